@@ -1,0 +1,238 @@
+"""System configuration and named scenarios.
+
+Every parameter of the paper's simulation section is a field of :class:`SystemConfig`;
+the parameters the paper leaves open (slot length, horizon, speed and acceleration bounds,
+attitude step, noise power, energy budget, flight region) carry documented defaults, see
+``docs/model.md``. Configs are frozen and validated on construction: a bad value raises
+:class:`ConfigError` naming the field and the allowed range.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+Vec3 = tuple[float, float, float]
+
+PAPER_USERS: tuple[Vec3, ...] = (
+    (15.0, 5.0, 1.0),
+    (20.0, 8.0, 1.5),
+    (30.0, 20.0, 0.1),
+    (15.0, 35.0, 0.6),
+)
+
+
+class ConfigError(ValueError):
+    """A configuration value is outside its allowed range."""
+
+
+def _check(ok: bool, owner: str, name: str, allowed: str, value: Any) -> None:
+    if not ok:
+        raise ConfigError(f"{owner}.{name} must be {allowed}, got {value!r}")
+
+
+def _finite(x: Any) -> bool:
+    try:
+        return math.isfinite(float(x))
+    except (TypeError, ValueError):
+        return False
+
+
+@dataclass(frozen=True)
+class PropulsionParams:
+    """Rotary-wing propulsion power model of Zeng, Xu and Zhang (IEEE TWC 2019).
+
+    Defaults are that paper's values; hovering costs ``blade_profile_w + induced_w``
+    = 168.49 W.
+    """
+
+    blade_profile_w: float = 79.86  # P0
+    induced_w: float = 88.63  # Pi
+    tip_speed: float = 120.0  # U_tip, m/s
+    hover_induced_velocity: float = 4.03  # v0, m/s
+    fuselage_drag_ratio: float = 0.6  # d0
+    air_density: float = 1.225  # rho, kg/m^3
+    rotor_solidity: float = 0.05  # s
+    rotor_disc_area: float = 0.503  # A, m^2
+
+    def __post_init__(self) -> None:
+        for f in dataclasses.fields(self):
+            v = getattr(self, f.name)
+            _check(_finite(v) and v > 0, "PropulsionParams", f.name, "a finite number > 0", v)
+
+
+@dataclass(frozen=True)
+class SystemConfig:
+    """The UAV-mounted RIS D2D system (paper Sec. II and V, MODEL.md).
+
+    Units: metres, seconds, watts, joules, dBm for the noise power.
+    """
+
+    room: Vec3 = (40.0, 40.0, 8.0)
+    users: tuple[Vec3, ...] = PAPER_USERS
+    nx: int = 4
+    ny: int = 4
+    element_spacing: float = 0.5  # d / lambda
+    rician_factor: float = 8.0  # kappa
+    pathloss_exponent: float = 2.4  # alpha
+    tx_power_w: float = 1.0  # P
+    noise_dbm: float = -80.0  # sigma^2
+    slot_s: float = 0.5  # Delta t
+    horizon: int = 100  # T
+    v_max: float = 5.0
+    a_max: float = 2.0
+    attitude_step_deg: float = 10.0  # per slot, per axis
+    z_min: float = 2.0
+    z_max: float = 8.0
+    energy_budget_j: float = 8000.0  # E_max
+    max_active_pairs: int | None = None  # None: floor(K/2)
+    angle_dependent_reflection: bool = True  # False: r = r_pre (ideal RIS)
+    learn_amplitudes: bool = False  # True: N extra action entries set |r_pre| in [0, 1]
+    channel_ref_distance: float = 10.0  # observation scale for channels, m
+    propulsion: PropulsionParams = field(default_factory=PropulsionParams)
+
+    def __post_init__(self) -> None:
+        o = "SystemConfig"
+        # Normalise list inputs (from YAML or the CLI) to tuples so the config stays hashable.
+        object.__setattr__(self, "room", tuple(float(v) for v in self.room))
+        object.__setattr__(self, "users", tuple(tuple(float(c) for c in u) for u in self.users))
+        if isinstance(self.propulsion, dict):
+            object.__setattr__(self, "propulsion", PropulsionParams(**self.propulsion))
+        _check(len(self.room) == 3 and all(_finite(v) and v > 0 for v in self.room), o, "room",
+               "three finite lengths > 0 (x, y, z in m)", self.room)
+        _check(len(self.users) >= 2, o, "users", "a list of at least 2 positions (K >= 2)", len(self.users))
+        for k, u in enumerate(self.users):
+            inside = len(u) == 3 and all(_finite(c) and 0.0 <= c <= r for c, r in zip(u, self.room))
+            _check(inside, o, f"users[{k}]", f"a point inside the room [0, {self.room}]", u)
+        for name in ("nx", "ny", "horizon"):
+            v = getattr(self, name)
+            _check(isinstance(v, int) and not isinstance(v, bool) and v >= 1, o, name, "an integer >= 1", v)
+        positive = ("element_spacing", "tx_power_w", "slot_s", "v_max", "a_max", "energy_budget_j",
+                    "channel_ref_distance", "pathloss_exponent")
+        for name in positive:
+            v = getattr(self, name)
+            _check(_finite(v) and v > 0, o, name, "a finite number > 0", v)
+        _check(_finite(self.rician_factor) and self.rician_factor >= 0, o, "rician_factor",
+               "a finite number >= 0", self.rician_factor)
+        _check(_finite(self.noise_dbm), o, "noise_dbm", "a finite number (dBm)", self.noise_dbm)
+        _check(_finite(self.attitude_step_deg) and 0 <= self.attitude_step_deg <= 180, o,
+               "attitude_step_deg", "in [0, 180]", self.attitude_step_deg)
+        _check(_finite(self.z_min) and _finite(self.z_max) and 0 <= self.z_min < self.z_max <= self.room[2],
+               o, "z_min/z_max", f"0 <= z_min < z_max <= room height {self.room[2]}", (self.z_min, self.z_max))
+        kmax = self.num_users // 2
+        if self.max_active_pairs is not None:
+            v = self.max_active_pairs
+            _check(isinstance(v, int) and 1 <= v <= kmax, o, "max_active_pairs", f"an integer in [1, {kmax}]", v)
+
+    @property
+    def num_users(self) -> int:
+        return len(self.users)
+
+    @property
+    def num_elements(self) -> int:
+        return self.nx * self.ny
+
+    @property
+    def pairs_upper(self) -> int:
+        """Largest number of simultaneously active pairs."""
+        return self.max_active_pairs or self.num_users // 2
+
+    @property
+    def noise_w(self) -> float:
+        return 10.0 ** (self.noise_dbm / 10.0) / 1000.0
+
+    @property
+    def attitude_step_rad(self) -> float:
+        return math.radians(self.attitude_step_deg)
+
+    @property
+    def action_dim(self) -> int:
+        """3 accelerations + N phases (+ N amplitudes) + 3 attitude increments."""
+        return 3 + self.num_elements * (2 if self.learn_amplitudes else 1) + 3
+
+    @property
+    def observation_dim(self) -> int:
+        k, n = self.num_users, self.num_elements
+        return 3 + 3 + 6 + 2 * k * n + k * k + 2
+
+    @property
+    def region_low(self) -> Vec3:
+        return (0.0, 0.0, self.z_min)
+
+    @property
+    def region_high(self) -> Vec3:
+        return (self.room[0], self.room[1], self.z_max)
+
+    def replace(self, **changes: Any) -> SystemConfig:
+        return dataclasses.replace(self, **changes)
+
+    def to_dict(self) -> dict[str, Any]:
+        d = dataclasses.asdict(self)
+        d["room"] = list(self.room)
+        d["users"] = [list(u) for u in self.users]
+        return d
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> SystemConfig:
+        known = {f.name for f in dataclasses.fields(cls)}
+        unknown = sorted(set(d) - known)
+        if unknown:
+            raise ConfigError(f"SystemConfig has no field(s) {unknown}; known fields: {sorted(known)}")
+        return cls(**d)
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """A deployment: the UAV's initial position (it starts at rest and level)."""
+
+    name: str
+    start: Vec3
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "start", tuple(float(c) for c in self.start))
+        _check(len(self.start) == 3 and all(_finite(c) for c in self.start), "Scenario", "start",
+               "three finite coordinates", self.start)
+
+    def validate_for(self, config: SystemConfig) -> None:
+        lo, hi = config.region_low, config.region_high
+        inside = all(lo_i <= c <= hi_i for c, lo_i, hi_i in zip(self.start, lo, hi))
+        _check(inside, f"Scenario({self.name!r})", "start", f"inside the flight region {lo}..{hi}", self.start)
+
+
+def _s(name: str, x: float, y: float) -> Scenario:
+    return Scenario(name, (x, y, 4.5))
+
+
+SCENARIOS: dict[str, Scenario] = {
+    s.name: s
+    for s in (
+        _s("fig2", 15, 20),
+        _s("train1", 10, 10),
+        _s("train2", 10, 30),
+        _s("train3", 15, 20),
+        _s("train4", 20, 20),
+        _s("train5", 20, 30),
+        _s("train6", 25, 20),
+        _s("train7", 30, 10),
+        _s("train8", 30, 30),
+        _s("unseen1", 15, 15),
+        _s("unseen2", 25, 25),
+    )
+}
+TRAINING_SCENARIOS: tuple[str, ...] = tuple(f"train{i}" for i in range(1, 9))
+UNSEEN_SCENARIOS: tuple[str, ...] = ("unseen1", "unseen2")
+
+
+def get_scenario(scenario: str | Scenario | tuple[float, float, float] | list[float]) -> Scenario:
+    """Resolve a scenario name, a :class:`Scenario`, or a start position ``[x, y, z]``."""
+    if isinstance(scenario, Scenario):
+        return scenario
+    if isinstance(scenario, str):
+        if scenario not in SCENARIOS:
+            raise ConfigError(f"unknown scenario {scenario!r}; choose one of {sorted(SCENARIOS)}")
+        return SCENARIOS[scenario]
+    if isinstance(scenario, (tuple, list)) and len(scenario) == 3:
+        return Scenario("custom", tuple(scenario))
+    raise ConfigError(f"scenario must be a name, a Scenario or [x, y, z], got {scenario!r}")

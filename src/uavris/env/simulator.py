@@ -1,0 +1,217 @@
+"""The batched simulator shared by the single and the vector environment.
+
+State lives in arrays with a leading environment axis; every quantity is computed with
+one numpy call per step for the whole batch. The single environment is this simulator
+with one row, which is why both agree bit for bit.
+
+Slot timing (MODEL.md): the observation of slot t holds the pose of slot t, the channels
+H(t) (NLoS included) and the pairing P(t). The action's phases apply to slot t; its
+acceleration and attitude increments then move the UAV to its slot t+1 pose, and
+H(t+1), P(t+1) are drawn.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from uavris import physics as ph
+from uavris.config import Scenario, SystemConfig, get_scenario
+from uavris.env import streams
+from uavris.env._malloc import tune_allocator
+
+
+class ActionError(ValueError):
+    """An action that cannot be applied (wrong shape, NaN or inf)."""
+
+
+@dataclass
+class SlotInfo:
+    """What one step produced, one row per environment."""
+
+    reward: NDArray[np.float64]  # sum rate r(t), bps/Hz
+    pair_rates: NDArray[np.float64]  # (n, K, K) rate of each active link tx -> rx
+    pairing: NDArray[np.float64]  # (n, K, K) P(t)
+    cos_theta: NDArray[np.float64]  # (n, K) incidence cosines in slot t
+    accel: NDArray[np.float64]  # (n, 3) acceleration actually applied
+    slot_energy: NDArray[np.float64]  # (n,) J spent moving to the next pose
+
+
+def decode_action(action: NDArray, config: SystemConfig) -> tuple[NDArray, NDArray, NDArray | None, NDArray]:
+    """Map Box(-1, 1) actions ``(n, action_dim)`` to (acceleration, phase, amplitude, attitude increment).
+
+    Phases map [-1, 1] -> [0, 2 pi]; amplitudes (only with ``learn_amplitudes``) [-1, 1] -> [0, 1]
+    and are ``None`` otherwise (unit amplitude).
+
+    Out-of-range values are clipped; NaN or inf raise :class:`ActionError`.
+    """
+    a = np.asarray(action, dtype=np.float64)
+    if a.ndim != 2 or a.shape[-1] != config.action_dim:
+        raise ActionError(f"action must have shape (..., {config.action_dim}), got {np.shape(action)}")
+    if not np.all(np.isfinite(a)):
+        bad = np.argwhere(~np.isfinite(a))[0]
+        raise ActionError(f"action contains NaN or inf (first at index {tuple(int(i) for i in bad)}); "
+                          "actions must be finite numbers in [-1, 1]")
+    a = np.clip(a, -1.0, 1.0)
+    n = config.num_elements
+    accel = ph.limit_norm(a[:, 0:3] * config.a_max, config.a_max)
+    # float32 phases: the action itself is float32, and float32 sin/cos are ~10x faster.
+    phase = ((a[:, 3:3 + n] + 1.0) * np.pi).astype(np.float32)  # [0, 2 pi]
+    amp = 0.5 * (a[:, 3 + n:3 + 2 * n] + 1.0) if config.learn_amplitudes else None
+    d_att = a[:, -3:] * config.attitude_step_rad
+    return accel, phase, amp, d_att
+
+
+class BatchedSimulator:
+    """The UAV-RIS D2D system for ``num_envs`` independent environments."""
+
+    def __init__(self, config: SystemConfig, scenario: str | Scenario, num_envs: int) -> None:
+        if not isinstance(num_envs, int) or num_envs < 1:
+            raise ValueError(f"num_envs must be an integer >= 1, got {num_envs!r}")
+        self.config = config
+        self.scenario = get_scenario(scenario)
+        self.scenario.validate_for(config)
+        self.num_envs = num_envs
+        if num_envs >= 64:
+            tune_allocator()
+        c = config
+        self.users = np.asarray(c.users, dtype=np.float64)
+        self.low = np.asarray(c.region_low)
+        self.high = np.asarray(c.region_high)
+        self._center = 0.5 * (self.low + self.high)
+        self._half = 0.5 * (self.high - self.low)
+        self._power = {k: float(v) for k, v in vars(c.propulsion).items()}
+        self._chan_scale = c.channel_ref_distance ** (0.5 * c.pathloss_exponent)
+        K, N = c.num_users, c.num_elements
+        self._draws_per_slot = K * N + 1 + K
+        self._layout = observation_layout(c)
+        z = np.zeros
+        self.key = z(num_envs, dtype=np.uint64)
+        self.episode = z(num_envs, dtype=np.uint64)
+        self.t = z(num_envs, dtype=np.int64)
+        self.pos = z((num_envs, 3))
+        self.vel = z((num_envs, 3))
+        self.att = z((num_envs, 3))
+        self.energy = z(num_envs)
+        self.channels = z((num_envs, K, N), dtype=np.complex128)
+        self.pairing = z((num_envs, K, K))
+        self.u = z((num_envs, K))
+        self.v = z((num_envs, K))
+        self.cos_theta = z((num_envs, K))
+        self.dist = z((num_envs, K))
+
+    # ----------------------------------------------------------------- randomness & channels
+    def _draw_slot(self, rows: NDArray[np.intp] | slice) -> None:
+        """Compute incidence for the current pose and draw H(t), P(t) for ``rows``."""
+        c = self.config
+        K, N = c.num_users, c.num_elements
+        axes = ph.ris_axes(self.att[rows])
+        u, v, cos_t, dist = ph.incidence(self.pos[rows], self.users, axes)
+        keys = streams.slot_key(self.key[rows], self.episode[rows], self.t[rows])
+        bits = streams.raw_bits(keys, self._draws_per_slot)
+        nlos = streams.complex_normals(bits[:, : K * N]).reshape(-1, K, N)
+        unif = streams.uniforms(bits[:, K * N:])
+        h = ph.rician_channels(u, v, cos_t, dist, nlos, rician_factor=c.rician_factor,
+                               pathloss_exponent=c.pathloss_exponent, nx=c.nx, ny=c.ny, spacing=c.element_spacing)
+        pairing = ph.pairing_from_uniforms(unif[:, 0], unif[:, 1:], c.pairs_upper)
+        if isinstance(rows, slice) and rows == slice(None):
+            # Whole batch: rebind rather than copy, so arrays handed out in a step's info
+            # keep describing that step.
+            self.channels, self.pairing = h, pairing
+            self.u, self.v, self.cos_theta, self.dist = u, v, cos_t, dist
+        else:
+            self.channels[rows], self.pairing[rows] = h, pairing
+            self.u[rows], self.v[rows], self.cos_theta[rows], self.dist[rows] = u, v, cos_t, dist
+
+    # ----------------------------------------------------------------- reset
+    def seed(self, seeds: NDArray[np.integer], rows: NDArray[np.intp] | slice = slice(None)) -> None:
+        """Set the key of ``rows`` from integer seeds and restart their episode count."""
+        self.key[rows] = streams.seed_key(seeds)
+        self.episode[rows] = 0
+
+    def reset(self, rows: NDArray[np.intp] | slice = slice(None), next_episode: bool = False) -> None:
+        """Put ``rows`` back at the scenario's start, at rest and level, slot 0.
+
+        A partial reset writes into the state arrays in place; arrays returned by an
+        earlier :meth:`step` were rebound by it and are not affected.
+        """
+        if next_episode:
+            self.episode[rows] += np.uint64(1)
+        self.t[rows] = 0
+        self.pos[rows] = self.scenario.start
+        self.vel[rows] = 0.0
+        self.att[rows] = 0.0
+        self.energy[rows] = 0.0
+        self._draw_slot(rows)
+
+    # ----------------------------------------------------------------- step
+    def step(self, action: NDArray) -> tuple[NDArray, NDArray, NDArray, SlotInfo]:
+        """Advance every environment by one slot. Returns (reward, terminated, truncated, info)."""
+        c = self.config
+        accel_cmd, phase, amp, d_att = decode_action(action, c)
+        if accel_cmd.shape[0] != self.num_envs:
+            raise ActionError(f"expected {self.num_envs} actions, got {accel_cmd.shape[0]}")
+        if amp is None:
+            refl = ph.effective_reflection_from_phases(phase, self.cos_theta, c.angle_dependent_reflection)
+        else:
+            refl = ph.effective_reflection(amp * np.exp(1j * phase), self.cos_theta, c.angle_dependent_reflection)
+        gains = ph.cascaded_gains(self.channels, refl)
+        rates = ph.pair_rates(gains, self.pairing, c.tx_power_w, c.noise_w)
+        reward = rates.sum(axis=(-2, -1))
+        accel = ph.feasible_acceleration(self.vel, accel_cmd, c.slot_s, c.v_max, c.a_max)
+        e_slot = ph.slot_energy(self.vel, accel, c.slot_s, **self._power)
+        self.pos, self.vel = ph.kinematic_step(self.pos, self.vel, accel, c.slot_s, self.low, self.high)
+        self.att = ph.accumulate_attitude(self.att, d_att)
+        self.energy = self.energy + e_slot
+        self.t = self.t + 1
+        info = SlotInfo(reward, rates, self.pairing, self.cos_theta, accel, e_slot)
+        terminated = self.energy >= c.energy_budget_j
+        truncated = (self.t >= c.horizon) & ~terminated
+        self._draw_slot(slice(None))
+        return reward, terminated, truncated, info
+
+    # ----------------------------------------------------------------- observation
+    def observe(self) -> NDArray[np.float32]:
+        """Order-1 observation ``(n, observation_dim)`` (layout in :data:`OBSERVATION_LAYOUT`)."""
+        c = self.config
+        n = self.num_envs
+        lay = self._layout
+        obs = np.empty((n, c.observation_dim), dtype=np.float32)
+        obs[:, lay["position"]] = (self.pos - self._center) / self._half
+        obs[:, lay["velocity"]] = self.vel / c.v_max
+        obs[:, lay["attitude_sin"]] = np.sin(self.att)
+        obs[:, lay["attitude_cos"]] = np.cos(self.att)
+        h = self.channels.reshape(n, -1)
+        obs[:, lay["channel_real"]] = h.real * self._chan_scale
+        obs[:, lay["channel_imag"]] = h.imag * self._chan_scale
+        obs[:, lay["pairing"]] = self.pairing.reshape(n, -1)
+        obs[:, lay["energy_remaining"]] = np.clip(1.0 - self.energy / c.energy_budget_j, 0.0, 1.0)[:, None]
+        obs[:, lay["time_fraction"]] = (self.t / c.horizon)[:, None]
+        return obs
+
+
+def observation_layout(config: SystemConfig) -> dict[str, slice]:
+    """Named slices of the observation vector."""
+    K, N = config.num_users, config.num_elements
+    sizes = [("position", 3), ("velocity", 3), ("attitude_sin", 3), ("attitude_cos", 3),
+             ("channel_real", K * N), ("channel_imag", K * N), ("pairing", K * K),
+             ("energy_remaining", 1), ("time_fraction", 1)]
+    out, start = {}, 0
+    for name, size in sizes:
+        out[name] = slice(start, start + size)
+        start += size
+    return out
+
+
+def observation_bounds(config: SystemConfig) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
+    """Box bounds of the observation: channels are unbounded, everything else in [-1, 1] or [0, 1]."""
+    lay = observation_layout(config)
+    low = np.full(config.observation_dim, -1.0, dtype=np.float32)
+    high = np.ones(config.observation_dim, dtype=np.float32)
+    for name in ("channel_real", "channel_imag"):
+        low[lay[name]], high[lay[name]] = -np.inf, np.inf
+    for name in ("pairing", "energy_remaining", "time_fraction"):
+        low[lay[name]] = 0.0
+    return low, high

@@ -1,0 +1,86 @@
+"""Angle-dependent RIS reflection (paper eq. 5-6 as corrected in MODEL.md).
+
+With eta = 120*pi, lambda1 = (2/eta)(1 - r_pre)/(1 + r_pre) and
+lambda2 = 2*eta*(1 + r_pre)/(1 - r_pre), eq. (5) reduces to the Moebius map
+
+    r(theta) = (cos(theta) - a) / (cos(theta) + a),   a = (1 - r_pre)/(1 + r_pre),
+
+so r(0) = r_pre, |r| = 1 whenever |r_pre| = 1, r(90 deg) = -1 and |r| <= 1 whenever
+|r_pre| <= 1 (Re a >= 0).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+FREE_SPACE_IMPEDANCE = 120.0 * np.pi  # eta, ohm
+
+
+def reflection_coefficient(r_pre: ArrayLike, cos_theta: ArrayLike) -> NDArray[np.complex128]:
+    """Practical reflection coefficient r(theta) for preset ``r_pre`` (eq. 5).
+
+    Evaluated as (c(1+r) - (1-r)) / (c(1+r) + (1-r)), the form above multiplied through
+    by (1 + r_pre), so r_pre = -1 gives -1 exactly. r_pre = +1 gives +1 for c > 0; at
+    grazing incidence (c = 0) it takes the limit value -1 shared by every other preset.
+    ``cos_theta`` is clipped to [0, 1]: a user behind the RIS is blocked elsewhere.
+    """
+    r = np.asarray(r_pre, dtype=np.complex128)
+    c = np.clip(np.asarray(cos_theta, dtype=np.float64), 0.0, 1.0)
+    num = c * (1.0 + r) - (1.0 - r)
+    den = c * (1.0 + r) + (1.0 - r)
+    degenerate = den == 0  # only r_pre = 1 at c = 0
+    return np.where(degenerate, -1.0 + 0j, num / np.where(degenerate, 1.0, den))
+
+
+def unit_reflection_coefficient(phase: ArrayLike, cos_theta: ArrayLike) -> NDArray[np.complex128]:
+    """r(theta) for a unit-modulus preset r_pre = exp(j phase), in real arithmetic.
+
+    With psi = phase/2, a = -j tan(psi) and r = A / conj(A) = A^2 / |A|^2 where
+    A = c cos(psi) + j sin(psi): the same map as :func:`reflection_coefficient`, without
+    complex division (the simulator's hot path). |r| = 1 exactly by construction.
+    """
+    phase = np.asarray(phase)
+    # Keep float32 phases in float32 (the simulator's fast path); promote anything else.
+    psi = 0.5 * (phase if phase.dtype == np.float32 else phase.astype(np.float64))
+    c = np.clip(np.asarray(cos_theta, dtype=np.float64), 0.0, 1.0)
+    re = c * np.cos(psi)
+    im = np.sin(psi)
+    re2 = re * re
+    # Re r = 2 re^2/|A|^2 - 1 rather than (re^2 - im^2)/|A|^2: at the one degenerate point
+    # (r_pre = 1, c = 0) re = 0, so the guarded division gives the limit value -1 exactly.
+    inv = 1.0 / (re2 + im * im + 1e-300)
+    out = np.empty(re2.shape, dtype=np.complex128)
+    out.real = 2.0 * re2 * inv - 1.0
+    out.imag = 2.0 * re * im * inv
+    return out
+
+
+def preset_for_target(r_target: ArrayLike, cos_theta: ArrayLike) -> NDArray[np.complex128]:
+    """Inverse of :func:`reflection_coefficient`: the r_pre that yields ``r_target``.
+
+    Defined for c = cos(theta) in (0, 1]; a unit-modulus target gives a unit-modulus
+    preset. Used to co-phase the RIS for a chosen incidence angle.
+    """
+    rt = np.asarray(r_target, dtype=np.complex128)
+    c = np.asarray(cos_theta, dtype=np.float64)
+    a = c * (1.0 - rt) / (1.0 + rt)
+    return (1.0 - a) / (1.0 + a)
+
+
+def lambda_coefficients(r_pre: ArrayLike) -> tuple[NDArray[np.complex128], NDArray[np.complex128]]:
+    """lambda1, lambda2 of eq. (6), with the units typo of lambda2 corrected."""
+    r = np.asarray(r_pre, dtype=np.complex128)
+    eta = FREE_SPACE_IMPEDANCE
+    return (2.0 / eta) * (1.0 - r) / (1.0 + r), 2.0 * eta * (1.0 + r) / (1.0 - r)
+
+
+def reflection_coefficient_eq5(r_pre: ArrayLike, cos_theta: ArrayLike) -> NDArray[np.complex128]:
+    """Eq. (5) evaluated literally from lambda1, lambda2 (for checking the reduced form).
+
+    Undefined at r_pre = +-1; use :func:`reflection_coefficient` in simulations.
+    """
+    lam1, lam2 = lambda_coefficients(r_pre)
+    c = np.asarray(cos_theta, dtype=np.float64)
+    eta = FREE_SPACE_IMPEDANCE
+    return -eta * lam1 / (2.0 * c + eta * lam1) + lam2 * c / (lam2 * c + 2.0 * eta)
