@@ -205,13 +205,31 @@ def observation_layout(config: SystemConfig) -> dict[str, slice]:
     return out
 
 
+# Box-Muller on 32-bit halves bounds |w| by sqrt(-log(2^-33)): the NLoS draw is never larger.
+MAX_NLOS_MAGNITUDE = float(np.sqrt(33.0 * np.log(2.0)))
+
+
+def channel_observation_bound(config: SystemConfig) -> float:
+    """Largest |Re h| or |Im h| of a scaled channel entry: the closest a user can be to the
+    flight region sets the path loss, the NLoS draw is bounded (above). Users inside the
+    region are floored at 0.1 m."""
+    users = np.asarray(config.users)
+    closest = np.clip(users, config.region_low, config.region_high)
+    d_min = max(float(np.min(np.linalg.norm(users - closest, axis=1))), 0.1)
+    k = config.rician_factor
+    amp = (config.channel_ref_distance / d_min) ** (0.5 * config.pathloss_exponent)
+    return amp * (np.sqrt(k / (k + 1)) + np.sqrt(1 / (k + 1)) * MAX_NLOS_MAGNITUDE)
+
+
 def observation_bounds(config: SystemConfig) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
-    """Box bounds of the observation: channels are unbounded, everything else in [-1, 1] or [0, 1]."""
+    """Box bounds of the observation: channels within +-:func:`channel_observation_bound`,
+    pairing and fractions in [0, 1], everything else in [-1, 1]."""
     lay = observation_layout(config)
     low = np.full(config.observation_dim, -1.0, dtype=np.float32)
     high = np.ones(config.observation_dim, dtype=np.float32)
+    bound = channel_observation_bound(config)
     for name in ("channel_real", "channel_imag"):
-        low[lay[name]], high[lay[name]] = -np.inf, np.inf
+        low[lay[name]], high[lay[name]] = -bound, bound
     for name in ("pairing", "energy_remaining", "time_fraction"):
         low[lay[name]] = 0.0
     return low, high

@@ -29,6 +29,12 @@ def reflection_coefficient(r_pre: ArrayLike, cos_theta: ArrayLike) -> NDArray[np
     c = np.clip(np.asarray(cos_theta, dtype=np.float64), 0.0, 1.0)
     num = c * (1.0 + r) - (1.0 - r)
     den = c * (1.0 + r) + (1.0 - r)
+    # Near r_pre = 1 at grazing incidence both terms can underflow to subnormals, where a
+    # plain complex division overflows; rescale both by the same power of two first.
+    big = np.maximum(np.maximum(np.abs(num.real), np.abs(num.imag)), np.maximum(np.abs(den.real), np.abs(den.imag)))
+    _, e = np.frexp(big)
+    num = np.ldexp(num.real, -e) + 1j * np.ldexp(num.imag, -e)
+    den = np.ldexp(den.real, -e) + 1j * np.ldexp(den.imag, -e)
     degenerate = den == 0  # only r_pre = 1 at c = 0
     return np.where(degenerate, -1.0 + 0j, num / np.where(degenerate, 1.0, den))
 

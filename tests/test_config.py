@@ -1,0 +1,69 @@
+import dataclasses
+
+import pytest
+
+from uavris.config import SCENARIOS, ConfigError, Scenario, SystemConfig, get_scenario
+from uavris.env import UavRisD2DEnv
+
+
+def test_defaults_are_the_papers():
+    c = SystemConfig()
+    assert c.num_users == 4 and c.num_elements == 16
+    assert (c.rician_factor, c.pathloss_exponent, c.tx_power_w) == (8.0, 2.4, 1.0)
+    assert c.room == (40.0, 40.0, 8.0)
+    assert c.action_dim == 22 and c.observation_dim == 158
+    assert c.pairs_upper == 2
+    assert abs(c.noise_w - 1e-11) < 1e-20
+
+
+def test_scenarios():
+    assert SCENARIOS["fig2"].start == (15.0, 20.0, 4.5)
+    assert [SCENARIOS[f"train{i}"].start[:2] for i in range(1, 9)] == [
+        (10, 10), (10, 30), (15, 20), (20, 20), (20, 30), (25, 20), (30, 10), (30, 30)]
+    assert SCENARIOS["unseen1"].start == (15, 15, 4.5) and SCENARIOS["unseen2"].start == (25, 25, 4.5)
+
+
+@pytest.mark.parametrize(
+    "changes, field",
+    [
+        (dict(tx_power_w=-1.0), "tx_power_w"),
+        (dict(users=((1.0, 1.0, 1.0),)), "users"),
+        (dict(users=((1.0, 1.0, 1.0), (50.0, 1.0, 1.0))), "users[1]"),
+        (dict(v_max=0.0), "v_max"),
+        (dict(a_max=float("nan")), "a_max"),
+        (dict(horizon=0), "horizon"),
+        (dict(nx=2.5), "nx"),
+        (dict(z_min=5.0, z_max=3.0), "z_min/z_max"),
+        (dict(energy_budget_j=-5.0), "energy_budget_j"),
+        (dict(attitude_step_deg=270.0), "attitude_step_deg"),
+        (dict(max_active_pairs=3), "max_active_pairs"),
+        (dict(noise_dbm=float("inf")), "noise_dbm"),
+    ],
+)
+def test_bad_config_names_the_field(changes, field):
+    with pytest.raises(ConfigError) as e:
+        SystemConfig(**changes)
+    msg = str(e.value)
+    assert f"SystemConfig.{field} must be" in msg
+    assert "\n" not in msg
+
+
+def test_start_outside_region_is_rejected():
+    with pytest.raises(ConfigError, match=r"start must be inside the flight region"):
+        UavRisD2DEnv(scenario=[15.0, 20.0, 1.0])  # below z_min
+    with pytest.raises(ConfigError, match="unknown scenario 'nope'"):
+        get_scenario("nope")
+
+
+def test_config_is_frozen_and_round_trips():
+    c = SystemConfig(noise_dbm=-90.0)
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        c.noise_dbm = 0  # type: ignore[misc]
+    assert SystemConfig.from_dict(c.to_dict()) == c
+    with pytest.raises(ConfigError, match="no field"):
+        SystemConfig.from_dict({"bogus": 1})
+
+
+def test_scenario_custom():
+    s = get_scenario([20, 20, 5])
+    assert isinstance(s, Scenario) and s.start == (20.0, 20.0, 5.0)
