@@ -1,0 +1,1 @@
+"""Policies: DRL experts (Stable-Baselines3), baselines, evaluation."""

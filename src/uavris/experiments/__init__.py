@@ -1,0 +1,1 @@
+"""Pipelines, reports and plots built on the environment and the agents."""

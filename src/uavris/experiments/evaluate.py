@@ -1,0 +1,57 @@
+"""Evaluate a run directory or a baseline on seeded episodes and write CSV/JSON."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+from uavris.agents.baselines import BASELINES
+from uavris.agents.evaluation import EpisodeResults, evaluate
+from uavris.agents.experts import sb3_batch_policy
+from uavris.config import SystemConfig, get_scenario
+from uavris.experiments.io import UavrisError, write_csv, write_json
+from uavris.experiments.training import configure_torch_threads, final_model_path, load_model, load_run_config
+
+BASELINE_PREFIX = "baseline:"
+
+
+def resolve_policy(target: str, seed: int) -> tuple[Any, SystemConfig, str | None, Path | None]:
+    """(batch policy, system config, the run's own scenario, run directory) for a target."""
+    if target.startswith(BASELINE_PREFIX):
+        name = target[len(BASELINE_PREFIX):]
+        if name not in BASELINES:
+            raise UavrisError(f"unknown baseline {name!r}; choose one of {', '.join(BASELINES)}")
+        return BASELINES[name](seed), SystemConfig(), None, None
+    run_dir = Path(target)
+    if not run_dir.is_dir():
+        raise UavrisError(f"{run_dir} is not a directory (expected a run directory or baseline:NAME)")
+    cfg = load_run_config(run_dir)
+    configure_torch_threads()
+    model = load_model(final_model_path(run_dir), cfg.algo)
+    return sb3_batch_policy(model), cfg.system, cfg.scenario, run_dir
+
+
+def write_results(res: EpisodeResults, summary: dict[str, Any], stem: Path) -> None:
+    rows = zip(res.seeds.tolist(), res.avg_sum_rate.tolist(), res.episode_return.tolist(), res.length.tolist(),
+               res.energy_used.tolist())
+    write_csv(stem.with_suffix(".csv"), ("seed", "avg_sum_rate", "return", "length", "energy_j"), rows)
+    write_json(stem.with_suffix(".json"), summary)
+
+
+def evaluate_target(target: str, scenario: str | None, episodes: int, seed: int,
+                    out: Path | None = None) -> tuple[dict[str, Any], Path]:
+    if episodes < 1:
+        raise UavrisError(f"--episodes must be >= 1, got {episodes}")
+    policy, system, own_scenario, run_dir = resolve_policy(target, seed)
+    scenario = scenario or own_scenario
+    if scenario is None:
+        raise UavrisError("--scenario is required when evaluating a baseline")
+    get_scenario(scenario).validate_for(system)
+    res = evaluate(policy, system, scenario, episodes, seed)
+    summary = {"target": target, "scenario": scenario, "seed": seed, **res.summary()}
+    if out is None:
+        base = run_dir if run_dir is not None else Path("runs/baselines") / target[len(BASELINE_PREFIX):]
+        out = base / "eval"
+    stem = Path(out) / f"{scenario}-seed{seed}-n{episodes}"
+    write_results(res, summary, stem)
+    return summary, stem.with_suffix(".json")

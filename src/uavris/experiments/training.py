@@ -1,0 +1,355 @@
+"""Training one expert: run directory, checkpoints, resume, logs and evaluation.
+
+A run directory holds::
+
+    config.yaml            the resolved TrainConfig (system, scenario, hyperparameters)
+    episodes.csv           every finished training episode: env steps, average sum rate
+    evals.csv              periodic deterministic evaluations (mean and 95% CI)
+    checkpoints/           step_<N>.zip models, replay_buffer.pkl (off-policy), latest.json
+    tb/                    TensorBoard logs
+    model.zip, done.json   the final model and the completion record
+
+Every file is written atomically. ``resume=True`` continues from ``checkpoints/latest.json``
+with the step counter continuing; a finished run is never retrained unless forced.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import shutil
+import time
+import zipfile
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from uavris.agents.evaluation import evaluate
+from uavris.agents.experts import (
+    ALGORITHMS,
+    OFF_POLICY,
+    Hyperparams,
+    algorithm_class,
+    build_model,
+    check_algorithm,
+    default_hyperparams,
+    sb3_batch_policy,
+)
+from uavris.agents.sb3_vec_env import UavRisVecEnv
+from uavris.config import ConfigError, SystemConfig, get_scenario
+from uavris.experiments.io import UavrisError, read_csv, read_json, read_yaml, write_csv, write_json, write_yaml
+
+PRESETS: tuple[str, ...] = ("smoke", "quick", "paper")
+EPISODE_HEADER = ("episode", "env_steps", "avg_sum_rate", "return", "length")
+EVAL_HEADER = ("env_steps", "episodes", "mean", "ci_low", "ci_high", "iqm")
+
+# Steps per preset: smoke exercises the code, quick fits the 30-minute comparison on two
+# cores (600 episodes), paper matches the paper's ~25,000 training episodes.
+PRESET_STEPS = {"smoke": 640, "quick": 60_000, "paper": 2_500_000}
+PRESET_EVAL = {"smoke": (320, 8), "quick": (10_000, 32), "paper": (50_000, 100)}  # (every, episodes)
+PRESET_CHECKPOINT = {"smoke": 320, "quick": 10_000, "paper": 50_000}
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """Everything that determines a training run (dumped as config.yaml)."""
+
+    algo: str = "ddpg"
+    scenario: str = "fig2"
+    seed: int = 0
+    preset: str = "quick"
+    total_steps: int = PRESET_STEPS["quick"]
+    eval_every: int = PRESET_EVAL["quick"][0]
+    eval_episodes: int = PRESET_EVAL["quick"][1]
+    eval_seed: int = 1_000_000  # evaluation episodes never share seeds with training
+    checkpoint_every: int = PRESET_CHECKPOINT["quick"]
+    hyperparams: Hyperparams = field(default_factory=Hyperparams)
+    system: SystemConfig = field(default_factory=SystemConfig)
+
+    def __post_init__(self) -> None:
+        check_algorithm(self.algo)
+        get_scenario(self.scenario).validate_for(self.system)
+        if self.preset not in PRESETS:
+            raise ConfigError(f"unknown preset {self.preset!r}; choose one of {', '.join(PRESETS)}")
+        for name in ("total_steps", "eval_every", "eval_episodes", "checkpoint_every"):
+            if getattr(self, name) < 1:
+                raise ConfigError(f"TrainConfig.{name} must be >= 1, got {getattr(self, name)}")
+        if self.seed < 0:
+            raise ConfigError(f"TrainConfig.seed must be >= 0, got {self.seed}")
+
+    def to_dict(self) -> dict[str, Any]:
+        d = dataclasses.asdict(self)
+        d["hyperparams"]["net_arch"] = list(self.hyperparams.net_arch)
+        d["system"] = self.system.to_dict()
+        return d
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> TrainConfig:
+        d = dict(d)
+        try:
+            d["hyperparams"] = Hyperparams(**d.get("hyperparams", {}))
+            d["system"] = SystemConfig.from_dict(d.get("system", {}))
+            return cls(**d)
+        except TypeError as e:
+            raise ConfigError(f"config.yaml does not describe a training run: {e}") from None
+
+
+def preset_config(algo: str, scenario: str, seed: int, preset: str, **overrides: Any) -> TrainConfig:
+    """The named preset for ``algo`` with optional field overrides (``hyperparams`` included)."""
+    if preset not in PRESETS:
+        raise ConfigError(f"unknown preset {preset!r}; choose one of {', '.join(PRESETS)}")
+    base = dict(algo=algo, scenario=scenario, seed=seed, preset=preset, total_steps=PRESET_STEPS[preset],
+                eval_every=PRESET_EVAL[preset][0], eval_episodes=PRESET_EVAL[preset][1],
+                checkpoint_every=PRESET_CHECKPOINT[preset], hyperparams=default_hyperparams(algo, preset))
+    base.update({k: v for k, v in overrides.items() if v is not None})
+    return TrainConfig(**base)
+
+
+def default_run_dir(cfg: TrainConfig, root: str | Path = "runs/train") -> Path:
+    return Path(root) / f"{cfg.algo}-{cfg.scenario}-s{cfg.seed}-{cfg.preset}"
+
+
+def configure_torch_threads() -> None:
+    """One torch thread per worker process (the machine's cores go to parallel jobs)."""
+    import torch
+
+    torch.set_num_threads(1)
+    os.environ.setdefault("OMP_NUM_THREADS", "1")
+
+
+# ---------------------------------------------------------------------------- run state
+def is_finished(run_dir: Path) -> bool:
+    return (run_dir / "done.json").exists()
+
+
+def load_run_config(run_dir: str | Path) -> TrainConfig:
+    run_dir = Path(run_dir)
+    if not (run_dir / "config.yaml").exists():
+        raise UavrisError(f"{run_dir} is not a uavris run directory (no config.yaml)")
+    raw = read_yaml(run_dir / "config.yaml")
+    if not isinstance(raw, dict):
+        raise UavrisError(f"{run_dir / 'config.yaml'} does not describe a training run")
+    return TrainConfig.from_dict(raw)
+
+
+def _check_model_file(path: Path) -> None:
+    """SB3 models are zip archives; reject a truncated or foreign file with a clear message."""
+    if not path.exists():
+        raise UavrisError(f"checkpoint {path} is missing")
+    try:
+        with zipfile.ZipFile(path) as z:
+            names = set(z.namelist())
+            bad = z.testzip()
+    except (zipfile.BadZipFile, OSError) as e:
+        raise UavrisError(f"checkpoint {path} is corrupt ({e})") from None
+    if bad is not None or "data" not in names:
+        raise UavrisError(f"checkpoint {path} is corrupt (not a Stable-Baselines3 model)")
+
+
+def load_model(path: str | Path, algo: str, env: Any = None) -> Any:
+    path = Path(path)
+    _check_model_file(path)
+    try:
+        return algorithm_class(algo).load(path, env=env, device="cpu")
+    except Exception as e:  # noqa: BLE001 - SB3 raises many types for a bad archive
+        raise UavrisError(f"checkpoint {path} could not be loaded: {type(e).__name__}: {e}") from None
+
+
+# ---------------------------------------------------------------------------- training
+class _Recorder:
+    """Collects finished episodes, evaluations and checkpoints during ``learn``."""
+
+    def __init__(self, cfg: TrainConfig, run_dir: Path, start_steps: int, episodes: list[list[Any]],
+                 evals: list[list[Any]], progress: bool, interrupt_at: int | None) -> None:
+        self.cfg, self.run_dir = cfg, run_dir
+        self.episodes, self.evals = episodes, evals
+        self.next_eval = (start_steps // cfg.eval_every + 1) * cfg.eval_every
+        self.next_ckpt = (start_steps // cfg.checkpoint_every + 1) * cfg.checkpoint_every
+        self.interrupt_at = interrupt_at
+        self.bar = None
+        if progress:
+            from tqdm.auto import tqdm
+
+            self.bar = tqdm(total=cfg.total_steps, initial=start_steps, unit="step", dynamic_ncols=True,
+                            desc=f"{cfg.algo} {cfg.scenario} s{cfg.seed}")
+
+    def callback(self):
+        from stable_baselines3.common.callbacks import BaseCallback
+
+        rec = self
+
+        class Callback(BaseCallback):
+            def _on_step(self) -> bool:
+                return rec.on_step(self.model, self.locals.get("infos", []), self.logger)
+
+        return Callback()
+
+    def on_step(self, model: Any, infos: list[dict[str, Any]], logger: Any) -> bool:
+        steps = model.num_timesteps
+        for info in infos:
+            ep = info.get("episode")
+            if ep is not None:
+                self.episodes.append([len(self.episodes), steps, ep["avg_sum_rate"], ep["r"], ep["l"]])
+                logger.record_mean("rollout/avg_sum_rate", ep["avg_sum_rate"])
+        if self.bar is not None:
+            self.bar.update(steps - self.bar.n)
+            if self.episodes:
+                recent = [row[2] for row in self.episodes[-20:]]
+                self.bar.set_postfix(avg_sum_rate=f"{np.mean(recent):.2f}", refresh=False)
+        if steps >= self.next_eval and steps < self.cfg.total_steps:  # the final evaluation follows training
+            res = run_evaluation(model, self.cfg, self.cfg.eval_episodes).summary()
+            self.evals.append([steps, res["episodes"], res["mean"], res["ci_low"], res["ci_high"], res["iqm"]])
+            logger.record("eval/avg_sum_rate", res["mean"])
+            self.next_eval = (steps // self.cfg.eval_every + 1) * self.cfg.eval_every
+        if steps >= self.next_ckpt:
+            save_checkpoint(model, self.cfg, self.run_dir, self.episodes, self.evals)
+            self.next_ckpt = (steps // self.cfg.checkpoint_every + 1) * self.cfg.checkpoint_every
+        if self.interrupt_at is not None and steps >= self.interrupt_at:
+            raise KeyboardInterrupt(f"interrupted at step {steps} (test hook)")
+        return True
+
+    def close(self) -> None:
+        if self.bar is not None:
+            self.bar.close()
+
+
+def run_evaluation(model: Any, cfg: TrainConfig, episodes: int, scenario: str | None = None, seed: int | None = None):
+    return evaluate(sb3_batch_policy(model), cfg.system, scenario or cfg.scenario, episodes,
+                    cfg.eval_seed if seed is None else seed)
+
+
+def save_checkpoint(model: Any, cfg: TrainConfig, run_dir: Path, episodes: list, evals: list) -> Path:
+    """Model (and replay buffer) then logs, then the ``latest.json`` pointer, each atomic.
+
+    The pointer moves last, so a kill at any moment leaves the previous checkpoint intact.
+    """
+    ck = run_dir / "checkpoints"
+    ck.mkdir(parents=True, exist_ok=True)
+    steps = int(model.num_timesteps)
+    model_path = ck / f"step_{steps}.zip"
+    tmp = ck / f".step_{steps}.tmp.zip"
+    model.save(tmp)
+    os.replace(tmp, model_path)
+    if cfg.algo in OFF_POLICY:
+        tmp_buf = ck / ".replay_buffer.tmp.pkl"
+        model.save_replay_buffer(tmp_buf)
+        os.replace(tmp_buf, ck / "replay_buffer.pkl")
+    write_csv(run_dir / "episodes.csv", EPISODE_HEADER, episodes)
+    write_csv(run_dir / "evals.csv", EVAL_HEADER, evals)
+    write_json(ck / "latest.json", {"env_steps": steps, "model": model_path.name,
+                                    "episodes": len(episodes), "evals": len(evals)})
+    return model_path
+
+
+_INT_COLUMNS = {"episode", "env_steps", "length", "episodes"}
+
+
+def _read_rows(path: Path, header: tuple[str, ...], limit: int) -> list[list[Any]]:
+    """The first ``limit`` rows of a log written by :func:`save_checkpoint`."""
+    if not path.exists():
+        return []
+    out = []
+    for r in read_csv(path)[:limit]:
+        try:
+            out.append([int(r[h]) if h in _INT_COLUMNS else float(r[h]) for h in header])
+        except (KeyError, TypeError, ValueError):
+            raise UavrisError(f"{path} is corrupt (bad row {r})") from None
+    return out
+
+
+def train(cfg: TrainConfig, run_dir: str | Path, *, resume: bool = False, force: bool = False,
+          progress: bool = True, interrupt_at: int | None = None) -> Path:
+    """Train ``cfg`` into ``run_dir``; returns the final model path.
+
+    Raises :class:`UavrisError` for a finished run (unless ``force``), an existing
+    unfinished run without ``resume``/``force``, a resume whose config differs, or a
+    corrupt checkpoint. ``interrupt_at`` is a test hook that stops training at that step.
+    """
+    configure_torch_threads()
+    run_dir = Path(run_dir)
+    has_config = (run_dir / "config.yaml").exists()
+    if force and run_dir.exists() and not resume:
+        if not has_config and any(run_dir.iterdir()):
+            raise UavrisError(f"{run_dir} exists and is not a uavris run directory; refusing to overwrite it")
+        shutil.rmtree(run_dir)
+        has_config = False
+    elif is_finished(run_dir):
+        raise UavrisError(f"{run_dir} is a finished run; evaluate it, or pass --force to retrain from scratch")
+    elif has_config and not resume:
+        raise UavrisError(f"{run_dir} already holds a run; pass --resume to continue it or --force to start over")
+    elif run_dir.exists() and not has_config and any(run_dir.iterdir()):
+        raise UavrisError(f"{run_dir} exists and is not a uavris run directory")
+
+    env = UavRisVecEnv(cfg.hyperparams.n_envs, cfg.system, cfg.scenario, cfg.hyperparams.reward_scale)
+    env.seed(cfg.seed * 10_000)
+    episodes: list[list[Any]] = []
+    evals: list[list[Any]] = []
+    start = 0
+    if resume and has_config:
+        saved = load_run_config(run_dir)
+        if saved != cfg:
+            raise UavrisError(f"{run_dir} was started with a different configuration; resume it without changing "
+                              "parameters, or pass --force to start over")
+        latest_path = run_dir / "checkpoints" / "latest.json"
+        if latest_path.exists():
+            latest = read_json(latest_path)
+            try:
+                model_path = run_dir / "checkpoints" / latest["model"]
+                start, n_ep, n_ev = int(latest["env_steps"]), int(latest["episodes"]), int(latest["evals"])
+            except (KeyError, TypeError, ValueError):
+                raise UavrisError(f"{latest_path} is corrupt") from None
+            model = load_model(model_path, cfg.algo, env)
+            if cfg.algo in OFF_POLICY:
+                buf = run_dir / "checkpoints" / "replay_buffer.pkl"
+                if not buf.exists():
+                    raise UavrisError(f"replay buffer {buf} is missing; pass --force to start over")
+                try:
+                    model.load_replay_buffer(buf)
+                except Exception as e:  # noqa: BLE001
+                    raise UavrisError(f"replay buffer {buf} is corrupt ({type(e).__name__})") from None
+            episodes = _read_rows(run_dir / "episodes.csv", EPISODE_HEADER, n_ep)
+            evals = _read_rows(run_dir / "evals.csv", EVAL_HEADER, n_ev)
+        else:
+            model = build_model(cfg.algo, env, cfg.hyperparams, cfg.seed, str(run_dir / "tb"))
+    else:
+        run_dir.mkdir(parents=True, exist_ok=True)
+        write_yaml(run_dir / "config.yaml", cfg.to_dict())
+        model = build_model(cfg.algo, env, cfg.hyperparams, cfg.seed, str(run_dir / "tb"))
+
+    rec = _Recorder(cfg, run_dir, start, episodes, evals, progress, interrupt_at)
+    t0 = time.perf_counter()
+    try:
+        remaining = cfg.total_steps - start
+        if remaining > 0:
+            model.learn(remaining, callback=rec.callback(), reset_num_timesteps=start == 0,
+                        tb_log_name="run", progress_bar=False)
+    finally:
+        rec.close()
+    final = run_evaluation(model, cfg, cfg.eval_episodes).summary()
+    evals.append([model.num_timesteps, final["episodes"], final["mean"], final["ci_low"], final["ci_high"],
+                  final["iqm"]])
+    save_checkpoint(model, cfg, run_dir, episodes, evals)
+    tmp = run_dir / ".model.tmp.zip"
+    model.save(tmp)
+    os.replace(tmp, run_dir / "model.zip")
+    write_json(run_dir / "done.json", {"env_steps": int(model.num_timesteps), "episodes": len(episodes),
+                                       "wall_clock_s_last_session": time.perf_counter() - t0,
+                                       "final_eval": final})
+    return run_dir / "model.zip"
+
+
+def final_model_path(run_dir: str | Path) -> Path:
+    """The final model, or the latest checkpoint of an unfinished run."""
+    run_dir = Path(run_dir)
+    if (run_dir / "model.zip").exists():
+        return run_dir / "model.zip"
+    latest = run_dir / "checkpoints" / "latest.json"
+    if latest.exists():
+        return run_dir / "checkpoints" / read_json(latest)["model"]
+    raise UavrisError(f"{run_dir} has no model yet (no model.zip and no checkpoint)")
+
+
+__all__ = ["ALGORITHMS", "PRESETS", "TrainConfig", "default_run_dir", "final_model_path", "load_model",
+           "load_run_config", "preset_config", "train"]
