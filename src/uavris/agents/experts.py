@@ -88,6 +88,22 @@ class Hyperparams:
         return dataclasses.replace(self, **changes)
 
 
+_COMMON = ("net_arch", "learning_rate", "gamma", "reward_scale", "n_envs", "batch_size")
+_OFF = ("buffer_size", "learning_starts", "tau", "gradient_steps")
+_USED_BY = {
+    "ddpg": _COMMON + _OFF + ("action_noise",),
+    "td3": _COMMON + _OFF + ("action_noise", "policy_delay", "target_policy_noise"),
+    "sac": _COMMON + _OFF + ("ent_coef",),
+    "ppo": _COMMON + ("n_steps", "n_epochs", "gae_lambda", "clip_range"),
+}
+
+
+def hyperparams_for(algo: str, hp: Hyperparams) -> dict[str, Any]:
+    """The hyperparameters ``algo`` actually uses, by name."""
+    check_algorithm(algo)
+    return {name: getattr(hp, name) for name in _USED_BY[algo]}
+
+
 def _is_float(x: str) -> bool:
     try:
         float(x)

@@ -1,0 +1,203 @@
+"""Algorithm comparison (paper Fig. 2): DDPG, PPO, SAC and TD3 over seeds.
+
+Outputs in ``OUT``: ``runs/ALGO-sSEED`` (one training run each, resumable),
+``learning_curves.{png,pdf}``, ``final_performance.csv``, ``report.md``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from pathlib import Path
+from typing import Any, Sequence
+
+import numpy as np
+
+from uavris.agents.evaluation import evaluate
+from uavris.agents.baselines import BASELINES
+from uavris.agents.experts import ALGORITHMS, check_algorithm, hyperparams_for
+from uavris.config import get_scenario
+from uavris.experiments.io import UavrisError, read_csv, read_json, write_csv, write_json, atomic_write_text
+from uavris.experiments.jobs import Job, JobResult, run_jobs
+from uavris.experiments.plots import learning_curves
+from uavris.experiments.stats import bootstrap_band, summarize
+from uavris.experiments.training import PRESETS, TrainConfig, is_finished, preset_config, train
+
+# MODEL.md: the paper's converged average sum rates from [15, 20, 4.5], bps/Hz.
+PAPER_FIG2 = {"ddpg": 29.5, "ppo": 25.0, "td3": 20.5, "sac": 17.0}
+
+
+def train_job(cfg_dict: dict[str, Any], run_dir: str) -> dict[str, Any]:
+    """Worker entry point: train (or resume) one run; returns its done.json."""
+    cfg = TrainConfig.from_dict(cfg_dict)
+    path = Path(run_dir)
+    if not is_finished(path):
+        train(cfg, path, resume=(path / "config.yaml").exists(), progress=False)
+    return read_json(path / "done.json")
+
+
+def _curve(run_dir: Path, window: int) -> tuple[np.ndarray, np.ndarray]:
+    rows = read_csv(run_dir / "episodes.csv")
+    y = np.array([float(r["avg_sum_rate"]) for r in rows])
+    if y.size == 0:
+        return np.zeros(0), np.zeros(0)
+    w = max(1, min(window, y.size))
+    smooth = np.convolve(y, np.ones(w) / w, mode="valid")
+    return np.arange(w, y.size + 1), smooth
+
+
+def learning_curve_summary(run_dirs: Sequence[Path], points: int = 100) -> tuple[np.ndarray, ...] | None:
+    """(episodes, mean, low, high) across seeds, on the episodes all seeds reached."""
+    raw = [_curve(d, window=max(1, len(read_csv(d / "episodes.csv")) // 20)) for d in run_dirs]
+    raw = [(x, y) for x, y in raw if x.size]
+    if not raw:
+        return None
+    end = min(x[-1] for x, _ in raw)
+    start = max(x[0] for x, _ in raw)
+    grid = np.unique(np.linspace(start, end, points).round().astype(int))
+    curves = np.stack([np.interp(grid, x, y) for x, y in raw])
+    mean, lo, hi = bootstrap_band(curves)
+    return grid, mean, lo, hi
+
+
+def compare_algorithms(preset: str = "quick", seeds: int = 5, workers: int = 2, out: Path | None = None,
+                       algos: Sequence[str] = ALGORITHMS, scenario: str = "fig2",
+                       eval_episodes: int | None = None) -> Path:
+    if preset not in PRESETS:
+        raise UavrisError(f"unknown preset {preset!r}; choose one of {', '.join(PRESETS)}")
+    if seeds < 1 or workers < 1:
+        raise UavrisError("--seeds and --workers must be >= 1")
+    for a in algos:
+        check_algorithm(a)
+    get_scenario(scenario)
+    out = Path(out or f"runs/compare-{preset}")
+    n_eval = eval_episodes or (100 if preset == "paper" else 32)
+    cfgs = {(a, s): preset_config(a, scenario, s, preset, eval_episodes=n_eval) for a in algos for s in range(seeds)}
+    jobs = [Job(f"{a}-s{s}", train_job, (cfg.to_dict(), str(out / "runs" / f"{a}-s{s}")),
+                out / "logs" / f"{a}-s{s}.log") for (a, s), cfg in cfgs.items()]
+    t0 = time.perf_counter()
+    from tqdm.auto import tqdm
+
+    bar = tqdm(total=len(jobs), unit="job", desc="compare-algorithms", dynamic_ncols=True)
+    bar.update(sum(is_finished(Path(j.args[1])) for j in jobs))
+    todo = [j for j in jobs if not is_finished(Path(j.args[1]))]
+
+    def done(res: JobResult) -> None:
+        bar.update(1)
+        status = "done" if res.ok else f"FAILED ({res.error}); log: {res.log}"
+        bar.write(f"  {res.name}: {status}")
+
+    results = run_jobs(todo, workers, done)
+    bar.close()
+    failures = [r for r in results if not r.ok]
+    report = write_comparison(out, cfgs, scenario, n_eval, time.perf_counter() - t0, failures)
+    if failures:
+        raise UavrisError(f"{len(failures)} of {len(jobs)} training jobs failed (see {report}); "
+                          f"first: {failures[0].name}, log {failures[0].log}")
+    return report
+
+
+def write_comparison(out: Path, cfgs: dict[tuple[str, int], TrainConfig], scenario: str, n_eval: int,
+                     wall_s: float, failures: Sequence[JobResult] = ()) -> Path:
+    """Figures, table and report from the finished runs under ``out/runs``."""
+    algos = list(dict.fromkeys(a for a, _ in cfgs))
+    any_cfg = next(iter(cfgs.values()))
+    eval_seed = any_cfg.eval_seed
+    curves, rows, per_run = {}, [], []
+    for a in algos:
+        dirs = [out / "runs" / f"{a}-s{s}" for (b, s) in cfgs if b == a]
+        finished = [d for d in dirs if is_finished(d)]
+        if not finished:
+            continue
+        scores = [read_json(d / "done.json")["final_eval"]["mean"] for d in finished]
+        per_run += [(a, d.name, sc) for d, sc in zip(finished, scores)]
+        summ = learning_curve_summary(finished)
+        if summ is not None:
+            curves[a] = summ
+        last = [np.mean([float(r["avg_sum_rate"]) for r in read_csv(d / "episodes.csv")][-max(
+            1, len(read_csv(d / "episodes.csv")) // 10):]) for d in finished if read_csv(d / "episodes.csv")]
+        s = summarize(scores)
+        rows.append({"policy": a.upper(), "kind": "DRL", **s, "train_last10pct": float(np.mean(last)) if last else
+                     float("nan"), "paper": PAPER_FIG2.get(a, float("nan"))})
+    for name, make in BASELINES.items():
+        res = evaluate(make(0), any_cfg.system, scenario, n_eval, eval_seed)
+        s = summarize(res.avg_sum_rate)
+        rows.append({"policy": name, "kind": "baseline", **s, "train_last10pct": float("nan"),
+                     "paper": float("nan")})
+    header = list(rows[0].keys()) if rows else []
+    write_csv(out / "final_performance.csv", header, [[r[h] for h in header] for r in rows])
+    write_csv(out / "final_per_run.csv", ("algo", "run", "final_eval_mean"), per_run)
+    figs = []
+    if curves:
+        figs = learning_curves(curves, out / "learning_curves",
+                               f"{scenario} {get_scenario(scenario).start}, mean and 95% bootstrap band over seeds",
+                               PAPER_FIG2 if scenario == "fig2" else None)
+    write_json(out / "summary.json", {"rows": rows, "wall_clock_s": wall_s,
+                                      "failures": [dataclasses.asdict(f) | {"log": str(f.log), "value": None}
+                                                   for f in failures]})
+    report = out / "report.md"
+    atomic_write_text(report, render_report(rows, cfgs, scenario, n_eval, wall_s, figs, failures))
+    return report
+
+
+def _fmt_ci(lo: float, hi: float) -> str:
+    return "n/a" if np.isnan(lo) else f"[{lo:.2f}, {hi:.2f}]"
+
+
+def render_report(rows: list[dict[str, Any]], cfgs: dict[tuple[str, int], TrainConfig], scenario: str, n_eval: int,
+                  wall_s: float, figs: Sequence[Path], failures: Sequence[JobResult]) -> str:
+    any_cfg = next(iter(cfgs.values()))
+    seeds = sorted({s for _, s in cfgs})
+    lines = [f"# Algorithm comparison (paper Fig. 2), preset `{any_cfg.preset}`", ""]
+    lines.append(f"Scenario `{scenario}`, UAV starting at {list(get_scenario(scenario).start)}; seeds {seeds}; "
+                 f"{any_cfg.total_steps:,} environment steps per run "
+                 f"({any_cfg.total_steps // any_cfg.system.horizon:,} episodes of {any_cfg.system.horizon} slots); "
+                 f"final evaluation: deterministic policy on {n_eval} seeded episodes "
+                 f"(seeds {any_cfg.eval_seed}..{any_cfg.eval_seed + n_eval - 1}), the same for every policy. "
+                 f"Wall clock of this invocation: {wall_s / 60:.1f} min.")
+    lines.append("")
+    if figs:
+        lines += [f"![learning curves]({Path(figs[0]).name})", ""]
+    lines += ["## Final performance (average sum rate, bps/Hz)", "",
+              "For DRL rows, statistics are over seeds (each seed's score is its mean over the evaluation "
+              "episodes); for baselines, over the evaluation episodes. CIs: 95% percentile bootstrap.", "",
+              "| policy | n | mean | 95% CI (mean) | IQM | 95% CI (IQM) | training, last 10% of episodes | paper |",
+              "|---|---:|---:|---|---:|---|---:|---:|"]
+    for r in rows:
+        paper = "" if np.isnan(r["paper"]) else f"{r['paper']:.1f}"
+        train_last = "" if np.isnan(r["train_last10pct"]) else f"{r['train_last10pct']:.2f}"
+        lines.append(f"| {r['policy']} | {r['n']} | {r['mean']:.2f} | {_fmt_ci(r['mean_ci_low'], r['mean_ci_high'])} "
+                     f"| {r['iqm']:.2f} | {_fmt_ci(r['iqm_ci_low'], r['iqm_ci_high'])} | {train_last} | {paper} |")
+    drl = [r for r in rows if r["kind"] == "DRL"]
+    lines += ["", "## Verdict", ""]
+    if drl:
+        best = max(drl, key=lambda r: r["mean"])
+        ranking = " > ".join(f"{r['policy']} ({r['mean']:.2f})" for r in sorted(drl, key=lambda r: -r["mean"]))
+        lines.append(f"On our simulator the best algorithm is **{best['policy']}**; ranking by mean final score: "
+                     f"{ranking}.")
+        overlap = [r for r in drl if r is not best and r["mean_ci_high"] >= best["mean_ci_low"]]
+        if overlap:
+            lines.append(f"The 95% CIs of {', '.join(r['policy'] for r in overlap)} overlap the best one's, so the "
+                         "ranking among those is not statistically settled with these seeds.")
+        paper_rank = " > ".join(a.upper() for a in sorted(PAPER_FIG2, key=lambda a: -PAPER_FIG2[a]))
+        agrees = best["policy"] == "DDPG"
+        lines.append(f"The paper ranks {paper_rank} with DDPG best; "
+                     + ("our result **agrees** on the winner." if agrees else
+                        f"our result **does not agree**: {best['policy']} wins here."))
+        base = {r["policy"]: r["mean"] for r in rows if r["kind"] == "baseline"}
+        if base:
+            lines.append(f"Baselines: {', '.join(f'{k} {v:.2f}' for k, v in base.items())} bps/Hz. "
+                         f"Our absolute numbers differ from the paper's: its unstated parameters (noise power, slot "
+                         f"length, energy budget, training length) differ from ours (docs/model.md).")
+    if failures:
+        lines += ["", "## Failed jobs", ""] + [f"- {f.name}: {f.error} (log: {f.log})" for f in failures]
+    lines += ["", "## Parameters", "", "Hyperparameters per algorithm (the paper gives none; reasons in "
+              "`uavris.agents.experts`):", ""]
+    for a in dict.fromkeys(a for a, _ in cfgs):
+        hp = cfgs[(a, seeds[0])].hyperparams
+        lines.append(f"- **{a.upper()}**: " + ", ".join(f"{k}={v}" for k, v in hyperparams_for(a, hp).items()))
+    lines += ["", "System configuration:", "", "```yaml"]
+    import yaml
+
+    lines += [yaml.safe_dump(any_cfg.system.to_dict(), sort_keys=False).rstrip(), "```", ""]
+    return "\n".join(lines)

@@ -1,0 +1,176 @@
+import json
+import shutil
+import zipfile
+
+import numpy as np
+import pytest
+from stable_baselines3.common.env_checker import check_env as sb3_check_env
+from stable_baselines3.common.vec_env import DummyVecEnv
+
+from uavris.agents.baselines import BASELINES
+from uavris.agents.evaluation import evaluate
+from uavris.agents.sb3_vec_env import UavRisVecEnv
+from uavris.cli import main as cli_main
+from uavris.config import SystemConfig
+from uavris.env import UavRisD2DEnv
+from uavris.experiments.io import UavrisError
+from uavris.experiments.training import load_model, preset_config, train
+
+
+def test_sb3_env_checker_passes():
+    with pytest.warns(None) if False else _no_warning():
+        sb3_check_env(UavRisD2DEnv(), warn=True)
+
+
+class _no_warning:
+    def __enter__(self):
+        import warnings
+
+        self._cm = warnings.catch_warnings(record=True)
+        self.caught = self._cm.__enter__()
+        warnings.simplefilter("always")
+        return self
+
+    def __exit__(self, *exc):
+        self._cm.__exit__(*exc)
+        assert not self.caught, [str(w.message) for w in self.caught]
+
+
+def test_vec_env_adapter_matches_dummy_vec_env():
+    n, steps = 3, 230
+    cfg = SystemConfig()
+    ours = UavRisVecEnv(n, cfg, "train2")
+    ref = DummyVecEnv([lambda: UavRisD2DEnv(cfg, "train2") for _ in range(n)])
+    ours.seed(42)
+    ref.seed(42)
+    np.testing.assert_array_equal(ours.reset(), ref.reset())
+    rng = np.random.default_rng(0)
+    for t in range(steps):
+        a = rng.uniform(-1, 1, (n, 22)).astype(np.float32)
+        o1, r1, d1, i1 = ours.step(a)
+        o2, r2, d2, i2 = ref.step(a)
+        np.testing.assert_array_equal(o1, o2)
+        np.testing.assert_allclose(r1, r2, rtol=1e-6)
+        np.testing.assert_array_equal(d1, d2)
+        for k in np.flatnonzero(d1):
+            np.testing.assert_array_equal(i1[k]["terminal_observation"], i2[k]["terminal_observation"])
+            assert i1[k]["TimeLimit.truncated"] == i2[k]["TimeLimit.truncated"]
+    assert d1.any() or t == steps - 1
+    # a later reset() without seeds continues with the next episodes in both
+    np.testing.assert_array_equal(ours.reset(), ref.reset())
+
+
+@pytest.mark.parametrize("algo", ["ddpg", "ppo", "sac", "td3"])
+def test_each_algorithm_trains_saves_loads_and_evaluates(algo, tmp_path):
+    cfg = preset_config(algo, "fig2", 0, "smoke", eval_episodes=4)
+    model_path = train(cfg, tmp_path / algo, progress=False)
+    assert model_path.exists()
+    done = json.loads((tmp_path / algo / "done.json").read_text())
+    assert done["env_steps"] >= cfg.total_steps
+    assert (tmp_path / algo / "config.yaml").exists() and any((tmp_path / algo / "tb").iterdir())
+    model = load_model(model_path, algo)
+    res = evaluate(lambda o, s: model.predict(o, deterministic=True)[0], cfg.system, "unseen1", 3, 5)
+    assert res.avg_sum_rate.shape == (3,) and np.all(res.avg_sum_rate > 0)
+
+
+def test_resume_continues_step_count_and_keeps_first_checkpoint(tmp_path):
+    cfg = preset_config("ddpg", "fig2", 1, "smoke", eval_episodes=4, checkpoint_every=160)
+    run = tmp_path / "run"
+    with pytest.raises(KeyboardInterrupt):
+        train(cfg, run, progress=False, interrupt_at=400)
+    latest = json.loads((run / "checkpoints" / "latest.json").read_text())
+    assert latest["env_steps"] == 320  # checkpoints at 160 and 320 before the kill at 400
+    first = run / "checkpoints" / "step_160.zip"
+    with pytest.raises(UavrisError, match="--resume"):
+        train(cfg, run, progress=False)  # no accidental restart
+    train(cfg, run, resume=True, progress=False)
+    done = json.loads((run / "done.json").read_text())
+    assert done["env_steps"] == cfg.total_steps  # counter continued from 320, not restarted
+    assert load_model(first, "ddpg").num_timesteps == 160  # the first checkpoint is still readable
+    with pytest.raises(UavrisError, match="finished run"):
+        train(cfg, run, progress=False)
+    with pytest.raises(UavrisError, match="finished run"):
+        train(cfg, run, resume=True, progress=False)
+
+
+def test_resume_with_changed_config_is_refused(tmp_path):
+    cfg = preset_config("td3", "fig2", 0, "smoke", eval_episodes=2)
+    with pytest.raises(KeyboardInterrupt):
+        train(cfg, tmp_path / "r", progress=False, interrupt_at=330)
+    other = preset_config("td3", "fig2", 0, "smoke", eval_episodes=2, total_steps=999)
+    with pytest.raises(UavrisError, match="different configuration"):
+        train(other, tmp_path / "r", resume=True, progress=False)
+
+
+def test_identical_seeds_give_identical_evaluation(tmp_path):
+    cfg = preset_config("td3", "fig2", 3, "smoke", eval_episodes=4)
+    train(cfg, tmp_path / "a", progress=False)
+    train(cfg, tmp_path / "b", progress=False)
+    ev = [json.loads((tmp_path / r / "done.json").read_text())["final_eval"]["mean"] for r in "ab"]
+    assert ev[0] == ev[1]
+    a = (tmp_path / "a" / "evals.csv").read_text()
+    assert a == (tmp_path / "b" / "evals.csv").read_text()
+
+
+def test_ddpg_learns_beyond_random(tmp_path):
+    """Kept small: 4,000 env steps of DDPG (about 10 s) must beat uniform random actions by
+    at least 3 bps/Hz on the same 16 evaluation episodes (random scores ~7, a policy that
+    merely keeps the RIS level scores ~12)."""
+    cfg = preset_config("ddpg", "fig2", 0, "smoke", total_steps=4000, eval_episodes=16)
+    train(cfg, tmp_path / "learn", progress=False)
+    ddpg = json.loads((tmp_path / "learn" / "done.json").read_text())["final_eval"]["mean"]
+    random = evaluate(BASELINES["random"](0), cfg.system, "fig2", 16, cfg.eval_seed).summary()["mean"]
+    assert ddpg > random + 3.0, (ddpg, random)
+
+
+def _run_cli(args, capsys):
+    code = cli_main(args)
+    err = capsys.readouterr().err.strip()
+    return code, err
+
+
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["train", "--algo", "a2c", "--preset", "smoke"], "unknown algorithm 'a2c'"),
+        (["train", "--scenario", "mars", "--preset", "smoke"], "unknown scenario 'mars'"),
+        (["train", "--preset", "huge"], "unknown preset 'huge'"),
+        (["train", "--preset", "smoke", "--system", "v_max=-1"], "SystemConfig.v_max must be"),
+        (["evaluate", "/nonexistent/run"], "is not a directory"),
+        (["evaluate", "baseline:oracle", "--scenario", "fig2"], "unknown baseline 'oracle'"),
+    ],
+)
+def test_bad_cli_input_is_one_line_exit_2(args, message, capsys):
+    code, err = _run_cli(args, capsys)
+    assert code == 2
+    assert message in err and len(err.splitlines()) == 1 and err.startswith("uavris: error:")
+
+
+def test_not_a_run_dir_and_corrupt_checkpoint(tmp_path, capsys):
+    (tmp_path / "junk").mkdir()
+    (tmp_path / "junk" / "notes.txt").write_text("keep me")
+    code, err = _run_cli(["evaluate", str(tmp_path / "junk")], capsys)
+    assert code == 2 and "not a uavris run directory" in err
+    code, err = _run_cli(["train", "--preset", "smoke", "--out", str(tmp_path / "junk"), "--no-progress"], capsys)
+    assert code == 2 and "not a uavris run directory" in err
+    assert (tmp_path / "junk" / "notes.txt").read_text() == "keep me"  # nothing overwritten
+
+    cfg = preset_config("ddpg", "fig2", 0, "smoke", eval_episodes=2)
+    run = tmp_path / "run"
+    train(cfg, run, progress=False)
+    (run / "model.zip").write_bytes(b"not a zip")
+    code, err = _run_cli(["evaluate", str(run)], capsys)
+    assert code == 2 and "corrupt" in err and len(err.splitlines()) == 1
+    # a truncated checkpoint on resume
+    shutil.rmtree(run)
+    with pytest.raises(KeyboardInterrupt):
+        train(cfg, run, progress=False, interrupt_at=330)
+    ck = run / "checkpoints" / "step_320.zip"
+    data = ck.read_bytes()
+    ck.write_bytes(data[: len(data) // 2])
+    before = sorted(p.name for p in run.rglob("*"))
+    code, err = _run_cli(["train", "--preset", "smoke", "--out", str(run), "--resume", "--no-progress"], capsys)
+    assert code == 2 and "corrupt" in err
+    assert sorted(p.name for p in run.rglob("*")) == before
+    with pytest.raises(zipfile.BadZipFile):
+        zipfile.ZipFile(ck)
