@@ -3,17 +3,21 @@
 The paper gives no hyperparameters. Ours, with their reasons:
 
 - Networks: two hidden layers (``net_arch``) for actor and critic; 256 units in ``paper``
-  (the common continuous-control size), 128 in ``quick`` because one gradient step costs
-  ~5 ms on one CPU core at 128 and ~12 ms at 256, and the quick study must fit 30 minutes.
+  (the common continuous-control size), 64 in ``quick`` because a DDPG gradient step costs
+  ~12 ms on one CPU core at 256 units and ~3 ms at 64, and the quick study (20 runs) must
+  fit 30 minutes on two cores.
 - ``gamma`` = 0.95: a slot's reward depends on that slot's phases and pose; moving pays off
   within ~10-20 slots (5-10 s at up to 5 m/s), so a 20-slot effective horizon suffices and
   keeps Q-values small.
 - ``reward_scale`` = 0.1: sum rates are 5-40 bps/Hz per slot; scaled rewards keep critic
   targets of order 10.
-- Off-policy: ``n_envs`` = 8 parallel systems, one update every vector step with
-  ``gradient_steps`` = 2, i.e. one gradient step per 4 env steps; replay 1e6 (paper) or
-  2e5 (quick); batch 256/128; learning rate 1e-3 (DDPG, TD3) and 3e-4 (SAC, its usual);
-  exploration: Gaussian noise sigma = 0.1 on DDPG/TD3 actions, SAC's automatic entropy.
+- Off-policy: ``n_envs`` parallel systems (8 paper, 4 quick/smoke), one update every
+  vector step with ``gradient_steps`` = ``n_envs``: one gradient step per env step. We
+  measured that at one gradient step per 4 env steps DDPG did not improve in 16,000 steps
+  (average sum rate 2-8 bps/Hz, actions saturated at +-1), while at 1:1 it climbed from
+  6.6 to 9.0 bps/Hz over the same steps. Replay 1e6 (paper) or 2e5 (quick); batch
+  256/128; learning rate 1e-3 (DDPG, TD3) and 3e-4 (SAC, its usual); exploration:
+  Gaussian noise sigma = 0.1 on DDPG/TD3 actions, SAC's automatic entropy.
 - PPO: 16 parallel systems x 256 steps per rollout, 10 epochs of minibatch 256, lr 3e-4,
   GAE 0.95, clip 0.2: the standard continuous-control settings.
 """
@@ -46,7 +50,7 @@ class Hyperparams:
     buffer_size: int = 1_000_000
     learning_starts: int = 2_000
     tau: float = 0.005
-    gradient_steps: int = 2
+    gradient_steps: int = 8
     action_noise: float = 0.1  # DDPG/TD3 Gaussian exploration sigma (actions in [-1, 1])
     policy_delay: int = 2  # TD3
     target_policy_noise: float = 0.2  # TD3
@@ -123,11 +127,12 @@ def default_hyperparams(algo: str, preset: str) -> Hyperparams:
     if preset == "paper":
         return hp
     if preset == "quick":
-        return hp.replace(net_arch=(128, 128), batch_size=128 if algo != "ppo" else 256, buffer_size=200_000,
-                          learning_starts=1_000, n_steps=128 if algo == "ppo" else hp.n_steps)
+        return hp.replace(net_arch=(64, 64), batch_size=128 if algo != "ppo" else 256, buffer_size=200_000,
+                          learning_starts=1_000, n_envs=4 if algo != "ppo" else 16, gradient_steps=4,
+                          n_steps=128 if algo == "ppo" else hp.n_steps)
     if preset == "smoke":
         return hp.replace(net_arch=(32, 32), batch_size=32, buffer_size=10_000, learning_starts=100,
-                          n_envs=4, n_steps=32, n_epochs=2)
+                          n_envs=4, gradient_steps=4, n_steps=32, n_epochs=2)
     raise ConfigError(f"unknown preset {preset!r}; choose one of smoke, quick, paper")
 
 

@@ -47,7 +47,7 @@ class UavRisD2DEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
             ``"unseen2"``), a :class:`Scenario`, or a start position ``[x, y, z]``.
 
     Action: ``Box(-1, 1, (22,), float32)`` = acceleration (x a_max), 16 RIS phases
-    (mapped to [0, 2 pi)), attitude increments (x the per-slot bound). Out-of-range values
+    (mapped to [0, 2 pi]; 0 and 2 pi are the same phasor), attitude increments (x the per-slot bound). Out-of-range values
     are clipped; NaN or inf raise ``ValueError``.
     Observation: ``Box((158,), float32)``, every component of order 1, see
     :func:`uavris.env.simulator.observation_layout`.

@@ -1,4 +1,4 @@
-"""UAV attitude and RIS geometry (paper eq. 13 and Remark 1).
+"""UAV attitude and RIS geometry (paper eq. 10, 11-12 and Remark 1).
 
 All functions are pure and batched over leading dimensions.
 """
@@ -12,7 +12,7 @@ TWO_PI = 2.0 * np.pi
 
 
 def wrap_angle(angle: ArrayLike) -> NDArray[np.float64]:
-    """Wrap angles to [0, 2*pi) (paper constraint 15e)."""
+    """Wrap angles to [0, 2*pi) (paper constraint 13e)."""
     w = np.mod(np.asarray(angle, dtype=np.float64), TWO_PI)
     # np.mod can return exactly 2*pi for tiny negative inputs; fold it back.
     return np.where(w >= TWO_PI, 0.0, w)
@@ -24,7 +24,7 @@ def accumulate_attitude(attitude: ArrayLike, increment: ArrayLike) -> NDArray[np
 
 
 def rotation_matrix(yaw: ArrayLike, pitch: ArrayLike, roll: ArrayLike) -> NDArray[np.float64]:
-    """R = Rz(yaw) @ Ry(pitch) @ Rx(roll), paper eq. (13). Shape ``(..., 3, 3)``."""
+    """R = Rz(yaw) @ Ry(pitch) @ Rx(roll), paper eq. (10). Shape ``(..., 3, 3)``."""
     y, p, r = np.broadcast_arrays(*(np.asarray(a, dtype=np.float64) for a in (yaw, pitch, roll)))
     cy, sy, cp, sp, cr, sr = np.cos(y), np.sin(y), np.cos(p), np.sin(p), np.cos(r), np.sin(r)
     R = np.empty(y.shape + (3, 3))
@@ -55,7 +55,7 @@ def ris_axes(attitude: ArrayLike) -> NDArray[np.float64]:
 def incidence(
     uav_pos: ArrayLike, user_pos: ArrayLike, axes: ArrayLike
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
-    """Spatial frequencies and incidence of each user at the RIS (Remark 1, eq. 14-15).
+    """Spatial frequencies and incidence of each user at the RIS (Remark 1, eq. 11-12).
 
     Args:
         uav_pos: ``(..., 3)`` RIS/UAV position q_U.

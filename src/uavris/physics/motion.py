@@ -1,4 +1,4 @@
-"""UAV kinematics (paper eq. 12) and propulsion energy (Zeng, Xu, Zhang, IEEE TWC 2019)."""
+"""UAV kinematics (paper eq. 9) and propulsion energy (Zeng, Xu, Zhang, IEEE TWC 2019)."""
 
 from __future__ import annotations
 
@@ -62,7 +62,7 @@ def feasible_acceleration(velocity: ArrayLike, accel: ArrayLike, dt: float, v_ma
 def kinematic_step(
     position: ArrayLike, velocity: ArrayLike, accel: ArrayLike, dt: float, low: ArrayLike, high: ArrayLike
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """q(t+1) = q + v dt + a dt^2/2 and v(t+1) = v + a dt (paper eq. 12), then projection of q
+    """q(t+1) = q + v dt + a dt^2/2 and v(t+1) = v + a dt (paper eq. 9), then projection of q
     onto the flight region [low, high] with the velocity component into a wall zeroed.
 
     ``accel`` must already be feasible (see :func:`feasible_acceleration`).

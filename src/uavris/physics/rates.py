@@ -1,4 +1,4 @@
-"""SINR, pair rates and the sum rate (paper eq. 10-11, corrected with |.|^2 in MODEL.md)."""
+"""SINR, pair rates and the sum rate (paper eq. 7-8, corrected with |.|^2 in MODEL.md)."""
 
 from __future__ import annotations
 
