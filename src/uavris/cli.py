@@ -166,6 +166,8 @@ def compare_cmd(
     algos: tuple[str, ...] = ("ddpg", "ppo", "sac", "td3"),
     scenario: str = "fig2",
     eval_episodes: Optional[int] = None,
+    backend: str = "local",
+    ray_address: Optional[str] = None,
 ) -> None:
     """Train DDPG, PPO, SAC and TD3 over several seeds and compare them (paper Fig. 2).
 
@@ -181,11 +183,14 @@ def compare_cmd(
         algos: algorithms to compare.
         scenario: scenario (the paper's Fig. 2 uses fig2 = [15, 20, 4.5]).
         eval_episodes: final evaluation episodes per run (default: 32 smoke/quick, 100 paper).
+        backend: local (process pool) or ray (pip install 'uavris[ray]').
+        ray_address: address of a running Ray cluster (default: start a local instance).
     """
     from uavris.experiments.compare import compare_algorithms
 
     report = compare_algorithms(preset=preset, seeds=seeds, workers=workers, out=out, algos=algos,
-                                scenario=scenario, eval_episodes=eval_episodes)
+                                scenario=scenario, eval_episodes=eval_episodes, backend=backend,
+                                ray_address=ray_address)
     print(f"report: {report}")
 
 
@@ -195,6 +200,198 @@ def demo_cmd(episodes: int = 32, seed: int = 0, scenario: str = "fig2") -> None:
     from uavris.demo import main as demo_main
 
     demo_main(["--episodes", str(episodes), "--seed", str(seed), "--scenario", scenario])
+
+
+@app.command(name="collect")
+def collect_cmd(
+    experts: tuple[Path, ...],
+    trajectories: int = 500,
+    out: Path = Path("runs/datasets/experts-v0"),
+    seed: int = 2_000_000,
+    force: bool = False,
+    no_progress: bool = False,
+) -> None:
+    """Roll expert runs out deterministically and write a Minari dataset for the Decision Transformer.
+
+    Each expert acts in its own scenario without exploration noise; episodes are batched.
+    The dataset (DIR/data/metadata.json + main_data.hdf5) records per-episode scenario,
+    expert and seed, and the system configuration and observation layout it was made with.
+
+    Args:
+        experts: expert run directories made by `uavris train` (one per scenario).
+        trajectories: episodes per expert (the paper uses 500).
+        out: dataset directory.
+        seed: seed of the first episode; expert k uses SEED + k*TRAJECTORIES onwards.
+        force: replace an existing dataset.
+        no_progress: no progress bar.
+    """
+    from uavris.experiments.dt_pipeline import collect, dataset_summary
+
+    path = collect(experts, trajectories, out, seed=seed, force=force, progress=not no_progress)
+    summary = dataset_summary(path)
+    rates = ", ".join(f"{s} {v['avg_sum_rate']:.2f}" for s, v in summary["scenarios"].items())
+    print(f"dataset {path} ({summary['dataset_id']}): {summary['episodes']} episodes, {summary['slots']} slots; "
+          f"average sum rate per scenario (bps/Hz): {rates}")
+
+
+@app.command(name="pretrain-dt")
+def pretrain_dt_cmd(
+    dataset: Path,
+    preset: str = "quick",
+    seed: int = 0,
+    out: Optional[Path] = None,
+    resume: bool = False,
+    force: bool = False,
+    steps: Optional[int] = None,
+    batch_size: Optional[int] = None,
+    learning_rate: Optional[float] = None,
+    warmup_steps: Optional[int] = None,
+    checkpoint_every: Optional[int] = None,
+    context: Optional[int] = None,
+    width: Optional[int] = None,
+    depth: Optional[int] = None,
+    heads: Optional[int] = None,
+    dropout: Optional[float] = None,
+    no_progress: bool = False,
+) -> None:
+    """Pre-train a Decision Transformer offline on an expert dataset (paper Algorithm 1, stage 1).
+
+    Writes a run directory (default runs/dt/pretrain-DATASET-sSEED-PRESET) with config.json,
+    train_log.csv, TensorBoard logs (tb/), checkpoints (safetensors + JSON) and the final
+    model.safetensors + model.json, which `uavris evaluate` and `uavris finetune-dt` accept.
+
+    Args:
+        dataset: dataset directory written by `uavris collect`.
+        preset: smoke (seconds), quick (minutes), paper (the DT paper's 100,000 steps; hours).
+        seed: seed of initialisation, window sampling and dropout.
+        out: run directory.
+        resume: continue an interrupted run from its last checkpoint.
+        force: delete the run directory and train from scratch.
+        steps: gradient steps (default: the preset's).
+        batch_size: context windows per step.
+        learning_rate: AdamW learning rate after warm-up.
+        warmup_steps: linear warm-up steps.
+        checkpoint_every: gradient steps between checkpoints.
+        context: slots per context window (DT paper: 20).
+        width: embedding width (DT paper: 128).
+        depth: transformer blocks (DT paper: 3).
+        heads: attention heads (DT paper: 1).
+        dropout: dropout rate (DT paper: 0.1).
+        no_progress: no progress bar.
+    """
+    from uavris.experiments.dt_pipeline import default_pretrain_dir, pretrain, pretrain_config
+    from uavris.experiments.io import read_json
+
+    cfg = pretrain_config(dataset, preset, seed, steps=steps, batch_size=batch_size, learning_rate=learning_rate,
+                          warmup_steps=warmup_steps, checkpoint_every=checkpoint_every, context=context, width=width,
+                          depth=depth, heads=heads, dropout=dropout)
+    run_dir = pretrain(cfg, out or default_pretrain_dir(cfg), resume=resume, force=force, progress=not no_progress)
+    done = read_json(run_dir / "done.json")
+    print(f"pre-trained {run_dir}: {done['gradient_steps']} steps, final action loss {done['final_loss']:.4f}, "
+          f"default target return {done['target_return']:.1f}")
+
+
+@app.command(name="finetune-dt")
+def finetune_dt_cmd(
+    model: Path,
+    scenario: str,
+    preset: str = "quick",
+    seed: int = 0,
+    out: Optional[Path] = None,
+    resume: bool = False,
+    force: bool = False,
+    rounds: Optional[int] = None,
+    candidates: Optional[int] = None,
+    elites: Optional[int] = None,
+    noise_sigma: Optional[float] = None,
+    epochs_per_round: Optional[int] = None,
+    learning_rate: Optional[float] = None,
+    target_return: Optional[float] = None,
+    eval_episodes: Optional[int] = None,
+    no_progress: bool = False,
+) -> None:
+    """Fine-tune a pre-trained Decision Transformer online in a scenario (paper Algorithm 1, stage 2).
+
+    Each round collects CANDIDATES noisy trajectories, keeps the ELITES best by return and
+    fine-tunes on them; the zero-shot policy (round 0) and every round are evaluated on the
+    same seeded episodes. Writes finetune.csv (with the environment interactions used),
+    TensorBoard logs, checkpoints and the final model to a run directory (default
+    runs/dt/finetune-SCENARIO-sSEED-PRESET).
+
+    Args:
+        model: pre-trained model directory (a `uavris pretrain-dt` run directory or checkpoint).
+        scenario: scenario to adapt to, e.g. unseen1 or unseen2.
+        preset: smoke (seconds), quick (minutes), paper (H = 10 rounds).
+        seed: seed of the exploration noise, window sampling and dropout.
+        out: run directory.
+        resume: continue an interrupted run from its last completed round.
+        force: delete the run directory and start over.
+        rounds: fine-tuning rounds H.
+        candidates: trajectories collected per round N (paper: 80).
+        elites: trajectories kept per round K (paper: 50).
+        noise_sigma: standard deviation of the Gaussian exploration noise on actions.
+        epochs_per_round: passes over the elite slots per round.
+        learning_rate: AdamW learning rate after warm-up.
+        target_return: target return R_hat_1 (default: the pre-trained model's).
+        eval_episodes: evaluation episodes after each round.
+        no_progress: no progress bar.
+    """
+    from uavris.experiments.dt_pipeline import default_finetune_dir, finetune, finetune_config
+    from uavris.experiments.io import read_json
+
+    cfg = finetune_config(model, scenario, preset, seed, rounds=rounds, candidates=candidates, elites=elites,
+                          noise_sigma=noise_sigma, epochs_per_round=epochs_per_round, learning_rate=learning_rate,
+                          target_return=target_return, eval_episodes=eval_episodes)
+    run_dir = finetune(cfg, out or default_finetune_dir(cfg), resume=resume, force=force, progress=not no_progress)
+    done = read_json(run_dir / "done.json")
+    z, f = done["zero_shot_eval"], done["final_eval"]
+    print(f"fine-tuned {run_dir} in {scenario}: average sum rate {z['mean']:.2f} (zero-shot) -> {f['mean']:.2f} "
+          f"bps/Hz after {done['rounds']} rounds, {done['env_interactions']} environment interactions")
+
+
+@app.command(name="reproduce")
+def reproduce_cmd(
+    preset: str = "quick",
+    out: Optional[Path] = None,
+    workers: int = 2,
+    backend: str = "local",
+    ray_address: Optional[str] = None,
+    force: tuple[str, ...] = (),
+    seed: int = 0,
+    compare_seeds: Optional[int] = None,
+    eval_episodes: Optional[int] = None,
+    trajectories: Optional[int] = None,
+    system: tuple[str, ...] = (),
+    no_progress: bool = False,
+) -> None:
+    """Reproduce the paper's study end to end: Fig. 2, experts, dataset, DT, Fig. 3, report.
+
+    Stages: compare, experts-train, experts-unseen, dataset, pretrain, finetune-unseen1/2,
+    evaluate-unseen1/2, report. Each stage is stored under OUT/stages/NAME-KEY (KEY = hash of
+    its configuration and inputs): a rerun skips finished stages and resumes an interrupted one.
+    Writes OUT/report.md and OUT/figures/.
+
+    Args:
+        preset: smoke (minutes), quick (< 60 min on 2 cores), paper (hours; sized like the paper).
+        out: output directory (default runs/PRESET).
+        workers: parallel job processes (local backend) or CPUs of a local Ray instance.
+        backend: local (process pool) or ray (pip install 'uavris[ray]').
+        ray_address: address of a running Ray cluster (default: start a local instance).
+        force: stage(s) to rerun even if finished, e.g. --force pretrain.
+        seed: seed of the experts and the DT.
+        compare_seeds: seeds per algorithm in the comparison (default 2 smoke, 5 otherwise).
+        eval_episodes: evaluation episodes per policy (default 8 smoke, 32 quick, 100 paper).
+        trajectories: expert trajectories per training scenario (default 4 smoke, 100 quick, 500 paper).
+        system: system-config overrides KEY=VALUE.
+        no_progress: no progress bar.
+    """
+    from uavris.experiments.reproduce import ReproduceConfig, reproduce
+
+    rc = ReproduceConfig(preset=preset, seed=seed, compare_seeds=compare_seeds, eval_episodes=eval_episodes,
+                         trajectories=trajectories, **({"system": _system(system)} if system else {}))
+    report = reproduce(rc, out or Path("runs") / preset, workers=workers, backend=backend, ray_address=ray_address,
+                       force=force, progress=not no_progress)
+    print(f"report: {report}")
 
 
 def main(argv: list[str] | None = None) -> int:

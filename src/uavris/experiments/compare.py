@@ -62,7 +62,8 @@ def learning_curve_summary(run_dirs: Sequence[Path], points: int = 100) -> tuple
 
 def compare_algorithms(preset: str = "quick", seeds: int = 5, workers: int = 2, out: Path | None = None,
                        algos: Sequence[str] = ALGORITHMS, scenario: str = "fig2",
-                       eval_episodes: int | None = None) -> Path:
+                       eval_episodes: int | None = None, backend: str = "local",
+                       ray_address: str | None = None, progress: bool = True) -> Path:
     if preset not in PRESETS:
         raise UavrisError(f"unknown preset {preset!r}; choose one of {', '.join(PRESETS)}")
     if seeds < 1 or workers < 1:
@@ -78,7 +79,7 @@ def compare_algorithms(preset: str = "quick", seeds: int = 5, workers: int = 2, 
     t0 = time.perf_counter()
     from tqdm.auto import tqdm
 
-    bar = tqdm(total=len(jobs), unit="job", desc="compare-algorithms", dynamic_ncols=True)
+    bar = tqdm(total=len(jobs), unit="job", desc="compare-algorithms", dynamic_ncols=True, disable=not progress)
     bar.update(sum(is_finished(Path(j.args[1])) for j in jobs))
     todo = [j for j in jobs if not is_finished(Path(j.args[1]))]
 
@@ -87,7 +88,7 @@ def compare_algorithms(preset: str = "quick", seeds: int = 5, workers: int = 2, 
         status = "done" if res.ok else f"FAILED ({res.error}); log: {res.log}"
         bar.write(f"  {res.name}: {status}")
 
-    results = run_jobs(todo, workers, done)
+    results = run_jobs(todo, workers, done, backend=backend, ray_address=ray_address)
     bar.close()
     failures = [r for r in results if not r.ok]
     report = write_comparison(out, cfgs, scenario, n_eval, time.perf_counter() - t0, failures)
