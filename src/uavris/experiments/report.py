@@ -28,11 +28,14 @@ def _fmt(x: float, nd: int = 2) -> str:
 def fig3(scenario: str, stage_dir: Path, stem: Path) -> list[Path]:
     """Average sum rate per evaluation episode for the four kinds of policy (paper Fig. 3)."""
     fig, ax = plt.subplots(figsize=(4.8, 3.4))
+    transfer_styles = iter(["--", ":", "-."] * 3)
     for csv in sorted(stage_dir.glob("*.csv")):
         key = csv.stem
         summary = read_json(csv.with_suffix(".json"))
         y = [float(r["avg_sum_rate"]) for r in read_csv(csv)]
         color, ls = KIND_STYLE.get("transfer" if key.startswith("transfer") else key, ("k", "-"))
+        if key.startswith("transfer"):
+            ls = next(transfer_styles)
         ax.plot(np.arange(1, len(y) + 1), y, ls, color=color, lw=1.1, alpha=0.9 if ls == "-" else 0.7,
                 label=f"{summary['label']} ({summary['mean']:.2f})")
     s = get_scenario(scenario)
