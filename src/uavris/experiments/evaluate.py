@@ -25,6 +25,11 @@ def resolve_policy(target: str, seed: int) -> tuple[Any, SystemConfig, str | Non
     run_dir = Path(target)
     if not run_dir.is_dir():
         raise UavrisError(f"{run_dir} is not a directory (expected a run directory or baseline:NAME)")
+    from uavris.experiments.dt_pipeline import dt_model_dir, load_dt_policy
+
+    if dt_model_dir(run_dir) is not None:  # a Decision Transformer model or DT run directory
+        policy, system, scenario = load_dt_policy(run_dir)
+        return policy, system, scenario, run_dir
     cfg = load_run_config(run_dir)
     configure_torch_threads()
     model = load_model(final_model_path(run_dir), cfg.algo)
