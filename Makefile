@@ -4,22 +4,28 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: run test bench clean
+.PHONY: run test demo bench clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
-	$(PY) -m pip install --quiet --upgrade pip
 	$(PY) -m pip install --quiet -e '.[test]'
 	touch $(STAMP)
 
 run: $(STAMP)
+	$(VENV)/bin/uavris reproduce --preset quick --out runs/quick
+
+demo: $(STAMP)
 	$(PY) -m uavris.demo
 
 test: $(STAMP)
 	$(PY) -m pytest -q
 
 bench: $(STAMP)
+	$(PY) -m pip install --quiet -e '.[bench]'
 	$(PY) benchmarks/env_throughput.py
+	$(PY) benchmarks/train_throughput.py
+	$(PY) benchmarks/dt_throughput.py
+	$(PY) benchmarks/oracle_throughput.py
 
 clean:
 	rm -rf $(VENV) runs

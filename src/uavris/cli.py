@@ -138,12 +138,13 @@ def evaluate_cmd(
     seed: int = 1_000_000,
     out: Optional[Path] = None,
 ) -> None:
-    """Evaluate a trained run (deterministic policy) or a baseline on seeded episodes.
+    """Evaluate an expert run, a Decision Transformer or a baseline on seeded episodes (deterministic).
 
     Writes per-episode CSV and a JSON summary (mean, 95% CI, IQM) to RUN_DIR/eval/ (or --out).
 
     Args:
-        target: a run directory, or baseline:random, baseline:hover-random-phases, baseline:hover-aligned.
+        target: an expert run directory (uavris train), a DT model or run directory (pretrain-dt, finetune-dt),
+            or baseline:random, baseline:hover-random-phases, baseline:hover-aligned.
         scenario: scenario to evaluate in (default: the run's own; required for baselines).
         episodes: number of evaluation episodes (seeds SEED .. SEED+EPISODES-1).
         seed: seed of the first evaluation episode.

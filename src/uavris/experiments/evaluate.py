@@ -50,7 +50,7 @@ def evaluate_target(target: str, scenario: str | None, episodes: int, seed: int,
     policy, system, own_scenario, run_dir = resolve_policy(target, seed)
     scenario = scenario or own_scenario
     if scenario is None:
-        raise UavrisError("--scenario is required when evaluating a baseline")
+        raise UavrisError("--scenario is required for a baseline or a pre-trained DT (it has no scenario of its own)")
     get_scenario(scenario).validate_for(system)
     res = evaluate(policy, system, scenario, episodes, seed)
     summary = {"target": target, "scenario": scenario, "seed": seed, **res.summary()}
