@@ -92,6 +92,7 @@ def train_cmd(
     checkpoint_every: Optional[int] = None,
     hp: HyperparamOverrides = HyperparamOverrides(),
     system: tuple[str, ...] = (),
+    phase_control: str = "agent",
     no_progress: bool = False,
 ) -> None:
     """Train a DRL expert (ddpg, ppo, sac or td3) on a scenario.
@@ -113,12 +114,15 @@ def train_cmd(
         checkpoint_every: environment steps between checkpoints.
         hp: hyperparameter overrides.
         system: system-config overrides KEY=VALUE, e.g. --system noise_dbm=-90 horizon=50.
+        phase_control: agent (the policy sets all 22 action entries) or optimizer (hybrid: the policy
+            sets acceleration and attitude, the per-slot phase optimiser sets the RIS phases).
         no_progress: no progress bar.
     """
     from uavris.experiments.training import default_run_dir, preset_config, train
 
     cfg = preset_config(algo, scenario, seed, preset, total_steps=total_steps, eval_every=eval_every,
-                        eval_episodes=eval_episodes, checkpoint_every=checkpoint_every, system=_system(system) if system else None)
+                        eval_episodes=eval_episodes, checkpoint_every=checkpoint_every,
+                        system=_system(system) if system else None, phase_control=phase_control)
     if hp.as_dict():
         cfg = dataclasses.replace(cfg, hyperparams=cfg.hyperparams.replace(**hp.as_dict()))
     run_dir = out or default_run_dir(cfg)
@@ -137,6 +141,7 @@ def evaluate_cmd(
     episodes: int = 100,
     seed: int = 1_000_000,
     out: Optional[Path] = None,
+    phase_control: Optional[str] = None,
 ) -> None:
     """Evaluate an expert run, a Decision Transformer or a baseline on seeded episodes (deterministic).
 
@@ -149,10 +154,13 @@ def evaluate_cmd(
         episodes: number of evaluation episodes (seeds SEED .. SEED+EPISODES-1).
         seed: seed of the first evaluation episode.
         out: output directory.
+        phase_control: optimizer replaces the policy's RIS phases by the per-slot optimiser's
+            (default: as the run was trained).
     """
     from uavris.experiments.evaluate import evaluate_target
 
-    summary, path = evaluate_target(target, scenario=scenario, episodes=episodes, seed=seed, out=out)
+    summary, path = evaluate_target(target, scenario=scenario, episodes=episodes, seed=seed, out=out,
+                                    phase_control=phase_control)
     print(f"{target} in {summary['scenario']}: average sum rate {summary['mean']:.2f} bps/Hz "
           f"(95% CI {summary['ci_low']:.2f}-{summary['ci_high']:.2f}, IQM {summary['iqm']:.2f}, "
           f"{summary['episodes']} episodes) -> {path}")

@@ -15,6 +15,7 @@ import gymnasium as gym
 import numpy as np
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvIndices, VecEnvStepReturn
 
+from uavris.agents.hybrid import MOTION_DIM, check_phase_control, full_action
 from uavris.config import Scenario, SystemConfig
 from uavris.env.simulator import BatchedSimulator, observation_bounds
 
@@ -28,15 +29,21 @@ class UavRisVecEnv(VecEnv):
         scenario: scenario name, :class:`Scenario` or start position.
         reward_scale: multiplies the reward handed to the learner (the sum rate in bps/Hz
             times this). Episode statistics in ``info["episode"]`` stay in bps/Hz.
+        phase_control: ``"agent"`` (the learner sets all 22 action entries) or
+            ``"optimizer"`` (hybrid: the learner sets the 6 motion entries and the per-slot
+            phase optimiser the RIS phases, :mod:`uavris.agents.hybrid`).
     """
 
     def __init__(self, num_envs: int, config: SystemConfig | None = None, scenario: str | Scenario = "fig2",
-                 reward_scale: float = 1.0) -> None:
+                 reward_scale: float = 1.0, phase_control: str = "agent") -> None:
+        check_phase_control(phase_control)
         self.config = config if config is not None else SystemConfig()
         self.sim = BatchedSimulator(self.config, scenario, num_envs)
+        self.phase_control = phase_control
         low, high = observation_bounds(self.config)
         obs_space = gym.spaces.Box(low, high, dtype=np.float32)
-        act_space = gym.spaces.Box(-1.0, 1.0, (self.config.action_dim,), dtype=np.float32)
+        dim = MOTION_DIM if phase_control == "optimizer" else self.config.action_dim
+        act_space = gym.spaces.Box(-1.0, 1.0, (dim,), dtype=np.float32)
         super().__init__(num_envs, obs_space, act_space)
         self.reward_scale = float(reward_scale)
         self._actions: np.ndarray | None = None
@@ -73,7 +80,10 @@ class UavRisVecEnv(VecEnv):
     def step_wait(self) -> VecEnvStepReturn:
         if not self._seeded:
             raise RuntimeError("call reset() before step()")
-        reward, terminated, truncated, _ = self.sim.step(self._actions.reshape(self.num_envs, -1))
+        actions = self._actions.reshape(self.num_envs, -1)
+        if self.phase_control == "optimizer":
+            actions = full_action(self.sim, actions)
+        reward, terminated, truncated, _ = self.sim.step(actions)
         done = terminated | truncated
         self._ep_return += reward
         self._ep_len += 1

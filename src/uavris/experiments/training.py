@@ -37,6 +37,7 @@ from uavris.agents.experts import (
     default_hyperparams,
     sb3_batch_policy,
 )
+from uavris.agents.hybrid import check_phase_control, with_optimised_phases
 from uavris.agents.sb3_vec_env import UavRisVecEnv
 from uavris.config import ConfigError, SystemConfig, get_scenario
 from uavris.experiments.io import UavrisError, read_csv, read_json, read_yaml, write_csv, write_json, write_yaml
@@ -65,11 +66,13 @@ class TrainConfig:
     eval_episodes: int = PRESET_EVAL["quick"][1]
     eval_seed: int = 1_000_000  # evaluation episodes never share seeds with training
     checkpoint_every: int = PRESET_CHECKPOINT["quick"]
+    phase_control: str = "agent"  # "optimizer": hybrid controller (uavris.agents.hybrid)
     hyperparams: Hyperparams = field(default_factory=Hyperparams)
     system: SystemConfig = field(default_factory=SystemConfig)
 
     def __post_init__(self) -> None:
         check_algorithm(self.algo)
+        check_phase_control(self.phase_control)
         get_scenario(self.scenario).validate_for(self.system)
         if self.preset not in PRESETS:
             raise ConfigError(f"unknown preset {self.preset!r}; choose one of {', '.join(PRESETS)}")
@@ -108,7 +111,8 @@ def preset_config(algo: str, scenario: str, seed: int, preset: str, **overrides:
 
 
 def default_run_dir(cfg: TrainConfig, root: str | Path = "runs/train") -> Path:
-    return Path(root) / f"{cfg.algo}-{cfg.scenario}-s{cfg.seed}-{cfg.preset}"
+    hybrid = "-hybrid" if cfg.phase_control == "optimizer" else ""
+    return Path(root) / f"{cfg.algo}{hybrid}-{cfg.scenario}-s{cfg.seed}-{cfg.preset}"
 
 
 def configure_torch_threads() -> None:
@@ -215,8 +219,14 @@ class _Recorder:
             self.bar.close()
 
 
+def run_policy(model: Any, cfg: TrainConfig) -> Any:
+    """The deterministic batch policy of a trained run (hybrid runs get optimised phases)."""
+    policy = sb3_batch_policy(model)
+    return with_optimised_phases(policy) if cfg.phase_control == "optimizer" else policy
+
+
 def run_evaluation(model: Any, cfg: TrainConfig, episodes: int, scenario: str | None = None, seed: int | None = None):
-    return evaluate(sb3_batch_policy(model), cfg.system, scenario or cfg.scenario, episodes,
+    return evaluate(run_policy(model, cfg), cfg.system, scenario or cfg.scenario, episodes,
                     cfg.eval_seed if seed is None else seed)
 
 
@@ -282,7 +292,8 @@ def train(cfg: TrainConfig, run_dir: str | Path, *, resume: bool = False, force:
     elif run_dir.exists() and not has_config and any(run_dir.iterdir()):
         raise UavrisError(f"{run_dir} exists and is not a uavris run directory")
 
-    env = UavRisVecEnv(cfg.hyperparams.n_envs, cfg.system, cfg.scenario, cfg.hyperparams.reward_scale)
+    env = UavRisVecEnv(cfg.hyperparams.n_envs, cfg.system, cfg.scenario, cfg.hyperparams.reward_scale,
+                       cfg.phase_control)
     env.seed(cfg.seed * 10_000)
     episodes: list[list[Any]] = []
     evals: list[list[Any]] = []
