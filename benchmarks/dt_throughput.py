@@ -49,6 +49,7 @@ from uavris.agents.dt_data import TrainingWindows, Trajectory, record_episodes  
 from uavris.agents.dt_model import DecisionTransformer, DTConfig, masked_action_loss  # noqa: E402
 from uavris.agents.dt_policy import DTBatchPolicy  # noqa: E402
 from uavris.config import SystemConfig  # noqa: E402
+from _machine import cpu_model, pin_to_one_core  # noqa: E402  (benchmarks/_machine.py)
 
 BATCH = 64
 CONTEXT, WIDTH, DEPTH, HEADS, DROPOUT = 20, 128, 3, 1, 0.1
@@ -56,26 +57,6 @@ EPISODES = 80
 SCENARIO = "unseen1"
 TARGET_RETURN = 2000.0
 ROLLOUT_RATIO_TARGET = 20.0
-
-
-def pin_to_one_core() -> str:
-    if not hasattr(os, "sched_setaffinity"):
-        return "not pinned (os.sched_setaffinity unavailable)"
-    cpu = min(os.sched_getaffinity(0))
-    os.sched_setaffinity(0, {cpu})
-    return f"pinned to CPU {cpu}"
-
-
-def cpu_model() -> str:
-    try:
-        with open("/proc/cpuinfo", encoding="utf-8") as f:
-            for line in f:
-                key, _, value = line.partition(":")
-                if key.strip() == "model name" and value.strip():
-                    return value.strip()
-    except OSError:
-        pass
-    return platform.processor() or "unknown"
 
 
 def best_of(fn: Callable[[], Any], repeats: int) -> float:

@@ -57,6 +57,7 @@ import numpy as np  # noqa: E402
 from numpy.typing import NDArray  # noqa: E402
 
 import uavris  # noqa: E402  (registers the environment id)
+from _machine import cpu_model, pin_to_one_core  # noqa: E402  (benchmarks/_machine.py)
 
 SEED = 0
 ACTION_POOL_BATCHES = 256  # pre-generated action batches, cycled through when stepping
@@ -105,28 +106,6 @@ CASES: tuple[Case, ...] = (
     Case(Kind.BATCHED, 64, full_steps=3_000, quick_steps=1_000),
     Case(Kind.BATCHED, 1024, full_steps=800, quick_steps=300),
 )
-
-
-def pin_to_one_core() -> str:
-    """Restrict this process to the first CPU it may run on; describe the outcome."""
-    if not hasattr(os, "sched_setaffinity"):
-        return "not pinned (os.sched_setaffinity unavailable on this platform)"
-    cpu = min(os.sched_getaffinity(0))
-    os.sched_setaffinity(0, {cpu})
-    return f"pinned to CPU {cpu}"
-
-
-def cpu_model() -> str:
-    """The CPU model from /proc/cpuinfo, falling back to platform.processor()."""
-    try:
-        with open("/proc/cpuinfo", encoding="utf-8") as cpuinfo:
-            for line in cpuinfo:
-                key, _, value = line.partition(":")
-                if key.strip() in ("model name", "Hardware", "Processor") and value.strip():
-                    return value.strip()
-    except OSError:
-        pass
-    return platform.processor() or "unknown"
 
 
 def make_env(case: Case) -> Any:

@@ -89,6 +89,7 @@ from uavris.agents.experts import build_model, default_hyperparams, sb3_batch_po
 from uavris.agents.sb3_vec_env import UavRisVecEnv  # noqa: E402
 from uavris.config import SystemConfig  # noqa: E402
 from uavris.env import UavRisD2DEnv  # noqa: E402
+from _machine import cpu_model, pin_to_one_core  # noqa: E402  (benchmarks/_machine.py)
 
 SEED = 0
 SCENARIO = "fig2"
@@ -262,28 +263,6 @@ def train(contender: Contender, budget_s: float, interval_s: float, seed: int) -
 
 
 # ---------------------------------------------------------------------------- reporting
-def pin_to_one_core() -> str:
-    """Restrict this process to the first CPU it may run on; describe the outcome."""
-    if not hasattr(os, "sched_setaffinity"):
-        return "not pinned (os.sched_setaffinity unavailable on this platform)"
-    cpu = min(os.sched_getaffinity(0))
-    os.sched_setaffinity(0, {cpu})
-    return f"pinned to CPU {cpu}"
-
-
-def cpu_model() -> str:
-    """The CPU model from /proc/cpuinfo, falling back to platform.processor()."""
-    try:
-        with open("/proc/cpuinfo", encoding="utf-8") as cpuinfo:
-            for line in cpuinfo:
-                key, _, value = line.partition(":")
-                if key.strip() in ("model name", "Hardware", "Processor") and value.strip():
-                    return value.strip()
-    except OSError:
-        pass
-    return platform.processor() or "unknown"
-
-
 def markdown_table(header: tuple[str, ...], rows: list[tuple[str, ...]], right: tuple[bool, ...]) -> str:
     widths = [max(len(row[i]) for row in (header, *rows)) for i in range(len(header))]
 

@@ -60,7 +60,7 @@ def test_report_numbers_come_from_evaluation_files(smoke_run):
     for scenario in ("unseen1", "unseen2"):
         stage = next((out / "stages").glob(f"evaluate-{scenario}-*"))
         result = read_json(stage / "stage.json")["result"]
-        assert set(result) == {"expert", "dt-zero-shot", "dt-finetuned"} | {
+        assert set(result) == {"expert", "dt-zero-shot", "dt-finetuned", "oracle"} | {
             f"transfer-{s}" for s in nearest_training_scenarios(scenario)}
         for summary in result.values():
             per_episode = [float(x) for x in re.findall(r"^\d+,([^,]+),", (stage / f"{summary['policy']}.csv")
@@ -68,6 +68,8 @@ def test_report_numbers_come_from_evaluation_files(smoke_run):
             assert len(per_episode) == 4
             assert abs(sum(per_episode) / 4 - summary["mean"]) < 1e-9
             assert f"| {summary['label']} | {summary['mean']:.2f} |" in text
+        oracle = result["oracle"]["mean"]
+        assert f"| {result['expert']['mean'] / oracle:.0%} |" in text
 
 
 def test_rerun_after_kill_skips_finished_stages(smoke_run):

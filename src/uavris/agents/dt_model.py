@@ -34,8 +34,6 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
-import os
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -44,6 +42,8 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 from torch import nn
+
+from uavris.atomic import atomic_write_bytes
 
 from uavris.config import ConfigError
 
@@ -228,21 +228,6 @@ def masked_action_loss(pred: torch.Tensor, target: torch.Tensor, valid: torch.Te
 
 
 # ------------------------------------------------------------------------------ checkpoints
-def write_bytes_atomically(path: Path, data: bytes) -> None:
-    """Temp file in the same directory, fsync, rename: readers see the old file or the new one."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-
-
 def save_dt(model: DecisionTransformer, directory: str | Path, metadata: dict[str, Any] | None = None) -> Path:
     """Write ``model.safetensors`` then ``model.json`` into ``directory``; returns it.
 
@@ -252,10 +237,10 @@ def save_dt(model: DecisionTransformer, directory: str | Path, metadata: dict[st
 
     directory = Path(directory)
     tensors = {k: v.detach().contiguous().clone() for k, v in model.state_dict().items()}
-    write_bytes_atomically(directory / WEIGHTS_FILE, save(tensors))
+    atomic_write_bytes(directory / WEIGHTS_FILE, save(tensors))
     meta = {"kind": MODEL_KIND, "format_version": MODEL_FORMAT_VERSION, "config": model.cfg.to_dict(),
             **(metadata or {})}
-    write_bytes_atomically(directory / META_FILE, (json.dumps(meta, indent=2) + "\n").encode("utf-8"))
+    atomic_write_bytes(directory / META_FILE, (json.dumps(meta, indent=2) + "\n").encode("utf-8"))
     return directory
 
 

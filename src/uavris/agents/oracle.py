@@ -74,8 +74,9 @@ which zero the velocity). A planner that circles the optimum at >= 2.6 m/s would
 needed; it is not implemented.
 
 Randomness: the phase optimiser's random starts are hashes of ``seed`` and each slot's
-channels, so an evaluation is reproducible, and an episode's result does not depend on
-the batch it is evaluated in.
+channels, so an evaluation is reproducible, and an episode gets the same optimiser starts
+whatever batch it is evaluated in (results can still differ in the last bits, which the
+non-concave optimisation may occasionally amplify).
 """
 
 from __future__ import annotations

@@ -62,40 +62,48 @@ Gradient, analytic (no autograd). With ``T_i = sum_{j active} P|c_ji|^2 + sigma^
     dR/d|c_ji|^2 = W_ji = (P / ln 2) (1/T_i - [j != k(i)] / I_i)     (active j, active receiver i)
     dR/dphi_n    = -2 sum_j g'(phi_n, c_j) Im( h_j[n] r_n(theta_j) sum_i W_ji conj(c_ji) h_i[n] ),
 
-``O(K^2 N)`` per evaluation, the same cost as the objective.
+``O(K^2 N)`` per evaluation, the same cost as the objective. Inside the iterations the
+objective is evaluated on the active links only (:func:`_link_rate_and_gradient`: ``L``
+transmitters and their ``L`` receivers, ``L = floor(K/2)``), since users that neither
+transmit nor receive do not enter the sum rate; for ``K = 4`` that halves the work.
 
 Why these settings (measured while writing this module; two seeded sets of two-pair
 slots of the default system: A = 256 slots at random poses over the whole flight region
 with random tilts up to 0.4 rad, B = 128 slots at the pose where the oracle hovers,
-[19.95, 8, 2], SNRs 1e10-1e12; mean optimised sum rate in bps/Hz):
+[19.95, 8, 2], SNRs 1e10-1e12; mean optimised sum rate in bps/Hz; rows marked * were
+measured with an earlier version of this code, the others with this one):
 
 | method | A | B |
 |---|---|---|
 | best co-phasing start only | 7.4 | - |
 | best of 1,000 random phase vectors | 10.6 | - |
-| normalised gradient ascent, 100 iterations, 2 + 4 starts | 19.9 | - |
-| L-BFGS, true noise only, 210 iterations, 2 + 4 starts, polish | 28.3 | 59.9 |
-| L-BFGS, 26 starts x 1,500 iterations (long reference) | 29.6 | - |
-| default without the polish | 29.2 | 52.8 |
+| * normalised gradient ascent with adaptive steps, 100 iterations, 2 + 4 starts | 19.9 | - |
+| * L-BFGS, 26 starts x 1,500 iterations at the true noise (long reference) | 29.6 | - |
+| L-BFGS at the true noise only, 210 iterations, no polish | 25.9 | 44.9 |
+| L-BFGS at the true noise only, 210 iterations, polish | 28.7 | 60.1 |
+| default without the polish | 29.3 | 52.6 |
+| 2 + 32 starts, 7 levels x 100 iterations, no polish (16x the work) | 29.5 | 61.5 |
 | **default** (2 + 4 starts, 7 levels x 30 iterations, polish 10) | **29.7** | **60.6** |
-| default with 8 random starts | 29.7 | 60.7 |
-| 2 + 32 starts, 7 levels x 100 iterations, no polish | - | 61.7 |
-| interference-free bound (sum of the lone-pair optima) | 31.6 | 64.0 |
+| default with 2 random starts (0.5x the work) | 29.7 | 60.5 |
+| default with 8 random starts (1.7x the work) | 29.7 | 60.7 |
+| default with 4 levels (1e6, 1e4, 1e2, 1) (0.6x the work) | 29.6 | 60.6 |
+| interference-free bound (sum of the two lone-pair optima) | 31.6 | 64.0 |
 
-Fewer continuation levels or iterations lose 0.2-1.3 bps/Hz on A; more restarts gain
-under 0.05 bps/Hz on A for proportionally more time. The default costs about 6 ms per
-two-pair slot in batches of a few hundred (see ``benchmarks/oracle_throughput.py``).
+The continuation and the polish each matter; starts and iterations beyond the default
+buy little. ``benchmarks/oracle_throughput.py`` measures the cost: about 3 ms per
+two-pair slot in a batch of 1,024 slots on one core, about 40 ms one slot at a time.
 
 Batching: every leading axis of the inputs is a slot axis; the work is whole-array numpy
-on ``(slots, starts, K, N)`` arrays, looping only over levels and iterations. Slots with one active
-pair take the closed form and skip the iterations; slots without active pair get zero
+on ``(slots, starts, L, N)`` arrays, looping only over levels and iterations (the L-BFGS
+memory is one circular buffer shared by all starts). Slots with one active pair take the closed form and skip the iterations; slots without active pair get zero
 phases and rate 0. With 64 or more multi-pair slots the optimiser applies the project's
 glibc allocator tuning (:mod:`uavris.env._malloc`, as the batched simulator does for 64+
 environments): its ~MB temporaries otherwise pay fresh page faults on every
 allocation, which more than doubled the time of an objective evaluation in our
 measurement. Random starts are counter-based hashes of the seed and the slot's
-channels (:func:`random_starts`), so every slot's result is deterministic and independent
-of the batch it is solved in.
+channels (:func:`random_starts`), so every slot's result is deterministic and, up to
+floating-point rounding that depends on the batch shape, independent of the batch it is
+solved in.
 
 Only the unit-modulus phase-only RIS (the default action) is optimised. For a single
 pair unit amplitude is optimal (|r_n| <= 1 and the triangle inequality); for several
@@ -148,15 +156,22 @@ def _reflection_and_slope(phases: NDArray[np.float64], cos_theta: NDArray[np.flo
         shape = np.broadcast_shapes(phases.shape[:-1], cos_theta.shape[:-1]) + cos_theta.shape[-1:] + phases.shape[-1:]
         r = np.broadcast_to(np.exp(1j * phases)[..., None, :], shape)
         return r, np.ones(shape)
-    half = 0.5 * phases[..., None, :]
-    co, si = np.cos(half), np.sin(half)  # (..., 1, N)
+    # A = c cos(psi) + j sin(psi), psi = phi/2, scaled by 1/cos(psi) or 1/sin(psi) whichever
+    # is larger: A ~ a + j b with (a, b) = (c, tan psi) for |tan psi| <= 1, (c cot psi, 1)
+    # otherwise. r and g' are scale-free, and numpy's float64 tan is ~20x faster than its
+    # cos and sin (this is the optimiser's hottest function).
+    t = np.tan(0.5 * phases)[..., None, :]  # (..., 1, N)
+    small = np.abs(t) <= 1.0
+    m = np.where(small, t, 1.0 / np.where(small, 1.0, t))  # tan or cot, |m| <= 1
     c = np.clip(cos_theta, 0.0, 1.0)[..., :, None]  # (..., K, 1)
-    c2co2 = (c * c) * (co * co)  # |A|^2 = c^2 cos^2 + sin^2, A = c cos(phi/2) + j sin(phi/2)
-    inv = 1.0 / (c2co2 + si * si + 1e-300)
+    a = c * np.where(small, 1.0, m)  # (..., K, N)
+    b = np.where(small, m, 1.0)
+    a2 = a * a
+    inv = 1.0 / (a2 + b * b + 1e-300)  # 1/|A|^2 after scaling
     r = np.empty(inv.shape, dtype=np.complex128)
-    r.real = 2.0 * c2co2 * inv - 1.0  # Re A^2/|A|^2; exactly -1 at the degenerate point c = 0, phi = 0
-    r.imag = (2.0 * c) * (co * si) * inv  # Im A^2/|A|^2
-    return r, c * inv
+    r.real = 2.0 * a2 * inv - 1.0  # Re A^2/|A|^2; exactly -1 at the degenerate point c = 0, phi = 0
+    r.imag = 2.0 * a * b * inv  # Im A^2/|A|^2
+    return r, (c * (1.0 + m * m)) * inv  # g' = c / (c^2 cos^2 psi + sin^2 psi)
 
 
 def target_phases_to_presets(target_phase: ArrayLike, cos_theta: ArrayLike, angle_dependent: bool = True) -> NDArray[np.float64]:
@@ -367,7 +382,10 @@ def random_starts(channels: NDArray[np.complex128], seed: int, count: int) -> ND
 
     Counter-based (:mod:`uavris.env.streams`): the key of a slot hashes the seed with the
     bits of the slot's own channels, so a slot gets the same starts whatever batch it is
-    in, and the batched optimiser equals a loop over slots exactly.
+    in. Results then agree between batch shapes up to floating point: numpy's kernels
+    for a batch of one can round differently, and on a non-concave surface a last-bit
+    difference occasionally sends an iterate to another local maximum (1 slot in 128 in
+    ``benchmarks/oracle_throughput.py``).
     """
     b, _, n = channels.shape
     words = np.ascontiguousarray(channels).view(np.uint64).reshape(b, -1)

@@ -15,6 +15,7 @@ import numpy as np
 
 from uavris.agents.evaluation import evaluate
 from uavris.agents.baselines import BASELINES
+from uavris.agents.oracle import oracle_policy
 from uavris.agents.experts import ALGORITHMS, check_algorithm, hyperparams_for
 from uavris.config import get_scenario
 from uavris.experiments.io import UavrisError, read_csv, read_json, write_csv, write_json, atomic_write_text
@@ -120,11 +121,16 @@ def write_comparison(out: Path, cfgs: dict[tuple[str, int], TrainConfig], scenar
         s = summarize(scores)
         rows.append({"policy": a.upper(), "kind": "DRL", **s, "train_last10pct": float(np.mean(last)) if last else
                      float("nan"), "paper": PAPER_FIG2.get(a, float("nan"))})
-    for name, make in BASELINES.items():
-        res = evaluate(make(0), any_cfg.system, scenario, n_eval, eval_seed)
+    references = {name: make(0) for name, make in BASELINES.items()}
+    references["oracle"] = oracle_policy()
+    for name, policy in references.items():
+        res = evaluate(policy, any_cfg.system, scenario, n_eval, eval_seed)
         s = summarize(res.avg_sum_rate)
-        rows.append({"policy": name, "kind": "baseline", **s, "train_last10pct": float("nan"),
-                     "paper": float("nan")})
+        rows.append({"policy": name, "kind": "oracle" if name == "oracle" else "baseline", **s,
+                     "train_last10pct": float("nan"), "paper": float("nan")})
+    oracle_mean = rows[-1]["mean"]
+    for r in rows:
+        r["fraction_of_oracle"] = r["mean"] / oracle_mean if oracle_mean > 0 else float("nan")
     header = list(rows[0].keys()) if rows else []
     write_csv(out / "final_performance.csv", header, [[r[h] for h in header] for r in rows])
     write_csv(out / "final_per_run.csv", ("algo", "run", "final_eval_mean"), per_run)
@@ -161,14 +167,18 @@ def render_report(rows: list[dict[str, Any]], cfgs: dict[tuple[str, int], TrainC
         lines += [f"![learning curves]({Path(figs[0]).name})", ""]
     lines += ["## Final performance (average sum rate, bps/Hz)", "",
               "For DRL rows, statistics are over seeds (each seed's score is its mean over the evaluation "
-              "episodes); for baselines, over the evaluation episodes. CIs: 95% percentile bootstrap.", "",
-              "| policy | n | mean | 95% CI (mean) | IQM | 95% CI (IQM) | training, last 10% of episodes | paper |",
-              "|---|---:|---:|---|---:|---|---:|---:|"]
+              "episodes); for baselines and the oracle, over the evaluation episodes. CIs: 95% percentile "
+              "bootstrap. The oracle (`uavris.agents.oracle`) optimises the phases every slot and searches the "
+              "next move; every policy is also shown as a fraction of it.", "",
+              "| policy | n | mean | 95% CI (mean) | IQM | 95% CI (IQM) | fraction of oracle | training, last 10% "
+              "of episodes | paper |",
+              "|---|---:|---:|---|---:|---|---:|---:|---:|"]
     for r in rows:
         paper = "" if np.isnan(r["paper"]) else f"{r['paper']:.1f}"
         train_last = "" if np.isnan(r["train_last10pct"]) else f"{r['train_last10pct']:.2f}"
         lines.append(f"| {r['policy']} | {r['n']} | {r['mean']:.2f} | {_fmt_ci(r['mean_ci_low'], r['mean_ci_high'])} "
-                     f"| {r['iqm']:.2f} | {_fmt_ci(r['iqm_ci_low'], r['iqm_ci_high'])} | {train_last} | {paper} |")
+                     f"| {r['iqm']:.2f} | {_fmt_ci(r['iqm_ci_low'], r['iqm_ci_high'])} | "
+                     f"{r['fraction_of_oracle']:.0%} | {train_last} | {paper} |")
     drl = [r for r in rows if r["kind"] == "DRL"]
     lines += ["", "## Verdict", ""]
     if drl:

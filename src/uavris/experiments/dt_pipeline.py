@@ -89,7 +89,7 @@ from uavris.agents.dt_policy import DTBatchPolicy
 from uavris.agents.evaluation import evaluate
 from uavris.agents.experts import sb3_batch_policy
 from uavris.config import ConfigError, SystemConfig, get_scenario
-from uavris.experiments.io import UavrisError, atomic_write_bytes, read_csv, read_json, write_csv, write_json
+from uavris.experiments.io import UavrisError, atomic_write_bytes, read_csv, read_json, read_rows, write_csv, write_json
 from uavris.experiments.training import configure_torch_threads, final_model_path, load_model, load_run_config
 
 PRESETS: tuple[str, ...] = ("smoke", "quick", "paper")
@@ -445,18 +445,6 @@ def _restore_weights(model: DecisionTransformer, ck: Path) -> None:
 _INT_COLUMNS = {"step", "round", "env_interactions", "gradient_steps"}
 
 
-def _read_rows(path: Path, header: Sequence[str], limit: int) -> list[list[Any]]:
-    if not path.exists():
-        return []
-    out = []
-    for r in read_csv(path)[:limit]:
-        try:
-            out.append([int(r[h]) if h in _INT_COLUMNS else float(r[h]) for h in header])
-        except (KeyError, TypeError, ValueError):
-            raise UavrisError(f"{path} is corrupt (bad row {r})") from None
-    return out
-
-
 def _tb_writer(run_dir: Path, start: int):
     from torch.utils.tensorboard import SummaryWriter
 
@@ -497,7 +485,7 @@ def pretrain(cfg: PretrainConfig, run_dir: str | Path, *, resume: bool = False, 
         start, ck = latest
         _restore_weights(model, ck)
         meta = _load_trainer_state(ck, opt, rng)
-        log = _read_rows(run_dir / "train_log.csv", LOG_HEADER, int(meta.get("log_rows", 0)))
+        log = read_rows(run_dir / "train_log.csv", LOG_HEADER, int(meta.get("log_rows", 0)), _INT_COLUMNS)
     writer = _tb_writer(run_dir, start)
     bar = _bar(cfg.steps, "pretrain-dt", "step", progress, start)
     t0 = time.perf_counter()
@@ -577,7 +565,7 @@ def finetune(cfg: FinetuneConfig, run_dir: str | Path, *, resume: bool = False, 
         _restore_weights(model, ck)
         meta = _load_trainer_state(ck, opt, rng)
         steps, interactions = int(meta["gradient_steps"]), int(meta["env_interactions"])
-        rows = _read_rows(run_dir / "finetune.csv", ROUND_HEADER, done_round + 1)
+        rows = read_rows(run_dir / "finetune.csv", ROUND_HEADER, done_round + 1, _INT_COLUMNS)
     writer = _tb_writer(run_dir, done_round)
     model.eval()
     if not rows:  # round 0: the zero-shot policy

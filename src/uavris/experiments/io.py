@@ -10,31 +10,16 @@ import csv
 import dataclasses
 import io
 import json
-import os
-import tempfile
 from pathlib import Path
 from typing import Any, Iterable, Sequence
 
 import yaml
 
+from uavris.atomic import atomic_write_bytes
+
 
 class UavrisError(Exception):
     """A user-facing error: bad input, a run directory that is not one, a corrupt file."""
-
-
-def atomic_write_bytes(path: str | Path, data: bytes) -> None:
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
 
 
 def atomic_write_text(path: str | Path, text: str) -> None:
@@ -88,6 +73,24 @@ def write_csv(path: str | Path, header: Sequence[str], rows: Iterable[Sequence[A
     w.writerow(header)
     w.writerows(rows)
     atomic_write_text(path, buf.getvalue())
+
+
+def read_rows(path: str | Path, header: Sequence[str], limit: int, int_columns: set[str]) -> list[list[Any]]:
+    """The first ``limit`` rows of a CSV log as lists in ``header`` order (ints where named).
+
+    Used on resume: a log may hold rows written after the checkpoint being resumed, and
+    those are dropped so they are not counted twice.
+    """
+    path = Path(path)
+    if not path.exists():
+        return []
+    out = []
+    for r in read_csv(path)[:limit]:
+        try:
+            out.append([int(r[h]) if h in int_columns else float(r[h]) for h in header])
+        except (KeyError, TypeError, ValueError):
+            raise UavrisError(f"{path} is corrupt (bad row {r})") from None
+    return out
 
 
 def read_csv(path: str | Path) -> list[dict[str, str]]:

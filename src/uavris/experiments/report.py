@@ -17,7 +17,7 @@ from uavris.experiments.stages import Pipeline, StageRecord
 
 PAPER_FIG2 = {"DDPG": 29.5, "PPO": 25.0, "TD3": 20.5, "SAC": 17.0}
 KIND_STYLE = {"expert": ("#1f77b4", "-"), "dt-finetuned": ("#2ca02c", "-"), "dt-zero-shot": ("#ff7f0e", "-"),
-              "transfer": ("#7f7f7f", "--")}
+              "transfer": ("#7f7f7f", "--"), "oracle": ("k", ":")}
 WITHIN_EXPERT = 0.05  # "nearly the same performance": within 5% of the expert's mean
 
 
@@ -137,10 +137,13 @@ def write_report(out: Path, rc: Any, pipeline: Pipeline, records: Sequence[Stage
                 shutil.copyfile(cdir / f"learning_curves.{ext}", figs / f"fig2_learning_curves.{ext}")
         lines += ["![Fig. 2](figures/fig2_learning_curves.png)", ""]
         rows = read_json(cdir / "summary.json")["rows"]
-        lines += ["| policy | mean | 95% CI | IQM | 95% CI (IQM) | paper |", "|---|---:|---|---:|---|---:|"]
+        lines += ["| policy | mean | 95% CI | IQM | 95% CI (IQM) | fraction of oracle | paper |",
+                  "|---|---:|---|---:|---|---:|---:|"]
         for r in rows:
+            frac = r.get("fraction_of_oracle", float("nan"))
             lines.append(f"| {r['policy']} | {_fmt(r['mean'])} | [{_fmt(r['mean_ci_low'])}, {_fmt(r['mean_ci_high'])}] "
                          f"| {_fmt(r['iqm'])} | [{_fmt(r['iqm_ci_low'])}, {_fmt(r['iqm_ci_high'])}] | "
+                         f"{'n/a' if math.isnan(frac) else f'{frac:.0%}'} | "
                          f"{_fmt(PAPER_FIG2.get(r['policy'], float('nan')), 1)} |")
         drl = [r for r in rows if r["kind"] == "DRL"]
         if drl:
@@ -165,10 +168,14 @@ def write_report(out: Path, rc: Any, pipeline: Pipeline, records: Sequence[Stage
         fig3(scenario, edir, figs / f"fig3{label}_{scenario}")
         lines += [f"![Fig. 3{label}](figures/fig3{label}_{scenario}.png)", ""]
         res = read_json(edir / "stage.json")["result"]
-        lines += ["| policy | mean | 95% CI (t) | IQM | 95% CI (IQM, bootstrap) |", "|---|---:|---|---:|---|"]
+        oracle = res.get("oracle", {}).get("mean", float("nan"))
+        lines += ["| policy | mean | 95% CI (t) | IQM | 95% CI (IQM, bootstrap) | fraction of oracle |",
+                  "|---|---:|---|---:|---|---:|"]
         for key, s in res.items():
+            frac = s["mean"] / oracle if oracle and not math.isnan(oracle) else float("nan")
             lines.append(f"| {s['label']} | {s['mean']:.2f} | [{s['ci_low']:.2f}, {s['ci_high']:.2f}] | "
-                         f"{s['iqm']:.2f} | [{s['boot_iqm_ci_low']:.2f}, {s['boot_iqm_ci_high']:.2f}] |")
+                         f"{s['iqm']:.2f} | [{s['boot_iqm_ci_low']:.2f}, {s['boot_iqm_ci_high']:.2f}] | "
+                         f"{'n/a' if math.isnan(frac) else f'{frac:.0%}'} |")
         zs, ft, ex = res["dt-zero-shot"], res["dt-finetuned"], res["expert"]
         transfers = [s for k, s in res.items() if k.startswith("transfer")]
         best_tr = max(transfers, key=lambda s: s["mean"])

@@ -176,7 +176,7 @@ def build_pipeline(rc: ReproduceConfig, out: Path, ctx: _Context) -> Pipeline:
         ft = dataclasses.asdict(dtp.finetune_config("<pretrain>", s, rc.preset, rc.seed, eval_episodes=rc.n_eval))
         stages.append(Stage(f"finetune-{s}", ft, finetune(s), ("pretrain",)))
     for s in UNSEEN_SCENARIOS:
-        stages.append(Stage(f"evaluate-{s}", {"episodes": rc.n_eval, "seed": EVAL_SEED,
+        stages.append(Stage(f"evaluate-{s}", {"episodes": rc.n_eval, "seed": EVAL_SEED, "oracle": True,
                                               "transfer_from": nearest_training_scenarios(s)},
                             evaluate_unseen(s), ("experts-train", "experts-unseen", "pretrain", f"finetune-{s}")))
     return Pipeline(out, stages)
@@ -187,6 +187,7 @@ def evaluate_policies(d: Path, scenario: str, rc: ReproduceConfig, deps: dict[st
     from uavris.agents.dt_policy import dt_policy_from_checkpoint
     from uavris.agents.evaluation import evaluate
     from uavris.agents.experts import sb3_batch_policy
+    from uavris.agents.oracle import oracle_policy
     from uavris.experiments.evaluate import write_results
     from uavris.experiments.stats import summarize
     from uavris.experiments.training import configure_torch_threads, final_model_path, load_model
@@ -200,6 +201,7 @@ def evaluate_policies(d: Path, scenario: str, rc: ReproduceConfig, deps: dict[st
     for src in nearest_training_scenarios(scenario):
         model = load_model(final_model_path(deps["experts-train"] / "runs" / src), "ddpg")
         policies[f"transfer-{src}"] = (f"DDPG transferred from {src}", sb3_batch_policy(model))
+    policies["oracle"] = ("oracle (reference)", oracle_policy())
     out: dict[str, Any] = {}
     for key, (label, policy) in policies.items():
         res = evaluate(policy, rc.system, scenario, rc.n_eval, EVAL_SEED)

@@ -40,7 +40,16 @@ from uavris.agents.experts import (
 from uavris.agents.hybrid import check_phase_control, with_optimised_phases
 from uavris.agents.sb3_vec_env import UavRisVecEnv
 from uavris.config import ConfigError, SystemConfig, get_scenario
-from uavris.experiments.io import UavrisError, read_csv, read_json, read_yaml, write_csv, write_json, write_yaml
+from uavris.experiments.io import (
+    UavrisError,
+    read_csv,
+    read_json,
+    read_rows,
+    read_yaml,
+    write_csv,
+    write_json,
+    write_yaml,
+)
 
 PRESETS: tuple[str, ...] = ("smoke", "quick", "paper")
 EPISODE_HEADER = ("episode", "env_steps", "avg_sum_rate", "return", "length")
@@ -256,19 +265,6 @@ def save_checkpoint(model: Any, cfg: TrainConfig, run_dir: Path, episodes: list,
 _INT_COLUMNS = {"episode", "env_steps", "length", "episodes"}
 
 
-def _read_rows(path: Path, header: tuple[str, ...], limit: int) -> list[list[Any]]:
-    """The first ``limit`` rows of a log written by :func:`save_checkpoint`."""
-    if not path.exists():
-        return []
-    out = []
-    for r in read_csv(path)[:limit]:
-        try:
-            out.append([int(r[h]) if h in _INT_COLUMNS else float(r[h]) for h in header])
-        except (KeyError, TypeError, ValueError):
-            raise UavrisError(f"{path} is corrupt (bad row {r})") from None
-    return out
-
-
 def train(cfg: TrainConfig, run_dir: str | Path, *, resume: bool = False, force: bool = False,
           progress: bool = True, interrupt_at: int | None = None) -> Path:
     """Train ``cfg`` into ``run_dir``; returns the final model path.
@@ -320,8 +316,8 @@ def train(cfg: TrainConfig, run_dir: str | Path, *, resume: bool = False, force:
                     model.load_replay_buffer(buf)
                 except Exception as e:  # noqa: BLE001
                     raise UavrisError(f"replay buffer {buf} is corrupt ({type(e).__name__})") from None
-            episodes = _read_rows(run_dir / "episodes.csv", EPISODE_HEADER, n_ep)
-            evals = _read_rows(run_dir / "evals.csv", EVAL_HEADER, n_ev)
+            episodes = read_rows(run_dir / "episodes.csv", EPISODE_HEADER, n_ep, _INT_COLUMNS)
+            evals = read_rows(run_dir / "evals.csv", EVAL_HEADER, n_ev, _INT_COLUMNS)
         else:
             model = build_model(cfg.algo, env, cfg.hyperparams, cfg.seed, str(run_dir / "tb"))
     else:
