@@ -52,32 +52,12 @@ from uavris.agents.oracle import oracle_policy  # noqa: E402
 from uavris.agents.phase_optimizer import optimize_slot_phases  # noqa: E402
 from uavris.config import SystemConfig  # noqa: E402
 from uavris.env.simulator import BatchedSimulator  # noqa: E402
+from _machine import cpu_model, pin_to_one_core  # noqa: E402  (benchmarks/_machine.py)
 
 SEED = 0
 EVAL_SEED = 1_000_000
 RATIO_TARGET = 10.0
 EVAL_LIMIT_S = 300.0
-
-
-def pin_to_one_core() -> str:
-    """Restrict this process to the first CPU it may run on; describe the outcome."""
-    if not hasattr(os, "sched_setaffinity"):
-        return "not pinned (os.sched_setaffinity unavailable on this platform)"
-    cpu = min(os.sched_getaffinity(0))
-    os.sched_setaffinity(0, {cpu})
-    return f"pinned to CPU {cpu}"
-
-
-def cpu_model() -> str:
-    try:
-        with open("/proc/cpuinfo", encoding="utf-8") as cpuinfo:
-            for line in cpuinfo:
-                key, _, value = line.partition(":")
-                if key.strip() in ("model name", "Hardware", "Processor") and value.strip():
-                    return value.strip()
-    except OSError:
-        pass
-    return platform.processor() or "unknown"
 
 
 def make_slots(config: SystemConfig, n: int, seed: int) -> tuple[NDArray, NDArray, NDArray]:
@@ -158,8 +138,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"| {name} (reference) | same episodes | - | {s['mean']:.2f} bps/Hz "
               f"(95% CI {s['ci_low']:.2f}-{s['ci_high']:.2f}) |")
     print()
-    print(f"mean episode length: oracle {oracle['mean_length']:.1f}, hover_aligned {base['hover_aligned']['mean_length']:.1f}, "
-          f"random {base['random']['mean_length']:.1f} slots; mean energy: oracle {oracle['mean_energy_j']:.0f} J")
+    lengths = ", ".join(f"{name} {s['mean_length']:.1f}" for name, s in [("oracle", oracle), *base.items()])
+    print(f"mean episode length (slots): {lengths}; mean energy: oracle {oracle['mean_energy_j']:.0f} J")
     print(f"looped vs batched results: {same} of {loop_slots} slots bit-identical; sum-rate difference "
           f"mean {diff.mean():+.4f}, max |.| {np.abs(diff).max():.4f} bps/Hz (same random starts; numpy can round "
           "a batch of one differently, and the non-concave ascent may amplify it)")

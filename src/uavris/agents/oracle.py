@@ -11,8 +11,9 @@ Each slot, for every environment of the batch:
 
 1. Phases. :func:`uavris.agents.phase_optimizer.optimize_phases` on ``H(t)``,
    ``cos(theta(t))`` and ``P(t)``: the sum-rate-optimal unit-modulus presets for this slot
-   (closed form for one active pair, multi-start L-BFGS with noise continuation for
-   several). The phases act on this slot's reward ``r(t)``.
+   (closed form for one active pair; for several, multi-start L-BFGS with noise
+   continuation and a nulling polish, a local method with no optimality guarantee). The
+   phases act on this slot's reward ``r(t)``.
 2. Motion: acceleration and attitude increments for the move to slot ``t+1``, chosen by a
    one-step lookahead over a grid of candidate moves:
 
@@ -50,14 +51,15 @@ the oracle keeps the RIS level unless a tilt is strictly better.
 
 Overshoot. The grid's one-slot effect on the position is small (``a dt^2 / 2`` = 0.25 m)
 beside the drift ``v dt`` (up to 2.5 m), so a score of the next pose alone steers by
-position without regard to speed, and the UAV overshoots its target and circles it (from
-the fig2 start it wandered for ~45 slots before settling; 40.3 against 41.6 bps/Hz with
-the braking continuation, both measured before the optimiser's null polish existed). The score therefore averages the
-expected rate over the next pose and the poses of a braking continuation: after the
-candidate move the UAV brakes at ``a_max`` (never reversing), attitude held, for
-``braking_slots`` slots (default: the slots needed to stop from ``v_max``, 5). A
-candidate is then good when it moves towards good poses *and* can stop there. Still a
-one-step decision: only the first move is applied, and it is re-planned next slot.
+position without regard to speed, and the UAV overshoots its target and circles it.
+From the fig2 start it wandered for ~45 slots before settling (40.3 bps/Hz against 41.6
+with the braking continuation; both measured before the optimiser's null polish
+existed). The score therefore averages the expected rate over the next pose and the
+poses of a braking continuation: after the candidate move the UAV brakes at ``a_max``
+(never reversing), attitude held, for ``braking_slots`` slots (default: the slots needed
+to stop from ``v_max``, 5). A candidate is then good when it moves towards good poses
+*and* can stop there. Still a one-step decision: only the first move is applied, and it
+is re-planned next slot.
 
 Energy. Constraint (13g) is enforced by the environment, which ends the episode in the
 slot where the propulsion energy reaches ``E_max``; the oracle is subject to it like
@@ -67,11 +69,11 @@ than ``E_max``); the evaluation's average sum rate is the mean over the slots fl
 Moving is cheaper than hovering (power falls with speed up to ``v_max``), so the oracle
 never spends more energy per slot than a hovering policy. We tried the alternative,
 keeping the horizon feasible (a candidate admissible only if the energy used, its slot
-energy and the least energy of the remaining slots fit in ``E_max``): it hovers until
-the bound binds, is then forced to cruise at ``v_max`` away from the good poses, lost
-2.3 bps/Hz on fig2 (39.3 against 41.6, same caveat as above) and still terminated (at slot 99: the greedy cruise runs into walls,
-which zero the velocity). A planner that circles the optimum at >= 2.6 m/s would be
-needed; it is not implemented.
+energy and the least energy of the remaining slots fit in ``E_max``). It hovered until
+that bound began to bind, was then forced to cruise at ``v_max`` away from the good poses, lost
+2.3 bps/Hz on fig2 (39.3 against 41.6, same caveat as above) and still terminated, at
+slot 99: the greedy cruise ran into walls, which zero the velocity. A planner that
+circles the optimum at >= 2.6 m/s would be needed; it is not implemented.
 
 Randomness: the phase optimiser's random starts are hashes of ``seed`` and each slot's
 channels, so an evaluation is reproducible, and an episode gets the same optimiser starts
@@ -119,7 +121,8 @@ def link_activity(config: SystemConfig) -> float:
     return 0.5 * (1 + m_max) / (k * (k - 1))
 
 
-def expected_sum_rate(config: SystemConfig, dist: NDArray[np.float64], cos_theta: NDArray[np.float64]) -> NDArray[np.float64]:
+def expected_sum_rate(config: SystemConfig, dist: NDArray[np.float64],
+                      cos_theta: NDArray[np.float64]) -> NDArray[np.float64]:
     """Expected next-slot sum rate at a pose (interference nulled, links co-phased), ``(...)``.
 
     ``dist`` and ``cos_theta`` are ``(..., K)`` from :func:`uavris.physics.incidence`.
@@ -134,8 +137,8 @@ def expected_sum_rate(config: SystemConfig, dist: NDArray[np.float64], cos_theta
     return link_activity(config) * rates.sum(axis=(-2, -1))
 
 
-def choose_moves(config: SystemConfig, pos: NDArray, vel: NDArray, att: NDArray,
-                 braking_slots: int | None = None) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+def choose_moves(config: SystemConfig, pos: NDArray, vel: NDArray, att: NDArray, braking_slots: int | None = None
+                 ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
     """One-step lookahead for a batch of UAV states ``pos``, ``vel``, ``att`` ``(n, 3)``.
 
     Returns (acceleration command ``(n, 3)`` m/s^2, attitude increment ``(n, 3)`` rad,

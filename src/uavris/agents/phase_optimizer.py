@@ -95,8 +95,9 @@ two-pair slot in a batch of 1,024 slots on one core, about 40 ms one slot at a t
 
 Batching: every leading axis of the inputs is a slot axis; the work is whole-array numpy
 on ``(slots, starts, L, N)`` arrays, looping only over levels and iterations (the L-BFGS
-memory is one circular buffer shared by all starts). Slots with one active pair take the closed form and skip the iterations; slots without active pair get zero
-phases and rate 0. With 64 or more multi-pair slots the optimiser applies the project's
+memory is one circular buffer shared by all starts). Slots with one active pair take
+the closed form and skip the iterations; slots without active pair get zero phases and
+rate 0. With 64 or more multi-pair slots the optimiser applies the project's
 glibc allocator tuning (:mod:`uavris.env._malloc`, as the batched simulator does for 64+
 environments): its ~MB temporaries otherwise pay fresh page faults on every
 allocation, which more than doubled the time of an objective evaluation in our
@@ -153,7 +154,8 @@ def _reflection_and_slope(phases: NDArray[np.float64], cos_theta: NDArray[np.flo
     A = c cos(phi/2) + j sin(phi/2)), evaluated once for the value and its slope.
     """
     if not angle_dependent:
-        shape = np.broadcast_shapes(phases.shape[:-1], cos_theta.shape[:-1]) + cos_theta.shape[-1:] + phases.shape[-1:]
+        lead = np.broadcast_shapes(phases.shape[:-1], cos_theta.shape[:-1])
+        shape = lead + cos_theta.shape[-1:] + phases.shape[-1:]
         r = np.broadcast_to(np.exp(1j * phases)[..., None, :], shape)
         return r, np.ones(shape)
     # A = c cos(psi) + j sin(psi), psi = phi/2, scaled by 1/cos(psi) or 1/sin(psi) whichever
@@ -174,7 +176,8 @@ def _reflection_and_slope(phases: NDArray[np.float64], cos_theta: NDArray[np.flo
     return r, (c * (1.0 + m * m)) * inv  # g' = c / (c^2 cos^2 psi + sin^2 psi)
 
 
-def target_phases_to_presets(target_phase: ArrayLike, cos_theta: ArrayLike, angle_dependent: bool = True) -> NDArray[np.float64]:
+def target_phases_to_presets(target_phase: ArrayLike, cos_theta: ArrayLike,
+                             angle_dependent: bool = True) -> NDArray[np.float64]:
     """Preset phases in [0, 2 pi) whose practical coefficient at ``cos_theta`` has phase ``target_phase``.
 
     Uses :func:`uavris.physics.preset_for_target` (the inverse reflection model). Its one
@@ -215,7 +218,8 @@ def co_phasing_phases(channels: ArrayLike, cos_theta: ArrayLike, tx: ArrayLike, 
     return target_phases_to_presets(-np.angle(h_tx * h_rx), c_tx, angle_dependent)
 
 
-def single_pair_snr(channels: ArrayLike, tx: ArrayLike, rx: ArrayLike, tx_power_w: float, noise_w: float) -> NDArray[np.float64]:
+def single_pair_snr(channels: ArrayLike, tx: ArrayLike, rx: ArrayLike, tx_power_w: float,
+                    noise_w: float) -> NDArray[np.float64]:
     """Closed-form optimal SNR of a lone link: ``P (sum_n |h_tx[n]| |h_rx[n]|)^2 / sigma^2``."""
     h = np.abs(np.asarray(channels))
     tx, rx = np.asarray(tx, dtype=np.intp), np.asarray(rx, dtype=np.intp)
@@ -296,7 +300,8 @@ def _link_rate_and_gradient(phases: NDArray[np.float64], tx_channels: NDArray[np
 
 
 # ----------------------------------------------------------------------------- optimiser
-def active_links(pairing: NDArray[np.float64], max_links: int) -> tuple[NDArray[np.intp], NDArray[np.intp], NDArray[np.bool_]]:
+def active_links(pairing: NDArray[np.float64],
+                 max_links: int) -> tuple[NDArray[np.intp], NDArray[np.intp], NDArray[np.bool_]]:
     """Up to ``max_links`` active links per slot: (tx, rx, valid), each ``(..., max_links)``.
 
     Invalid entries (fewer active links) repeat the first active link (or link 0 -> 0).
@@ -390,7 +395,8 @@ def random_starts(channels: NDArray[np.complex128], seed: int, count: int) -> ND
     b, _, n = channels.shape
     words = np.ascontiguousarray(channels).view(np.uint64).reshape(b, -1)
     with np.errstate(over="ignore"):
-        mixed = streams.mix64(words + np.arange(1, words.shape[1] + 1, dtype=np.uint64) * np.uint64(0x9E3779B97F4A7C15))
+        position = np.arange(1, words.shape[1] + 1, dtype=np.uint64) * np.uint64(0x9E3779B97F4A7C15)
+        mixed = streams.mix64(words + position)
         keys = streams.mix64(np.bitwise_xor.reduce(mixed, axis=1) ^ streams.seed_key(seed))
     u = streams.uniforms(streams.raw_bits(keys, count * n))
     return TWO_PI * u.reshape(b, count, n)
