@@ -1,5 +1,13 @@
+import os
+
 import numpy as np
 import pytest
+from hypothesis import settings
+
+# CI runs a fixed set of examples (reproducible verdicts); locally hypothesis explores anew.
+settings.register_profile("ci", derandomize=True, max_examples=200)
+if os.environ.get("CI"):
+    settings.load_profile("ci")
 
 from uavris.config import SystemConfig
 

@@ -36,7 +36,13 @@ def reflection_coefficient(r_pre: ArrayLike, cos_theta: ArrayLike) -> NDArray[np
     num = np.ldexp(num.real, -e) + 1j * np.ldexp(num.imag, -e)
     den = np.ldexp(den.real, -e) + 1j * np.ldexp(den.imag, -e)
     degenerate = den == 0  # only r_pre = 1 at c = 0
-    return np.where(degenerate, -1.0 + 0j, num / np.where(degenerate, 1.0, den))
+    general = np.where(degenerate, -1.0 + 0j, num / np.where(degenerate, 1.0, den))
+    # For unit-modulus presets 1 - r_pre loses its real part (1 - cos(phi)) to rounding when
+    # phi is tiny, which breaks |r| = 1 by up to ~1e-9; the half-angle form is exact there.
+    unit = (np.abs(np.abs(r) - 1.0) <= 1e-12) & (r.imag != 0)  # r_pre = +-1 are exact above
+    if np.any(unit):
+        general = np.where(unit, unit_reflection_coefficient(np.angle(r), c), general)
+    return general
 
 
 def unit_reflection_coefficient(phase: ArrayLike, cos_theta: ArrayLike) -> NDArray[np.complex128]:
