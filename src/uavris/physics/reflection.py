@@ -58,13 +58,16 @@ def unit_reflection_coefficient(phase: ArrayLike, cos_theta: ArrayLike) -> NDArr
     c = np.clip(np.asarray(cos_theta, dtype=np.float64), 0.0, 1.0)
     re = c * np.cos(psi)
     im = np.sin(psi)
-    re2 = re * re
-    # Re r = 2 re^2/|A|^2 - 1 rather than (re^2 - im^2)/|A|^2: at the one degenerate point
-    # (r_pre = 1, c = 0) re = 0, so the guarded division gives the limit value -1 exactly.
-    inv = 1.0 / (re2 + im * im + 1e-300)
-    out = np.empty(re2.shape, dtype=np.complex128)
-    out.real = 2.0 * re2 * inv - 1.0
-    out.imag = 2.0 * re * im * inv
+    # Normalise A with hypot (no underflow for tiny c and phase) and use r = (A/|A|)^2 as
+    # (2u^2 - 1, 2uv): at the degenerate point (r_pre = 1, c = 0) A = 0, u = v = 0 and the
+    # same expression gives the limit value -1 exactly, with no branch.
+    h = np.hypot(re, im)
+    h = np.where(h > 0.0, h, 1.0)
+    u = re / h  # divide, not multiply by 1/h: 1/h overflows for subnormal h
+    v = im / h
+    out = np.empty(u.shape, dtype=np.complex128)
+    out.real = 2.0 * u * u - 1.0
+    out.imag = 2.0 * u * v
     return out
 
 
