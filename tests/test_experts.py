@@ -186,15 +186,15 @@ def test_hybrid_controller_trains_and_evaluates_reproducibly(tmp_path):
 
     env = UavRisVecEnv(2, phase_control="optimizer")
     assert env.action_space.shape == (6,)
-    cfg = preset_config("td3", "fig2", 0, "smoke", eval_episodes=2, total_steps=320, phase_control="optimizer")
+    cfg = preset_config("td3", "fig2", 0, "smoke", eval_episodes=1, total_steps=160, phase_control="optimizer")
     train(cfg, tmp_path / "hyb", progress=False)
-    a, _ = evaluate_target(str(tmp_path / "hyb"), None, 3, 11, out=tmp_path / "e1")
-    b, _ = evaluate_target(str(tmp_path / "hyb"), None, 3, 11, out=tmp_path / "e2")
+    a, _ = evaluate_target(str(tmp_path / "hyb"), None, 2, 11, out=tmp_path / "e1")
+    b, _ = evaluate_target(str(tmp_path / "hyb"), None, 2, 11, out=tmp_path / "e2")
     assert a["mean"] == b["mean"] and a["phase_control"] == "as trained"
     # optimised phases on a hovering policy beat its random phases by a wide margin
     hover = BASELINES["hover-random-phases"](0)
-    plain = evaluate(hover, cfg.system, "fig2", 4, 1_000_000).summary()["mean"]
-    hybrid = evaluate(with_optimised_phases(hover), cfg.system, "fig2", 4, 1_000_000).summary()["mean"]
+    plain = evaluate(hover, cfg.system, "fig2", 2, 1_000_000).summary()["mean"]
+    hybrid = evaluate(with_optimised_phases(hover), cfg.system, "fig2", 2, 1_000_000).summary()["mean"]
     assert hybrid > plain + 10.0, (hybrid, plain)
     with pytest.raises(Exception, match="unknown phase control"):
         preset_config("ddpg", "fig2", 0, "smoke", phase_control="magic")
