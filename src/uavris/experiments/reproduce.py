@@ -227,12 +227,13 @@ def reproduce(rc: ReproduceConfig, out: str | Path, *, workers: int = 2, backend
     out = Path(out)
     from tqdm.auto import tqdm
 
-    bar = tqdm(total=0, unit="step", desc="reproduce", dynamic_ncols=True, disable=not progress)
-    ctx = _Context(workers, backend, ray_address, bar)
+    ctx = _Context(workers, backend, ray_address, None)
     pipeline = build_pipeline(rc, out, ctx)
     unknown = [f for f in force if f not in pipeline.stages and f != "report"]
     if unknown:
         raise UavrisError(f"--force names unknown stage(s) {unknown}; stages: {list(pipeline.stages) + ['report']}")
+    bar = tqdm(total=0, unit="step", desc="reproduce", dynamic_ncols=True, disable=not progress)
+    ctx.bar = bar
     bar.total += len(pipeline.stages) + 1
     bar.refresh()
 
