@@ -37,20 +37,20 @@ def train_job(cfg_dict: dict[str, Any], run_dir: str) -> dict[str, Any]:
     return read_json(path / "done.json")
 
 
-def _curve(run_dir: Path, window: int) -> tuple[np.ndarray, np.ndarray]:
-    rows = read_csv(run_dir / "episodes.csv")
-    y = np.array([float(r["avg_sum_rate"]) for r in rows])
-    if y.size == 0:
-        return np.zeros(0), np.zeros(0)
-    w = max(1, min(window, y.size))
-    smooth = np.convolve(y, np.ones(w) / w, mode="valid")
-    return np.arange(w, y.size + 1), smooth
+def episode_rates(run_dir: Path) -> np.ndarray:
+    """Average sum rate of every training episode of a run, in order."""
+    return np.array([float(r["avg_sum_rate"]) for r in read_csv(run_dir / "episodes.csv")])
 
 
-def learning_curve_summary(run_dirs: Sequence[Path], points: int = 100) -> tuple[np.ndarray, ...] | None:
+def _smoothed(y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Moving average over 5% of the episodes; x is the episode count at each window's end."""
+    w = max(1, y.size // 20)
+    return np.arange(w, y.size + 1), np.convolve(y, np.ones(w) / w, mode="valid")
+
+
+def learning_curve_summary(series: Sequence[np.ndarray], points: int = 100) -> tuple[np.ndarray, ...] | None:
     """(episodes, mean, low, high) across seeds, on the episodes all seeds reached."""
-    raw = [_curve(d, window=max(1, len(read_csv(d / "episodes.csv")) // 20)) for d in run_dirs]
-    raw = [(x, y) for x, y in raw if x.size]
+    raw = [_smoothed(y) for y in series if y.size]
     if not raw:
         return None
     end = min(x[-1] for x, _ in raw)
@@ -113,11 +113,11 @@ def write_comparison(out: Path, cfgs: dict[tuple[str, int], TrainConfig], scenar
             continue
         scores = [read_json(d / "done.json")["final_eval"]["mean"] for d in finished]
         per_run += [(a, d.name, sc) for d, sc in zip(finished, scores)]
-        summ = learning_curve_summary(finished)
+        series = [episode_rates(d) for d in finished]
+        summ = learning_curve_summary(series)
         if summ is not None:
             curves[a] = summ
-        last = [np.mean([float(r["avg_sum_rate"]) for r in read_csv(d / "episodes.csv")][-max(
-            1, len(read_csv(d / "episodes.csv")) // 10):]) for d in finished if read_csv(d / "episodes.csv")]
+        last = [float(np.mean(y[-max(1, y.size // 10):])) for y in series if y.size]
         s = summarize(scores)
         rows.append({"policy": a.upper(), "kind": "DRL", **s, "train_last10pct": float(np.mean(last)) if last else
                      float("nan"), "paper": PAPER_FIG2.get(a, float("nan"))})
