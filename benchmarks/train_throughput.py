@@ -33,11 +33,14 @@ Reported per configuration:
   ``gradient_steps`` per ``train()`` call; ``learn()`` calls ``train()`` after every
   vector step once ``num_timesteps > learning_starts``. Both rates include the warm-up;
 - best average sum rate: the best evaluation mean (bps/Hz) over the run;
-- time to target: with target = 0.9 x min(best of A, best of B), the training-clock time
-  of the first evaluation (the one at time 0 included) whose mean reaches the target.
-  Both always reach it, since each best is at least the target. The time is resolved to
-  the evaluation interval. If the untrained policy of A already meets the target, the
-  ratio is reported as undefined: the target then says nothing about learning.
+- time to target: with target = min(best of A, best of B), the score the weaker
+  configuration ends up with, the training-clock time of the first evaluation (the one at
+  time 0 included) whose mean reaches the target. Both always reach it, since each best is
+  at least the target. The time is resolved to the evaluation interval. If the untrained
+  policy of A already meets the target, the ratio is reported as undefined: the target
+  then says nothing about learning. (An earlier version used 0.9 x that score; on this
+  simulator that level sits at the untrained policies' own scores, so the ratio measured
+  evaluation noise, not learning speed.)
 
 The script prints the machine, versions, the command, a Markdown table, the env-steps/s
 ratio A/B and the time-to-target ratio B/A with PASS/FAIL against 3x. ``--csv PATH`` also
@@ -98,7 +101,7 @@ EVAL_EPISODES = 16
 FULL_BUDGET_S = 240.0
 QUICK_BUDGET_S = 60.0
 EVALS_PER_BUDGET = 8
-TARGET_FRACTION = 0.9
+TARGET_FRACTION = 1.0
 RATIO_TARGET = 3.0
 NEVER_ENDING = 10**12  # total_timesteps handed to learn(); the callback stops training
 
@@ -285,7 +288,7 @@ def report(ours: RunResult, sb3_default: RunResult) -> None:
     print(markdown_table(("config", "env-steps/s", "grad-steps/s", "best avg sum rate (bps/Hz)", "time to target (s)"),
                          rows, (False, True, True, True, True)))
     print()
-    print(f"target = {TARGET_FRACTION} x min(best A, best B) = {target:.3f} bps/Hz; "
+    print(f"target = min(best A, best B) = {target:.3f} bps/Hz; "
           f"untrained policies (time 0): A {ours.evals[0].mean:.3f}, B {sb3_default.evals[0].mean:.3f}; "
           f"evaluation: {EVAL_EPISODES} deterministic episodes, seeds {EVAL_SEED:,}.., scenario {SCENARIO}")
     for r in (ours, sb3_default):
