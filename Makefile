@@ -26,6 +26,8 @@ bench: $(STAMP)
 	$(PY) benchmarks/train_throughput.py
 	$(PY) benchmarks/dt_throughput.py
 	$(PY) benchmarks/oracle_throughput.py
+	$(PY) benchmarks/paper_wallclock.py
+	$(PY) benchmarks/reproduce_scaling.py
 
 clean:
 	rm -rf $(VENV) runs
