@@ -4,6 +4,7 @@ import zipfile
 
 import numpy as np
 import pytest
+import torch
 from stable_baselines3.common.env_checker import check_env as sb3_check_env
 from stable_baselines3.common.vec_env import DummyVecEnv
 
@@ -91,6 +92,35 @@ def test_resume_continues_step_count_and_keeps_first_checkpoint(tmp_path):
         train(cfg, run, progress=False)
     with pytest.raises(UavrisError, match="finished run"):
         train(cfg, run, resume=True, progress=False)
+
+
+@pytest.mark.parametrize("algo, interrupt", [("ddpg", 400), ("td3", 400), ("ppo", 300)])
+def test_killed_and_resumed_run_equals_uninterrupted_run(tmp_path, algo, interrupt):
+    """Checkpoints carry the environments mid-episode and every random stream, so a resume
+    continues exactly: same episodes, same evaluations, same final weights."""
+    cfg = preset_config(algo, "fig2", 2, "smoke", eval_episodes=4, eval_every=160, checkpoint_every=160)
+    train(cfg, tmp_path / "whole", progress=False)
+    with pytest.raises(KeyboardInterrupt):
+        train(cfg, tmp_path / "resumed", progress=False, interrupt_at=interrupt)
+    latest = json.loads((tmp_path / "resumed" / "checkpoints" / "latest.json").read_text())
+    assert 0 < latest["env_steps"] < cfg.total_steps
+    train(cfg, tmp_path / "resumed", resume=True, progress=False)
+    for name in ("episodes.csv", "evals.csv"):
+        assert (tmp_path / "whole" / name).read_text() == (tmp_path / "resumed" / name).read_text(), name
+    a, b = (load_model(tmp_path / r / "model.zip", algo).policy.state_dict() for r in ("whole", "resumed"))
+    assert all(torch.equal(a[k], b[k]) for k in a)
+
+
+def test_corrupt_resume_state_is_one_clear_error_and_nothing_changes(tmp_path):
+    cfg = preset_config("ddpg", "fig2", 0, "smoke", eval_episodes=2, checkpoint_every=160)
+    with pytest.raises(KeyboardInterrupt):
+        train(cfg, tmp_path / "r", progress=False, interrupt_at=200)
+    state = tmp_path / "r" / "checkpoints" / "step_160.state.pkl"
+    state.write_bytes(state.read_bytes()[:100])
+    before = {p: p.read_bytes() for p in (tmp_path / "r").rglob("*") if p.is_file()}
+    with pytest.raises(UavrisError, match="resume state .*step_160.state.pkl"):
+        train(cfg, tmp_path / "r", resume=True, progress=False)
+    assert {p: p.read_bytes() for p in (tmp_path / "r").rglob("*") if p.is_file()} == before
 
 
 def test_resume_with_changed_config_is_refused(tmp_path):

@@ -5,12 +5,18 @@ A run directory holds::
     config.yaml            the resolved TrainConfig (system, scenario, hyperparameters)
     episodes.csv           every finished training episode: env steps, average sum rate
     evals.csv              periodic deterministic evaluations (mean and 95% CI)
-    checkpoints/           step_<N>.zip models, replay_buffer.pkl (off-policy), latest.json
+    checkpoints/           step_<N>.zip models, step_<N>.state.pkl (environments and random
+                           streams), replay_buffer.pkl (off-policy), latest.json
     tb/                    TensorBoard logs
     model.zip, done.json   the final model and the completion record
 
 Every file is written atomically. ``resume=True`` continues from ``checkpoints/latest.json``
 with the step counter continuing; a finished run is never retrained unless forced.
+Checkpoints are taken between a gradient update and the next env step (SB3's
+``on_rollout_start``: every vector step for the off-policy algorithms, every rollout for
+PPO) and hold the environments mid-episode and every random stream
+(:mod:`uavris.agents.resume_state`), so a killed and resumed run ends with the same model
+and numbers as an uninterrupted one.
 """
 
 from __future__ import annotations
@@ -37,8 +43,10 @@ from uavris.agents.experts import (
     default_hyperparams,
     sb3_batch_policy,
 )
+from uavris.agents import resume_state
 from uavris.agents.hybrid import check_phase_control, with_optimised_phases
 from uavris.agents.sb3_vec_env import UavRisVecEnv
+from uavris.atomic import atomic_write_bytes
 from uavris.config import ConfigError, SystemConfig, get_scenario
 from uavris.experiments.io import (
     UavrisError,
@@ -181,6 +189,7 @@ class _Recorder:
         self.next_eval = (start_steps // cfg.eval_every + 1) * cfg.eval_every
         self.next_ckpt = (start_steps // cfg.checkpoint_every + 1) * cfg.checkpoint_every
         self.interrupt_at = interrupt_at
+        self.checkpoint_due = False
         self.bar = None
         if progress:
             from tqdm.auto import tqdm
@@ -196,6 +205,9 @@ class _Recorder:
         class Callback(BaseCallback):
             def _on_step(self) -> bool:
                 return rec.on_step(self.model, self.locals.get("infos", []), self.logger)
+
+            def _on_rollout_start(self) -> None:
+                rec.on_rollout_start(self.model)
 
         return Callback()
 
@@ -217,11 +229,17 @@ class _Recorder:
             logger.record("eval/avg_sum_rate", res["mean"])
             self.next_eval = (steps // self.cfg.eval_every + 1) * self.cfg.eval_every
         if steps >= self.next_ckpt:
-            save_checkpoint(model, self.cfg, self.run_dir, self.episodes, self.evals)
+            # saved at the next rollout start, once this step's transition is stored and trained on
+            self.checkpoint_due = True
             self.next_ckpt = (steps // self.cfg.checkpoint_every + 1) * self.cfg.checkpoint_every
         if self.interrupt_at is not None and steps >= self.interrupt_at:
             raise KeyboardInterrupt(f"interrupted at step {steps} (test hook)")
         return True
+
+    def on_rollout_start(self, model: Any) -> None:
+        if self.checkpoint_due:
+            save_checkpoint(model, self.cfg, self.run_dir, self.episodes, self.evals)
+            self.checkpoint_due = False
 
     def close(self) -> None:
         if self.bar is not None:
@@ -240,7 +258,8 @@ def run_evaluation(model: Any, cfg: TrainConfig, episodes: int, scenario: str | 
 
 
 def save_checkpoint(model: Any, cfg: TrainConfig, run_dir: Path, episodes: list, evals: list) -> Path:
-    """Model (and replay buffer) then logs, then the ``latest.json`` pointer, each atomic.
+    """Model, resume state (and replay buffer), then logs, then the ``latest.json`` pointer,
+    each atomic. Call it only between a gradient update and the next env step.
 
     The pointer moves last, so a kill at any moment leaves the previous checkpoint intact.
     """
@@ -251,13 +270,15 @@ def save_checkpoint(model: Any, cfg: TrainConfig, run_dir: Path, episodes: list,
     tmp = ck / f".step_{steps}.tmp.zip"
     model.save(tmp)
     os.replace(tmp, model_path)
+    state_path = ck / f"step_{steps}.state.pkl"
+    atomic_write_bytes(state_path, resume_state.capture(model))
     if cfg.algo in OFF_POLICY:
         tmp_buf = ck / ".replay_buffer.tmp.pkl"
         model.save_replay_buffer(tmp_buf)
         os.replace(tmp_buf, ck / "replay_buffer.pkl")
     write_csv(run_dir / "episodes.csv", EPISODE_HEADER, episodes)
     write_csv(run_dir / "evals.csv", EVAL_HEADER, evals)
-    write_json(ck / "latest.json", {"env_steps": steps, "model": model_path.name,
+    write_json(ck / "latest.json", {"env_steps": steps, "model": model_path.name, "state": state_path.name,
                                     "episodes": len(episodes), "evals": len(evals)})
     return model_path
 
@@ -316,6 +337,12 @@ def train(cfg: TrainConfig, run_dir: str | Path, *, resume: bool = False, force:
                     model.load_replay_buffer(buf)
                 except Exception as e:  # noqa: BLE001
                     raise UavrisError(f"replay buffer {buf} is corrupt ({type(e).__name__})") from None
+            if "state" in latest:  # older checkpoints have none: the run then starts fresh episodes
+                state_path = run_dir / "checkpoints" / str(latest["state"])
+                try:
+                    resume_state.restore(model, state_path.read_bytes())
+                except (OSError, ValueError) as e:
+                    raise UavrisError(f"resume state {state_path} is missing or corrupt ({e})") from None
             episodes = read_rows(run_dir / "episodes.csv", EPISODE_HEADER, n_ep, _INT_COLUMNS)
             evals = read_rows(run_dir / "evals.csv", EVAL_HEADER, n_ev, _INT_COLUMNS)
         else:
