@@ -7,6 +7,7 @@ import pytest
 
 from uavris.atomic import atomic_write_bytes
 
+
 def test_mode_follows_umask_like_open(tmp_path):
     old = os.umask(0o022)
     try:
@@ -16,6 +17,7 @@ def test_mode_follows_umask_like_open(tmp_path):
     finally:
         os.umask(old)
     assert stat.S_IMODE((tmp_path / "new.bin").stat().st_mode) == stat.S_IMODE(ref.stat().st_mode)
+
 
 def test_failed_write_keeps_old_file_and_leaves_no_temporary(tmp_path):
     path = tmp_path / "data.bin"

@@ -26,7 +26,6 @@ import torch
 from uavris.agents.sb3_vec_env import UavRisVecEnv
 
 STATE_VERSION = 1
-_ENV_FIELDS = ("sim", "_seeded", "_seeds", "_options", "_ep_return", "_ep_len")
 _MODEL_FIELDS = ("_last_obs", "_last_episode_starts", "_last_original_obs", "_episode_num")
 
 
@@ -38,7 +37,7 @@ def capture(model: Any) -> bytes:
     state = {
         "version": STATE_VERSION,
         "num_timesteps": int(model.num_timesteps),
-        "env": {name: getattr(env, name) for name in _ENV_FIELDS},
+        "env": env.get_state(),
         "model": {name: getattr(model, name, None) for name in _MODEL_FIELDS},
         "numpy": np.random.get_state(),
         "python": random.getstate(),
@@ -62,9 +61,7 @@ def restore(model: Any, blob: bytes) -> None:
         raise ValueError("not a uavris resume state of this version")
     if state["num_timesteps"] != int(model.num_timesteps):
         raise ValueError(f"state is for step {state['num_timesteps']}, model is at {model.num_timesteps}")
-    env = model.get_env()
-    for name, value in state["env"].items():
-        setattr(env, name, value)
+    model.get_env().set_state(state["env"])
     for name, value in state["model"].items():
         setattr(model, name, value)
     np.random.set_state(state["numpy"])

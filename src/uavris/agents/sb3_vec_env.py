@@ -119,6 +119,20 @@ class UavRisVecEnv(VecEnv):
     def env_is_wrapped(self, wrapper_class: type[gym.Wrapper], indices: VecEnvIndices = None) -> list[bool]:
         return [False for _ in self._get_indices(indices)]
 
+    # ------------------------------------------------------------------ checkpointing
+    _STATE_FIELDS = ("sim", "_seeded", "_seeds", "_options", "_ep_return", "_ep_len")
+
+    def get_state(self) -> dict[str, Any]:
+        """Everything that evolves while stepping (the systems mid-episode, pending seeds,
+        episode statistics), for an exact resume; :meth:`set_state` puts it back."""
+        return {name: getattr(self, name) for name in self._STATE_FIELDS}
+
+    def set_state(self, state: dict[str, Any]) -> None:
+        if set(state) != set(self._STATE_FIELDS):
+            raise ValueError(f"UavRisVecEnv state must hold {sorted(self._STATE_FIELDS)}, got {sorted(state)}")
+        for name, value in state.items():
+            setattr(self, name, value)
+
     def _get_indices(self, indices: VecEnvIndices) -> Sequence[int]:
         if indices is None:
             return range(self.num_envs)
