@@ -9,9 +9,10 @@ measures, on one core with one torch thread, the steady-state cost of each part 
   off-policy algorithms the warm-up has no gradient steps), measured over ``--steps``
   env steps of ``build_model(algo, UavRisVecEnv(...), default_hyperparams(algo, "paper"))``;
   the study trains 5 seeds of each of the four algorithms plus 10 DDPG scenario experts;
-- DT pre-training: seconds per step of the paper-size model (context 20, width 128,
-  3 layers, batch 64) on random windows, times 100,000 steps; fine-tuning and evaluation
-  are not included (minutes, measured in the quick run).
+- DT pre-training: seconds per step of the ``paper`` pre-training preset (the DT paper's
+  size, batch 64), taken by the pipeline's own optimiser and training step on windows cut
+  from random episodes, times its 100,000 steps; fine-tuning and evaluation are not
+  included (minutes, measured in the quick run).
 
 Training runs are independent jobs, so they spread over workers (the longest-job bound
 is reported too); pre-training is one sequential job. Run on an otherwise idle machine::
@@ -30,14 +31,16 @@ import argparse  # noqa: E402
 import sys  # noqa: E402
 import time  # noqa: E402
 
+import numpy as np  # noqa: E402
 import torch  # noqa: E402
 from stable_baselines3.common.callbacks import BaseCallback  # noqa: E402
 
-from uavris.agents.dt_model import DecisionTransformer, DTConfig, masked_action_loss  # noqa: E402
+from uavris.agents.dt_data import TrainingWindows, Trajectory  # noqa: E402
+from uavris.agents.dt_model import DecisionTransformer  # noqa: E402
 from uavris.agents.experts import ALGORITHMS, build_model, default_hyperparams  # noqa: E402
 from uavris.agents.sb3_vec_env import UavRisVecEnv  # noqa: E402
 from uavris.config import SystemConfig  # noqa: E402
-from uavris.experiments.dt_pipeline import PRETRAIN_PRESETS  # noqa: E402
+from uavris.experiments.dt_pipeline import PRETRAIN_PRESETS, _make_optimizer, _train_steps, pretrain_config  # noqa: E402
 from uavris.experiments.training import PRESET_STEPS  # noqa: E402
 from _machine import cpu_model, pin_to_one_core  # noqa: E402  (benchmarks/_machine.py)
 
@@ -68,24 +71,25 @@ def seconds_per_env_step(algo: str, steps: int) -> float:
 
 
 def seconds_per_pretrain_step(steps: int) -> float:
+    """One pre-training step exactly as ``uavris pretrain-dt --preset paper`` takes it (the
+    pipeline's own optimiser and step, windows cut from random 100-slot episodes)."""
     system = SystemConfig()
-    p = PRETRAIN_PRESETS["paper"]
-    cfg = DTConfig(system.observation_dim, system.action_dim)  # the DT paper's size, as the preset uses
-    model = DecisionTransformer(cfg)
-    opt = torch.optim.AdamW(model.parameters(), lr=1e-4)
-    b, k = p["batch_size"], cfg.context
-    batch = (torch.randn(b, k), torch.randn(b, k, cfg.state_dim), torch.rand(b, k, cfg.act_dim) * 2 - 1,
-             torch.arange(k).repeat(b, 1), torch.ones(b, k, dtype=torch.bool))
-    t0 = None
-    for i in range(steps + 5):
-        if i == 5:
-            t0 = time.perf_counter()
-        pred = model(*batch[:4], valid=batch[4])
-        loss = masked_action_loss(pred, batch[2], batch[4])
-        opt.zero_grad()
-        loss.backward()
-        torch.nn.utils.clip_grad_norm_(model.parameters(), 0.25)
-        opt.step()
+    cfg = pretrain_config("<benchmark>", "paper")
+    rng = np.random.default_rng(0)
+    trajs = [Trajectory(rng.standard_normal((system.horizon + 1, system.observation_dim)).astype(np.float32),
+                        rng.uniform(-1, 1, (system.horizon, system.action_dim)).astype(np.float32),
+                        rng.uniform(0, 30, system.horizon), False, True, "fig2", i) for i in range(32)]
+    windows = TrainingWindows(trajs, cfg.context)
+    model = DecisionTransformer(cfg.model_config(system.observation_dim, system.action_dim))
+    opt = _make_optimizer(model, cfg.learning_rate, cfg.weight_decay)
+
+    def train(first: int, count: int) -> None:
+        _train_steps(model, opt, windows, rng, first, count, cfg.batch_size, cfg.learning_rate, cfg.warmup_steps,
+                     cfg.grad_clip)
+
+    train(0, 5)  # warm-up of the allocator and kernels, not timed
+    t0 = time.perf_counter()
+    train(5, steps)
     return (time.perf_counter() - t0) / steps
 
 
