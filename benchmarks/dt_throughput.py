@@ -13,7 +13,10 @@ Two measurements, in this one process pinned to a single CPU, one torch thread:
 2. **Rollout** of 80 episodes (``unseen1``, seeds 0..79, the default system) by a DT of
    the same size: all 80 in one batched simulator with one forward pass per slot
    (``DTBatchPolicy`` + ``record_episodes``), against rolling the same 80 episodes out one
-   by one (batch of 1). Same seeds, same model, same code path.
+   by one (batch of 1). Same seeds, same model, same code path. Measured for both
+   attention layouts: ``window`` (the DT paper's; every slot re-reads 59 tokens) and
+   ``banded`` (every slot adds 3 tokens to a key/value cache; see
+   ``uavris.agents.dt_model``).
 
 Each case is warmed up, then timed ``--repeats`` times; the best timing is kept. The
 script prints the machine, the command, a Markdown table and PASS/FAIL lines against the
@@ -22,7 +25,7 @@ exits 0: it is a report, not a test.
 
 Run from the repository root::
 
-    .venv/bin/python benchmarks/dt_throughput.py            # ~3 minutes
+    .venv/bin/python benchmarks/dt_throughput.py            # ~4 minutes
     .venv/bin/python benchmarks/dt_throughput.py --quick    # ~40 seconds (16 episodes, fewer steps)
 """
 
@@ -46,7 +49,7 @@ import numpy as np  # noqa: E402
 import torch  # noqa: E402
 
 from uavris.agents.dt_data import TrainingWindows, Trajectory, record_episodes  # noqa: E402
-from uavris.agents.dt_model import DecisionTransformer, DTConfig, masked_action_loss  # noqa: E402
+from uavris.agents.dt_model import ATTENTION_LAYOUTS, DecisionTransformer, DTConfig, masked_action_loss  # noqa: E402
 from uavris.agents.dt_policy import DTBatchPolicy  # noqa: E402
 from uavris.config import SystemConfig  # noqa: E402
 from _machine import cpu_model, pin_to_one_core  # noqa: E402  (benchmarks/_machine.py)
@@ -139,11 +142,13 @@ def measure_training(step: Callable[[dict], None], batches: list[dict], steps: i
 
 
 # ------------------------------------------------------------------------------ rollouts
-def measure_rollouts(system: SystemConfig, episodes: int, repeats: int) -> tuple[float, float, int]:
+def measure_rollouts(system: SystemConfig, episodes: int, repeats: int, attention: str = "window"
+                     ) -> tuple[float, float, int]:
     """(batched s, one-by-one s, slots) for ``episodes`` episodes."""
     torch.manual_seed(0)
     model = DecisionTransformer(DTConfig(system.observation_dim, system.action_dim, CONTEXT, WIDTH, DEPTH, HEADS,
-                                         DROPOUT, max_timestep=system.horizon), return_scale=3000.0).eval()
+                                         DROPOUT, max_timestep=system.horizon, attention=attention),
+                                return_scale=3000.0).eval()
     seeds = np.arange(episodes)
     record_episodes(DTBatchPolicy(model, TARGET_RETURN), system, SCENARIO, seeds[:2])  # warm-up
     slots = sum(t.length for t in record_episodes(DTBatchPolicy(model, TARGET_RETURN), system, SCENARIO, seeds))
@@ -199,8 +204,10 @@ def main(argv: list[str] | None = None) -> int:
     if hf is not None:
         print("measuring training (Hugging Face) ...", file=sys.stderr, flush=True)
         hf_rate = measure_training(hf[0], batches, steps, args.repeats)
-    print(f"measuring rollouts of {episodes} episodes ...", file=sys.stderr, flush=True)
-    batched, sequential, slots = measure_rollouts(system, episodes, args.repeats)
+    rollouts = {}
+    for attention in ATTENTION_LAYOUTS:
+        print(f"measuring rollouts of {episodes} episodes ({attention} attention) ...", file=sys.stderr, flush=True)
+        rollouts[attention] = measure_rollouts(system, episodes, args.repeats, attention)
 
     rows = [("case", "throughput", "relative")]
     rows.append((f"training, uavris DT ({ours_params:,} parameters)", f"{ours:,.0f} samples/s", "1.00x"))
@@ -209,18 +216,22 @@ def main(argv: list[str] | None = None) -> int:
                      f"{hf_rate:,.0f} samples/s", f"{hf_rate / ours:.2f}x"))
     else:
         rows.append(("training, HF DecisionTransformerModel", "skipped (pip install -e '.[bench]')", "n/a"))
-    rows.append((f"rollout, {episodes} episodes one by one", f"{slots / sequential:,.0f} slots/s "
-                 f"({sequential:.2f} s)", "1.00x"))
-    rows.append((f"rollout, {episodes} episodes batched", f"{slots / batched:,.0f} slots/s ({batched:.2f} s)",
-                 f"{sequential / batched:.2f}x"))
+    for attention, (batched, sequential, slots) in rollouts.items():
+        rows.append((f"rollout ({attention}), {episodes} episodes one by one",
+                     f"{slots / sequential:,.0f} slots/s ({sequential:.2f} s)", "1.00x"))
+        rows.append((f"rollout ({attention}), {episodes} episodes batched",
+                     f"{slots / batched:,.0f} slots/s ({batched:.2f} s)", f"{sequential / batched:.2f}x"))
     print(table(rows))
     print()
     if hf_rate is not None:
         print(f"training: uavris / Hugging Face = {ours / hf_rate:.2f}x (target >= 1x) "
               f"{'PASS' if ours >= hf_rate else 'FAIL'}")
-    ratio = sequential / batched
-    print(f"rollout: batched / one by one = {ratio:.2f}x (target >= {ROLLOUT_RATIO_TARGET:.0f}x) "
-          f"{'PASS' if ratio >= ROLLOUT_RATIO_TARGET else 'FAIL'}")
+    for attention, (batched, sequential, _) in rollouts.items():
+        ratio = sequential / batched
+        print(f"rollout ({attention}): batched / one by one = {ratio:.2f}x (target >= {ROLLOUT_RATIO_TARGET:.0f}x) "
+              f"{'PASS' if ratio >= ROLLOUT_RATIO_TARGET else 'FAIL'}")
+    window_one, banded_batched = rollouts["window"][1], rollouts["banded"][0]
+    print(f"rollout: banded batched / window one by one = {window_one / banded_batched:.2f}x")
     return 0
 
 

@@ -261,6 +261,7 @@ def pretrain_dt_cmd(
     depth: Optional[int] = None,
     heads: Optional[int] = None,
     dropout: Optional[float] = None,
+    attention: Optional[str] = None,
     no_progress: bool = False,
 ) -> None:
     """Pre-train a Decision Transformer offline on an expert dataset (paper Algorithm 1, stage 1).
@@ -277,7 +278,8 @@ def pretrain_dt_cmd(
         resume: continue an interrupted run from its last checkpoint.
         force: delete the run directory and train from scratch.
         steps: gradient steps (default: the preset's).
-        batch_size: context windows per step.
+        batch_size: context windows per step (whole episodes with --attention banded; about
+            batch * context / T of them match the window model's compute per step, e.g. 16).
         learning_rate: AdamW learning rate after warm-up.
         warmup_steps: linear warm-up steps.
         checkpoint_every: gradient steps between checkpoints.
@@ -286,6 +288,9 @@ def pretrain_dt_cmd(
         depth: transformer blocks (DT paper: 3).
         heads: attention heads (DT paper: 1).
         dropout: dropout rate (DT paper: 0.1).
+        attention: window (the DT paper's re-read context window, default) or banded (every
+            token attends to the 3 context - 1 latest tokens of the whole episode; trains on
+            whole episodes and acts from a key/value cache, several times faster to deploy).
         no_progress: no progress bar.
     """
     from uavris.experiments.dt_pipeline import default_pretrain_dir, pretrain, pretrain_config
@@ -293,7 +298,7 @@ def pretrain_dt_cmd(
 
     cfg = pretrain_config(dataset, preset, seed, steps=steps, batch_size=batch_size, learning_rate=learning_rate,
                           warmup_steps=warmup_steps, checkpoint_every=checkpoint_every, context=context, width=width,
-                          depth=depth, heads=heads, dropout=dropout)
+                          depth=depth, heads=heads, dropout=dropout, attention=attention)
     run_dir = pretrain(cfg, out or default_pretrain_dir(cfg), resume=resume, force=force, progress=not no_progress)
     done = read_json(run_dir / "done.json")
     print(f"pre-trained {run_dir}: {done['gradient_steps']} steps, final action loss {done['final_loss']:.4f}, "

@@ -37,7 +37,7 @@ import re
 import shutil
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Sequence
+from typing import TYPE_CHECKING, Sequence
 
 import numpy as np
 import torch
@@ -46,6 +46,9 @@ from numpy.typing import NDArray
 from uavris.agents.baselines import BatchPolicy
 from uavris.config import ConfigError, Scenario, SystemConfig
 from uavris.env.simulator import BatchedSimulator, observation_bounds, observation_layout
+
+if TYPE_CHECKING:
+    from uavris.agents.dt_model import DTConfig
 
 DATASET_FORMAT_VERSION = 1
 STATE_STD_FLOOR = 0.1
@@ -177,28 +180,49 @@ class TrainingWindows:
     A window is the ``context`` slots ending at a slot chosen uniformly among all slots;
     near an episode's start it is left-padded, exactly as the history a deployed DT sees
     at that slot (:mod:`uavris.agents.dt_policy`). The loss covers every real slot of it.
+
+    With ``whole_episodes`` (the banded DT, which reads episodes from slot 0) a sample is
+    instead one whole episode chosen uniformly, left-padded to the longest episode.
     """
 
-    def __init__(self, trajectories: Sequence[Trajectory], context: int) -> None:
+    def __init__(self, trajectories: Sequence[Trajectory], context: int, whole_episodes: bool = False) -> None:
         if not trajectories:
             raise DatasetError("no trajectories to train on")
-        self.context = context
         lengths = np.array([tr.length for tr in trajectories])
+        self.whole_episodes = whole_episodes
+        self.model_context = context
+        self.context = int(lengths.max()) if whole_episodes else context
         starts = np.concatenate([[0], np.cumsum(lengths)[:-1]])
+        self.episode_end = starts + lengths - 1
         self.states = np.concatenate([tr.observations[:-1] for tr in trajectories]).astype(np.float32)
         self.actions = np.concatenate([tr.actions for tr in trajectories]).astype(np.float32)
         self.rtg = np.concatenate([returns_to_go(tr.rewards) for tr in trajectories]).astype(np.float32)
         self.timesteps = np.concatenate([np.arange(n) for n in lengths]).astype(np.int64)
         self.episode_start = np.repeat(starts, lengths)
 
+    @classmethod
+    def for_model(cls, trajectories: Sequence[Trajectory], model_config: DTConfig) -> TrainingWindows:
+        """The samples a model of this :class:`~uavris.agents.dt_model.DTConfig` trains on."""
+        return cls(trajectories, model_config.context, whole_episodes=model_config.attention == "banded")
+
     @property
     def num_slots(self) -> int:
         return int(self.rtg.shape[0])
 
+    @property
+    def samples_per_epoch(self) -> int:
+        """Samples of one epoch: one window per slot, or, for whole episodes, ``context``
+        draws per episode, so that an epoch predicts about as many actions either way (a
+        window predicts ``context`` of them, an episode all of its slots)."""
+        return len(self.episode_end) * self.model_context if self.whole_episodes else self.num_slots
+
     def sample(self, batch_size: int, rng: np.random.Generator) -> dict[str, torch.Tensor]:
         """``batch_size`` windows: rtg (B, K), states (B, K, S), actions (B, K, A),
         timesteps (B, K), valid (B, K); padded entries are zero."""
-        ends = rng.integers(0, self.num_slots, batch_size)
+        if self.whole_episodes:
+            ends = self.episode_end[rng.integers(0, len(self.episode_end), batch_size)]
+        else:
+            ends = rng.integers(0, self.num_slots, batch_size)
         pos = ends[:, None] + np.arange(1 - self.context, 1)
         valid = pos >= self.episode_start[ends][:, None]
         idx = np.where(valid, pos, ends[:, None])

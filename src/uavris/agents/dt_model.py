@@ -12,6 +12,21 @@ Context: the model sees the last ``context`` slots. Shorter histories (the start
 episode) are left-padded; ``valid`` marks the real slots, and padded slots are masked out
 as attention keys, so they never change the prediction of a real slot.
 
+Two attention layouts (``DTConfig.attention``):
+
+- ``"window"`` (default; the DT paper's): at every slot the model re-reads a fresh window
+  of the last ``context`` slots, so tokens that slide out of the window change every
+  representation computed from them and nothing can be reused from the previous slot.
+- ``"banded"`` (opt-in, a sliding-window / banded attention): the model reads the whole
+  episode from slot 0, and every token attends to itself and the ``3 context - 2`` tokens
+  before it, in every block. A token's keys and values then never change once computed,
+  so deployment keeps them in a cache (:class:`KVCache`) and each slot costs three new
+  tokens instead of ``3 context - 1``: exact, not an approximation. The first token of a
+  slot sees the same ``3 context - 1`` tokens as the window layout at its first layer, but
+  deeper blocks reach further back (``depth`` bands). The model is trained on whole
+  episodes (:class:`uavris.agents.dt_data.TrainingWindows` with ``whole_episodes``).
+  For histories of at most ``context`` slots both layouts compute the same function.
+
 Two exact savings, both invisible in the outputs:
 
 - the action token of the last slot of a window is dropped, because no state token of the
@@ -51,6 +66,7 @@ MODEL_KIND = "uavris-decision-transformer"
 MODEL_FORMAT_VERSION = 1
 WEIGHTS_FILE = "model.safetensors"
 META_FILE = "model.json"
+ATTENTION_LAYOUTS = ("window", "banded")
 
 
 class CheckpointError(ValueError):
@@ -71,6 +87,7 @@ class DTConfig:
     dropout: float = 0.1
     max_timestep: int = 100  # size of the timestep embedding; later slots reuse the last entry
     mlp_ratio: int = 4
+    attention: str = "window"  # "window" (DT paper) or "banded" (cached deployment); see the module docstring
 
     def __post_init__(self) -> None:
         for name in ("state_dim", "act_dim", "context", "width", "depth", "heads", "max_timestep", "mlp_ratio"):
@@ -81,6 +98,13 @@ class DTConfig:
             raise ConfigError(f"DTConfig.width ({self.width}) must be a multiple of heads ({self.heads})")
         if not (isinstance(self.dropout, (int, float)) and 0.0 <= self.dropout < 1.0):
             raise ConfigError(f"DTConfig.dropout must be in [0, 1), got {self.dropout!r}")
+        if self.attention not in ATTENTION_LAYOUTS:
+            raise ConfigError(f"DTConfig.attention must be one of {ATTENTION_LAYOUTS}, got {self.attention!r}")
+
+    @property
+    def band(self) -> int | None:
+        """Keys a token attends to (itself included) in the banded layout; None for window."""
+        return 3 * self.context - 1 if self.attention == "banded" else None
 
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
@@ -116,14 +140,27 @@ class _Block(nn.Module):
 
     def forward(self, x: torch.Tensor, mask: torch.Tensor, query_index: torch.Tensor | None = None) -> torch.Tensor:
         b, n, w = x.shape
-        h = self.heads
         y = self.norm1(x)
-        k, v = self.key_value(y).view(b, n, 2, h, w // h).permute(2, 0, 3, 1, 4)
+        k, v = self.key_value(y).view(b, n, 2, self.heads, w // self.heads).permute(2, 0, 3, 1, 4)
+        return self._attend(x, y, k, v, mask, query_index)
+
+    def forward_cached(self, x: torch.Tensor, mask: torch.Tensor, cache: KVCache, index: int, slots: torch.Tensor,
+                       query_index: torch.Tensor | None = None) -> torch.Tensor:
+        """As :meth:`forward` for new tokens ``x``, whose keys and values go into ring
+        entries ``slots`` of block ``index`` of ``cache``; they attend over the whole ring."""
+        b, n, w = x.shape
+        y = self.norm1(x)
+        k, v = self.key_value(y).view(b, n, 2, self.heads, w // self.heads).permute(2, 0, 3, 1, 4)
+        cache.write(index, slots, k, v)
+        return self._attend(x, y, cache.keys[index], cache.values[index], mask, query_index)
+
+    def _attend(self, x: torch.Tensor, y: torch.Tensor, k: torch.Tensor, v: torch.Tensor, mask: torch.Tensor,
+                query_index: torch.Tensor | None) -> torch.Tensor:
+        b, _, w = x.shape
         if query_index is not None:
             x, y, mask = x[:, query_index], y[:, query_index], mask[:, :, query_index]
-        q = self.query(y).view(b, -1, h, w // h).transpose(1, 2)
-        att = F.scaled_dot_product_attention(q, k, v, attn_mask=mask,
-                                             dropout_p=self.dropout if self.training else 0.0)
+        q = self.query(y).view(b, -1, self.heads, w // self.heads).transpose(1, 2)
+        att = F.scaled_dot_product_attention(q, k, v, attn_mask=mask, dropout_p=self.dropout if self.training else 0.0)
         x = x + self.drop(self.proj(att.transpose(1, 2).reshape(b, -1, w)))
         return x + self.drop(self.mlp(self.norm2(x)))
 
@@ -171,15 +208,11 @@ class DecisionTransformer(nn.Module):
             ``(B, L, act_dim)`` in (-1, 1), or ``(B, act_dim)`` with ``last_only``.
         """
         b, length = returns_to_go.shape
-        t = timesteps.clamp(0, self.cfg.max_timestep - 1)
-        time_emb = self.embed_timestep(t)
-        r = self.embed_return((returns_to_go / self.return_scale).unsqueeze(-1)) + time_emb
-        s = self.embed_state((states - self.state_mean) / self.state_std) + time_emb
-        a = self.embed_action(actions) + time_emb
+        r, s, a = self._embed(returns_to_go, states, actions, timesteps)
         n = 3 * length - 1  # the last slot's action token is dropped (nothing reads it)
         x = torch.stack((r, s, a), dim=2).reshape(b, 3 * length, -1)[:, :n]
         x = self.embed_drop(self.embed_norm(x))
-        mask = attention_mask(valid, length, b, x.device)
+        mask = attention_mask(valid, length, b, x.device, self.cfg.band)
         readout = torch.arange(1, n, 3, device=x.device)  # state tokens
         if last_only:
             readout = readout[-1:]
@@ -189,18 +222,125 @@ class DecisionTransformer(nn.Module):
         out = torch.tanh(self.action_head(self.final_norm(x)))
         return out[:, -1] if last_only else out
 
+    def _embed(self, returns_to_go: torch.Tensor, states: torch.Tensor, actions: torch.Tensor,
+               timesteps: torch.Tensor, action_timesteps: torch.Tensor | None = None
+               ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """Token embeddings of R_hat, S and A (before the embedding LayerNorm), each with the
+        timestep embedding of its slot added (``action_timesteps`` for A, if given)."""
+        top = self.cfg.max_timestep - 1
+        time_emb = self.embed_timestep(timesteps.clamp(0, top))
+        act_time = time_emb if action_timesteps is None else self.embed_timestep(action_timesteps.clamp(0, top))
+        r = self.embed_return((returns_to_go / self.return_scale).unsqueeze(-1)) + time_emb
+        s = self.embed_state((states - self.state_mean) / self.state_std) + time_emb
+        return r, s, self.embed_action(actions) + act_time
+
+    def new_cache(self, batch: int) -> KVCache:
+        """An empty key/value cache for ``batch`` episodes (banded layout only)."""
+        if self.cfg.band is None:
+            raise ValueError("only a DT with attention='banded' can act from a key/value cache")
+        p = next(self.parameters())
+        return KVCache(self.cfg, batch, p.device, p.dtype)
+
+    def step(self, cache: KVCache, returns_to_go: torch.Tensor, states: torch.Tensor, prev_actions: torch.Tensor,
+             timesteps: torch.Tensor, has_prev: torch.Tensor) -> torch.Tensor:
+        """Predict A_t of every row from the cache plus three new tokens, and add them to it.
+
+        The new tokens are A_{t-1}, R_hat_t and S_t (their order in the sequence). Equal to
+        ``forward(..., last_only=True)`` on the whole episode so far (banded layout), at the
+        cost of three tokens.
+
+        Args:
+            cache: the rows' cache (:meth:`new_cache`); updated in place.
+            returns_to_go: ``(B,)`` raw R_hat_t.
+            states: ``(B, state_dim)`` raw S_t.
+            prev_actions: ``(B, act_dim)`` A_{t-1}; ignored where ``has_prev`` is False.
+            timesteps: ``(B,)`` t (long).
+            has_prev: ``(B,)`` bool, False at the first slot of an episode (no A_{t-1}).
+        Returns:
+            ``(B, act_dim)`` in (-1, 1).
+        """
+        if self.training:
+            raise RuntimeError("DecisionTransformer.step is for deployment: call model.eval() first")
+        r, s, a = self._embed(returns_to_go[:, None], states[:, None], prev_actions[:, None], timesteps[:, None],
+                              (timesteps - 1)[:, None])
+        x = self.embed_norm(torch.cat((a, r, s), dim=1))
+        new_valid = torch.stack((has_prev.bool(), torch.ones_like(has_prev, dtype=torch.bool),
+                                 torch.ones_like(has_prev, dtype=torch.bool)), dim=1)
+        slots = cache.slots(3)
+        mask = cache.insert(new_valid)
+        readout = torch.tensor([2], device=x.device)  # S_t
+        for i, block in enumerate(self.blocks):
+            last = i == len(self.blocks) - 1
+            x = block.forward_cached(x, mask, cache, i, slots, readout if last else None)
+        return torch.tanh(self.action_head(self.final_norm(x)))[:, -1]
+
     @property
     def normalisation(self) -> dict[str, Any]:
         return {"state_mean": self.state_mean.tolist(), "state_std": self.state_std.tolist(),
                 "return_scale": float(self.return_scale)}
 
 
-def attention_mask(valid: torch.Tensor | None, length: int, batch: int, device: torch.device) -> torch.Tensor:
+class KVCache:
+    """Keys and values of each row's recent tokens, per block (banded DT), in a ring buffer.
+
+    The ring has ``band + 2`` slots: the ``band - 1`` tokens a new slot's three tokens may
+    attend to, plus room for those three, which overwrite the oldest entries in place (no
+    copying of the cache per slot). Attention does not depend on the order of its keys, so
+    only the mask needs each entry's position: ``position`` is the token index of each ring
+    entry (all rows advance in lockstep), ``valid`` marks entries that hold a real token of
+    the row's current episode (all False after :meth:`reset`), so rows may be at different
+    slots of their episodes.
+    """
+
+    def __init__(self, cfg: DTConfig, batch: int, device: torch.device, dtype: torch.dtype) -> None:
+        assert cfg.band is not None
+        self.band = cfg.band
+        size, h = cfg.band + 2, cfg.heads
+        shape = (batch, h, size, cfg.width // h)
+        self.keys = [torch.zeros(shape, device=device, dtype=dtype) for _ in range(cfg.depth)]
+        self.values = [torch.zeros(shape, device=device, dtype=dtype) for _ in range(cfg.depth)]
+        self.valid = torch.zeros(batch, size, dtype=torch.bool, device=device)
+        self.position = torch.full((size,), -(10 ** 9), dtype=torch.long, device=device)
+        self.next_position = 0
+
+    def reset(self, rows: torch.Tensor | np.ndarray) -> None:
+        """Forget the history of ``rows`` (they start new episodes)."""
+        self.valid[torch.as_tensor(rows)] = False
+
+    def slots(self, m: int) -> torch.Tensor:
+        """Ring entries the next ``m`` tokens go to."""
+        size = self.valid.shape[1]
+        return (self.next_position + torch.arange(m, device=self.valid.device)) % size
+
+    def insert(self, new_valid: torch.Tensor) -> torch.Tensor:
+        """Claim ring entries for ``m`` new tokens (``new_valid`` is (B, m)) and return the
+        ``(B, 1, m, size)`` attention mask of the new tokens over the ring. The new keys and
+        values go in with :meth:`write` before attention is computed."""
+        m = new_valid.shape[1]
+        slots = self.slots(m)
+        self.position[slots] = self.next_position + torch.arange(m, device=slots.device)
+        self.valid[:, slots] = new_valid
+        query = self.next_position + torch.arange(m, device=slots.device)[:, None]
+        in_band = (self.position[None, :] <= query) & (query - self.position[None, :] < self.band)
+        own = self.position[None, :] == query  # an invalid new token keeps its own key (no NaN)
+        self.next_position += m
+        return (in_band & (self.valid[:, None, :] | own)).unsqueeze(1)
+
+    def write(self, block: int, slots: torch.Tensor, keys: torch.Tensor, values: torch.Tensor) -> None:
+        self.keys[block][:, :, slots] = keys
+        self.values[block][:, :, slots] = values
+
+
+def attention_mask(valid: torch.Tensor | None, length: int, batch: int, device: torch.device,
+                   band: int | None = None) -> torch.Tensor:
     """Boolean ``(B, 1, n, n)`` mask over the ``n = 3 L - 1`` tokens: True where a query may
-    attend. Causal, and padded keys are hidden; a padded query keeps its own key so its row
-    is never empty (an all-masked row would give NaN, and its output is never read)."""
+    attend. Causal (and, with ``band``, only the ``band`` latest keys), and padded keys are
+    hidden; a padded query keeps its own key so its row is never empty (an all-masked row
+    would give NaN, and its output is never read)."""
     n = 3 * length - 1
     causal = torch.ones(n, n, dtype=torch.bool, device=device).tril()
+    if band is not None:
+        causal = causal & ~torch.ones(n, n, dtype=torch.bool, device=device).tril(-band)
     if valid is None:
         return causal.expand(batch, 1, n, n)
     keys = valid.bool().repeat_interleave(3, dim=1)[:, :n]

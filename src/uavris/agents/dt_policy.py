@@ -3,7 +3,8 @@
 Zero-shot deployment (paper Sec. IV-D): the first action of an episode is predicted from
 the target return R_hat_1 and the first state; after each slot the return-to-go is
 updated as R_hat_{t+1} = R_hat_t - r(t), and the last ``context`` slots of (R_hat, S, A)
-form the next input. With ``noise_sigma`` > 0 the executed action is
+form the next input (window layout), or, for a banded DT, the three new tokens of the slot
+are added to the model's key/value cache (:class:`uavris.agents.dt_model.KVCache`). With ``noise_sigma`` > 0 the executed action is
 A_t = clip(A_hat_t + eps_t, -1, 1), eps_t ~ N(0, sigma^2 I) (Algorithm 1, stage 2), and
 the history holds the executed action, which is also what the trajectory records.
 
@@ -76,56 +77,30 @@ class DTBatchPolicy:
     # ------------------------------------------------------------------ history
     def begin(self, n: int) -> None:
         """Allocate the history of ``n`` rows, all at the start of an episode."""
-        k, c = self.model.cfg.context, self.model.cfg
         self._n = n
-        self._rtg = np.zeros((n, k), dtype=np.float32)
-        self._states = np.zeros((n, k, c.state_dim), dtype=np.float32)
-        self._actions = np.zeros((n, k, c.act_dim), dtype=np.float32)
-        self._steps = np.zeros((n, k), dtype=np.int64)
-        self._valid = np.zeros((n, k), dtype=bool)
-        self._filled = np.zeros(n, dtype=np.int64)
-        self._t = np.zeros(n, dtype=np.int64)
+        self._history = _CachedHistory(self.model, n) if self.model.cfg.band is not None else _Window(self.model, n)
         self.remaining = np.full(n, self.target_return)  # R_hat_t of the current slot, float64
         self._pending = None
 
     def reset_rows(self, rows: NDArray[np.bool_] | NDArray[np.intp]) -> None:
         """Start new episodes in ``rows``."""
-        for buf in (self._rtg, self._states, self._actions, self._steps):
-            buf[rows] = 0
-        self._valid[rows] = False
-        self._filled[rows] = 0
-        self._t[rows] = 0
+        self._history.reset(rows)
         self.remaining[rows] = self.target_return
 
     def act(self, obs: NDArray[np.float32]) -> NDArray[np.float32]:
         """Append S_t with the current R_hat_t and return the action of every row."""
-        for buf in (self._rtg, self._states, self._actions, self._steps, self._valid):
-            buf[:, :-1] = buf[:, 1:]
-        self._rtg[:, -1] = self.remaining
-        self._states[:, -1] = obs
-        self._actions[:, -1] = 0.0  # A_t is not known yet; the model never reads it
-        self._steps[:, -1] = self._t
-        self._valid[:, -1] = True
-        self._filled = np.minimum(self._filled + 1, self.model.cfg.context)
-        # When every row is early in its episode the leading columns are padding for all
-        # rows: drop them (exact, and the forward pass gets shorter).
-        width = int(self._filled.max())
-        sl = slice(self.model.cfg.context - width, None)
         if self.model.training:  # acting is always deterministic apart from the explicit noise
             self.model.eval()
         with torch.inference_mode():
-            pred = self.model(torch.from_numpy(self._rtg[:, sl]), torch.from_numpy(self._states[:, sl]),
-                              torch.from_numpy(self._actions[:, sl]), torch.from_numpy(self._steps[:, sl]),
-                              torch.from_numpy(self._valid[:, sl]), last_only=True).numpy()
+            pred = self._history.predict(self.remaining, obs)
         if self.noise_sigma > 0:
             pred = pred + self._rng.normal(0.0, self.noise_sigma, pred.shape)
         return np.clip(pred, -1.0, 1.0).astype(np.float32)
 
     def record(self, actions: NDArray[np.float32], rewards: NDArray[np.float64]) -> None:
         """Store the executed A_t and update R_hat_{t+1} = R_hat_t - r(t)."""
-        self._actions[:, -1] = actions
+        self._history.record(actions)
         self.remaining = self.remaining - rewards
-        self._t += 1
 
     # ------------------------------------------------------------------ batch-policy interface
     def __call__(self, obs: NDArray[np.float32], sim: BatchedSimulator) -> NDArray[np.float32]:
@@ -147,6 +122,76 @@ class DTBatchPolicy:
         # Copies: a partial reset may write into the simulator's current arrays in place.
         self._pending = (sim.channels.copy(), sim.cos_theta.copy(), sim.pairing.copy(), action)
         return action
+
+
+class _Window:
+    """The last ``context`` slots of every row, re-read by the model at each slot (window layout)."""
+
+    def __init__(self, model: DecisionTransformer, n: int) -> None:
+        k, c = model.cfg.context, model.cfg
+        self.model = model
+        self.rtg = np.zeros((n, k), dtype=np.float32)
+        self.states = np.zeros((n, k, c.state_dim), dtype=np.float32)
+        self.actions = np.zeros((n, k, c.act_dim), dtype=np.float32)
+        self.steps = np.zeros((n, k), dtype=np.int64)
+        self.valid = np.zeros((n, k), dtype=bool)
+        self.filled = np.zeros(n, dtype=np.int64)
+        self.t = np.zeros(n, dtype=np.int64)
+
+    def reset(self, rows: NDArray[np.bool_] | NDArray[np.intp]) -> None:
+        for buf in (self.rtg, self.states, self.actions, self.steps):
+            buf[rows] = 0
+        self.valid[rows] = False
+        self.filled[rows] = 0
+        self.t[rows] = 0
+
+    def predict(self, remaining: NDArray[np.float64], obs: NDArray[np.float32]) -> NDArray[np.float32]:
+        for buf in (self.rtg, self.states, self.actions, self.steps, self.valid):
+            buf[:, :-1] = buf[:, 1:]
+        self.rtg[:, -1] = remaining
+        self.states[:, -1] = obs
+        self.actions[:, -1] = 0.0  # A_t is not known yet; the model never reads it
+        self.steps[:, -1] = self.t
+        self.valid[:, -1] = True
+        self.filled = np.minimum(self.filled + 1, self.model.cfg.context)
+        # When every row is early in its episode the leading columns are padding for all
+        # rows: drop them (exact, and the forward pass gets shorter).
+        sl = slice(self.model.cfg.context - int(self.filled.max()), None)
+        return self.model(torch.from_numpy(self.rtg[:, sl]), torch.from_numpy(self.states[:, sl]),
+                          torch.from_numpy(self.actions[:, sl]), torch.from_numpy(self.steps[:, sl]),
+                          torch.from_numpy(self.valid[:, sl]), last_only=True).numpy()
+
+    def record(self, actions: NDArray[np.float32]) -> None:
+        self.actions[:, -1] = actions
+        self.t += 1
+
+
+class _CachedHistory:
+    """Banded layout: the model's key/value cache plus A_{t-1}; three new tokens per slot."""
+
+    def __init__(self, model: DecisionTransformer, n: int) -> None:
+        self.model = model
+        self.cache = model.new_cache(n)
+        self.prev_action = np.zeros((n, model.cfg.act_dim), dtype=np.float32)
+        self.has_prev = np.zeros(n, dtype=bool)
+        self.t = np.zeros(n, dtype=np.int64)
+
+    def reset(self, rows: NDArray[np.bool_] | NDArray[np.intp]) -> None:
+        self.cache.reset(rows)
+        self.prev_action[rows] = 0.0
+        self.has_prev[rows] = False
+        self.t[rows] = 0
+
+    def predict(self, remaining: NDArray[np.float64], obs: NDArray[np.float32]) -> NDArray[np.float32]:
+        return self.model.step(self.cache, torch.from_numpy(remaining.astype(np.float32)),
+                               torch.from_numpy(np.ascontiguousarray(obs, dtype=np.float32)),
+                               torch.from_numpy(self.prev_action), torch.from_numpy(self.t),
+                               torch.from_numpy(self.has_prev)).numpy()
+
+    def record(self, actions: NDArray[np.float32]) -> None:
+        self.prev_action = np.asarray(actions, dtype=np.float32).copy()
+        self.has_prev[:] = True
+        self.t += 1
 
 
 def dt_policy_from_checkpoint(directory: str | Path, target_return: float | None = None, noise_sigma: float = 0.0,

@@ -211,6 +211,7 @@ class PretrainConfig:
     depth: int = 3
     heads: int = 1
     dropout: float = 0.1
+    attention: str = "window"
     target_quantile: float = TARGET_QUANTILE
 
     def __post_init__(self) -> None:
@@ -225,7 +226,7 @@ class PretrainConfig:
 
     def model_config(self, state_dim: int, act_dim: int, max_timestep: int = 100) -> DTConfig:
         return DTConfig(state_dim, act_dim, context=self.context, width=self.width, depth=self.depth, heads=self.heads,
-                        dropout=self.dropout, max_timestep=max_timestep)
+                        dropout=self.dropout, max_timestep=max_timestep, attention=self.attention)
 
 
 def pretrain_config(dataset: str | Path, preset: str = "quick", seed: int = 0, **overrides: Any) -> PretrainConfig:
@@ -289,7 +290,8 @@ def finetune_config(model: str | Path, scenario: str, preset: str = "quick", see
 
 
 def default_pretrain_dir(cfg: PretrainConfig, root: str | Path = "runs/dt") -> Path:
-    return Path(root) / f"pretrain-{Path(cfg.dataset).name}-s{cfg.seed}-{cfg.preset}"
+    layout = "" if cfg.attention == "window" else f"-{cfg.attention}"
+    return Path(root) / f"pretrain-{Path(cfg.dataset).name}-s{cfg.seed}-{cfg.preset}{layout}"
 
 
 def default_finetune_dir(cfg: FinetuneConfig, root: str | Path = "runs/dt") -> Path:
@@ -472,7 +474,7 @@ def pretrain(cfg: PretrainConfig, run_dir: str | Path, *, resume: bool = False, 
     model = DecisionTransformer(cfg.model_config(system.observation_dim, system.action_dim, system.horizon),
                                 norm.state_mean, norm.state_std, norm.return_scale)
     opt = _make_optimizer(model, cfg.learning_rate, cfg.weight_decay)
-    windows = TrainingWindows(ds.trajectories, cfg.context)
+    windows = TrainingWindows.for_model(ds.trajectories, model.cfg)
     model_meta = {
         "stage": "pretrain", "scenario": None, "scenarios": ds.scenarios, "dataset": str(cfg.dataset),
         "dataset_id": ds.dataset_id, "system": system.to_dict(), "observation_layout": layout_as_lists(system),
@@ -584,8 +586,8 @@ def finetune(cfg: FinetuneConfig, run_dir: str | Path, *, resume: bool = False, 
             cands = record_episodes(explorer, system, cfg.scenario, seeds, expert="dt-finetune", expert_algo="dt")
             interactions += sum(tr.length for tr in cands)
             elites = select_elites(cands, cfg.elites)
-            windows = TrainingWindows(elites, model.cfg.context)  # RTGs from the rewards actually received
-            count = cfg.epochs_per_round * math.ceil(windows.num_slots / cfg.batch_size)
+            windows = TrainingWindows.for_model(elites, model.cfg)  # RTGs from the rewards actually received
+            count = cfg.epochs_per_round * math.ceil(windows.samples_per_epoch / cfg.batch_size)
             losses = _train_steps(model, opt, windows, rng, steps, count, cfg.batch_size, cfg.learning_rate,
                                   cfg.warmup_steps, cfg.grad_clip)
             steps += count
