@@ -4,9 +4,10 @@ Zero-shot deployment (paper Sec. IV-D): the first action of an episode is predic
 the target return R_hat_1 and the first state; after each slot the return-to-go is
 updated as R_hat_{t+1} = R_hat_t - r(t), and the last ``context`` slots of (R_hat, S, A)
 form the next input (window layout), or, for a banded DT, the three new tokens of the slot
-are added to the model's key/value cache (:class:`uavris.agents.dt_model.KVCache`). With ``noise_sigma`` > 0 the executed action is
-A_t = clip(A_hat_t + eps_t, -1, 1), eps_t ~ N(0, sigma^2 I) (Algorithm 1, stage 2), and
-the history holds the executed action, which is also what the trajectory records.
+are added to the model's key/value cache (:class:`uavris.agents.dt_model.KVCache`). With
+``noise_sigma`` > 0 the executed action is A_t = clip(A_hat_t + eps_t, -1, 1),
+eps_t ~ N(0, sigma^2 I) (Algorithm 1, stage 2), and the history holds the executed action,
+which is also what the trajectory records.
 
 :class:`DTBatchPolicy` is a batch policy ``policy(obs, sim) -> actions`` like every other
 policy of :mod:`uavris.agents`, so it is scored by :func:`uavris.agents.evaluation.evaluate`
