@@ -12,7 +12,9 @@ context windows of the dataset, AdamW with decoupled weight decay on the weight 
 a linear learning-rate warm-up then a constant rate, gradient-norm clipping. These are
 the DT paper's settings (lr 1e-4, weight decay 1e-4, warm-up 10,000 steps, clip 0.25,
 batch 64, 100,000 steps in ``paper``). The default target return of the model is the 0.9
-quantile of the dataset's episode returns, stored in the checkpoint.
+quantile of the dataset's episode returns, stored in the checkpoint. With
+``attention="banded"`` (:mod:`uavris.agents.dt_model`) a sample is a whole episode instead of
+a window, and ``batch_size`` counts episodes.
 
 **Fine-tune** (:func:`finetune`, Algorithm 1 stage 2) in one scenario, for H rounds:
 collect N trajectories with Gaussian noise sigma on the DT's actions, keep the top K by
@@ -28,7 +30,8 @@ ours, with reasons:
   pre-training rate, large enough to move within a few hundred steps per round, small
   enough not to erase the pre-trained policy in one round.
 - Epochs per round: 5 (``paper``), 2 (``quick``), an epoch being ceil(elite slots / batch)
-  sampled windows; only the current round's elites are trained on, as in Algorithm 1.
+  sampled windows (banded DT: ceil(elites x context / batch) sampled episodes, about as
+  many predicted actions); only the current round's elites are trained on, as in Algorithm 1.
 - The target return stays the pre-trained model's default (or ``--target-return``), so
   zero-shot and fine-tuned policies are conditioned alike; the state normalisation and
   return scale of the pre-trained model are kept, so its inputs mean the same thing.
