@@ -156,3 +156,13 @@ def test_banded_pipeline_pretrains_finetunes_and_round_trips(tmp_path):
     del old["config"]["attention"]
     meta_path.write_text(json.dumps(old))
     assert load_dt(tmp_path / "copy")[0].cfg.attention == "window"
+
+
+def test_unknown_attention_layout_on_the_cli_is_one_line_exit_2(tmp_path, capsys):
+    from uavris.cli import main as cli_main
+
+    code = cli_main(["pretrain-dt", "--dataset", str(tmp_path), "--attention", "sliding", "--out",
+                     str(tmp_path / "run"), "--no-progress"])
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and len(err.splitlines()) == 1 and "attention" in err and "sliding" in err
+    assert not (tmp_path / "run").exists()
