@@ -147,7 +147,9 @@ def test_identical_seeds_give_identical_evaluation(tmp_path):
     "CI-sized budgets on this simulator (measured, seed 0: 3.1 bps/Hz after 8k steps, 7.0 after 20k, random "
     "7.0; seed 1: 8.1). Diagnosis: the deterministic actor saturates (77-95% of phase entries at |a| > 0.95, "
     "accelerations at the bound, attitude increments constant so the RIS spins), also at learning rates "
-    "1e-4 and 3e-4 and with exploration sigma 0.3 and 0.5. If this starts passing, DDPG learns: remove the xfail."))
+    "1e-4 and 3e-4 and with exploration sigma 0.3 and 0.5; a sweep over tau, gamma, width, reward scale, batch, "
+    "learning_starts and update ratio (README, 5 seeds) finds no setting that does. If this starts passing, DDPG "
+    "learns: remove the xfail."))
 def test_ddpg_learns_beyond_random(tmp_path):
     """Kept small: 8,000 env steps of DDPG (about 20 s) must beat uniform random actions by
     at least 2 bps/Hz on the same 16 evaluation episodes (random scores ~7, a policy that
