@@ -114,8 +114,7 @@ def train_cmd(
         checkpoint_every: environment steps between checkpoints.
         hp: hyperparameter overrides.
         system: system-config overrides KEY=VALUE, e.g. --system noise_dbm=-90 horizon=50.
-        phase_control: agent (the policy sets all 22 action entries) or optimizer (hybrid: the policy
-            sets acceleration and attitude, the per-slot phase optimiser sets the RIS phases).
+        phase_control: agent (policy sets all 22 action entries) or optimizer (policy moves, optimiser sets phases).
         no_progress: no progress bar.
     """
     from uavris.experiments.training import default_run_dir, preset_config, train
@@ -148,8 +147,7 @@ def evaluate_cmd(
     Writes per-episode CSV and a JSON summary (mean, 95% CI, IQM) to RUN_DIR/eval/ (or --out).
 
     Args:
-        target: an expert run directory (uavris train), a DT model or run directory (pretrain-dt, finetune-dt),
-            or baseline:random, baseline:hover-random-phases, baseline:hover-aligned.
+        target: run dir (train, pretrain-dt, finetune-dt), DT model, baseline:random|hover-random-phases|hover-aligned.
         scenario: scenario to evaluate in (default: the run's own; required for baselines).
         episodes: number of evaluation episodes (seeds SEED .. SEED+EPISODES-1).
         seed: seed of the first evaluation episode.
@@ -278,8 +276,7 @@ def pretrain_dt_cmd(
         resume: continue an interrupted run from its last checkpoint.
         force: delete the run directory and train from scratch.
         steps: gradient steps (default: the preset's).
-        batch_size: context windows per step (whole episodes with --attention banded; about
-            batch * context / T of them match the window model's compute per step, e.g. 16).
+        batch_size: context windows per step (whole episodes with --attention banded; 16 of them cost about 64 windows).
         learning_rate: AdamW learning rate after warm-up.
         warmup_steps: linear warm-up steps.
         checkpoint_every: gradient steps between checkpoints.
@@ -288,9 +285,7 @@ def pretrain_dt_cmd(
         depth: transformer blocks (DT paper: 3).
         heads: attention heads (DT paper: 1).
         dropout: dropout rate (DT paper: 0.1).
-        attention: window (the DT paper's re-read context window, default) or banded (every
-            token attends to the 3 context - 1 latest tokens of the whole episode; trains on
-            whole episodes and acts from a key/value cache, several times faster to deploy).
+        attention: window (DT paper: re-reads the last context slots) or banded (sliding band, cached rollouts).
         no_progress: no progress bar.
     """
     from uavris.experiments.dt_pipeline import default_pretrain_dir, pretrain, pretrain_config
