@@ -266,8 +266,7 @@ class DecisionTransformer(nn.Module):
         x = self.embed_norm(torch.cat((a, r, s), dim=1))
         new_valid = torch.stack((has_prev.bool(), torch.ones_like(has_prev, dtype=torch.bool),
                                  torch.ones_like(has_prev, dtype=torch.bool)), dim=1)
-        slots = cache.slots(3)
-        mask = cache.insert(new_valid)
+        slots, mask = cache.insert(new_valid)
         readout = torch.tensor([2], device=x.device)  # S_t
         for i, block in enumerate(self.blocks):
             last = i == len(self.blocks) - 1
@@ -307,24 +306,20 @@ class KVCache:
         """Forget the history of ``rows`` (they start new episodes)."""
         self.valid[torch.as_tensor(rows)] = False
 
-    def slots(self, m: int) -> torch.Tensor:
-        """Ring entries the next ``m`` tokens go to."""
-        size = self.valid.shape[1]
-        return (self.next_position + torch.arange(m, device=self.valid.device)) % size
-
-    def insert(self, new_valid: torch.Tensor) -> torch.Tensor:
-        """Claim ring entries for ``m`` new tokens (``new_valid`` is (B, m)) and return the
-        ``(B, 1, m, size)`` attention mask of the new tokens over the ring. The new keys and
-        values go in with :meth:`write` before attention is computed."""
+    def insert(self, new_valid: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """Claim ring entries for ``m`` new tokens (``new_valid`` is (B, m)); returns those
+        entries and the ``(B, 1, m, size)`` attention mask of the new tokens over the ring.
+        Each block puts its keys and values there with :meth:`write` before attending."""
         m = new_valid.shape[1]
-        slots = self.slots(m)
-        self.position[slots] = self.next_position + torch.arange(m, device=slots.device)
+        new_positions = self.next_position + torch.arange(m, device=new_valid.device)
+        slots = new_positions % self.valid.shape[1]
+        self.position[slots] = new_positions
         self.valid[:, slots] = new_valid
-        query = self.next_position + torch.arange(m, device=slots.device)[:, None]
+        query = new_positions[:, None]
         in_band = (self.position[None, :] <= query) & (query - self.position[None, :] < self.band)
         own = self.position[None, :] == query  # an invalid new token keeps its own key (no NaN)
         self.next_position += m
-        return (in_band & (self.valid[:, None, :] | own)).unsqueeze(1)
+        return slots, (in_band & (self.valid[:, None, :] | own)).unsqueeze(1)
 
     def write(self, block: int, slots: torch.Tensor, keys: torch.Tensor, values: torch.Tensor) -> None:
         self.keys[block][:, :, slots] = keys
