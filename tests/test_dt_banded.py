@@ -51,7 +51,7 @@ def test_cached_steps_equal_the_full_forward_pass_at_every_slot(context, depth):
     with torch.inference_mode():
         for i in range(r.shape[1]):
             prev = a[:, i - 1] if i else torch.zeros_like(a[:, 0])
-            out = model.step(cache, r[:, i], s[:, i], prev, t[:, i], torch.full((r.shape[0],), i > 0))
+            out = model.step(cache, r[:, i], s[:, i], prev, t[:, i])
             torch.testing.assert_close(out, full[:, i], rtol=0, atol=1e-5)
 
 
@@ -65,9 +65,8 @@ def test_rows_reset_at_different_slots_keep_separate_histories():
             if i == restart:
                 cache.reset(np.array([1]))
             t_row = torch.tensor([i, i - restart if i >= restart else i])
-            has_prev = torch.tensor([i > 0, i > 0 and i != restart])
             prev = a[:, i - 1] if i else torch.zeros_like(a[:, 0])
-            out = model.step(cache, r[:, i], s[:, i], prev, t_row, has_prev)
+            out = model.step(cache, r[:, i], s[:, i], prev, t_row)
             if i >= restart:
                 sl = slice(restart, i + 1)
                 ref = model(r[1:, sl], s[1:, sl], a[1:, sl], t[1:, : i + 1 - restart], last_only=True)

@@ -242,7 +242,7 @@ class DecisionTransformer(nn.Module):
         return KVCache(self.cfg, batch, p.device, p.dtype)
 
     def step(self, cache: KVCache, returns_to_go: torch.Tensor, states: torch.Tensor, prev_actions: torch.Tensor,
-             timesteps: torch.Tensor, has_prev: torch.Tensor) -> torch.Tensor:
+             timesteps: torch.Tensor) -> torch.Tensor:
         """Predict A_t of every row from the cache plus three new tokens, and add them to it.
 
         The new tokens are A_{t-1}, R_hat_t and S_t (their order in the sequence). Equal to
@@ -253,9 +253,8 @@ class DecisionTransformer(nn.Module):
             cache: the rows' cache (:meth:`new_cache`); updated in place.
             returns_to_go: ``(B,)`` raw R_hat_t.
             states: ``(B, state_dim)`` raw S_t.
-            prev_actions: ``(B, act_dim)`` A_{t-1}; ignored where ``has_prev`` is False.
-            timesteps: ``(B,)`` t (long).
-            has_prev: ``(B,)`` bool, False at the first slot of an episode (no A_{t-1}).
+            prev_actions: ``(B, act_dim)`` A_{t-1}; ignored where t = 0 (an episode's first slot has none).
+            timesteps: ``(B,)`` t (long), the slot within each row's episode.
         Returns:
             ``(B, act_dim)`` in (-1, 1).
         """
@@ -264,8 +263,8 @@ class DecisionTransformer(nn.Module):
         r, s, a = self._embed(returns_to_go[:, None], states[:, None], prev_actions[:, None], timesteps[:, None],
                               (timesteps - 1)[:, None])
         x = self.embed_norm(torch.cat((a, r, s), dim=1))
-        new_valid = torch.stack((has_prev.bool(), torch.ones_like(has_prev, dtype=torch.bool),
-                                 torch.ones_like(has_prev, dtype=torch.bool)), dim=1)
+        real = torch.ones_like(timesteps, dtype=torch.bool)
+        new_valid = torch.stack((timesteps > 0, real, real), dim=1)
         slots, mask = cache.insert(new_valid)
         readout = torch.tensor([2], device=x.device)  # S_t
         for i, block in enumerate(self.blocks):

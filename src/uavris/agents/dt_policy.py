@@ -173,25 +173,20 @@ class _CachedHistory:
     def __init__(self, model: DecisionTransformer, n: int) -> None:
         self.model = model
         self.cache = model.new_cache(n)
-        self.prev_action = np.zeros((n, model.cfg.act_dim), dtype=np.float32)
-        self.has_prev = np.zeros(n, dtype=bool)
+        self.prev_action = np.zeros((n, model.cfg.act_dim), dtype=np.float32)  # read only where t > 0
         self.t = np.zeros(n, dtype=np.int64)
 
     def reset(self, rows: NDArray[np.bool_] | NDArray[np.intp]) -> None:
         self.cache.reset(rows)
-        self.prev_action[rows] = 0.0
-        self.has_prev[rows] = False
         self.t[rows] = 0
 
     def predict(self, remaining: NDArray[np.float64], obs: NDArray[np.float32]) -> NDArray[np.float32]:
         return self.model.step(self.cache, torch.from_numpy(remaining.astype(np.float32)),
                                torch.from_numpy(np.ascontiguousarray(obs, dtype=np.float32)),
-                               torch.from_numpy(self.prev_action), torch.from_numpy(self.t),
-                               torch.from_numpy(self.has_prev)).numpy()
+                               torch.from_numpy(self.prev_action), torch.from_numpy(self.t)).numpy()
 
     def record(self, actions: NDArray[np.float32]) -> None:
         self.prev_action = np.asarray(actions, dtype=np.float32).copy()
-        self.has_prev[:] = True
         self.t += 1
 
 
