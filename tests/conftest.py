@@ -11,6 +11,9 @@ if os.environ.get("CI"):
 
 from uavris.config import SystemConfig
 
+# Decision Transformer tests: short episodes keep rollouts cheap; the layout does not depend on T.
+SHORT = SystemConfig(horizon=16)
+
 
 @pytest.fixture
 def config() -> SystemConfig:
@@ -24,3 +27,22 @@ def rng() -> np.random.Generator:
 
 def random_cn(rng: np.random.Generator, shape: tuple[int, ...]) -> np.ndarray:
     return (rng.standard_normal(shape) + 1j * rng.standard_normal(shape)) / np.sqrt(2.0)
+
+
+@pytest.fixture(scope="module")
+def expert_trajectories():
+    """Two cheap "experts" (baselines) in two scenarios, 3 episodes each (DT tests)."""
+    from uavris.agents.baselines import BASELINES
+    from uavris.agents.dt_data import record_episodes
+
+    a = record_episodes(BASELINES["hover-aligned"](0), SHORT, "train1", [10, 11, 12], expert="hover", expert_algo="b")
+    b = record_episodes(BASELINES["hover-random-phases"](0), SHORT, "train2", [20, 21, 22], expert="rand",
+                        expert_algo="b")
+    return a + b
+
+
+@pytest.fixture(scope="module")
+def dataset_dir(expert_trajectories, tmp_path_factory):
+    from uavris.agents.dt_data import write_dataset
+
+    return write_dataset(tmp_path_factory.mktemp("ds") / "experts-v0", expert_trajectories, SHORT)

@@ -8,7 +8,6 @@ import numpy as np
 import pytest
 import torch
 
-from uavris.agents.baselines import BASELINES
 from uavris.agents.dt_data import (
     DatasetError,
     TrainingWindows,
@@ -23,18 +22,17 @@ from uavris.agents.dt_model import CheckpointError, DecisionTransformer, DTConfi
 from uavris.agents.dt_policy import DTBatchPolicy
 from uavris.agents.evaluation import evaluate
 from uavris.cli import main as cli_main
-from uavris.config import SystemConfig
 from uavris.experiments.dt_pipeline import finetune, finetune_config, pretrain, pretrain_config
 from uavris.experiments.io import UavrisError
+from tests.conftest import SHORT
 
 torch.set_num_threads(1)
-SHORT = SystemConfig(horizon=16)  # short episodes keep rollouts cheap; the layout does not depend on T
 
 
-def tiny_model(system=SHORT, context=5, width=32, depth=2, heads=2, dropout=0.0, seed=0, **norm):
+def tiny_model(system=SHORT, context=5, width=32, depth=2, heads=2, dropout=0.0, seed=0, attention="window", **norm):
     torch.manual_seed(seed)
     cfg = DTConfig(system.observation_dim, system.action_dim, context=context, width=width, depth=depth, heads=heads,
-                   dropout=dropout, max_timestep=system.horizon)
+                   dropout=dropout, max_timestep=system.horizon, attention=attention)
     return DecisionTransformer(cfg, **norm).eval()
 
 
@@ -43,20 +41,6 @@ def random_inputs(model, batch=3, length=5, seed=1):
     c = model.cfg
     return (torch.rand(batch, length, generator=g) * 100, torch.randn(batch, length, c.state_dim, generator=g),
             torch.rand(batch, length, c.act_dim, generator=g) * 2 - 1, torch.arange(length).repeat(batch, 1))
-
-
-@pytest.fixture(scope="module")
-def expert_trajectories():
-    """Two cheap "experts" (baselines) in two scenarios, 3 episodes each."""
-    a = record_episodes(BASELINES["hover-aligned"](0), SHORT, "train1", [10, 11, 12], expert="hover", expert_algo="b")
-    b = record_episodes(BASELINES["hover-random-phases"](0), SHORT, "train2", [20, 21, 22], expert="rand",
-                        expert_algo="b")
-    return a + b
-
-
-@pytest.fixture(scope="module")
-def dataset_dir(expert_trajectories, tmp_path_factory):
-    return write_dataset(tmp_path_factory.mktemp("ds") / "experts-v0", expert_trajectories, SHORT)
 
 
 # ------------------------------------------------------------------------------ hand-checked pieces

@@ -10,11 +10,12 @@ from uavris.agents.dt_data import TrainingWindows, Trajectory, record_episodes
 from uavris.agents.dt_model import DecisionTransformer, DTConfig, load_dt, save_dt
 from uavris.agents.dt_policy import DTBatchPolicy
 from uavris.agents.evaluation import evaluate
-from uavris.config import ConfigError, SystemConfig
+from uavris.config import ConfigError
 from uavris.experiments.dt_pipeline import finetune, finetune_config, pretrain, pretrain_config
+from tests.conftest import SHORT
+from tests.test_dt import random_inputs, tiny_model
 
 torch.set_num_threads(1)
-SHORT = SystemConfig(horizon=16)
 
 
 def model_pair(context=3, depth=2, heads=2, width=32, state_dim=6, act_dim=3, seed=0):
@@ -25,13 +26,6 @@ def model_pair(context=3, depth=2, heads=2, width=32, state_dim=6, act_dim=3, se
     window = DecisionTransformer(DTConfig(state_dim, act_dim, **kw)).eval()
     window.load_state_dict(banded.state_dict())
     return banded, window
-
-
-def episode_inputs(model, batch=3, length=12, seed=1):
-    g = torch.Generator().manual_seed(seed)
-    c = model.cfg
-    return (torch.rand(batch, length, generator=g) * 100, torch.randn(batch, length, c.state_dim, generator=g),
-            torch.rand(batch, length, c.act_dim, generator=g) * 2 - 1, torch.arange(length).repeat(batch, 1))
 
 
 def test_attention_layout_is_validated():
@@ -45,7 +39,7 @@ def test_attention_layout_is_validated():
 def test_cached_steps_equal_the_full_forward_pass_at_every_slot(context, depth):
     """Beyond the context the band slides; the cache must still reproduce the uncached model."""
     model, _ = model_pair(context=context, depth=depth)
-    r, s, a, t = episode_inputs(model, length=4 * context + 5)
+    r, s, a, t = random_inputs(model, length=4 * context + 5)
     full = model(r, s, a, t)  # every slot's prediction, reading the episode from slot 0
     cache = model.new_cache(r.shape[0])
     with torch.inference_mode():
@@ -57,7 +51,7 @@ def test_cached_steps_equal_the_full_forward_pass_at_every_slot(context, depth):
 
 def test_rows_reset_at_different_slots_keep_separate_histories():
     model, _ = model_pair()
-    r, s, a, t = episode_inputs(model, batch=2, length=14)
+    r, s, a, t = random_inputs(model, batch=2, length=14)
     cache = model.new_cache(2)
     restart = 5  # row 1 starts a new episode (its slot 0 = input slot 5) while row 0 goes on
     with torch.inference_mode():
@@ -77,9 +71,9 @@ def test_rows_reset_at_different_slots_keep_separate_histories():
 
 def test_banded_equals_window_while_the_history_fits_the_context():
     banded, window = model_pair(context=4)
-    r, s, a, t = episode_inputs(banded, length=4)
+    r, s, a, t = random_inputs(banded, length=4)
     torch.testing.assert_close(banded(r, s, a, t), window(r, s, a, t), rtol=0, atol=1e-6)
-    r, s, a, t = episode_inputs(banded, length=9)  # longer: the window model re-reads, the banded one does not
+    r, s, a, t = random_inputs(banded, length=9)  # longer: the window model re-reads, the banded one does not
     assert not torch.allclose(banded(r, s, a, t, last_only=True), window(r[:, -4:], s[:, -4:], a[:, -4:], t[:, -4:],
                                                                           last_only=True))
 
@@ -89,7 +83,7 @@ def test_receptive_field_is_depth_bands(depth):
     """S_t's prediction depends on the token p positions back iff p <= depth * (band - 1)."""
     model, _ = model_pair(context=2, depth=depth)  # band = 5 tokens
     reach = depth * (model.cfg.band - 1)
-    r, s, a, t = episode_inputs(model, batch=1, length=10)
+    r, s, a, t = random_inputs(model, batch=1, length=10)
     last = 3 * (r.shape[1] - 1) + 1  # token index of the last S
     base = model(r, s, a, t, last_only=True)
     for slot in range(r.shape[1] - 1):
@@ -116,9 +110,7 @@ def test_whole_episode_samples_and_epoch_size():
 
 
 def test_policy_actions_equal_the_models_prediction_on_the_whole_episode():
-    torch.manual_seed(0)
-    model = DecisionTransformer(DTConfig(SHORT.observation_dim, SHORT.action_dim, context=3, width=32, depth=2,
-                                         heads=2, dropout=0.0, max_timestep=SHORT.horizon, attention="banded")).eval()
+    model = tiny_model(context=3, attention="banded")
     target = 300.0
     trajs = record_episodes(DTBatchPolicy(model, target), SHORT, "unseen1", [5, 6, 7])
     for tr in trajs:
@@ -132,13 +124,8 @@ def test_policy_actions_equal_the_models_prediction_on_the_whole_episode():
         np.testing.assert_allclose(one.actions, b.actions, rtol=0, atol=1e-4)
 
 
-def test_banded_pipeline_pretrains_finetunes_and_round_trips(tmp_path):
-    from uavris.agents.baselines import BASELINES
-    from uavris.agents.dt_data import write_dataset
-
-    trajs = record_episodes(BASELINES["hover-aligned"](0), SHORT, "train1", [10, 11, 12])
-    ds = write_dataset(tmp_path / "ds" / "experts-v0", trajs, SHORT)
-    pre = pretrain(pretrain_config(ds, "smoke", attention="banded"), tmp_path / "pre", progress=False)
+def test_banded_pipeline_pretrains_finetunes_and_round_trips(dataset_dir, tmp_path):
+    pre = pretrain(pretrain_config(dataset_dir, "smoke", attention="banded"), tmp_path / "pre", progress=False)
     model, meta = load_dt(pre)
     assert model.cfg.attention == "banded"
     ft = finetune(finetune_config(pre, "unseen1", "smoke"), tmp_path / "ft", progress=False)
