@@ -103,7 +103,7 @@ def main() -> None:
     print(f"# expected wall clock of `reproduce --preset paper`\n\n- cpu: {cpu_model()}; {pinning}; torch threads 1"
           f"\n- command: {' '.join([sys.executable] + sys.argv)}\n")
     total_steps = PRESET_STEPS["paper"]
-    print(f"| part | measured cost | runs x work | core-hours |\n|---|---:|---|---:|")
+    print("| part | measured cost | runs x work | core-hours |\n|---|---:|---|---:|")
     jobs_h: list[float] = []
     for algo in ALGORITHMS:
         s = seconds_per_env_step(algo, args.steps)
