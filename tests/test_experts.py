@@ -148,7 +148,7 @@ def test_identical_seeds_give_identical_evaluation(tmp_path):
     "7.0; seed 1: 8.1). Diagnosis: the deterministic actor saturates (77-95% of phase entries at |a| > 0.95, "
     "accelerations at the bound, attitude increments constant so the RIS spins), also at learning rates "
     "1e-4 and 3e-4 and with exploration sigma 0.3 and 0.5; a sweep over tau, gamma, width, reward scale, batch, "
-    "learning_starts and update ratio (README, 5 seeds) finds no setting that does. If this starts passing, DDPG "
+    "learning_starts and update ratio (README, 3-5 seeds each) finds no setting that does. If this starts passing, DDPG "
     "learns: remove the xfail."))
 def test_ddpg_learns_beyond_random(tmp_path):
     """Kept small: 8,000 env steps of DDPG (about 20 s) must beat uniform random actions by
