@@ -1,29 +1,31 @@
-"""Single-core throughput of the per-slot phase optimiser and cost of the oracle policy.
+"""Single-core cost of the phase optimiser, the planning stage and the oracle policy.
 
-Three measurements, in this one process pinned to a single CPU with BLAS/OpenMP limited
-to one thread:
+Measurements, in this one process pinned to a single CPU with BLAS/OpenMP limited to one
+thread:
 
-1. Batched optimisation: ``optimize_phases`` on ``--slots`` slots (default 1024) in one
-   call. The slots are seeded default-system slots at random poses over the flight
-   region (tilts up to 0.4 rad) with the default pairing draw (one or two active pairs,
-   half each on average); one-pair slots take the closed form, two-pair slots the
-   iterative method.
-2. One slot at a time: the same optimiser called in a Python loop over the first
-   ``--loop-slots`` of those slots (default 128: the loop is slow). The results are
-   compared with the batched ones (same per-slot random starts; equal up to rounding
-   paths).
-   Target: batched at least 10x the loop's slots per second.
-3. The oracle policy evaluated with ``uavris.agents.evaluation.evaluate`` on 32 episodes
-   of ``fig2`` (the quick preset's evaluation size), seed 1_000_000, and the
-   ``hover_aligned`` and ``random`` baselines on the same episodes for reference.
-   Target: under 5 minutes on one core.
+1. The optimiser against 0.1.0's. ``optimize_phases`` (default settings) and the frozen
+   numpy optimiser of uavris 0.1.0 (``benchmarks/_phase_optimizer_v010.py``, its default
+   settings) on the same ``--slots`` seeded slots (default 1024: default-system slots at
+   random poses over the flight region, tilts up to 0.4 rad, the default pairing draw, so
+   about half have two active pairs). Best of ``--repeats`` timings each. Targets: at
+   least 5x 0.1.0's slots per second, mean sum rate within 0.5% of 0.1.0's.
+2. One slot at a time: the optimiser in a Python loop over the first ``--loop-slots``
+   slots (the cost a policy pays per environment step with few environments), against
+   the batched call.
+3. The planning stage: :func:`uavris.agents.oracle.plan_target` for every named scenario,
+   the first from scratch and the others with the poses valued so far (as the policy
+   does). Target: at most 10 s per scenario.
+4. The oracle policy: the planning oracle and the greedy oracle evaluated with
+   :func:`uavris.agents.evaluation.evaluate` on ``--episodes`` episodes (default 32) of
+   fig2 and unseen2, seed 1_000_000, with the zero action (``hover``) on the same
+   episodes. Target: a 32-episode evaluation under 5 minutes.
 
-It prints the machine, the command line, a Markdown table and PASS/FAIL lines. It always
+It prints the machine, the command line, Markdown tables and PASS/FAIL lines. It always
 exits with status 0: it is a report, not a test.
 
 Run from the repository root::
 
-    .venv/bin/python benchmarks/oracle_throughput.py            # ~1-2 minutes
+    .venv/bin/python benchmarks/oracle_throughput.py            # ~3 minutes
     .venv/bin/python benchmarks/oracle_throughput.py --quick    # 256 / 32 slots, 8 episodes
 """
 
@@ -32,7 +34,7 @@ from __future__ import annotations
 import os
 
 # Limit numerical libraries to one thread before numpy (and its BLAS) is imported.
-THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
+THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS")
 for _variable in THREAD_VARIABLES:
     os.environ[_variable] = "1"
 
@@ -45,24 +47,27 @@ import time  # noqa: E402
 import numpy as np  # noqa: E402
 from numpy.typing import NDArray  # noqa: E402
 
+import _phase_optimizer_v010 as v010  # noqa: E402  (benchmarks/_phase_optimizer_v010.py)
 import uavris  # noqa: E402
-from uavris.agents.baselines import hover_aligned, random_policy  # noqa: E402
-from uavris.agents.evaluation import evaluate  # noqa: E402
-from uavris.agents.oracle import oracle_policy  # noqa: E402
-from uavris.agents.phase_optimizer import optimize_slot_phases  # noqa: E402
-from uavris.config import SystemConfig  # noqa: E402
-from uavris.env.simulator import BatchedSimulator  # noqa: E402
 from _machine import cpu_model, pin_to_one_core  # noqa: E402  (benchmarks/_machine.py)
+from uavris.agents.baselines import BASELINES  # noqa: E402
+from uavris.agents.evaluation import evaluate  # noqa: E402
+from uavris.agents.oracle import PlanningOracle, greedy_oracle_policy  # noqa: E402
+from uavris.agents.phase_optimizer import DEFAULT_RESTARTS, optimize_slot_phases  # noqa: E402
+from uavris.config import SCENARIOS, SystemConfig  # noqa: E402
+from uavris.env.simulator import BatchedSimulator  # noqa: E402
 
 SEED = 0
 EVAL_SEED = 1_000_000
-RATIO_TARGET = 10.0
+SPEED_TARGET = 5.0
+QUALITY_TARGET = 0.005
+PLAN_LIMIT_S = 10.0
 EVAL_LIMIT_S = 300.0
 
 
 def make_slots(config: SystemConfig, n: int, seed: int) -> tuple[NDArray, NDArray, NDArray]:
     """``n`` seeded slots at random poses: channels, cos(theta), pairing (default draw)."""
-    sim = BatchedSimulator(config, "fig2", n)
+    sim = BatchedSimulator(config.replace(safety_distance=0.0), "fig2", n)  # poses anywhere in the region
     sim.seed(seed + np.arange(n))
     sim.reset()
     rng = np.random.default_rng(seed)
@@ -72,12 +77,23 @@ def make_slots(config: SystemConfig, n: int, seed: int) -> tuple[NDArray, NDArra
     return sim.channels.copy(), sim.cos_theta.copy(), sim.pairing.copy()
 
 
+def best_time(fn, repeats: int):
+    """(best wall time over ``repeats`` calls, last result)."""
+    best, out = float("inf"), None
+    for _ in range(repeats):
+        start = time.perf_counter()
+        out = fn()
+        best = min(best, time.perf_counter() - start)
+    return best, out
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="256 batched / 32 looped slots, 8 episodes")
     parser.add_argument("--slots", type=int, default=None, help="slots in the batched call (default 1024)")
     parser.add_argument("--loop-slots", type=int, default=None, help="slots optimised one at a time (default 128)")
-    parser.add_argument("--episodes", type=int, default=None, help="fig2 evaluation episodes (default 32)")
+    parser.add_argument("--episodes", type=int, default=None, help="evaluation episodes per scenario (default 32)")
+    parser.add_argument("--repeats", type=int, default=3, help="timings per optimiser measurement (best is kept)")
     args = parser.parse_args(argv)
     slots = args.slots or (256 if args.quick else 1024)
     loop_slots = min(args.loop_slots or (32 if args.quick else 128), slots)
@@ -85,69 +101,90 @@ def main(argv: list[str] | None = None) -> int:
 
     pinning = pin_to_one_core()
     config = SystemConfig()
-    print("# uavris phase optimiser and oracle throughput (one core)")
+    print("# uavris phase optimiser, planning stage and oracle (one core)")
     print()
     print(f"- command: {shlex.join([sys.executable, *sys.argv])}")
     print(f"- cpu: {cpu_model()}; {pinning}; " + ", ".join(f"{v}={os.environ[v]}" for v in THREAD_VARIABLES))
     print(f"- platform: {platform.platform()}; python {platform.python_version()}, numpy {np.__version__}, "
           f"uavris {uavris.__version__}")
-    print(f"- optimiser: default settings (2 co-phasing + 4 random starts, 7 noise levels x 30 L-BFGS "
-          f"iterations, 10 polish steps); slots seeded {SEED}")
+    print(f"- optimiser today: compiled kernel, 2 co-phasing + {DEFAULT_RESTARTS} random starts, 7 noise levels x 30 "
+          "L-BFGS iterations, 10 polish steps; 0.1.0: batched numpy, 2 + 4 starts, same levels, iterations, polish")
     print(flush=True)
 
     h, cos, pairing = make_slots(config, slots, SEED)
     two_pair = int(np.sum(pairing.sum(axis=(1, 2)) >= 2))
-
-    print(f"batched call over {slots} slots ...", file=sys.stderr, flush=True)
-    optimize_slot_phases(config, h[:8], cos[:8], pairing[:8])  # warm-up
-    start = time.perf_counter()
-    batched = optimize_slot_phases(config, h, cos, pairing)
-    t_batched = time.perf_counter() - start
-
-    print(f"loop over {loop_slots} slots ...", file=sys.stderr, flush=True)
-    looped_rate = np.empty(loop_slots)
-    looped_phases = np.empty((loop_slots, config.num_elements))
+    optimize_slot_phases(config, h[:8], cos[:8], pairing[:8])  # compile (or load the cache) and warm up
+    v010.optimize_slot_phases(config, h[:8], cos[:8], pairing[:8])
+    print(f"optimiser: {slots} slots, best of {args.repeats} ...", file=sys.stderr, flush=True)
+    t_new, new = best_time(lambda: optimize_slot_phases(config, h, cos, pairing), args.repeats)
+    t_old, old = best_time(lambda: v010.optimize_slot_phases(config, h, cos, pairing), args.repeats)
     start = time.perf_counter()
     for i in range(loop_slots):
-        sol = optimize_slot_phases(config, h[i], cos[i], pairing[i])
-        looped_rate[i], looped_phases[i] = sol.sum_rate, sol.phases
+        optimize_slot_phases(config, h[i], cos[i], pairing[i])
     t_loop = time.perf_counter() - start
-    diff = looped_rate - batched.sum_rate[:loop_slots]
-    same = int(np.sum(np.all(looped_phases == batched.phases[:loop_slots], axis=1) & (diff == 0)))
-    loop_two_pair = int(np.sum(pairing[:loop_slots].sum(axis=(1, 2)) >= 2))
 
-    print(f"evaluating the oracle on {episodes} fig2 episodes ...", file=sys.stderr, flush=True)
-    start = time.perf_counter()
-    oracle = evaluate(oracle_policy(), config, "fig2", episodes, EVAL_SEED).summary()
-    t_eval = time.perf_counter() - start
-    base = {name: evaluate(policy, config, "fig2", episodes, EVAL_SEED).summary()
-            for name, policy in (("hover_aligned", hover_aligned()), ("random", random_policy(0)))}
-
-    rate_batched = slots / t_batched
-    rate_loop = loop_slots / t_loop
-    ratio = rate_batched / rate_loop
-    print("| measurement | setting | time (s) | slots/s or result |")
-    print("|---|---|---:|---:|")
-    print(f"| optimiser, batched | {slots} slots in one call ({two_pair} with two pairs) | {t_batched:.2f} | "
-          f"{rate_batched:,.0f} slots/s |")
-    print(f"| optimiser, one slot at a time | {loop_slots} slots in a loop ({loop_two_pair} with two pairs) | "
-          f"{t_loop:.2f} | {rate_loop:,.1f} slots/s |")
-    print(f"| oracle evaluation | {episodes} episodes of fig2, seed {EVAL_SEED} | {t_eval:.1f} | "
-          f"{oracle['mean']:.2f} bps/Hz (95% CI {oracle['ci_low']:.2f}-{oracle['ci_high']:.2f}) |")
-    for name, s in base.items():
-        print(f"| {name} (reference) | same episodes | - | {s['mean']:.2f} bps/Hz "
-              f"(95% CI {s['ci_low']:.2f}-{s['ci_high']:.2f}) |")
+    speed = t_old / t_new
+    quality = new.sum_rate.mean() / old.sum_rate.mean() - 1.0
+    print("## Phase optimiser")
     print()
-    lengths = ", ".join(f"{name} {s['mean_length']:.1f}" for name, s in [("oracle", oracle), *base.items()])
-    print(f"mean episode length (slots): {lengths}; mean energy: oracle {oracle['mean_energy_j']:.0f} J")
-    print(f"looped vs batched results: {same} of {loop_slots} slots bit-identical; sum-rate difference "
-          f"mean {diff.mean():+.4f}, max |.| {np.abs(diff).max():.4f} bps/Hz (same random starts; numpy can round "
-          "a batch of one differently, and the non-concave ascent may amplify it)")
-    print(f"batched / one-at-a-time = {ratio:.1f}x (target >= {RATIO_TARGET:.0f}x) "
-          f"{'PASS' if ratio >= RATIO_TARGET else 'FAIL'}")
-    scaled = t_eval * 32 / episodes
-    note = "" if episodes == 32 else f" (scaled from {episodes} episodes: {scaled:.1f} s)"
-    print(f"oracle evaluation of 32 fig2 episodes: {scaled:.1f} s on one core{note} "
+    print("| optimiser | setting | time (s) | slots/s | mean sum rate (bps/Hz) |")
+    print("|---|---|---:|---:|---:|")
+    print(f"| uavris today | {slots} slots in one call ({two_pair} with two pairs) | {t_new:.2f} | "
+          f"{slots / t_new:,.0f} | {new.sum_rate.mean():.3f} |")
+    print(f"| uavris 0.1.0 (numpy) | same slots | {t_old:.2f} | {slots / t_old:,.0f} | {old.sum_rate.mean():.3f} |")
+    print(f"| uavris today, one slot at a time | first {loop_slots} slots in a loop | {t_loop:.2f} | "
+          f"{loop_slots / t_loop:,.0f} | |")
+    print()
+    diff = new.sum_rate - old.sum_rate
+    print(f"per slot, today - 0.1.0: mean {diff.mean():+.4f}, slots worse by > 0.5 bps/Hz: {int(np.sum(diff < -0.5))}, "
+          f"better by > 0.5: {int(np.sum(diff > 0.5))} (non-concave: different local optima)")
+    print(f"speed today / 0.1.0 = {speed:.1f}x (target >= {SPEED_TARGET:.0f}x) "
+          f"{'PASS' if speed >= SPEED_TARGET else 'FAIL'}")
+    print(f"mean sum rate today vs 0.1.0: {quality:+.2%} (target within {QUALITY_TARGET:.1%}) "
+          f"{'PASS' if abs(quality) <= QUALITY_TARGET else 'FAIL'}")
+    print(flush=True)
+
+    print("planning every named scenario ...", file=sys.stderr, flush=True)
+    oracle = PlanningOracle()
+    print("## Planning stage")
+    print()
+    print("| scenario | start | plan (s) | poses valued | target | attitude (deg) | R(target) | R(start) | "
+          "trip (slots) | plan value |")
+    print("|---|---|---:|---:|---|---|---:|---:|---:|---:|")
+    plan_times = []
+    for name, scen in SCENARIOS.items():
+        start = time.perf_counter()
+        plan = oracle.plan(config, scen.start)
+        plan_times.append(time.perf_counter() - start)
+        print(f"| {name} | {list(scen.start)} | {plan_times[-1]:.2f} | {plan.poses_valued} | "
+              f"{np.round(plan.target, 2).tolist()} | {np.round(np.degrees(plan.attitude), 1).tolist()} | "
+              f"{plan.rate:.2f} | {plan.start_rate:.2f} | {plan.travel_slots} | {plan.value:.2f} |")
+    print()
+    print(f"planning stage: first scenario {plan_times[0]:.2f} s, slowest {max(plan_times):.2f} s "
+          f"(target <= {PLAN_LIMIT_S:.0f} s per scenario) {'PASS' if max(plan_times) <= PLAN_LIMIT_S else 'FAIL'}")
+    print(flush=True)
+
+    print("## Oracle policies")
+    print()
+    print("| scenario | policy | time (s) | ms per slot | average sum rate (bps/Hz) | 95% CI |")
+    print("|---|---|---:|---:|---:|---|")
+    eval_times = []
+    for scenario in ("fig2", "unseen2"):
+        for name, policy in (("planning oracle", PlanningOracle()), ("greedy oracle", greedy_oracle_policy()),
+                             ("hover (zero action)", BASELINES["hover"](0))):
+            print(f"evaluating {name} on {episodes} {scenario} episodes ...", file=sys.stderr, flush=True)
+            start = time.perf_counter()
+            res = evaluate(policy, config, scenario, episodes, EVAL_SEED)
+            wall = time.perf_counter() - start
+            s = res.summary()
+            if name == "planning oracle":
+                eval_times.append(wall)
+            print(f"| {scenario} | {name} | {wall:.1f} | {1000 * wall / res.length.sum():.2f} | {s['mean']:.2f} | "
+                  f"{s['ci_low']:.2f}-{s['ci_high']:.2f} |")
+    print()
+    scaled = max(eval_times) * 32 / episodes
+    note = "" if episodes == 32 else f" (scaled from {episodes} episodes)"
+    print(f"planning oracle evaluation of 32 episodes (planning included): {scaled:.1f} s on one core{note} "
           f"(target < {EVAL_LIMIT_S:.0f} s) {'PASS' if scaled < EVAL_LIMIT_S else 'FAIL'}")
     return 0
 

@@ -86,6 +86,7 @@ class SystemConfig:
     attitude_step_deg: float = 10.0  # per slot, per axis
     z_min: float = 2.0
     z_max: float = 8.0
+    safety_distance: float = 3.0  # least UAV-device distance, m (docs/model.md, defaults table)
     energy_budget_j: float = 8000.0  # E_max
     max_active_pairs: int | None = None  # None: floor(K/2)
     angle_dependent_reflection: bool = True  # False: r = r_pre (ideal RIS)
@@ -119,6 +120,8 @@ class SystemConfig:
         _check(_finite(self.noise_dbm), o, "noise_dbm", "a finite number (dBm)", self.noise_dbm)
         _check(_finite(self.attitude_step_deg) and 0 <= self.attitude_step_deg <= 180, o,
                "attitude_step_deg", "in [0, 180]", self.attitude_step_deg)
+        _check(_finite(self.safety_distance) and self.safety_distance >= 0, o, "safety_distance",
+               "a finite distance >= 0 (m)", self.safety_distance)
         _check(_finite(self.z_min) and _finite(self.z_max) and 0 <= self.z_min < self.z_max <= self.room[2],
                o, "z_min/z_max", f"0 <= z_min < z_max <= room height {self.room[2]}", (self.z_min, self.z_max))
         kmax = self.num_users // 2
@@ -176,11 +179,29 @@ class SystemConfig:
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> SystemConfig:
+        """A config from a (possibly partial) dict; missing fields take their defaults."""
         known = {f.name for f in dataclasses.fields(cls)}
         unknown = sorted(set(d) - known)
         if unknown:
             raise ConfigError(f"SystemConfig has no field(s) {unknown}; known fields: {sorted(known)}")
         return cls(**d)
+
+    @classmethod
+    def from_stored(cls, d: dict[str, Any]) -> SystemConfig:
+        """The config of a run, dataset or checkpoint written earlier: a field added after it
+        was written takes the value that reproduces the system it was made with (no
+        safety separation before ``safety_distance`` existed), not today's default."""
+        return cls.from_dict({**STORED_BEFORE_FIELD, **d})
+
+    def nearest_device(self, position: Vec3) -> tuple[int, float]:
+        """Index of the device closest to ``position`` and its distance, m."""
+        dist = [math.dist(position, u) for u in self.users]
+        k = min(range(len(dist)), key=dist.__getitem__)
+        return k, dist[k]
+
+
+# Values of fields that did not exist when older run files were written (see from_stored).
+STORED_BEFORE_FIELD: dict[str, Any] = {"safety_distance": 0.0}
 
 
 @dataclass(frozen=True)
@@ -196,9 +217,14 @@ class Scenario:
                "three finite coordinates", self.start)
 
     def validate_for(self, config: SystemConfig) -> None:
+        """The start must lie in the flight region and keep the safety distance from every device."""
         lo, hi = config.region_low, config.region_high
         inside = all(lo_i <= c <= hi_i for c, lo_i, hi_i in zip(self.start, lo, hi))
         _check(inside, f"Scenario({self.name!r})", "start", f"inside the flight region {lo}..{hi}", self.start)
+        k, dist = config.nearest_device(self.start)
+        _check(dist >= config.safety_distance, f"Scenario({self.name!r})", "start",
+               f"at least safety_distance = {config.safety_distance:g} m from every device, but it is "
+               f"{dist:.2f} m from users[{k}] = {list(config.users[k])}", list(self.start))
 
 
 def _s(name: str, x: float, y: float) -> Scenario:

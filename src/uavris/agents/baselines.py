@@ -24,6 +24,16 @@ def phases_to_action(phase: NDArray[np.float64]) -> NDArray[np.float64]:
     return np.mod(phase, 2 * np.pi) / np.pi - 1.0
 
 
+def hover() -> BatchPolicy:
+    """The zero action: the UAV hovers at its start, level, with all N phases equal (the
+    phase action 0 maps to pi). "Doing nothing": every learned policy is read against it."""
+
+    def act(obs: NDArray[np.float32], sim: BatchedSimulator) -> NDArray[np.float32]:
+        return np.zeros((obs.shape[0], sim.config.action_dim), dtype=np.float32)
+
+    return act
+
+
 def random_policy(seed: int) -> BatchPolicy:
     """Uniform random actions in [-1, 1]."""
     rng = np.random.default_rng(seed)
@@ -86,6 +96,7 @@ def hover_aligned() -> BatchPolicy:
 
 
 BASELINES: dict[str, Callable[[int], BatchPolicy]] = {
+    "hover": lambda seed: hover(),
     "random": random_policy,
     "hover-random-phases": hover_random_phases,
     "hover-aligned": lambda seed: hover_aligned(),

@@ -371,7 +371,7 @@ def load_dataset(path: str | Path) -> ExpertDataset:
         raise DatasetError(f"{path} has dataset format {info['format_version']!r}; "
                            f"this uavris reads format {DATASET_FORMAT_VERSION}")
     try:
-        system = SystemConfig.from_dict(info["system"])
+        system = SystemConfig.from_stored(info["system"])
     except (ConfigError, TypeError, ValueError) as e:
         raise DatasetError(f"{path}: stored system configuration is invalid ({_one_line(e)})") from None
     current = layout_as_lists(system)

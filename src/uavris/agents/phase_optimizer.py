@@ -1,6 +1,6 @@
 """Per-slot RIS phase optimiser: the phases that maximise one slot's sum rate.
 
-Problem (MODEL.md). Given this slot's channels ``h`` ``(..., K, N)``, incidence cosines
+Problem (docs/model.md sections 6-8). Given this slot's channels ``h`` ``(..., K, N)``, incidence cosines
 ``cos_theta`` ``(..., K)`` and pairing ``P`` ``(..., K, K)``, choose unit-modulus presets
 ``r_pre_n = exp(j phi_n)`` to maximise
 
@@ -24,11 +24,12 @@ found by inverting the reflection model with :func:`uavris.physics.preset_for_ta
 the optimum is exact: ``SNR = P (sum_n |h_k[n]| |h_i[n]|)^2 / sigma^2``.
 
 *Several active pairs* (no closed form; non-concave, with one basin per "which pair is
-served" and narrow ridges where the cross links are nulled). Three stages, all batched:
+served" and narrow ridges where the cross links are nulled). Three stages, run for every
+slot and start by the compiled kernel :mod:`uavris.agents.phase_kernel`:
 
 1. Starts. The co-phasing solution of each active pair (so the result is never worse
    than the best single-pair co-phasing, which is what ``hover_aligned`` plays) plus
-   ``restarts`` uniform random phase vectors (default 4). The basins differ by up to
+   ``restarts`` uniform random phase vectors (default 2). The basins differ by up to
    ~20 bps/Hz (one pair served vs both), and which start reaches the best one varies
    from slot to slot: in a long reference run (26 starts x 1,500 iterations) the best
    result came from a co-phasing start in 56% of slots, from another start otherwise.
@@ -43,13 +44,13 @@ served" and narrow ridges where the cross links are nulled). Three stages, all b
    gradient ascent was slower still). A likely reason: along the way into a null,
    ``-log(I + sigma^2)`` is convex while ``I >> sigma^2``, so curvature pairs are
    rejected and the quasi-Newton model is poor exactly where the gains are.
-   L-BFGS details (:func:`_lbfgs_ascent`): memory 8, a pair stored only when its
+   L-BFGS details (``phase_kernel._lbfgs``): memory 8 per start, a pair stored only when its
    curvature is positive, normalised gradient steps of 0.3 rad when there is no usable
    pair, every step capped at pi/2 rad per element. Step-size rule: try the full
    quasi-Newton step; if ``R`` does not increase, halve it (backtracking spread over
    iterations), so the iterates are monotone for each level. ``iterations`` = 30 per
    level (210 in all).
-3. Null polish (:func:`_null_polish`, 10 steps). Newton-Raphson on the cross links
+3. Null polish (``phase_kernel._polish``, 10 steps). Newton-Raphson on the cross links
    ``c_ji = 0`` with least-norm steps, kept only where the true sum rate rises. At high
    SNR the ridge ascent leaves interference well above the noise, and this is where
    quasi-Newton is weakest and Newton-Raphson on the nulls strongest.
@@ -63,15 +64,15 @@ Gradient, analytic (no autograd). With ``T_i = sum_{j active} P|c_ji|^2 + sigma^
     dR/dphi_n    = -2 sum_j g'(phi_n, c_j) Im( h_j[n] r_n(theta_j) sum_i W_ji conj(c_ji) h_i[n] ),
 
 ``O(K^2 N)`` per evaluation, the same cost as the objective. Inside the iterations the
-objective is evaluated on the active links only (:func:`_link_rate_and_gradient`: ``L``
+objective is evaluated on the active links only (``phase_kernel.link_rate``: ``L``
 transmitters and their ``L`` receivers, ``L = floor(K/2)``), since users that neither
 transmit nor receive do not enter the sum rate; for ``K = 4`` that halves the work.
 
-Why these settings (measured while writing this module; two seeded sets of two-pair
-slots of the default system: A = 256 slots at random poses over the whole flight region
-with random tilts up to 0.4 rad, B = 128 slots at the pose where the oracle hovers,
-[19.95, 8, 2], SNRs 1e10-1e12; mean optimised sum rate in bps/Hz; rows marked * were
-measured with an earlier version of this code, the others with this one):
+Why these settings (measured while writing the numpy version of this module, 0.1.0; two
+seeded sets of two-pair slots of the default system: A = 256 slots at random poses over
+the whole flight region with random tilts up to 0.4 rad, B = 128 slots at the pose where
+the greedy oracle hovered, [19.95, 8, 2], SNRs 1e10-1e12; mean optimised sum rate in
+bps/Hz; rows marked * were measured with an earlier version still; "default" is 0.1.0's):
 
 | method | A | B |
 |---|---|---|
@@ -90,21 +91,18 @@ measured with an earlier version of this code, the others with this one):
 | interference-free bound (sum of the two lone-pair optima) | 31.6 | 64.0 |
 
 The continuation and the polish each matter; starts and iterations beyond the default
-buy little. ``benchmarks/oracle_throughput.py`` measures the cost: about 3 ms per
-two-pair slot in a batch of 1,024 slots on one core, about 40 ms one slot at a time.
+buy little. Since 0.2 the multi-pair stages run compiled (numba), one slot and one start
+at a time, with a textbook L-BFGS memory per start (0.1.0's batched numpy shared one
+circular buffer between a slot's starts), and with 2 random starts instead of 4: on the
+1,024 seeded slots of ``benchmarks/oracle_throughput.py`` (random poses, the default pairing
+draw) the mean sum rate is within 0.1% of 0.1.0's at about 5x its slots per second on one
+core (the benchmark prints both, measured in the same run against a frozen copy of 0.1.0).
 
-Batching: every leading axis of the inputs is a slot axis; the work is whole-array numpy
-on ``(slots, starts, L, N)`` arrays, looping only over levels and iterations (the L-BFGS
-memory is one circular buffer shared by all starts). Slots with one active pair take
-the closed form and skip the iterations; slots without active pair get zero phases and
-rate 0. With 64 or more multi-pair slots the optimiser applies the project's
-glibc allocator tuning (:mod:`uavris.env._malloc`, as the batched simulator does for 64+
-environments): its ~MB temporaries otherwise pay fresh page faults on every
-allocation, which more than doubled the time of an objective evaluation in our
-measurement. Random starts are counter-based hashes of the seed and the slot's
-channels (:func:`random_starts`), so every slot's result is deterministic and, up to
-floating-point rounding that depends on the batch shape, independent of the batch it is
-solved in.
+Batching: every leading axis of the inputs is a slot axis. Slots with one active pair take
+the closed form (numpy, whole batch); slots without active pair get zero phases and rate
+0; the others go to the kernel. Random starts are counter-based hashes of the seed and
+the slot's channels (:func:`random_starts`), and the kernel solves every slot on its own,
+so a slot's result is deterministic and the same whatever batch it is solved in.
 
 Only the unit-modulus phase-only RIS (the default action) is optimised. For a single
 pair unit amplitude is optimal (|r_n| <= 1 and the triangle inequality); for several
@@ -122,13 +120,13 @@ from numpy.typing import ArrayLike, NDArray
 from uavris import physics as ph
 from uavris.config import SystemConfig
 from uavris.env import streams
-from uavris.env._malloc import tune_allocator
+from uavris.agents.phase_kernel import solve_slots
 
 TWO_PI = 2.0 * np.pi
 LN2 = np.log(2.0)
 
 DEFAULT_ITERATIONS = 30  # L-BFGS iterations per continuation level
-DEFAULT_RESTARTS = 4  # random starts, besides one co-phasing start per active pair
+DEFAULT_RESTARTS = 2  # random starts, besides one co-phasing start per active pair
 DEFAULT_NOISE_LEVELS = (1e6, 1e5, 1e4, 1e3, 1e2, 1e1, 1.0)  # continuation: multiples of sigma^2
 DEFAULT_MEMORY = 8  # L-BFGS pairs kept
 DEFAULT_POLISH_STEPS = 10  # Newton-Raphson nulling steps after the continuation
@@ -270,35 +268,6 @@ def sum_rate_and_gradient(phases: ArrayLike, channels: ArrayLike, cos_theta: Arr
     return rate, grad
 
 
-def _link_rate_and_gradient(phases: NDArray[np.float64], tx_channels: NDArray[np.complex128],
-                            rx_channels: NDArray[np.complex128], tx_cos: NDArray[np.float64], tx_power_w: float,
-                            noise_w: float, angle_dependent: bool, need_gradient: bool = True
-                            ) -> tuple[NDArray[np.float64], NDArray[np.float64] | None]:
-    """:func:`sum_rate_and_gradient` restricted to the active links, link ``l``: tx ``l`` -> rx ``l``.
-
-    ``tx_channels``, ``rx_channels`` ``(..., L, N)`` are the channels of the ``L`` active
-    transmitters and of their receivers, ``tx_cos`` ``(..., L)`` the transmitters' cosines.
-    Users that neither transmit nor receive do not enter the sum rate, so this is the same
-    objective at ``(L/K)`` to ``(L/K)^2`` of the cost (half for K = 4, L = 2). A link with zero
-    channels contributes nothing (used to pad slots with fewer than ``L`` links).
-    """
-    r, slope = _reflection_and_slope(phases, tx_cos, angle_dependent)
-    hr = tx_channels * r  # (..., L, N)
-    c = np.matmul(hr, np.swapaxes(rx_channels, -1, -2))  # (..., L, L): c[j, i] = gain of tx j at rx i
-    g2 = c.real * c.real + c.imag * c.imag
-    off = 1.0 - np.eye(g2.shape[-1])
-    signal = tx_power_w * np.diagonal(g2, axis1=-2, axis2=-1)
-    interf = tx_power_w * np.sum(off * g2, axis=-2) + noise_w  # I_i + sigma^2, summed directly
-    total = interf + signal
-    rate = np.sum(np.log2(total) - np.log2(interf), axis=-1)
-    if not need_gradient:
-        return rate, None
-    w = (tx_power_w / LN2) * (1.0 / total[..., None, :] - off / interf[..., None, :])
-    b = np.matmul(w * np.conj(c), rx_channels)  # (..., L, N): sum_i W_ji conj(c_ji) h_i[n]
-    q = hr * b
-    return rate, -2.0 * np.sum(slope * q.imag, axis=-2)
-
-
 # ----------------------------------------------------------------------------- optimiser
 def active_links(pairing: NDArray[np.float64],
                  max_links: int) -> tuple[NDArray[np.intp], NDArray[np.intp], NDArray[np.bool_]]:
@@ -358,27 +327,21 @@ def optimize_phases(channels: ArrayLike, cos_theta: ArrayLike, pairing: ArrayLik
     rate, _ = sum_rate_and_gradient(phases, h, cos, p, tx_power_w, noise_w, angle_dependent, need_gradient=False)
 
     multi = np.flatnonzero(npairs >= 2)
-    if multi.size >= 64:
-        tune_allocator()  # as the batched simulator does: keeps ~MB temporaries in the heap
     if multi.size:
         # Reduced problem on the active links only (padding links get zero channels).
         pad = valid[multi][..., None]
         h_tx = np.take_along_axis(h[multi], tx[multi][..., None], axis=1) * pad  # (M, L, N)
         h_rx = np.take_along_axis(h[multi], rx[multi][..., None], axis=1) * pad
-        cos_tx = np.take_along_axis(cos[multi], tx[multi], axis=1)
-        sub = (h_tx[:, None], h_rx[:, None], cos_tx[:, None])
-        random = random_starts(h[multi], seed, restarts)
-        phi0 = np.concatenate([starts[multi], random], axis=1)  # (M, S, N)
-        phi = phi0
-        for level in noise_levels:
-            phi = _lbfgs_ascent(phi, sub, tx_power_w, noise_w * float(level), angle_dependent, iterations, memory)
-        phi = _null_polish(phi, sub, tx_power_w, noise_w, angle_dependent, polish_steps)
-        # Final ranking at the true noise, the starts included: never worse than co-phasing.
-        cand = np.concatenate([phi, phi0], axis=1)
-        cand_rate, _ = _link_rate_and_gradient(cand, *sub, tx_power_w, noise_w, angle_dependent, need_gradient=False)
-        pick = np.argmax(cand_rate, axis=1)
-        phases[multi] = np.take_along_axis(cand, pick[:, None, None], axis=1)[:, 0]
-        rate[multi] = np.take_along_axis(cand_rate, pick[:, None], axis=1)[:, 0]
+        cos_tx = np.ascontiguousarray(np.take_along_axis(cos[multi], tx[multi], axis=1))
+        phi0 = np.concatenate([starts[multi], random_starts(h[multi], seed, restarts)], axis=1)  # (M, S, N)
+        out_phi = np.empty((multi.size, n))
+        out_rate = np.empty(multi.size)
+        part = [np.ascontiguousarray(x) for x in (h_tx.real, h_tx.imag, h_rx.real, h_rx.imag)]
+        solve_slots(*part, cos_tx, np.ascontiguousarray(phi0), float(tx_power_w), float(noise_w),
+                    np.asarray(noise_levels, dtype=np.float64), iterations, memory, polish_steps, bool(angle_dependent),
+                    INITIAL_STEP, MAX_STEP, MIN_STEP, out_phi, out_rate)
+        phases[multi] = out_phi
+        rate[multi] = out_rate
     return PhaseSolution(ph.wrap_angle(phases).reshape(lead + (n,)), rate.reshape(lead))
 
 
@@ -387,10 +350,7 @@ def random_starts(channels: NDArray[np.complex128], seed: int, count: int) -> ND
 
     Counter-based (:mod:`uavris.env.streams`): the key of a slot hashes the seed with the
     bits of the slot's own channels, so a slot gets the same starts whatever batch it is
-    in. Results then agree between batch shapes up to floating point: numpy's kernels
-    for a batch of one can round differently, and on a non-concave surface a last-bit
-    difference occasionally sends an iterate to another local maximum (1 slot in 128 in
-    ``benchmarks/oracle_throughput.py``).
+    in, and the kernel then solves it on its own.
     """
     b, _, n = channels.shape
     words = np.ascontiguousarray(channels).view(np.uint64).reshape(b, -1)
@@ -400,123 +360,6 @@ def random_starts(channels: NDArray[np.complex128], seed: int, count: int) -> ND
         keys = streams.mix64(np.bitwise_xor.reduce(mixed, axis=1) ^ streams.seed_key(seed))
     u = streams.uniforms(streams.raw_bits(keys, count * n))
     return TWO_PI * u.reshape(b, count, n)
-
-
-def _null_polish(phi: NDArray[np.float64], sub: tuple[NDArray, NDArray, NDArray], tx_power_w: float,
-                 noise_w: float, angle_dependent: bool, steps: int) -> NDArray[np.float64]:
-    """Newton-Raphson steps towards exact nulls of the cross links, kept only where they raise ``R``.
-
-    The cross links ``c_ji`` (active transmitter ``j``, active receiver ``i`` not its
-    partner) are linearised in the phases, ``c(phi + delta) ~ c + J delta``, and the
-    least-norm correction ``delta = -J^T (J J^T)^-1 c`` (real and imaginary parts stacked)
-    is applied. Least-norm steps barely move the wanted links, so where interference is
-    still above the noise each step removes most of it (quadratic convergence near a
-    null). The best iterate by the true sum rate is returned per start.
-    """
-    h_tx, h_rx, cos_tx = sub
-    lead, links = phi.shape[:-1], h_tx.shape[-2]
-    mask = (1.0 - np.eye(links)).reshape(-1)  # the cross links c_ji, j != i
-    rows = links * links
-    best = phi
-    best_rate, _ = _link_rate_and_gradient(phi, h_tx, h_rx, cos_tx, tx_power_w, noise_w, angle_dependent, False)
-    eye = np.eye(2 * rows)
-    for _ in range(steps):
-        r, slope = _reflection_and_slope(phi, cos_tx, angle_dependent)
-        hr = h_tx * r
-        c = np.matmul(hr, np.swapaxes(h_rx, -1, -2)).reshape(lead + (rows,)) * mask
-        jac = (1j * hr * slope)[..., :, None, :] * h_rx[..., None, :, :]  # dc_ji/dphi_n, (M, S, L, L, N)
-        jac = jac.reshape(lead + (rows, phi.shape[-1])) * mask[..., None]
-        jr = np.concatenate([jac.real, jac.imag], axis=-2)  # (M, S, 2 L^2, N)
-        cr = np.concatenate([c.real, c.imag], axis=-1)
-        gram = np.matmul(jr, np.swapaxes(jr, -1, -2))
-        reg = 1e-12 * np.trace(gram, axis1=-2, axis2=-1)[..., None, None] + 1e-300
-        y = np.linalg.solve(gram + reg * eye, cr[..., None])
-        phi = phi - np.matmul(np.swapaxes(jr, -1, -2), y)[..., 0]
-        phi = np.where(np.all(np.isfinite(phi), axis=-1, keepdims=True), phi, best)  # degenerate solve: restart
-        rate, _ = _link_rate_and_gradient(phi, h_tx, h_rx, cos_tx, tx_power_w, noise_w, angle_dependent, False)
-        better = rate > best_rate
-        best = np.where(better[..., None], phi, best)
-        best_rate = np.where(better, rate, best_rate)
-    return best
-
-
-def _dot(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
-    return np.einsum("...n,...n->...", a, b)
-
-
-def _lbfgs_ascent(phi: NDArray[np.float64], sub: tuple[NDArray, NDArray, NDArray], tx_power_w: float,
-                  noise_w: float, angle_dependent: bool, iterations: int, memory: int) -> NDArray[np.float64]:
-    """Monotone L-BFGS ascent on the phases from every start in ``phi`` ``(M, S, N)``, batched.
-
-    Direction: the two-loop recursion on the last ``memory`` accepted (step, gradient
-    change) pairs, with the usual ``s.y / y.y`` initial scaling; a pair is stored only
-    when it has positive curvature ``s.y > 0`` (for the minimisation of ``-R``). When no
-    pair is stored or the direction is not an ascent direction, a normalised gradient
-    step of ``INITIAL_STEP`` rad replaces it (and the memory is cleared). Every step is
-    capped at ``MAX_STEP`` rad per element. Step rule: try the full step; if ``R`` does
-    not increase, halve it and try again next iteration (backtracking spread over
-    iterations, so each iteration costs one evaluation for every start).
-    """
-    f, g = _link_rate_and_gradient(phi, *sub, tx_power_w, noise_w, angle_dependent)
-    shape, n = f.shape, phi.shape[-1]
-    # Circular memory shared by all starts (one write position), so no per-start indexing:
-    # a start that stores no pair in an iteration gets a null pair (s = y = 0, rho = 0),
-    # which the two-loop recursion ignores.
-    s_mem = np.zeros((memory,) + shape + (n,))
-    y_mem = np.zeros((memory,) + shape + (n,))
-    rho = np.zeros((memory,) + shape)
-    alpha = np.empty((memory,) + shape)
-    head = 0  # next write position; newest pair at head - 1
-    gamma = np.zeros(shape)  # s.y / y.y of each start's newest stored pair
-    have = np.zeros(shape, dtype=bool)
-    t = np.ones(shape)
-    d = np.zeros_like(phi)
-    need_dir = np.ones(shape, dtype=bool)
-    for _ in range(iterations):
-        if need_dir.any():
-            order = [(head - 1 - i) % memory for i in range(memory)]  # newest first
-            q = g.copy()  # ascent: minimise -R, whose gradient is -g; the recursion is linear
-            for i in order:
-                alpha[i] = rho[i] * _dot(s_mem[i], q)
-                q -= alpha[i][..., None] * y_mem[i]
-            r = gamma[..., None] * q
-            for i in reversed(order):
-                r += (alpha[i] - rho[i] * _dot(y_mem[i], r))[..., None] * s_mem[i]
-            bad = ~have | (_dot(r, g) <= 0.0)
-            gmax = np.maximum(np.max(np.abs(g), axis=-1), 1e-300)
-            new_d = np.where(bad[..., None], g * (INITIAL_STEP / gmax)[..., None], r)
-            new_d *= np.minimum(1.0, MAX_STEP / np.maximum(np.max(np.abs(new_d), axis=-1), 1e-300))[..., None]
-            d = np.where(need_dir[..., None], new_d, d)
-            t = np.where(need_dir, 1.0, t)
-            reset = need_dir & bad & have
-            if reset.any():
-                s_mem[:, reset] = 0.0
-                y_mem[:, reset] = 0.0
-                rho[:, reset] = 0.0
-                have &= ~reset
-        step = t[..., None] * d
-        trial = phi + step
-        f_new, g_new = _link_rate_and_gradient(trial, *sub, tx_power_w, noise_w, angle_dependent)
-        ok = f_new > f
-        y = g - g_new
-        sy = _dot(step, y)
-        yy = _dot(y, y)
-        store = ok & (sy > 1e-10 * np.sqrt(_dot(step, step) * yy))
-        if store.any():
-            s_mem[head] = np.where(store[..., None], step, 0.0)
-            y_mem[head] = np.where(store[..., None], y, 0.0)
-            rho[head] = np.where(store, 1.0 / np.where(store, sy, 1.0), 0.0)
-            gamma = np.where(store, sy / np.maximum(yy, 1e-300), gamma)
-            have |= store
-            head = (head + 1) % memory
-        phi = np.where(ok[..., None], trial, phi)
-        g = np.where(ok[..., None], g_new, g)
-        f = np.where(ok, f_new, f)
-        step_size = t * np.max(np.abs(d), axis=-1)
-        # New direction after a success, or when backtracking has shrunk the step to nothing.
-        need_dir = ok | (step_size < MIN_STEP)
-        t = np.where(ok, 1.0, 0.5 * t)
-    return phi
 
 
 def optimize_slot_phases(config: SystemConfig, channels: ArrayLike, cos_theta: ArrayLike, pairing: ArrayLike,

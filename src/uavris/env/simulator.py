@@ -162,7 +162,8 @@ class BatchedSimulator:
         reward = rates.sum(axis=(-2, -1))
         accel = ph.feasible_acceleration(self.vel, accel_cmd, c.slot_s, c.v_max, c.a_max)
         e_slot = ph.slot_energy(self.vel, accel, c.slot_s, **self._power)
-        self.pos, self.vel = ph.kinematic_step(self.pos, self.vel, accel, c.slot_s, self.low, self.high)
+        self.pos, self.vel = ph.kinematic_step(self.pos, self.vel, accel, c.slot_s, self.low, self.high,
+                                               self.users, c.safety_distance)
         self.att = ph.accumulate_attitude(self.att, d_att)
         self.energy = self.energy + e_slot
         self.t = self.t + 1
@@ -170,6 +171,10 @@ class BatchedSimulator:
         terminated = self.energy >= c.energy_budget_j
         truncated = (self.t >= c.horizon) & ~terminated
         self._draw_slot(slice(None))
+        # Debug-mode invariant (stripped by python -O): the incidence step just measured every
+        # UAV-device distance, so checking the safety separation costs one comparison.
+        assert np.all(self.dist >= c.safety_distance * (1.0 - 1e-9)), (
+            f"UAV within {self.dist.min():.6f} m of a device (safety_distance {c.safety_distance} m)")
         return reward, terminated, truncated, info
 
     # ----------------------------------------------------------------- observation
@@ -210,12 +215,13 @@ MAX_NLOS_MAGNITUDE = float(np.sqrt(33.0 * np.log(2.0)))
 
 
 def channel_observation_bound(config: SystemConfig) -> float:
-    """Largest |Re h| or |Im h| of a scaled channel entry: the closest a user can be to the
-    flight region sets the path loss, the NLoS draw is bounded (above). Users inside the
-    region are floored at 0.1 m."""
+    """Largest |Re h| or |Im h| of a scaled channel entry: the closest the UAV can come to a
+    user (the flight region and the safety separation bound it) sets the path loss, the NLoS
+    draw is bounded (above). The distance is floored at 0.1 m."""
     users = np.asarray(config.users)
     closest = np.clip(users, config.region_low, config.region_high)
-    d_min = max(float(np.min(np.linalg.norm(users - closest, axis=1))), 0.1)
+    d_region = float(np.min(np.linalg.norm(users - closest, axis=1)))
+    d_min = max(d_region, config.safety_distance, 0.1)
     k = config.rician_factor
     amp = (config.channel_ref_distance / d_min) ** (0.5 * config.pathloss_exponent)
     return amp * (np.sqrt(k / (k + 1)) + np.sqrt(1 / (k + 1)) * MAX_NLOS_MAGNITUDE)

@@ -632,7 +632,7 @@ def finetune(cfg: FinetuneConfig, run_dir: str | Path, *, resume: bool = False, 
 def _checked_system(meta: dict[str, Any], where: Path) -> SystemConfig:
     """The checkpoint's system config, checked against the current observation layout."""
     try:
-        system = SystemConfig.from_dict(meta["system"])
+        system = SystemConfig.from_stored(meta["system"])
     except (KeyError, TypeError, ConfigError) as e:
         raise UavrisError(f"{where} stores no valid system configuration ({e})") from None
     if meta.get("observation_layout") != layout_as_lists(system):

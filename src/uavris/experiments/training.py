@@ -110,7 +110,7 @@ class TrainConfig:
         d = dict(d)
         try:
             d["hyperparams"] = Hyperparams(**d.get("hyperparams", {}))
-            d["system"] = SystemConfig.from_dict(d.get("system", {}))
+            d["system"] = SystemConfig.from_stored(d.get("system", {}))
             return cls(**d)
         except TypeError as e:
             raise ConfigError(f"config.yaml does not describe a training run: {e}") from None

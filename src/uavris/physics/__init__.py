@@ -30,6 +30,7 @@ from uavris.physics.motion import (
     kinematic_step,
     limit_norm,
     propulsion_power,
+    separation,
     slot_energy,
 )
 from uavris.physics.pairing import pairing_from_uniforms, sample_pairing
@@ -64,6 +65,7 @@ __all__ = [
     "rician_channels",
     "rotation_matrix",
     "sample_pairing",
+    "separation",
     "slot_energy",
     "sum_rate",
     "unit_reflection_coefficient",

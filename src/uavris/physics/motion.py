@@ -60,23 +60,65 @@ def feasible_acceleration(velocity: ArrayLike, accel: ArrayLike, dt: float, v_ma
 
 
 def kinematic_step(
-    position: ArrayLike, velocity: ArrayLike, accel: ArrayLike, dt: float, low: ArrayLike, high: ArrayLike
+    position: ArrayLike,
+    velocity: ArrayLike,
+    accel: ArrayLike,
+    dt: float,
+    low: ArrayLike,
+    high: ArrayLike,
+    keep_out: ArrayLike | None = None,
+    clearance: float = 0.0,
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """q(t+1) = q + v dt + a dt^2/2 and v(t+1) = v + a dt (paper eq. 9), then projection of q
-    onto the flight region [low, high] with the velocity component into a wall zeroed.
+    """q(t+1) = q + v dt + a dt^2/2 and v(t+1) = v + a dt (paper eq. 9), then the flight
+    constraints: q is projected onto the flight region [low, high] (13a) and out of the
+    ball of radius ``clearance`` around every point of ``keep_out`` ``(K, 3)`` (the safety
+    separation from the devices, docs/model.md section 12), and the velocity component
+    into a wall or a ball is removed.
 
-    ``accel`` must already be feasible (see :func:`feasible_acceleration`).
+    ``accel`` must already be feasible (see :func:`feasible_acceleration`). Removing a
+    velocity component never raises |v|, so |v| <= v_max still holds. In the rare case
+    where the projections cannot satisfy walls and balls together (a ball pressed against
+    a wall), the UAV stays at ``position`` and stops: the start of the slot was feasible.
     """
     q = np.asarray(position, dtype=np.float64)
     v = np.asarray(velocity, dtype=np.float64)
     a = np.asarray(accel, dtype=np.float64)
-    q_new = q + v * dt + 0.5 * a * dt * dt
-    v_new = v + a * dt
     lo, hi = np.asarray(low, dtype=np.float64), np.asarray(high, dtype=np.float64)
-    below, above = q_new < lo, q_new > hi
-    q_new = np.clip(q_new, lo, hi)
-    v_new = np.where((below & (v_new < 0)) | (above & (v_new > 0)), 0.0, v_new)
+    q_new, v_new = _project_onto_box(q + v * dt + 0.5 * a * dt * dt, v + a * dt, lo, hi)
+    if keep_out is None or clearance <= 0.0:
+        return q_new, v_new
+    centres = np.asarray(keep_out, dtype=np.float64)
+    if not np.any(separation(q_new, centres) < clearance):  # the usual case: no ball touched
+        return q_new, v_new
+    for centre in centres:  # K is small; balls are handled one after the other
+        d = q_new - centre
+        dist = np.sqrt(np.sum(d * d, axis=-1, keepdims=True))
+        inside = dist < clearance
+        # At the centre itself the direction is undefined: leave upwards (z_min lies above every device).
+        normal = np.where(dist > 0.0, d / np.maximum(dist, 1e-300), np.array([0.0, 0.0, 1.0]))
+        q_new = np.where(inside, centre + clearance * normal, q_new)
+        inward = np.minimum(np.sum(v_new * normal, axis=-1, keepdims=True), 0.0)
+        v_new = np.where(inside, v_new - inward * normal, v_new)
+    q_new, v_new = _project_onto_box(q_new, v_new, lo, hi)
+    stuck = np.any(separation(q_new, centres) < clearance * (1.0 - 1e-12), axis=-1, keepdims=True)
+    if np.any(stuck):
+        q_new = np.where(stuck, np.broadcast_to(q, q_new.shape), q_new)
+        v_new = np.where(stuck, 0.0, v_new)
     return q_new, v_new
+
+
+def _project_onto_box(q: NDArray[np.float64], v: NDArray[np.float64], lo: NDArray[np.float64],
+                      hi: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Clip q to [lo, hi] and zero the velocity components pointing out through a wall."""
+    below, above = q < lo, q > hi
+    v = np.where((below & (v < 0)) | (above & (v > 0)), 0.0, v)
+    return np.clip(q, lo, hi), v
+
+
+def separation(position: ArrayLike, points: ArrayLike) -> NDArray[np.float64]:
+    """Distances ``(..., K)`` from positions ``(..., 3)`` to ``K`` points ``(K, 3)``."""
+    d = np.asarray(position, dtype=np.float64)[..., None, :] - np.asarray(points, dtype=np.float64)
+    return np.sqrt(np.sum(d * d, axis=-1))
 
 
 def slot_energy(velocity: ArrayLike, accel: ArrayLike, dt: float, **power_params: float) -> NDArray[np.float64]:

@@ -1,0 +1,21 @@
+"""Oracle references: optimised phases every slot, and motion planned over the whole room.
+
+:func:`oracle_policy` (the planning oracle) is the reference of every report;
+:func:`greedy_oracle_policy` is the one-step-lookahead oracle of earlier releases, kept for
+comparison. Modules: :mod:`.lookahead` (the local move choice and its expected-rate score),
+:mod:`.planner` (the global plan), :mod:`.policy` (the batch policies).
+"""
+
+from uavris.agents.oracle.lookahead import (
+    candidate_moves,
+    choose_moves,
+    default_braking_slots,
+    expected_sum_rate,
+    link_activity,
+)
+from uavris.agents.oracle.planner import Plan, PlanSettings, expected_optimised_rate, plan_target
+from uavris.agents.oracle.policy import PlanningOracle, greedy_oracle_policy, oracle_policy
+
+__all__ = ["Plan", "PlanSettings", "PlanningOracle", "candidate_moves", "choose_moves", "default_braking_slots",
+           "expected_optimised_rate", "expected_sum_rate", "greedy_oracle_policy", "link_activity", "oracle_policy",
+           "plan_target"]
