@@ -12,7 +12,7 @@ from uavris.agents.baselines import BASELINES
 from uavris.agents.evaluation import evaluate
 from uavris.agents.sb3_vec_env import UavRisVecEnv
 from uavris.cli import main as cli_main
-from uavris.config import SystemConfig
+from uavris.config import ConfigError, SystemConfig
 from uavris.env import UavRisD2DEnv
 from uavris.experiments.io import UavrisError
 from uavris.experiments.training import load_model, preset_config, train
@@ -142,23 +142,34 @@ def test_identical_seeds_give_identical_evaluation(tmp_path):
     assert a == (tmp_path / "b" / "evals.csv").read_text()
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "Known gap, tracked: with the smoke hyperparameters DDPG does not beat uniform random actions within "
-    "CI-sized budgets on this simulator (measured, seed 0: 3.1 bps/Hz after 8k steps, 7.0 after 20k, random "
-    "7.0; seed 1: 8.1). Diagnosis: the deterministic actor saturates (77-95% of phase entries at |a| > 0.95, "
-    "accelerations at the bound, attitude increments constant so the RIS spins), also at learning rates "
-    "1e-4 and 3e-4 and with exploration sigma 0.3 and 0.5; a sweep over tau, gamma, width, reward scale, batch, "
-    "learning_starts and update ratio (README, 3-5 seeds each) finds no setting that does. If this starts passing, DDPG "
-    "learns: remove the xfail."))
-def test_ddpg_learns_beyond_random(tmp_path):
-    """Kept small: 8,000 env steps of DDPG (about 20 s) must beat uniform random actions by
-    at least 2 bps/Hz on the same 16 evaluation episodes (random scores ~7, a policy that
-    merely keeps the RIS level scores ~12)."""
-    cfg = preset_config("ddpg", "fig2", 0, "smoke", total_steps=8000, eval_episodes=16)
+def test_strong_expert_learns_beyond_hovering_with_optimised_phases(tmp_path):
+    """The strong track's expert as the quick preset makes it (PPO on the motion, 6 DAgger
+    rounds of 32 episodes imitating the planning oracle, about 15 s) beats its baseline,
+    hovering with the optimiser's phases, on the same 8 evaluation episodes by more than both
+    95% CIs. Measured over seeds 0-2 in fig2 and train8: 42.99-43.23 against ~36.4 bps/Hz
+    (smaller imitation budgets were unreliable: 17-40 bps/Hz over seeds)."""
+    from uavris.agents.imitation import ImitationConfig
+    from uavris.agents.references import reference_policy
+
+    cfg = preset_config("ppo", "fig2", 0, "quick", eval_episodes=8, total_steps=0, phase_control="optimizer",
+                        imitation=ImitationConfig())
+    train(cfg, tmp_path / "strong", progress=False)
+    expert = json.loads((tmp_path / "strong" / "done.json").read_text())["final_eval"]
+    hover = evaluate(reference_policy("hover-optimizer"), cfg.system, "fig2", 8, cfg.eval_seed).summary()
+    assert expert["ci_low"] > hover["ci_high"], (expert, hover)
+    assert (tmp_path / "strong" / "imitation.csv").read_text().count("\n") == 1 + ImitationConfig().rounds
+
+
+def test_paper_track_expert_learns_beyond_random_actions(tmp_path):
+    """The paper track's expert algorithm (PPO, the quick comparison's winner) learns at a
+    CI-sized budget: 20,000 env steps beat uniform random actions on 16 episodes by more than
+    both 95% CIs. It does not beat doing nothing (the zero action, ~12.3 bps/Hz) at any
+    budget we measured (benchmarks/expert_learning.py): a finding, not asserted here."""
+    cfg = preset_config("ppo", "fig2", 0, "smoke", total_steps=20_000, eval_episodes=16)
     train(cfg, tmp_path / "learn", progress=False)
-    ddpg = json.loads((tmp_path / "learn" / "done.json").read_text())["final_eval"]["mean"]
-    random = evaluate(BASELINES["random"](0), cfg.system, "fig2", 16, cfg.eval_seed).summary()["mean"]
-    assert ddpg > random + 2.0, (ddpg, random)
+    ppo = json.loads((tmp_path / "learn" / "done.json").read_text())["final_eval"]
+    random = evaluate(BASELINES["random"](0), cfg.system, "fig2", 16, cfg.eval_seed).summary()
+    assert ppo["ci_low"] > random["ci_high"], (ppo, random)
 
 
 def _run_cli(args, capsys):
@@ -175,7 +186,7 @@ def _run_cli(args, capsys):
         (["train", "--preset", "huge"], "unknown preset 'huge'"),
         (["train", "--preset", "smoke", "--system", "v_max=-1"], "SystemConfig.v_max must be"),
         (["evaluate", "/nonexistent/run"], "is not a directory"),
-        (["evaluate", "baseline:oracle", "--scenario", "fig2"], "unknown baseline 'oracle'"),
+        (["evaluate", "baseline:nothing", "--scenario", "fig2"], "unknown baseline 'nothing'"),
     ],
 )
 def test_bad_cli_input_is_one_line_exit_2(args, message, capsys):
@@ -230,5 +241,5 @@ def test_hybrid_controller_trains_and_evaluates_reproducibly(tmp_path):
     plain = evaluate(hover, cfg.system, "fig2", 2, 1_000_000).summary()["mean"]
     hybrid = evaluate(with_optimised_phases(hover), cfg.system, "fig2", 2, 1_000_000).summary()["mean"]
     assert hybrid > plain + 10.0, (hybrid, plain)
-    with pytest.raises(Exception, match="unknown phase control"):
+    with pytest.raises(ConfigError, match="unknown phase control"):
         preset_config("ddpg", "fig2", 0, "smoke", phase_control="magic")

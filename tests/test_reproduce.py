@@ -1,19 +1,20 @@
-"""End to end: `uavris reproduce --preset smoke` (one comparison seed, 4 evaluation episodes,
-2 trajectories per expert to keep CI at a few minutes), interrupted once and resumed."""
+"""End to end: `uavris reproduce --preset smoke`, both tracks (one comparison seed, 4 evaluation
+episodes, 2 trajectories per expert to keep CI at a few minutes), killed once and resumed."""
 
 import dataclasses
 import re
+import threading
+import time
 
 import pytest
 
 from uavris.config import SystemConfig
 from uavris.experiments import dt_pipeline
-from uavris.experiments.compare import train_job
-from uavris.experiments.io import read_json
-from uavris.experiments.jobs import Job, run_jobs
+from uavris.experiments.io import UavrisError, read_json
+from uavris.experiments.jobs import Job, JobRunner, run_jobs
 from uavris.experiments.reproduce import ReproduceConfig, _Context, build_pipeline, nearest_training_scenarios, reproduce
 from uavris.experiments.stages import Pipeline, Stage
-from uavris.experiments.training import preset_config
+from uavris.experiments.training import preset_config, train_job
 
 RC = ReproduceConfig("smoke", compare_seeds=1, eval_episodes=4, trajectories=2)
 
@@ -28,10 +29,12 @@ def smoke_run(tmp_path_factory):
         calls.append(1)
         raise KeyboardInterrupt("simulated kill during pre-training")
 
+    # One worker runs the jobs in this process, where the patched function is seen; the
+    # killed pre-training fails its stages and what depends on them, the rest finishes.
     dt_pipeline.pretrain = killed
     try:
-        with pytest.raises(KeyboardInterrupt):
-            reproduce(RC, out, workers=2, progress=False)
+        with pytest.raises(UavrisError, match="stage"):
+            reproduce(RC, out, workers=1, progress=False)
     finally:
         dt_pipeline.pretrain = real_pretrain
     assert calls
@@ -43,24 +46,32 @@ def smoke_run(tmp_path_factory):
 def test_all_artefacts_exist(smoke_run):
     out, report, _ = smoke_run
     assert report == out / "report.md"
-    for stem in ("fig2_learning_curves", "fig3a_unseen1", "fig3b_unseen2", "interactions_unseen1",
-                 "interactions_unseen2", "trajectory_unseen1"):
-        for ext in ("png", "pdf"):
-            assert (out / "figures" / f"{stem}.{ext}").stat().st_size > 1000, stem
+    for prefix in ("", "strong-"):
+        for stem in ("fig3a_unseen1", "fig3b_unseen2", "interactions_unseen1", "interactions_unseen2",
+                     "trajectory_unseen1"):
+            for ext in ("png", "pdf"):
+                assert (out / "figures" / f"{prefix}{stem}.{ext}").stat().st_size > 1000, prefix + stem
+    assert (out / "figures" / "fig2_learning_curves.png").stat().st_size > 1000
     text = report.read_text()
-    assert "## The paper's claims, checked" in text
-    for claim in ("DDPG is the best of the four", "zero-shot DT above transferred DDPG",
-                  "fine-tuned DT within 5% of the expert"):
-        assert claim in text
+    assert "## The paper's claims, checked" in text and "## Both tracks side by side" in text
+    assert "DDPG is the best of the four" in text
+    for track in ("paper", "strong"):
+        for scenario in ("unseen1", "unseen2"):
+            assert f"{track} track, {scenario}: **zero-shot DT above transferred experts**" in text
+            assert f"{track} track, {scenario}: **fine-tuned DT within 5% of the expert**" in text
+    chosen = read_json(next((out / "stages").glob("compare-*")) / "summary.json")["expert"]
+    assert f"chosen as the paper does (largest IQM of the final evaluations): **{chosen.upper()}**" in text
+    experts = read_json(next((out / "stages").glob("experts-train-*")) / "stage.json")["result"]
+    assert experts["algo"] == chosen
 
 
 def test_report_numbers_come_from_evaluation_files(smoke_run):
     out, report, _ = smoke_run
     text = report.read_text()
-    for scenario in ("unseen1", "unseen2"):
-        stage = next((out / "stages").glob(f"evaluate-{scenario}-*"))
+    for stage in sorted((out / "stages").glob("*evaluate-unseen*")):
+        scenario = stage.name.split("-")[-2]
         result = read_json(stage / "stage.json")["result"]
-        assert set(result) == {"expert", "dt-zero-shot", "dt-finetuned", "oracle"} | {
+        assert set(result) == {"expert", "dt-zero-shot", "dt-finetuned", "hover", "hover-optimizer", "oracle"} | {
             f"transfer-{s}" for s in nearest_training_scenarios(scenario)}
         for summary in result.values():
             per_episode = [float(x) for x in re.findall(r"^\d+,([^,]+),", (stage / f"{summary['policy']}.csv")
@@ -75,8 +86,9 @@ def test_report_numbers_come_from_evaluation_files(smoke_run):
 def test_rerun_after_kill_skips_finished_stages(smoke_run):
     out, _, first_done = smoke_run
     # the kill hit pre-training: everything before it had finished and was not redone
-    assert {"compare", "experts-train", "experts-unseen", "dataset"} <= set(first_done)
-    assert "pretrain" not in first_done
+    assert {"compare", "experts-train", "experts-unseen", "dataset", "strong-experts-train",
+            "strong-dataset"} <= set(first_done)
+    assert "pretrain" not in first_done and "strong-pretrain" not in first_done
     pipeline = build_pipeline(RC, out, _Context(1, "local", None, None))
     records = pipeline.run()
     assert all(r.status == "skipped" for r in records)
@@ -90,11 +102,14 @@ def test_changed_parameter_invalidates_exactly_its_dependents(tmp_path):
         other = build_pipeline(dataclasses.replace(RC, **kw), tmp_path, ctx)
         return {n for n in base.stages if base.stages[n].key != other.stages[n].key}
 
-    downstream_of_dataset = {"dataset", "pretrain", "finetune-unseen1", "finetune-unseen2", "evaluate-unseen1",
-                             "evaluate-unseen2"}
-    assert changed(trajectories=3) == downstream_of_dataset
-    assert changed(compare_seeds=2) == {"compare"}
+    dt = {"dataset", "pretrain", "finetune-unseen1", "finetune-unseen2", "evaluate-unseen1", "evaluate-unseen2"}
+    assert changed(trajectories=3) == dt | {f"strong-{n}" for n in dt}
+    # the paper track's experts follow the comparison (they are its winner's)
+    assert changed(compare_seeds=2) == {"compare", "experts-train", "experts-unseen"} | dt
+    assert changed(expert_algo="ppo") == {"experts-train", "experts-unseen"} | dt
     assert changed(system=SystemConfig(noise_dbm=-90.0)) == set(base.stages)
+    assert set(build_pipeline(dataclasses.replace(RC, track="strong"), tmp_path, ctx).stages) == {
+        n for n in base.stages if n.startswith("strong-")}
 
 
 def test_stage_keys_chain_through_dependencies(tmp_path):
@@ -120,10 +135,54 @@ def test_stage_keys_chain_through_dependencies(tmp_path):
 def test_ray_backend_gives_the_same_numbers_as_the_process_pool(smoke_run, tmp_path):
     pytest.importorskip("ray")
     out, _, _ = smoke_run
-    cfg = preset_config("ddpg", "unseen1", RC.seed, "smoke", eval_episodes=RC.n_eval)
-    local_dir = next((out / "stages").glob("experts-unseen-*")) / "runs" / "unseen1"
-    jobs = [Job("ddpg-unseen1", train_job, (cfg.to_dict(), str(tmp_path / "ray" / "unseen1")),
+    stage = next((out / "stages").glob("experts-unseen-*"))
+    algo = read_json(stage / "stage.json")["result"]["algo"]
+    cfg = preset_config(algo, "unseen1", RC.seed, "smoke", eval_episodes=RC.n_eval)
+    local_dir = stage / "runs" / "unseen1"
+    jobs = [Job(f"{algo}-unseen1", train_job, (cfg.to_dict(), str(tmp_path / "ray" / "unseen1")),
                 tmp_path / "ray.log")]
     [res] = run_jobs(jobs, 1, backend="ray")
     assert res.ok, (res.error, res.log.read_text()[-2000:])
     assert res.value["final_eval"] == read_json(local_dir / "done.json")["final_eval"]
+
+
+_ORDER = []
+_GATE = threading.Event()
+
+
+def _record(name, wait=False):
+    if wait:
+        _GATE.wait(10)
+    _ORDER.append(name)
+    return name
+
+
+def test_job_runner_starts_the_highest_priority_waiting_job_first(tmp_path):
+    """One worker busy with a job; a low- and then a high-priority job wait from two other
+    threads: when the worker frees, the high-priority one runs first."""
+    _ORDER.clear()
+    _GATE.clear()
+    runner = JobRunner(1)
+    log = tmp_path / "log"
+    first = threading.Thread(target=runner.run, args=([Job("first", _record, ("first", True), log)],))
+    first.start()
+    while not runner._busy:
+        time.sleep(0.01)
+    low = threading.Thread(target=runner.run, args=([Job("low", _record, ("low",), log)],), kwargs={"priority": 0})
+    high = threading.Thread(target=runner.run, args=([Job("high", _record, ("high",), log)],), kwargs={"priority": 2})
+    low.start()
+    while len(runner._waiting) < 1:
+        time.sleep(0.01)
+    high.start()
+    while len(runner._waiting) < 2:
+        time.sleep(0.01)
+    _GATE.set()
+    for t in (first, low, high):
+        t.join(10)
+    assert _ORDER == ["first", "high", "low"]
+
+
+def test_job_runner_pool_returns_every_result(tmp_path):
+    with JobRunner(2) as runner:
+        res = runner.run([Job(f"j{i}", _record, (f"j{i}",), tmp_path / f"{i}.log") for i in range(4)])
+    assert sorted(r.value for r in res) == ["j0", "j1", "j2", "j3"] and all(r.ok for r in res)

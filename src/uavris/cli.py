@@ -147,7 +147,7 @@ def evaluate_cmd(
     Writes per-episode CSV and a JSON summary (mean, 95% CI, IQM) to RUN_DIR/eval/ (or --out).
 
     Args:
-        target: run dir (train, pretrain-dt, finetune-dt), DT model, baseline:random|hover-random-phases|hover-aligned.
+        target: run dir (train, pretrain-dt, finetune-dt), DT model dir, or a reference: hover (the zero action), random, hover-random-phases, hover-aligned, hover-optimizer, oracle, oracle-greedy (also as baseline:NAME).
         scenario: scenario to evaluate in (default: the run's own; required for baselines).
         episodes: number of evaluation episodes (seeds SEED .. SEED+EPISODES-1).
         seed: seed of the first evaluation episode.
@@ -313,6 +313,8 @@ def finetune_dt_cmd(
     candidates: Optional[int] = None,
     elites: Optional[int] = None,
     noise_sigma: Optional[float] = None,
+    selection: Optional[str] = None,
+    rollouts_per_seed: Optional[int] = None,
     epochs_per_round: Optional[int] = None,
     learning_rate: Optional[float] = None,
     target_return: Optional[float] = None,
@@ -339,6 +341,8 @@ def finetune_dt_cmd(
         candidates: trajectories collected per round N (paper: 80).
         elites: trajectories kept per round K (paper: 50).
         noise_sigma: standard deviation of the Gaussian exploration noise on actions.
+        selection: elites: paired (largest return relative to the same episode seed's other rollouts; default) or return (the paper's top-K).
+        rollouts_per_seed: noisy rollouts of each episode seed with paired selection (CANDIDATES / this = seeds per round).
         epochs_per_round: passes over the elite slots per round.
         learning_rate: AdamW learning rate after warm-up.
         target_return: target return R_hat_1 (default: the pre-trained model's).
@@ -349,7 +353,8 @@ def finetune_dt_cmd(
     from uavris.experiments.io import read_json
 
     cfg = finetune_config(model, scenario, preset, seed, rounds=rounds, candidates=candidates, elites=elites,
-                          noise_sigma=noise_sigma, epochs_per_round=epochs_per_round, learning_rate=learning_rate,
+                          noise_sigma=noise_sigma, selection=selection, rollouts_per_seed=rollouts_per_seed,
+                          epochs_per_round=epochs_per_round, learning_rate=learning_rate,
                           target_return=target_return, eval_episodes=eval_episodes)
     run_dir = finetune(cfg, out or default_finetune_dir(cfg), resume=resume, force=force, progress=not no_progress)
     done = read_json(run_dir / "done.json")
@@ -371,13 +376,17 @@ def reproduce_cmd(
     eval_episodes: Optional[int] = None,
     trajectories: Optional[int] = None,
     system: tuple[str, ...] = (),
+    track: str = "both",
+    expert_algo: str = "auto",
     no_progress: bool = False,
 ) -> None:
-    """Reproduce the paper's study end to end: Fig. 2, experts, dataset, DT, Fig. 3, report.
+    """Reproduce the paper's study end to end in two tracks: Fig. 2, experts, dataset, DT, Fig. 3, report.
 
-    Stages: compare, experts-train, experts-unseen, dataset, pretrain, finetune-unseen1/2,
-    evaluate-unseen1/2, report. Each stage is stored under OUT/stages/NAME-KEY (KEY = hash of
-    its configuration and inputs): a rerun skips finished stages and resumes an interrupted one.
+    Paper track: compare, experts-train, experts-unseen, dataset, pretrain, finetune-unseen1/2,
+    evaluate-unseen1/2 (experts: the comparison's winner). Strong track (learned motion, optimised
+    phases, experts initialised from the oracle): the same stages prefixed strong-. Each stage is
+    stored under OUT/stages/NAME-KEY (KEY = hash of its configuration and inputs): a rerun skips
+    finished stages and resumes an interrupted one; independent stages run concurrently.
     Writes OUT/report.md and OUT/figures/.
 
     Args:
@@ -388,16 +397,19 @@ def reproduce_cmd(
         ray_address: address of a running Ray cluster (default: start a local instance).
         force: stage(s) to rerun even if finished, e.g. --force pretrain.
         seed: seed of the experts and the DT.
-        compare_seeds: seeds per algorithm in the comparison (default 2 smoke, 5 otherwise).
+        compare_seeds: seeds per algorithm in the comparison (default 2 smoke, 3 quick, 5 paper).
         eval_episodes: evaluation episodes per policy (default 8 smoke, 32 quick, 100 paper).
         trajectories: expert trajectories per training scenario (default 4 smoke, 100 quick, 500 paper).
         system: system-config overrides KEY=VALUE.
+        track: both, paper (the published study) or strong (learned motion, optimised phases).
+        expert_algo: paper track's expert algorithm: auto (the comparison's winner by IQM) or ddpg, ppo, sac, td3.
         no_progress: no progress bar.
     """
     from uavris.experiments.reproduce import ReproduceConfig, reproduce
 
     rc = ReproduceConfig(preset=preset, seed=seed, compare_seeds=compare_seeds, eval_episodes=eval_episodes,
-                         trajectories=trajectories, **({"system": _system(system)} if system else {}))
+                         trajectories=trajectories, track=track, expert_algo=expert_algo,
+                         **({"system": _system(system)} if system else {}))
     report = reproduce(rc, out or Path("runs") / preset, workers=workers, backend=backend, ray_address=ray_address,
                        force=force, progress=not no_progress)
     print(f"report: {report}")

@@ -5,7 +5,7 @@
   (plus the final one), the actions actually executed (clipped to [-1, 1]) and the rewards.
 - :func:`returns_to_go` is the paper's eq. (15), R_hat_t = sum_{t' >= t} r(t'), computed from
   the stored rewards (never stored itself, so relabelling is automatic).
-- :func:`select_elites` is the top-K selection of eq. (18).
+- :func:`select_elites` is the top-K selection of eq. (18), or its paired variant.
 - :func:`write_dataset` / :func:`load_dataset` store trajectories as a Minari dataset (HDF5
   backend) and read them back with validation.
 - :class:`TrainingWindows` samples context windows for L_OFF (eq. 16) and L_FT (eq. 19).
@@ -13,7 +13,9 @@
 Dataset layout (a directory ``DIR``)::
 
     DIR/data/metadata.json   Minari metadata plus a "uavris" entry: format version, the
-                             SystemConfig, the observation layout, obs/action sizes
+                             SystemConfig, the observation layout, obs/action sizes and
+                             the phase control ("agent": full actions; "optimizer": the
+                             6 motion entries, the phases being the optimiser's)
     DIR/data/main_data.hdf5  one group per episode: observations (T+1, obs_dim),
                              actions (T, act_dim), rewards, terminations, truncations;
                              attributes seed, scenario, expert, expert_algo
@@ -44,6 +46,7 @@ import torch
 from numpy.typing import NDArray
 
 from uavris.agents.baselines import BatchPolicy
+from uavris.agents.hybrid import PHASE_CONTROLS, action_dim_for, motion_of
 from uavris.config import ConfigError, Scenario, SystemConfig
 from uavris.env.simulator import BatchedSimulator, observation_bounds, observation_layout
 
@@ -88,39 +91,60 @@ def returns_to_go(rewards: NDArray[np.floating]) -> NDArray[np.float64]:
     return np.cumsum(r[::-1])[::-1].copy()
 
 
-def select_elites(trajectories: Sequence[Trajectory], k: int) -> list[Trajectory]:
-    """The K trajectories with the largest returns (paper eq. 18), best first; ties keep
-    collection order."""
+ELITE_RULES: tuple[str, ...] = ("return", "paired")
+
+
+def select_elites(trajectories: Sequence[Trajectory], k: int, rule: str = "return") -> list[Trajectory]:
+    """The K elites, best first; ties keep collection order.
+
+    ``rule="return"``: the K largest returns (paper eq. 18). ``rule="paired"``: the K largest
+    returns relative to the mean return of the candidates with the same episode seed.
+    Episodes with the same seed share every random draw (channels, pairings: common random
+    numbers), so this difference measures what the actions did, not the luck of the draw
+    (docs/model.md, departures).
+    """
     if not 1 <= k <= len(trajectories):
         raise ValueError(f"k must be in [1, {len(trajectories)}], got {k}")
-    order = sorted(range(len(trajectories)), key=lambda i: -trajectories[i].episode_return)
+    if rule not in ELITE_RULES:
+        raise ValueError(f"unknown elite rule {rule!r}; choose one of {', '.join(ELITE_RULES)}")
+    score = np.array([tr.episode_return for tr in trajectories])
+    if rule == "paired":
+        seeds = np.array([tr.seed for tr in trajectories])
+        for s in np.unique(seeds):
+            group = seeds == s
+            score[group] -= score[group].mean()
+    order = sorted(range(len(trajectories)), key=lambda i: -score[i])
     return [trajectories[i] for i in order[:k]]
 
 
 # ------------------------------------------------------------------------------ collection
 def record_episodes(policy: BatchPolicy, config: SystemConfig, scenario: str | Scenario,
                     seeds: Sequence[int] | NDArray[np.integer], *, expert: str = "", expert_algo: str = "",
-                    batch_size: int = 256) -> list[Trajectory]:
+                    phase_control: str = "agent", batch_size: int = 256) -> list[Trajectory]:
     """Roll ``policy`` out on one episode per seed, ``batch_size`` episodes per simulator.
 
     Episode j is the one a single environment produces after ``reset(seed=seeds[j])``, as in
-    :func:`uavris.agents.evaluation.evaluate`. Returns the trajectories in seed order.
+    :func:`uavris.agents.evaluation.evaluate`. Returns the trajectories in seed order. With
+    ``phase_control="optimizer"`` the trajectories keep only the 6 motion entries of the
+    executed actions (the phases were the optimiser's, a function of the state).
     """
     seeds = np.asarray(seeds, dtype=np.int64)
     out: list[Trajectory] = []
     for start in range(0, len(seeds), batch_size):
-        out.extend(_record_batch(policy, config, scenario, seeds[start:start + batch_size], expert, expert_algo))
+        out.extend(_record_batch(policy, config, scenario, seeds[start:start + batch_size], expert, expert_algo,
+                                 phase_control))
     return out
 
 
 def _record_batch(policy: BatchPolicy, config: SystemConfig, scenario: str | Scenario, seeds: NDArray[np.int64],
-                  expert: str, expert_algo: str) -> list[Trajectory]:
+                  expert: str, expert_algo: str, phase_control: str) -> list[Trajectory]:
     n, horizon = len(seeds), config.horizon
+    motion_only = action_dim_for(config, phase_control) != config.action_dim
     sim = BatchedSimulator(config, scenario, n)
     sim.seed(seeds)
     sim.reset()
     obs_buf = np.zeros((n, horizon + 1, config.observation_dim), dtype=np.float32)
-    act_buf = np.zeros((n, horizon, config.action_dim), dtype=np.float32)
+    act_buf = np.zeros((n, horizon, action_dim_for(config, phase_control)), dtype=np.float32)
     rew_buf = np.zeros((n, horizon))
     length = np.zeros(n, dtype=np.int64)
     terminated = np.zeros(n, dtype=bool)
@@ -132,7 +156,7 @@ def _record_batch(policy: BatchPolicy, config: SystemConfig, scenario: str | Sce
     while alive.any():
         action = np.clip(np.asarray(policy(obs, sim), dtype=np.float32), -1.0, 1.0)
         obs_buf[alive, t] = obs[alive]
-        act_buf[alive, t] = action[alive]
+        act_buf[alive, t] = (motion_of(action) if motion_only else action)[alive]
         reward, term, trunc, _ = sim.step(action)
         rew_buf[alive, t] = reward[alive]
         obs = sim.observe()
@@ -245,6 +269,7 @@ class ExpertDataset:
     system: SystemConfig
     trajectories: list[Trajectory]
     description: str
+    phase_control: str = "agent"  # "optimizer": the actions are the 6 motion entries (strong track)
 
     @property
     def scenarios(self) -> list[str]:
@@ -267,7 +292,7 @@ def dataset_id_for(path: Path) -> str:
 
 
 def write_dataset(path: str | Path, trajectories: Sequence[Trajectory], system: SystemConfig, *,
-                  description: str = "", force: bool = False) -> Path:
+                  description: str = "", force: bool = False, phase_control: str = "agent") -> Path:
     """Write ``trajectories`` as a Minari dataset at ``path`` (see the module docstring).
 
     The dataset is built in a temporary sibling directory and renamed into place, so an
@@ -288,15 +313,16 @@ def write_dataset(path: str | Path, trajectories: Sequence[Trajectory], system: 
             raise DatasetError(f"{path} exists and is not a dataset; refusing to overwrite it")
         if not force:
             raise DatasetError(f"{path} already exists; pass --force to replace it")
+    act_dim = action_dim_for(system, phase_control)
     for tr in trajectories:
-        _check_trajectory(tr, system.observation_dim, system.action_dim, f"trajectory (seed {tr.seed})")
+        _check_trajectory(tr, system.observation_dim, act_dim, f"trajectory (seed {tr.seed})")
     tmp = path.parent / f".{path.name}.tmp"
     shutil.rmtree(tmp, ignore_errors=True)
     tmp.mkdir(parents=True)
     try:
         low, high = observation_bounds(system)
         storage = MinariStorage.new(tmp / "data", observation_space=gym.spaces.Box(low, high, dtype=np.float32),
-                                    action_space=gym.spaces.Box(-1.0, 1.0, (system.action_dim,), dtype=np.float32),
+                                    action_space=gym.spaces.Box(-1.0, 1.0, (act_dim,), dtype=np.float32),
                                     data_format="hdf5", jpeg_encoding=False)
         algos = sorted({tr.expert_algo for tr in trajectories if tr.expert_algo})
         storage.update_metadata({
@@ -306,7 +332,7 @@ def write_dataset(path: str | Path, trajectories: Sequence[Trajectory], system: 
             "description": description or "uavris expert trajectories",
             "uavris": {"format_version": DATASET_FORMAT_VERSION, "system": system.to_dict(),
                        "observation_layout": layout_as_lists(system), "observation_dim": system.observation_dim,
-                       "action_dim": system.action_dim},
+                       "action_dim": act_dim, "phase_control": phase_control},
         })
         storage.update_episodes(
             EpisodeBuffer(id=i, seed=tr.seed, observations=tr.observations, actions=tr.actions, rewards=tr.rewards,
@@ -378,7 +404,10 @@ def load_dataset(path: str | Path) -> ExpertDataset:
     if info["observation_layout"] != current:
         raise DatasetError(f"{path}: observation layout {info['observation_layout']} differs from the current "
                            f"environment's {current}; re-collect the dataset")
-    obs_dim, act_dim = system.observation_dim, system.action_dim
+    phase_control = info.get("phase_control", "agent")  # datasets from before the field: full actions
+    if phase_control not in PHASE_CONTROLS:
+        raise DatasetError(f"{path}: unknown phase control {phase_control!r} in the uavris metadata")
+    obs_dim, act_dim = system.observation_dim, action_dim_for(system, phase_control)
     if info["observation_dim"] != obs_dim or info["action_dim"] != act_dim \
             or ds.observation_space.shape != (obs_dim,) or ds.action_space.shape != (act_dim,):
         raise DatasetError(f"{path}: observation/action sizes {ds.observation_space.shape}/{ds.action_space.shape} "
@@ -404,7 +433,8 @@ def load_dataset(path: str | Path) -> ExpertDataset:
         if isinstance(e, DatasetError):
             raise
         raise DatasetError(f"{path}: episode data is unreadable ({_one_line(e)})") from None
-    return ExpertDataset(path, str(meta.get("dataset_id", "")), system, trajectories, str(meta.get("description", "")))
+    return ExpertDataset(path, str(meta.get("dataset_id", "")), system, trajectories, str(meta.get("description", "")),
+                         phase_control)
 
 
 def _check_trajectory(tr: Trajectory, obs_dim: int, act_dim: int, where: str) -> None:

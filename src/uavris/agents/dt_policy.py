@@ -19,6 +19,10 @@ acted in from the simulator state it saw then (channels, incidence, pairing) and
 action it returned, with the very calls :meth:`BatchedSimulator.step` makes
 (:func:`slot_reward`; a test checks it against the simulator's reward).
 
+Strong track (``phase_control="optimizer"``): the model predicts the 6 motion entries and
+the per-slot phase optimiser sets the phases (:func:`uavris.agents.hybrid.full_action`); the
+history holds the motion actions, the reward is that of the full action executed.
+
 Default target return: the checkpoint's ``target_return``, set at pre-training to the
 0.9 quantile of the dataset's episode returns (a high but attained return: conditioning
 far above anything in the data asks the model to extrapolate). Callers may override it.
@@ -35,6 +39,7 @@ from numpy.typing import NDArray
 
 from uavris import physics as ph
 from uavris.agents.dt_model import DecisionTransformer, load_dt
+from uavris.agents.hybrid import MOTION_DIM, check_phase_control, full_action
 from uavris.config import SystemConfig
 from uavris.env.simulator import BatchedSimulator, decode_action
 
@@ -59,14 +64,21 @@ class DTBatchPolicy:
         target_return: R_hat_1 of every episode.
         noise_sigma: standard deviation of the Gaussian exploration noise (0: deterministic).
         seed: seed of the noise.
+        phase_control: ``"agent"`` (the model sets every action entry) or ``"optimizer"``
+            (the model sets the motion, the optimiser the phases).
     """
 
     def __init__(self, model: DecisionTransformer, target_return: float, noise_sigma: float = 0.0,
-                 seed: int | None = None) -> None:
+                 seed: int | None = None, phase_control: str = "agent") -> None:
         if not np.isfinite(target_return):
             raise ValueError(f"target_return must be finite, got {target_return!r}")
         if noise_sigma < 0:
             raise ValueError(f"noise_sigma must be >= 0, got {noise_sigma!r}")
+        check_phase_control(phase_control)
+        if phase_control == "optimizer" and model.cfg.act_dim != MOTION_DIM:
+            raise ValueError(f"phase_control 'optimizer' needs a model of the {MOTION_DIM} motion entries, "
+                             f"this one predicts {model.cfg.act_dim}")
+        self.phase_control = phase_control
         self.model = model
         self.target_return = float(target_return)
         self.noise_sigma = float(noise_sigma)
@@ -113,16 +125,17 @@ class DTBatchPolicy:
             self.begin(n)
             self._sim = sim
         elif self._pending is not None:
-            channels, cos_theta, pairing, action = self._pending
-            self.record(action, slot_reward(channels, cos_theta, pairing, action, sim.config))
+            channels, cos_theta, pairing, action, executed = self._pending
+            self.record(action, slot_reward(channels, cos_theta, pairing, executed, sim.config))
             if fresh.any():
                 self.reset_rows(fresh)
         elif not fresh.all():
             raise ValueError("a DT policy lost track of its episodes (called twice without a step?)")
         action = self.act(obs)
+        executed = full_action(sim, action) if self.phase_control == "optimizer" else action
         # Copies: a partial reset may write into the simulator's current arrays in place.
-        self._pending = (sim.channels.copy(), sim.cos_theta.copy(), sim.pairing.copy(), action)
-        return action
+        self._pending = (sim.channels.copy(), sim.cos_theta.copy(), sim.pairing.copy(), action, executed)
+        return executed
 
 
 class _Window:
@@ -198,4 +211,4 @@ def dt_policy_from_checkpoint(directory: str | Path, target_return: float | None
     target = meta.get("target_return") if target_return is None else target_return
     if target is None:
         raise ValueError(f"{directory} stores no target return; pass one")
-    return DTBatchPolicy(model, float(target), noise_sigma, seed), meta
+    return DTBatchPolicy(model, float(target), noise_sigma, seed, meta.get("phase_control", "agent")), meta

@@ -27,6 +27,18 @@ def check_phase_control(mode: str) -> None:
         raise ConfigError(f"unknown phase control {mode!r}; choose one of {', '.join(PHASE_CONTROLS)}")
 
 
+def action_dim_for(config: SystemConfig, phase_control: str) -> int:
+    """Entries of the learner's action: all of them, or the 6 motion entries under the optimiser."""
+    check_phase_control(phase_control)
+    return MOTION_DIM if phase_control == "optimizer" else config.action_dim
+
+
+def motion_of(action: NDArray) -> NDArray[np.float32]:
+    """The 6 motion entries (acceleration, attitude increments) of full actions ``(n, action_dim)``."""
+    a = np.asarray(action)
+    return np.concatenate([a[..., :3], a[..., -3:]], axis=-1).astype(np.float32)
+
+
 def optimised_phase_actions(sim: BatchedSimulator) -> NDArray[np.float32]:
     """The phase part of the action ``(n, N)`` in [-1, 1] that realises the optimiser's phases."""
     sol = optimize_slot_phases(sim.config, sim.channels, sim.cos_theta, sim.pairing)
@@ -54,9 +66,6 @@ def with_optimised_phases(policy: BatchPolicy) -> BatchPolicy:
 
     def act(obs: NDArray[np.float32], sim: BatchedSimulator) -> NDArray[np.float32]:
         a = np.asarray(policy(obs, sim))
-        if a.shape[-1] == MOTION_DIM:
-            return full_action(sim, a)
-        motion = np.concatenate([a[:, :3], a[:, -3:]], axis=1)
-        return full_action(sim, motion)
+        return full_action(sim, a if a.shape[-1] == MOTION_DIM else motion_of(a))
 
     return act

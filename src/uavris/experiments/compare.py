@@ -14,27 +14,30 @@ from typing import Any, Sequence
 import numpy as np
 
 from uavris.agents.evaluation import evaluate
-from uavris.agents.baselines import BASELINES
-from uavris.agents.oracle import oracle_policy
 from uavris.agents.experts import ALGORITHMS, check_algorithm, hyperparams_for
+from uavris.agents.references import HOVER_OPTIMIZER, ORACLE, REFERENCES, ZERO_ACTION, reference_policy
 from uavris.config import get_scenario
 from uavris.experiments.io import UavrisError, read_csv, read_json, write_csv, write_json, atomic_write_text
-from uavris.experiments.jobs import Job, JobResult, run_jobs
+from uavris.experiments.jobs import Job, JobResult, JobRunner, run_jobs
 from uavris.experiments.plots import learning_curves
-from uavris.experiments.stats import bootstrap_band, summarize
-from uavris.experiments.training import PRESETS, TrainConfig, is_finished, preset_config, train
+from uavris.experiments.stats import bootstrap_band, summarize, versus
+from uavris.experiments.training import PRESETS, TrainConfig, is_finished, preset_config, train_job
 
-# MODEL.md: the paper's converged average sum rates from [15, 20, 4.5], bps/Hz.
+# The paper's converged average sum rates from [15, 20, 4.5], bps/Hz (docs/model.md).
 PAPER_FIG2 = {"ddpg": 29.5, "ppo": 25.0, "td3": 20.5, "sac": 17.0}
+# Reference rows of every comparison, in table order (uavris.agents.references).
+COMPARISON_REFERENCES = (ZERO_ACTION, "random", "hover-random-phases", "hover-aligned", HOVER_OPTIMIZER, ORACLE)
+FIGURE_REFERENCES = (ZERO_ACTION, HOVER_OPTIMIZER, ORACLE)
 
 
-def train_job(cfg_dict: dict[str, Any], run_dir: str) -> dict[str, Any]:
-    """Worker entry point: train (or resume) one run; returns its done.json."""
-    cfg = TrainConfig.from_dict(cfg_dict)
-    path = Path(run_dir)
-    if not is_finished(path):
-        train(cfg, path, resume=(path / "config.yaml").exists(), progress=False)
-    return read_json(path / "done.json")
+def select_expert(rows: Sequence[dict[str, Any]]) -> str:
+    """The algorithm the paper's Sec. IV-B would pick: the DRL row with the largest IQM of the
+    final evaluations over seeds (ties: the first); lower-case name."""
+    drl = [r for r in rows if r["kind"] == "DRL"]
+    if not drl:
+        raise UavrisError("the comparison has no finished DRL run to choose an expert algorithm from")
+    best = max(drl, key=lambda r: r["iqm"])
+    return str(best["policy"]).lower()
 
 
 def episode_rates(run_dir: Path) -> np.ndarray:
@@ -64,7 +67,11 @@ def learning_curve_summary(series: Sequence[np.ndarray], points: int = 100) -> t
 def compare_algorithms(preset: str = "quick", seeds: int = 5, workers: int = 2, out: Path | None = None,
                        algos: Sequence[str] = ALGORITHMS, scenario: str = "fig2",
                        eval_episodes: int | None = None, backend: str = "local",
-                       ray_address: str | None = None, progress: bool = True) -> Path:
+                       ray_address: str | None = None, progress: bool = True,
+                       runner: JobRunner | None = None) -> Path:
+    """Train ``algos`` x ``seeds`` in ``scenario`` and write the comparison into ``out``; returns
+    the report path. Jobs go to ``runner`` when given (shared with other work), else to a
+    pool of ``workers`` of their own."""
     if preset not in PRESETS:
         raise UavrisError(f"unknown preset {preset!r}; choose one of {', '.join(PRESETS)}")
     if seeds < 1 or workers < 1:
@@ -89,7 +96,10 @@ def compare_algorithms(preset: str = "quick", seeds: int = 5, workers: int = 2, 
         status = "done" if res.ok else f"FAILED ({res.error}); log: {res.log}"
         bar.write(f"  {res.name}: {status}")
 
-    results = run_jobs(todo, workers, done, backend=backend, ray_address=ray_address)
+    if runner is not None:
+        results = runner.run(todo, done)
+    else:
+        results = run_jobs(todo, workers, done, backend=backend, ray_address=ray_address)
     bar.close()
     failures = [r for r in results if not r.ok]
     report = write_comparison(out, cfgs, scenario, n_eval, time.perf_counter() - t0, failures)
@@ -121,25 +131,27 @@ def write_comparison(out: Path, cfgs: dict[tuple[str, int], TrainConfig], scenar
         s = summarize(scores)
         rows.append({"policy": a.upper(), "kind": "DRL", **s, "train_last10pct": float(np.mean(last)) if last else
                      float("nan"), "paper": PAPER_FIG2.get(a, float("nan"))})
-    references = {name: make(0) for name, make in BASELINES.items()}
-    references["oracle"] = oracle_policy()
-    for name, policy in references.items():
-        res = evaluate(policy, any_cfg.system, scenario, n_eval, eval_seed)
+    for name in COMPARISON_REFERENCES:
+        res = evaluate(reference_policy(name), any_cfg.system, scenario, n_eval, eval_seed)
         s = summarize(res.avg_sum_rate)
-        rows.append({"policy": name, "kind": "oracle" if name == "oracle" else "baseline", **s,
+        rows.append({"policy": name, "kind": "oracle" if name == ORACLE else "baseline", **s,
                      "train_last10pct": float("nan"), "paper": float("nan")})
-    oracle_mean = rows[-1]["mean"]
+    by_name = {r["policy"]: r for r in rows}
+    oracle_mean, zero = by_name[ORACLE]["mean"], by_name[ZERO_ACTION]["mean"]
     for r in rows:
         r["fraction_of_oracle"] = r["mean"] / oracle_mean if oracle_mean > 0 else float("nan")
+        r["vs_zero_action"] = "-" if r["policy"] == ZERO_ACTION else versus(r["mean_ci_low"], r["mean_ci_high"], zero)
     header = list(rows[0].keys()) if rows else []
     write_csv(out / "final_performance.csv", header, [[r[h] for h in header] for r in rows])
     write_csv(out / "final_per_run.csv", ("algo", "run", "final_eval_mean"), per_run)
     figs = []
     if curves:
+        refs = {name: (REFERENCES[name].label, by_name[name]["mean"]) for name in FIGURE_REFERENCES}
         figs = learning_curves(curves, out / "learning_curves",
                                f"{scenario} {get_scenario(scenario).start}, mean and 95% bootstrap band over seeds",
-                               PAPER_FIG2 if scenario == "fig2" else None)
-    write_json(out / "summary.json", {"rows": rows, "wall_clock_s": wall_s,
+                               PAPER_FIG2 if scenario == "fig2" else None, refs)
+    expert = select_expert(rows) if any(r["kind"] == "DRL" for r in rows) else None
+    write_json(out / "summary.json", {"rows": rows, "expert": expert, "wall_clock_s": wall_s,
                                       "failures": [dataclasses.asdict(f) | {"log": str(f.log), "value": None}
                                                    for f in failures]})
     report = out / "report.md"
@@ -168,16 +180,18 @@ def render_report(rows: list[dict[str, Any]], cfgs: dict[tuple[str, int], TrainC
     lines += ["## Final performance (average sum rate, bps/Hz)", "",
               "For DRL rows, statistics are over seeds (each seed's score is its mean over the evaluation "
               "episodes); for baselines and the oracle, over the evaluation episodes. CIs: 95% percentile "
-              "bootstrap. The oracle (`uavris.agents.oracle`) optimises the phases every slot and searches the "
-              "next move; every policy is also shown as a fraction of it.", "",
-              "| policy | n | mean | 95% CI (mean) | IQM | 95% CI (IQM) | fraction of oracle | training, last 10% "
-              "of episodes | paper |",
-              "|---|---:|---:|---|---:|---|---:|---:|---:|"]
+              "bootstrap. `hover` is the zero action (doing nothing); the oracle (`uavris.agents.oracle`) "
+              "optimises the phases every slot and flies to the best region it plans; every policy is shown "
+              "against both: whether its CI lies above or below the zero action's mean (tie: not resolved), "
+              "and as a fraction of the oracle.", "",
+              "| policy | n | mean | 95% CI (mean) | IQM | 95% CI (IQM) | vs zero action | fraction of oracle | "
+              "training, last 10% of episodes | paper |",
+              "|---|---:|---:|---|---:|---|---|---:|---:|---:|"]
     for r in rows:
         paper = "" if np.isnan(r["paper"]) else f"{r['paper']:.1f}"
         train_last = "" if np.isnan(r["train_last10pct"]) else f"{r['train_last10pct']:.2f}"
         lines.append(f"| {r['policy']} | {r['n']} | {r['mean']:.2f} | {_fmt_ci(r['mean_ci_low'], r['mean_ci_high'])} "
-                     f"| {r['iqm']:.2f} | {_fmt_ci(r['iqm_ci_low'], r['iqm_ci_high'])} | "
+                     f"| {r['iqm']:.2f} | {_fmt_ci(r['iqm_ci_low'], r['iqm_ci_high'])} | {r['vs_zero_action']} | "
                      f"{r['fraction_of_oracle']:.0%} | {train_last} | {paper} |")
     drl = [r for r in rows if r["kind"] == "DRL"]
     lines += ["", "## Verdict", ""]
@@ -195,6 +209,14 @@ def render_report(rows: list[dict[str, Any]], cfgs: dict[tuple[str, int], TrainC
         lines.append(f"The paper ranks {paper_rank} with DDPG best; "
                      + ("our result **agrees** on the winner." if agrees else
                         f"our result **does not agree**: {best['policy']} wins here."))
+        chosen = select_expert(rows)
+        lines.append(f"Expert algorithm chosen as the paper does (Sec. IV-B), by the largest IQM of the final "
+                     f"evaluations: **{chosen.upper()}**.")
+        zero = next(r for r in rows if r["policy"] == ZERO_ACTION)
+        below = [r["policy"] for r in drl if r["vs_zero_action"] != "above"]
+        if below:
+            lines.append(f"Doing nothing (the zero action, {zero['mean']:.2f}) is not beaten by "
+                         f"{', '.join(below)}: their 95% CIs do not lie above it.")
         base = {r["policy"]: r["mean"] for r in rows if r["kind"] == "baseline"}
         if base:
             lines.append(f"Baselines: {', '.join(f'{k} {v:.2f}' for k, v in base.items())} bps/Hz. "

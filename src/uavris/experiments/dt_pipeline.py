@@ -17,10 +17,16 @@ quantile of the dataset's episode returns, stored in the checkpoint. With
 a window, and ``batch_size`` counts episodes.
 
 **Fine-tune** (:func:`finetune`, Algorithm 1 stage 2) in one scenario, for H rounds:
-collect N trajectories with Gaussian noise sigma on the DT's actions, keep the top K by
-return (eq. 18), relabel their returns-to-go from the rewards actually received, and
-minimise L_FT (eq. 19) on them. The paper fixes N = 80 and K = 50 and leaves the rest open;
-ours, with reasons:
+collect N trajectories with Gaussian noise sigma on the DT's actions, keep K elites,
+relabel their returns-to-go from the rewards actually received, and minimise L_FT (eq. 19)
+on them. The paper fixes N = 80 and K = 50 and leaves the rest open; ours, with reasons:
+
+- Elites (a departure, docs/model.md): by default (``selection="paired"``) the N candidates
+  are N / 5 episode seeds with 5 noisy rollouts each, and the K kept are those with the
+  largest return relative to the mean of their seed's rollouts. Rollouts of one seed share
+  every channel and pairing draw, so the difference is what the actions did; the paper's
+  plain top-K by return (eq. 18, ``selection="return"``) mostly keeps episodes that were
+  lucky in which pairs were active.
 
 - H = 10 rounds (``paper``), 3 (``quick``): 800 episodes = 80,000 slots of interaction in
   ``paper``, about 3% of one DDPG expert's 2.5 M training steps, which is the saving the
@@ -77,6 +83,7 @@ from uavris.agents.dt_data import (
     load_dataset,
     normalisation_from,
     record_episodes,
+    ELITE_RULES,
     select_elites,
     write_dataset,
 )
@@ -90,10 +97,16 @@ from uavris.agents.dt_model import (
 )
 from uavris.agents.dt_policy import DTBatchPolicy
 from uavris.agents.evaluation import evaluate
-from uavris.agents.experts import sb3_batch_policy
+from uavris.agents.hybrid import action_dim_for
 from uavris.config import ConfigError, SystemConfig, get_scenario
 from uavris.experiments.io import UavrisError, atomic_write_bytes, read_csv, read_json, read_rows, write_csv, write_json
-from uavris.experiments.training import configure_torch_threads, final_model_path, load_model, load_run_config
+from uavris.experiments.training import (
+    configure_torch_threads,
+    final_model_path,
+    load_model,
+    load_run_config,
+    run_policy,
+)
 
 PRESETS: tuple[str, ...] = ("smoke", "quick", "paper")
 PRETRAIN_KIND = "uavris-dt-pretrain"
@@ -145,21 +158,25 @@ def collect(experts: Sequence[str | Path], trajectories: int, out: str | Path, *
             raise UavrisError(f"{run_dir} is not a directory (expected an expert run directory)")
         runs.append((run_dir, load_run_config(run_dir)))
     system = runs[0][1].system
+    phase_control = runs[0][1].phase_control
     for run_dir, cfg in runs[1:]:
         if cfg.system != system:
             raise UavrisError(f"{run_dir} was trained with a different system configuration than {runs[0][0]}; "
                               "a dataset holds one system")
+        if cfg.phase_control != phase_control:
+            raise UavrisError(f"{run_dir} sets the phases with phase control {cfg.phase_control!r}, {runs[0][0]} "
+                              f"with {phase_control!r}; a dataset holds one action layout")
     if out.exists() and not force:  # checked before the rollouts, not only when writing
         raise UavrisError(f"{out} already exists; pass --force to replace it")
     bar = _bar(len(runs) * trajectories, "collect", "episode", progress)
     trajs: list[Trajectory] = []
     try:
         for k, (run_dir, cfg) in enumerate(runs):
-            policy = sb3_batch_policy(load_model(final_model_path(run_dir), cfg.algo))
+            policy = run_policy(load_model(final_model_path(run_dir), cfg.algo), cfg)
             seeds = seed + k * trajectories + np.arange(trajectories)
             for start in range(0, trajectories, 256):
                 batch = record_episodes(policy, system, cfg.scenario, seeds[start:start + 256], expert=str(run_dir),
-                                        expert_algo=cfg.algo)
+                                        expert_algo=cfg.algo, phase_control=phase_control)
                 trajs.extend(batch)
                 if bar is not None:
                     bar.update(len(batch))
@@ -169,7 +186,7 @@ def collect(experts: Sequence[str | Path], trajectories: int, out: str | Path, *
     description = (f"uavris expert trajectories: {len(runs)} experts x {trajectories} deterministic episodes "
                    f"({', '.join(sorted({cfg.scenario for _, cfg in runs}))})")
     with user_errors():
-        return write_dataset(out, trajs, system, description=description, force=force)
+        return write_dataset(out, trajs, system, description=description, force=force, phase_control=phase_control)
 
 
 def dataset_summary(path: str | Path) -> dict[str, Any]:
@@ -241,7 +258,8 @@ def pretrain_config(dataset: str | Path, preset: str = "quick", seed: int = 0, *
 
 
 FINETUNE_PRESETS: dict[str, dict[str, Any]] = {
-    "smoke": dict(rounds=1, candidates=4, elites=2, epochs_per_round=1, batch_size=8, warmup_steps=2, eval_episodes=2),
+    "smoke": dict(rounds=1, candidates=4, elites=2, rollouts_per_seed=2, epochs_per_round=1, batch_size=8,
+                  warmup_steps=2, eval_episodes=2),
     "quick": dict(rounds=3, epochs_per_round=2, eval_episodes=16),
     "paper": dict(rounds=10, epochs_per_round=5, eval_episodes=100),
 }
@@ -259,6 +277,8 @@ class FinetuneConfig:
     candidates: int = 80  # N
     elites: int = 50  # K
     noise_sigma: float = 0.1  # sigma
+    selection: str = "paired"  # "return": eq. (18); "paired": within-seed ranking (docs/model.md)
+    rollouts_per_seed: int = 5  # paired: candidates = seeds x rollouts_per_seed
     epochs_per_round: int = 2
     batch_size: int = 64
     learning_rate: float = 5e-5
@@ -277,6 +297,13 @@ class FinetuneConfig:
                                                  "learning_rate", "warmup_steps", "grad_clip", "eval_episodes"))
         if self.elites > self.candidates:
             raise ConfigError(f"FinetuneConfig.elites ({self.elites}) must be <= candidates ({self.candidates})")
+        if self.selection not in ELITE_RULES:
+            raise ConfigError(f"FinetuneConfig.selection must be one of {', '.join(ELITE_RULES)}, "
+                              f"got {self.selection!r}")
+        if self.selection == "paired" and not (isinstance(self.rollouts_per_seed, int) and self.rollouts_per_seed >= 2
+                                               and self.candidates % self.rollouts_per_seed == 0):
+            raise ConfigError(f"FinetuneConfig.rollouts_per_seed must be an integer >= 2 dividing candidates "
+                              f"({self.candidates}) for paired selection, got {self.rollouts_per_seed!r}")
         if self.noise_sigma < 0 or self.seed < 0 or self.weight_decay < 0:
             raise ConfigError("FinetuneConfig.noise_sigma, seed and weight_decay must be >= 0")
         if self.target_return is not None and not math.isfinite(self.target_return):
@@ -474,7 +501,8 @@ def pretrain(cfg: PretrainConfig, run_dir: str | Path, *, resume: bool = False, 
     torch.manual_seed(cfg.seed)
     rng = np.random.default_rng(cfg.seed)
     norm = normalisation_from(ds.trajectories)
-    model = DecisionTransformer(cfg.model_config(system.observation_dim, system.action_dim, system.horizon),
+    model = DecisionTransformer(cfg.model_config(system.observation_dim, action_dim_for(system, ds.phase_control),
+                                                 system.horizon),
                                 norm.state_mean, norm.state_std, norm.return_scale)
     opt = _make_optimizer(model, cfg.learning_rate, cfg.weight_decay)
     windows = TrainingWindows.for_model(ds.trajectories, model.cfg)
@@ -483,7 +511,7 @@ def pretrain(cfg: PretrainConfig, run_dir: str | Path, *, resume: bool = False, 
         "dataset_id": ds.dataset_id, "system": system.to_dict(), "observation_layout": layout_as_lists(system),
         "target_return": default_target_return(ds.trajectories, cfg.target_quantile),
         "target_return_rule": f"{cfg.target_quantile} quantile of the dataset's episode returns",
-        "env_interactions": 0,
+        "env_interactions": 0, "phase_control": ds.phase_control,
     }
     start, log = 0, []
     if resuming and (latest := _latest_checkpoint(run_dir)) is not None:
@@ -564,6 +592,11 @@ def finetune(cfg: FinetuneConfig, run_dir: str | Path, *, resume: bool = False, 
     model_meta = {**{k: v for k, v in pre_meta.items() if k not in ("kind", "format_version", "config")},
                   "stage": "finetune", "scenario": cfg.scenario, "pretrained_model": str(cfg.model),
                   "target_return": float(target)}
+    phase_control = pre_meta.get("phase_control", "agent")
+
+    def dt_policy(sigma: float = 0.0, noise_seed: int | None = None) -> DTBatchPolicy:
+        return DTBatchPolicy(model, target, sigma, noise_seed, phase_control)
+
     done_round, steps, interactions, rows = 0, 0, 0, []
     if resuming and (latest := _latest_checkpoint(run_dir)) is not None:
         done_round, ck = latest
@@ -574,7 +607,7 @@ def finetune(cfg: FinetuneConfig, run_dir: str | Path, *, resume: bool = False, 
     writer = _tb_writer(run_dir, done_round)
     model.eval()
     if not rows:  # round 0: the zero-shot policy
-        ev = evaluate(DTBatchPolicy(model, target), system, cfg.scenario, cfg.eval_episodes, cfg.eval_seed).summary()
+        ev = evaluate(dt_policy(), system, cfg.scenario, cfg.eval_episodes, cfg.eval_seed).summary()
         rows.append([0, 0, 0, *([float("nan")] * 5), ev["mean"], ev["ci_low"], ev["ci_high"]])
         writer.add_scalar("eval/avg_sum_rate", ev["mean"], 0)
         write_csv(run_dir / "finetune.csv", ROUND_HEADER, rows)
@@ -584,18 +617,19 @@ def finetune(cfg: FinetuneConfig, run_dir: str | Path, *, resume: bool = False, 
         for h in range(done_round + 1, cfg.rounds + 1):
             # Noise seeded by (seed, round): a resumed run explores exactly as an uninterrupted one.
             noise_seed = int(np.random.SeedSequence([cfg.seed, h]).generate_state(1)[0])
-            explorer = DTBatchPolicy(model, target, cfg.noise_sigma, noise_seed)
-            seeds = cfg.collect_seed + (h - 1) * cfg.candidates + np.arange(cfg.candidates)
-            cands = record_episodes(explorer, system, cfg.scenario, seeds, expert="dt-finetune", expert_algo="dt")
+            per_seed = cfg.rollouts_per_seed if cfg.selection == "paired" else 1
+            distinct = cfg.candidates // per_seed
+            seeds = np.repeat(cfg.collect_seed + (h - 1) * cfg.candidates + np.arange(distinct), per_seed)
+            cands = record_episodes(dt_policy(cfg.noise_sigma, noise_seed), system, cfg.scenario, seeds,
+                                    expert="dt-finetune", expert_algo="dt", phase_control=phase_control)
             interactions += sum(tr.length for tr in cands)
-            elites = select_elites(cands, cfg.elites)
+            elites = select_elites(cands, cfg.elites, cfg.selection)
             windows = TrainingWindows.for_model(elites, model.cfg)  # RTGs from the rewards actually received
             count = cfg.epochs_per_round * math.ceil(windows.samples_per_epoch / cfg.batch_size)
             losses = _train_steps(model, opt, windows, rng, steps, count, cfg.batch_size, cfg.learning_rate,
                                   cfg.warmup_steps, cfg.grad_clip)
             steps += count
-            ev = evaluate(DTBatchPolicy(model, target), system, cfg.scenario, cfg.eval_episodes,
-                          cfg.eval_seed).summary()
+            ev = evaluate(dt_policy(), system, cfg.scenario, cfg.eval_episodes, cfg.eval_seed).summary()
             ret = [tr.episode_return for tr in cands]
             rows.append([h, interactions, steps, float(np.mean(ret)),
                          float(np.mean([tr.episode_return / tr.length for tr in cands])),
@@ -671,4 +705,5 @@ def load_dt_policy(path: str | Path, target_return: float | None = None) -> tupl
     target = meta.get("target_return") if target_return is None else target_return
     if target is None:
         raise UavrisError(f"{model_dir} stores no target return")
-    return DTBatchPolicy(model, float(target)), system, meta.get("scenario")
+    return (DTBatchPolicy(model, float(target), phase_control=meta.get("phase_control", "agent")), system,
+            meta.get("scenario"))

@@ -2,11 +2,12 @@
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from uavris.agents.baselines import BASELINES
 from uavris.agents.evaluation import EpisodeResults, evaluate
+from uavris.agents.references import REFERENCE_SEED, REFERENCES, reference_policy
 from uavris.config import SystemConfig, get_scenario
 from uavris.experiments.io import UavrisError, write_csv, write_json
 from uavris.agents.hybrid import check_phase_control, with_optimised_phases
@@ -21,25 +22,51 @@ from uavris.experiments.training import (
 BASELINE_PREFIX = "baseline:"
 
 
-def resolve_policy(target: str, seed: int) -> tuple[Any, SystemConfig, str | None, Path | None]:
-    """(batch policy, system config, the run's own scenario, run directory) for a target."""
-    if target.startswith(BASELINE_PREFIX):
-        name = target[len(BASELINE_PREFIX):]
-        if name not in BASELINES:
-            raise UavrisError(f"unknown baseline {name!r}; choose one of {', '.join(BASELINES)}")
-        return BASELINES[name](seed), SystemConfig(), None, None
+def reference_name(target: str) -> str | None:
+    """The reference a target names (``NAME`` or ``baseline:NAME``), or None for a path.
+    An existing directory is always a run, even if its name is a reference's."""
+    name = target[len(BASELINE_PREFIX):] if target.startswith(BASELINE_PREFIX) else target
+    if target.startswith(BASELINE_PREFIX) or (name in REFERENCES and not Path(target).is_dir()):
+        if name not in REFERENCES:
+            raise UavrisError(f"unknown baseline {name!r}; choose one of {', '.join(REFERENCES)}")
+        return name
+    return None
+
+
+@dataclass(frozen=True)
+class Target:
+    """What ``uavris evaluate`` resolved a target to."""
+
+    policy: Any  # batch policy
+    system: SystemConfig
+    scenario: str | None  # the run's own scenario (None: a reference or a pre-trained DT)
+    run_dir: Path | None  # None for a reference
+    phase_control: str  # how it was trained: "agent" (all entries) or "optimizer" (motion only)
+
+
+def resolve_policy(target: str) -> Target:
+    """Resolve a run directory, DT model directory or reference name.
+
+    References use their own fixed seed (:data:`uavris.agents.references.REFERENCE_SEED`),
+    so ``uavris evaluate oracle`` gives the numbers of the reports whatever episodes it is
+    evaluated on.
+    """
+    name = reference_name(target)
+    if name is not None:
+        return Target(reference_policy(name, REFERENCE_SEED), SystemConfig(), None, None, "agent")
     run_dir = Path(target)
     if not run_dir.is_dir():
-        raise UavrisError(f"{run_dir} is not a directory (expected a run directory or baseline:NAME)")
+        raise UavrisError(f"{run_dir} is not a directory (expected a run directory, a model directory or one of the "
+                          f"references {', '.join(REFERENCES)})")
     from uavris.experiments.dt_pipeline import dt_model_dir, load_dt_policy
 
     if dt_model_dir(run_dir) is not None:  # a Decision Transformer model or DT run directory
         policy, system, scenario = load_dt_policy(run_dir)
-        return policy, system, scenario, run_dir
+        return Target(policy, system, scenario, run_dir, policy.phase_control)
     cfg = load_run_config(run_dir)
     configure_torch_threads()
     model = load_model(final_model_path(run_dir), cfg.algo)
-    return run_policy(model, cfg), cfg.system, cfg.scenario, run_dir
+    return Target(run_policy(model, cfg), cfg.system, cfg.scenario, run_dir, cfg.phase_control)
 
 
 def write_results(res: EpisodeResults, summary: dict[str, Any], stem: Path) -> None:
@@ -56,8 +83,12 @@ def evaluate_target(target: str, scenario: str | None, episodes: int, seed: int,
         raise UavrisError(f"--episodes must be >= 1, got {episodes}")
     if phase_control is not None:
         check_phase_control(phase_control)
-    policy, system, own_scenario, run_dir = resolve_policy(target, seed)
-    if phase_control == "optimizer":
+    resolved = resolve_policy(target)
+    policy, system, own_scenario, run_dir = resolved.policy, resolved.system, resolved.scenario, resolved.run_dir
+    if phase_control == "agent" and resolved.phase_control == "optimizer":
+        raise UavrisError(f"{target} acts on the motion only (trained with the optimiser setting the phases, the "
+                          "strong track); it cannot be evaluated with --phase-control agent")
+    if phase_control == "optimizer" and resolved.phase_control == "agent":
         policy = with_optimised_phases(policy)
     scenario = scenario or own_scenario
     if scenario is None:
@@ -67,7 +98,7 @@ def evaluate_target(target: str, scenario: str | None, episodes: int, seed: int,
     summary = {"target": target, "scenario": scenario, "seed": seed, "phase_control": phase_control or "as trained",
                **res.summary()}
     if out is None:
-        base = run_dir if run_dir is not None else Path("runs/baselines") / target[len(BASELINE_PREFIX):]
+        base = run_dir if run_dir is not None else Path("runs/baselines") / str(reference_name(target))
         out = base / "eval"
     suffix = "-optimizer-phases" if phase_control == "optimizer" else ""
     stem = Path(out) / f"{scenario}-seed{seed}-n{episodes}{suffix}"

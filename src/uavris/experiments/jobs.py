@@ -13,10 +13,13 @@ their own configuration, so both backends give the same results.
 
 from __future__ import annotations
 
+import heapq
+import itertools
 import multiprocessing as mp
 import sys
+import threading
 import traceback
-from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures import Future, ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable
@@ -62,52 +65,122 @@ def _run_logged(job: Job) -> JobResult:
 BACKENDS = ("local", "ray")
 
 
-def run_jobs(jobs: list[Job], workers: int, on_done: Callable[[JobResult], None] | None = None,
-             backend: str = "local", ray_address: str | None = None) -> list[JobResult]:
-    """Run ``jobs`` with ``workers`` processes (in this process when ``workers`` <= 1 locally)."""
-    if backend not in BACKENDS:
-        raise ValueError(f"unknown backend {backend!r}; choose one of {', '.join(BACKENDS)}")
-    if backend == "ray":
-        return _run_ray(jobs, workers, ray_address, on_done)
-    results: list[JobResult] = []
-    if workers <= 1 or len(jobs) <= 1:
-        for job in jobs:
-            res = _run_logged(job)
+class JobRunner:
+    """Runs jobs on ``workers`` processes (or Ray CPUs) shared by every caller.
+
+    :meth:`run` may be called from several threads at once (the stages of a pipeline that
+    run concurrently): all their jobs share the one pool, so at most ``workers`` jobs run at
+    a time whoever submitted them, and a waiting job with a higher ``priority`` starts
+    before the others (the stages of a study's longest chain go first; the Ray backend
+    leaves the order to Ray). With one local worker the jobs run in the calling thread, one
+    at a time. Use as a context manager, or call :meth:`close`.
+    """
+
+    def __init__(self, workers: int, backend: str = "local", ray_address: str | None = None) -> None:
+        if backend not in BACKENDS:
+            raise ValueError(f"unknown backend {backend!r}; choose one of {', '.join(BACKENDS)}")
+        self.workers, self.backend, self.ray_address = max(1, int(workers)), backend, ray_address
+        self._lock = threading.Condition()
+        self._pool: ProcessPoolExecutor | None = None
+        self._ray_started = False
+        self._waiting: list[tuple[int, int, Job, Future[JobResult] | None]] = []  # heap: (-priority, order, ...)
+        self._order = itertools.count()
+        self._busy = 0
+
+    def __enter__(self) -> JobRunner:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def close(self) -> None:
+        if self._pool is not None:
+            self._pool.shutdown()
+            self._pool = None
+        if self._ray_started:
+            import ray
+
+            ray.shutdown()
+            self._ray_started = False
+
+    def run(self, jobs: list[Job], on_done: Callable[[JobResult], None] | None = None,
+            priority: int = 0) -> list[JobResult]:
+        """Run ``jobs``; ``on_done`` is called as each finishes. Returns results in finishing order."""
+        if not jobs:
+            return []
+        if self.backend == "ray":
+            return self._run_ray(jobs, on_done)
+        if self.workers <= 1:
+            return [self._run_here(job, on_done, priority) for job in jobs]
+        with self._lock:
+            if self._pool is None:
+                self._pool = ProcessPoolExecutor(max_workers=self.workers, mp_context=mp.get_context("spawn"))
+            futures: dict[Future[JobResult], Job] = {}
+            for job in jobs:
+                fut: Future[JobResult] = Future()
+                heapq.heappush(self._waiting, (-priority, next(self._order), job, fut))
+                futures[fut] = job
+            self._dispatch()
+        results = []
+        for fut in as_completed(futures):
+            res = fut.result()
             results.append(res)
             if on_done:
                 on_done(res)
         return results
-    with ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("spawn")) as pool:
-        futures = {pool.submit(_run_logged, job): job for job in jobs}
-        for fut in as_completed(futures):
-            job = futures[fut]
-            try:
-                res = fut.result()
-            except BaseException as e:  # noqa: BLE001 - a worker that died (e.g. killed by the OOM killer)
-                res = JobResult(job.name, False, None, f"worker died: {type(e).__name__}: {e}", job.log)
-            results.append(res)
-            if on_done:
-                on_done(res)
-    return results
 
+    def _dispatch(self) -> None:
+        """Start waiting jobs, highest priority first, while workers are free (lock held)."""
+        while self._busy < self.workers and self._waiting:
+            _, _, job, outer = heapq.heappop(self._waiting)
+            self._busy += 1
+            assert self._pool is not None and outer is not None
+            self._pool.submit(_run_logged, job).add_done_callback(
+                lambda inner, job=job, outer=outer: self._finished(inner, job, outer))
 
-def _run_ray(jobs: list[Job], workers: int, address: str | None,
-             on_done: Callable[[JobResult], None] | None) -> list[JobResult]:
-    try:
-        import ray
-    except ImportError:
-        raise ImportError("the Ray backend needs Ray: pip install 'uavris[ray]'") from None
-    if not jobs:
-        return []
-    started_here = not ray.is_initialized()
-    if started_here:
-        if address:
-            ray.init(address=address, log_to_driver=False)
-        else:
-            ray.init(num_cpus=max(1, workers), include_dashboard=False, log_to_driver=False)
-    try:
-        remote = ray.remote(num_cpus=1, max_retries=0)(_run_logged)
-        refs = {remote.remote(job): job for job in jobs}
+    def _finished(self, inner: Future[JobResult], job: Job, outer: Future[JobResult]) -> None:
+        try:
+            res = inner.result()
+        except BaseException as e:  # noqa: BLE001 - a worker that died (e.g. killed by the OOM killer)
+            res = JobResult(job.name, False, None, f"worker died: {type(e).__name__}: {e}", job.log)
+        with self._lock:
+            self._busy -= 1
+            self._dispatch()
+        outer.set_result(res)
+
+    def _run_here(self, job: Job, on_done: Callable[[JobResult], None] | None, priority: int) -> JobResult:
+        """One job in this thread once no other is running and none of higher priority waits."""
+        entry = (-priority, next(self._order), job, None)
+        with self._lock:
+            heapq.heappush(self._waiting, entry)
+            while self._busy or self._waiting[0] is not entry:
+                self._lock.wait()
+            heapq.heappop(self._waiting)
+            self._busy = 1
+        try:
+            res = _run_logged(job)
+        finally:
+            with self._lock:
+                self._busy = 0
+                self._lock.notify_all()
+        if on_done:
+            on_done(res)
+        return res
+
+    def _run_ray(self, jobs: list[Job], on_done: Callable[[JobResult], None] | None) -> list[JobResult]:
+        try:
+            import ray
+        except ImportError:
+            raise ImportError("the Ray backend needs Ray: pip install 'uavris[ray]'") from None
+        with self._lock:
+            if not ray.is_initialized():
+                if self.ray_address:
+                    ray.init(address=self.ray_address, log_to_driver=False)
+                else:
+                    ray.init(num_cpus=self.workers, include_dashboard=False, log_to_driver=False)
+                self._ray_started = True
+            remote = ray.remote(num_cpus=1, max_retries=0)(_run_logged)
+            refs = {remote.remote(job): job for job in jobs}
         pending = list(refs)
         results: list[JobResult] = []
         while pending:
@@ -122,6 +195,10 @@ def _run_ray(jobs: list[Job], workers: int, address: str | None,
                 if on_done:
                     on_done(res)
         return results
-    finally:
-        if started_here:
-            ray.shutdown()
+
+
+def run_jobs(jobs: list[Job], workers: int, on_done: Callable[[JobResult], None] | None = None,
+             backend: str = "local", ray_address: str | None = None) -> list[JobResult]:
+    """Run ``jobs`` on a :class:`JobRunner` of its own (in this process when ``workers`` <= 1 locally)."""
+    with JobRunner(workers, backend, ray_address) as runner:
+        return runner.run(jobs, on_done)

@@ -33,14 +33,26 @@ def save_figure(fig: plt.Figure, stem: Path) -> list[Path]:
     return out
 
 
+REFERENCE_STYLE = {"hover": ("0.35", "--"), "hover-optimizer": ("#9467bd", "-."), "oracle": ("k", ":")}
+
+
+def reference_lines(ax: plt.Axes, references: Mapping[str, tuple[str, float]]) -> None:
+    """Horizontal lines at reference scores, ``references[key] = (label, value)``."""
+    for key, (label, value) in references.items():
+        color, ls = REFERENCE_STYLE.get(key, ("0.5", "--"))
+        ax.axhline(value, color=color, ls=ls, lw=1.0, label=f"{label} ({value:.1f})")
+
+
 def learning_curves(curves: Mapping[str, tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]],
-                    stem: Path, title: str, paper_values: Mapping[str, float] | None = None) -> list[Path]:
+                    stem: Path, title: str, paper_values: Mapping[str, float] | None = None,
+                    references: Mapping[str, tuple[str, float]] | None = None) -> list[Path]:
     """Average sum rate vs training episodes: mean over seeds with a 95% bootstrap band.
 
-    ``curves[name] = (episodes, mean, low, high)``; optional dashed lines at the paper's
-    converged values.
+    ``curves[name] = (episodes, mean, low, high)``; optional dotted lines at the paper's
+    converged values and horizontal lines at reference scores (:func:`reference_lines`).
     """
-    fig, ax = plt.subplots(figsize=(4.8, 3.4))
+    fig, ax = plt.subplots(figsize=(4.8, 3.6))
+    reference_lines(ax, references or {})
     for name, (x, mean, lo, hi) in curves.items():
         color = COLORS.get(name)
         ax.plot(x, mean, label=name.upper(), color=color, lw=1.4)
@@ -50,7 +62,7 @@ def learning_curves(curves: Mapping[str, tuple[np.ndarray, np.ndarray, np.ndarra
     ax.set_xlabel("training episode")
     ax.set_ylabel("average sum rate (bps/Hz)")
     ax.set_title(title, fontsize=9)
-    ax.legend(loc="lower right", fontsize=8, frameon=False)
+    ax.legend(loc="center right", fontsize=7, frameon=False)
     if paper_values:
         ax.text(0.01, 0.99, "dotted: paper's converged values", transform=ax.transAxes, va="top", fontsize=7,
                 color="0.4")

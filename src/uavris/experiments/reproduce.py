@@ -1,40 +1,62 @@
-"""``uavris reproduce``: the paper's whole study, resumable, on a process pool or Ray.
+"""``uavris reproduce``: the paper's whole study in two tracks, resumable, on a process pool or Ray.
 
 Stages (each in ``OUT/stages/NAME-KEY``, keyed by its configuration and its inputs):
 
 1. ``compare``: DDPG, PPO, SAC, TD3 over seeds in the Fig. 2 scenario (paper Fig. 2).
-2. ``experts-train``: a DDPG expert in each of the eight training scenarios.
-3. ``experts-unseen``: a scenario-specific DDPG expert in each unseen scenario.
+2. ``experts-train``: an expert in each of the eight training scenarios, of the algorithm
+   the comparison picks (largest IQM, as the paper's Sec. IV-B) or ``expert_algo``.
+3. ``experts-unseen``: a scenario-specific expert in each unseen scenario.
 4. ``dataset``: the experts' deterministic trajectories as a Minari dataset.
 5. ``pretrain``: the Decision Transformer, offline (Algorithm 1, stage 1).
 6. ``finetune-unseenX``: elite online fine-tuning in each unseen scenario (stage 2).
-7. ``evaluate-unseenX``: the expert, the zero-shot DT, the fine-tuned DT and the DDPG
-   experts of the nearest training scenarios (transferred), all on the same seeded
-   evaluation episodes (paper Fig. 3).
+7. ``evaluate-unseenX``: the expert, the zero-shot DT, the fine-tuned DT, the experts of the
+   nearest training scenarios (transferred) and the references (zero action, hover with
+   the optimiser's phases, oracle), all on the same seeded evaluation episodes (Fig. 3).
 8. ``report``: figures and ``OUT/report.md`` with every number read from the stage files.
+
+Stages 2-7 exist once per track (:mod:`.study`): the paper track as above, and the strong
+track (learned motion, optimised phases) with the same names prefixed ``strong-``. Stages
+whose inputs are ready run at the same time, and all their jobs share ``workers``
+processes, so the two tracks interleave.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import shutil
+import threading
 import time
 from pathlib import Path
 from typing import Any, Sequence
 
-import numpy as np
-
-from uavris.config import SCENARIOS, TRAINING_SCENARIOS, UNSEEN_SCENARIOS, SystemConfig, get_scenario
-from uavris.experiments.io import UavrisError, read_csv, read_json, write_csv, write_json
-from uavris.experiments.jobs import BACKENDS, Job, JobResult, run_jobs
+from uavris.agents.experts import ALGORITHMS
+from uavris.config import TRAINING_SCENARIOS, UNSEEN_SCENARIOS, SystemConfig
+from uavris.experiments.io import UavrisError, read_json
+from uavris.experiments.jobs import BACKENDS, Job, JobResult, JobRunner
 from uavris.experiments.stages import Pipeline, Stage, StageRecord
-from uavris.experiments.training import PRESETS, TrainConfig, is_finished, preset_config
+from uavris.experiments.study import (
+    EVAL_SEED,
+    TRACK_SPECS,
+    TRACKS,
+    Track,
+    dataset_job,
+    evaluate_job,
+    finetune_job,
+    nearest_training_scenarios,
+    pretrain_job,
+    strong_expert_config,
+)
+from uavris.experiments.training import PRESETS, TrainConfig, is_finished, preset_config, train_job
 
-EVAL_SEED = 1_000_000
 EVAL_EPISODES = {"smoke": 8, "quick": 32, "paper": 100}
-COMPARE_SEEDS = {"smoke": 2, "quick": 5, "paper": 5}
+# quick: 3 seeds (5 before the strong track): both tracks must fit 60 minutes on 2 cores, and the
+# comparison alone took 37.8 min with 5 seeds on the project machine (README); paper keeps 5.
+COMPARE_SEEDS = {"smoke": 2, "quick": 3, "paper": 5}
 TRAJECTORIES = {"smoke": 4, "quick": 100, "paper": 500}  # per training scenario (paper: 500)
-TRANSFER_NEIGHBOURS = 2
+TRACK_CHOICES = ("both",) + TRACKS
+AUTO = "auto"
+# Job priorities: a free worker takes DT-chain jobs first, then experts, then the comparison's
+# runs, so the chains that follow the experts do not wait behind independent training jobs.
+PRIORITY_EXPERTS, PRIORITY_DT = 1, 2
 
 
 @dataclasses.dataclass(frozen=True)
@@ -46,11 +68,18 @@ class ReproduceConfig:
     compare_seeds: int | None = None
     eval_episodes: int | None = None
     trajectories: int | None = None
+    track: str = "both"  # both, paper or strong
+    expert_algo: str = AUTO  # paper track: "auto" = the comparison's winner, or one of the four
     system: SystemConfig = dataclasses.field(default_factory=SystemConfig)
 
     def __post_init__(self) -> None:
         if self.preset not in PRESETS:
             raise UavrisError(f"unknown preset {self.preset!r}; choose one of {', '.join(PRESETS)}")
+        if self.track not in TRACK_CHOICES:
+            raise UavrisError(f"unknown track {self.track!r}; choose one of {', '.join(TRACK_CHOICES)}")
+        if self.expert_algo not in (AUTO,) + ALGORITHMS:
+            raise UavrisError(f"unknown expert algorithm {self.expert_algo!r}; choose {AUTO} (the comparison's "
+                              f"winner) or one of {', '.join(ALGORITHMS)}")
         for name in ("compare_seeds", "eval_episodes", "trajectories"):
             v = getattr(self, name)
             if v is not None and v < 1:
@@ -68,148 +97,154 @@ class ReproduceConfig:
     def n_trajectories(self) -> int:
         return self.trajectories or TRAJECTORIES[self.preset]
 
-
-def nearest_training_scenarios(scenario: str, k: int = TRANSFER_NEIGHBOURS) -> list[str]:
-    """The ``k`` training scenarios whose start is closest to ``scenario``'s (ties by name)."""
-    start = np.asarray(get_scenario(scenario).start)
-    dist = {s: float(np.linalg.norm(np.asarray(SCENARIOS[s].start) - start)) for s in TRAINING_SCENARIOS}
-    return sorted(dist, key=lambda s: (round(dist[s], 9), s))[:k]
-
-
-# ------------------------------------------------------------------------------------------ jobs
-def expert_job(cfg_dict: dict[str, Any], run_dir: str) -> dict[str, Any]:
-    """Worker entry point: train (or resume) one DDPG expert."""
-    from uavris.experiments.compare import train_job
-
-    return train_job(cfg_dict, run_dir)
-
-
-def _expert_configs(rc: ReproduceConfig, scenarios: Sequence[str]) -> dict[str, TrainConfig]:
-    return {s: preset_config("ddpg", s, rc.seed, rc.preset, eval_episodes=rc.n_eval, system=rc.system)
-            for s in scenarios}
-
-
-def _run_experts(stage_dir: Path, cfgs: dict[str, TrainConfig], ctx: "_Context") -> dict[str, Any]:
-    jobs = [Job(f"ddpg-{s}", expert_job, (cfg.to_dict(), str(stage_dir / "runs" / s)), stage_dir / "logs" / f"{s}.log")
-            for s, cfg in cfgs.items() if not is_finished(stage_dir / "runs" / s)]
-    failures = ctx.run_jobs(jobs)
-    if failures:
-        raise UavrisError(f"{len(failures)} expert job(s) failed: "
-                          + "; ".join(f"{f.name} ({f.error}; log {f.log})" for f in failures))
-    return {s: read_json(stage_dir / "runs" / s / "done.json")["final_eval"] for s in cfgs}
+    @property
+    def tracks(self) -> tuple[Track, ...]:
+        return tuple(TRACK_SPECS[t] for t in (TRACKS if self.track == "both" else (self.track,)))
 
 
 class _Context:
-    """Backend and progress shared by the stages."""
+    """The job runner and the progress bar shared by the stages (which may run concurrently)."""
 
     def __init__(self, workers: int, backend: str, ray_address: str | None, bar: Any) -> None:
         self.workers, self.backend, self.ray_address, self.bar = workers, backend, ray_address, bar
+        self.runner = JobRunner(workers, backend, ray_address)
         self.failures: list[JobResult] = []
+        self._lock = threading.Lock()
 
-    def run_jobs(self, jobs: list[Job]) -> list[JobResult]:
-        if self.bar is not None:
-            self.bar.total += len(jobs)
-            self.bar.refresh()
+    def run_jobs(self, jobs: list[Job], priority: int = 0) -> list[JobResult]:
+        with self._lock:
+            if self.bar is not None:
+                self.bar.total += len(jobs)
+                self.bar.refresh()
 
         def done(res: JobResult) -> None:
-            if self.bar is not None:
-                self.bar.update(1)
-                self.bar.write(f"  job {res.name}: " + ("done" if res.ok else f"FAILED ({res.error}); log: {res.log}"))
+            with self._lock:
+                if self.bar is not None:
+                    self.bar.update(1)
+                    self.bar.write(f"  job {res.name}: " + ("done" if res.ok else f"FAILED ({res.error}); log: {res.log}"))
 
-        results = run_jobs(jobs, self.workers, done, backend=self.backend, ray_address=self.ray_address)
+        results = self.runner.run(jobs, done, priority)
         failed = [r for r in results if not r.ok]
-        self.failures += failed
+        with self._lock:
+            self.failures += failed
         return failed
+
+    def run_one(self, name: str, fn: Any, args: tuple[Any, ...], log: Path) -> Any:
+        """One job of a DT stage (the study's longest chains: they go before waiting training
+        jobs); its value, or a :class:`UavrisError` naming its log when it failed."""
+        results = self.runner.run([Job(name, fn, args, log)], priority=PRIORITY_DT)
+        res = results[0]
+        if not res.ok:
+            with self._lock:
+                self.failures.append(res)
+            raise UavrisError(f"{res.error}; log {res.log}")
+        return res.value
 
 
 # ------------------------------------------------------------------------------------------ stages
-def build_pipeline(rc: ReproduceConfig, out: Path, ctx: _Context) -> Pipeline:
+def _run_experts(stage_dir: Path, cfgs: dict[str, TrainConfig], ctx: _Context) -> dict[str, Any]:
+    jobs = [Job(f"{cfg.algo}-{s}", train_job, (cfg.to_dict(), str(stage_dir / "runs" / s)),
+                stage_dir / "logs" / f"{s}.log")
+            for s, cfg in cfgs.items() if not is_finished(stage_dir / "runs" / s)]
+    failures = ctx.run_jobs(jobs, PRIORITY_EXPERTS)
+    if failures:
+        raise UavrisError(f"{len(failures)} expert job(s) failed: "
+                          + "; ".join(f"{f.name} ({f.error}; log {f.log})" for f in failures))
+    algos = sorted({cfg.algo for cfg in cfgs.values()})
+    return {"algo": "+".join(algos), "final_evals": {s: read_json(stage_dir / "runs" / s / "done.json")["final_eval"]
+                                                     for s in cfgs}}
+
+
+def _expert_stages(rc: ReproduceConfig, track: Track, ctx: _Context) -> list[Stage]:
+    """Experts of the training and of the unseen scenarios for ``track``."""
+    stages = []
+    for name, scenarios in (("experts-train", TRAINING_SCENARIOS), ("experts-unseen", UNSEEN_SCENARIOS)):
+        if track.name == "strong":
+            cfgs = {s: strong_expert_config(s, rc.seed, rc.preset, rc.n_eval, rc.system) for s in scenarios}
+            stages.append(Stage(track.stage(name), {s: c.to_dict() for s, c in cfgs.items()},
+                                lambda d, deps, cfgs=cfgs: _run_experts(d, cfgs, ctx)))
+            continue
+
+        def run(d: Path, deps: dict[str, Path], scenarios: Sequence[str] = scenarios) -> dict[str, Any]:
+            algo = rc.expert_algo if rc.expert_algo != AUTO else read_json(deps["compare"] / "summary.json")["expert"]
+            cfgs = {s: preset_config(algo, s, rc.seed, rc.preset, eval_episodes=rc.n_eval, system=rc.system)
+                    for s in scenarios}
+            return _run_experts(d, cfgs, ctx)
+
+        config = {"algo": rc.expert_algo, "scenarios": list(scenarios), "seed": rc.seed, "preset": rc.preset,
+                  "eval_episodes": rc.n_eval, "system": rc.system.to_dict()}
+        stages.append(Stage(name, config, run, ("compare",) if rc.expert_algo == AUTO else ()))
+    return stages
+
+
+def _dt_stages(rc: ReproduceConfig, track: Track, ctx: _Context) -> list[Stage]:
+    """Dataset, pre-training, fine-tuning and evaluation of ``track``."""
     from uavris.experiments import dt_pipeline as dtp
 
-    sys_dict = rc.system.to_dict()
-    train_cfgs = _expert_configs(rc, TRAINING_SCENARIOS)
-    unseen_cfgs = _expert_configs(rc, UNSEEN_SCENARIOS)
+    t = track.stage
 
+    def dataset(d: Path, deps: dict[str, Path]) -> dict[str, Any]:
+        experts = [str(deps[t("experts-train")] / "runs" / s) for s in TRAINING_SCENARIOS]
+        return ctx.run_one(t("dataset"), dataset_job, (experts, rc.n_trajectories, str(d / "dataset")),
+                           d / "job.log")
+
+    def pretrain(d: Path, deps: dict[str, Path]) -> dict[str, Any]:
+        cfg = dtp.pretrain_config(deps[t("dataset")] / "dataset", rc.preset, rc.seed)
+        return ctx.run_one(t("pretrain"), pretrain_job, (dataclasses.asdict(cfg), str(d / "model")), d / "job.log")
+
+    def finetune(scenario: str):
+        def run(d: Path, deps: dict[str, Path]) -> dict[str, Any]:
+            cfg = dtp.finetune_config(deps[t("pretrain")] / "model", scenario, rc.preset, rc.seed,
+                                      eval_episodes=rc.n_eval)
+            return ctx.run_one(t(f"finetune-{scenario}"), finetune_job, (dataclasses.asdict(cfg), str(d / "model")),
+                               d / "job.log")
+        return run
+
+    def evaluate(scenario: str):
+        def run(d: Path, deps: dict[str, Path]) -> dict[str, Any]:
+            dirs = {name: str(deps[t(name)]) for name in ("experts-train", "experts-unseen", "pretrain")}
+            dirs["finetune"] = str(deps[t(f"finetune-{scenario}")])
+            return ctx.run_one(t(f"evaluate-{scenario}"), evaluate_job,
+                               (str(d), scenario, track.name, rc.system.to_dict(), rc.n_eval, dirs), d / "job.log")
+        return run
+
+    stages = [
+        Stage(t("dataset"), {"trajectories": rc.n_trajectories, "seed": dtp.COLLECT_SEED}, dataset,
+              (t("experts-train"),)),
+        Stage(t("pretrain"), dataclasses.asdict(dtp.pretrain_config("<dataset>", rc.preset, rc.seed)), pretrain,
+              (t("dataset"),)),
+    ]
+    for s in UNSEEN_SCENARIOS:
+        ft = dataclasses.asdict(dtp.finetune_config("<pretrain>", s, rc.preset, rc.seed, eval_episodes=rc.n_eval))
+        stages.append(Stage(t(f"finetune-{s}"), ft, finetune(s), (t("pretrain"),)))
+    for s in UNSEEN_SCENARIOS:
+        stages.append(Stage(t(f"evaluate-{s}"), {"episodes": rc.n_eval, "seed": EVAL_SEED, "track": track.name,
+                                                 "references": ["hover", "hover-optimizer", "oracle"],
+                                                 "transfer_from": nearest_training_scenarios(s)},
+                            evaluate(s), (t("experts-train"), t("experts-unseen"), t("pretrain"),
+                                          t(f"finetune-{s}"))))
+    return stages
+
+
+def build_pipeline(rc: ReproduceConfig, out: Path, ctx: _Context) -> Pipeline:
     def compare(d: Path, deps: dict[str, Path]) -> dict[str, Any]:
         from uavris.experiments.compare import compare_algorithms
 
         compare_algorithms(preset=rc.preset, seeds=rc.n_compare_seeds, workers=ctx.workers, out=d,
-                           eval_episodes=rc.n_eval, backend=ctx.backend, ray_address=ctx.ray_address,
-                           progress=False)
-        return {"rows": read_json(d / "summary.json")["rows"]}
+                           eval_episodes=rc.n_eval, progress=False, runner=ctx.runner)
+        summary = read_json(d / "summary.json")
+        return {"rows": summary["rows"], "expert": summary["expert"]}
 
-    def dataset(d: Path, deps: dict[str, Path]) -> dict[str, Any]:
-        experts = [deps["experts-train"] / "runs" / s for s in TRAINING_SCENARIOS]
-        path = dtp.collect(experts, rc.n_trajectories, d / "dataset", force=True, progress=ctx.bar is None)
-        return dtp.dataset_summary(path)
-
-    def pretrain(d: Path, deps: dict[str, Path]) -> dict[str, Any]:
-        cfg = dtp.pretrain_config(deps["dataset"] / "dataset", rc.preset, rc.seed)
-        dtp.pretrain(cfg, d / "model", resume=(d / "model").exists(), progress=False)
-        return read_json(d / "model" / "done.json")
-
-    def finetune(scenario: str):
-        def run(d: Path, deps: dict[str, Path]) -> dict[str, Any]:
-            cfg = dtp.finetune_config(deps["pretrain"] / "model", scenario, rc.preset, rc.seed,
-                                      eval_episodes=rc.n_eval)
-            dtp.finetune(cfg, d / "model", resume=(d / "model").exists(), progress=False)
-            return read_json(d / "model" / "done.json")
-        return run
-
-    def evaluate_unseen(scenario: str):
-        def run(d: Path, deps: dict[str, Path]) -> dict[str, Any]:
-            return evaluate_policies(d, scenario, rc, deps)
-        return run
-
-    stages = [
-        Stage("compare", {"preset": rc.preset, "seeds": rc.n_compare_seeds, "eval_episodes": rc.n_eval,
-                          "system": sys_dict}, compare),
-        Stage("experts-train", {s: c.to_dict() for s, c in train_cfgs.items()},
-              lambda d, deps: _run_experts(d, train_cfgs, ctx)),
-        Stage("experts-unseen", {s: c.to_dict() for s, c in unseen_cfgs.items()},
-              lambda d, deps: _run_experts(d, unseen_cfgs, ctx)),
-        Stage("dataset", {"trajectories": rc.n_trajectories, "seed": dtp.COLLECT_SEED}, dataset, ("experts-train",)),
-        Stage("pretrain", dataclasses.asdict(dtp.pretrain_config("<dataset>", rc.preset, rc.seed)), pretrain,
-              ("dataset",)),
-    ]
-    for s in UNSEEN_SCENARIOS:
-        ft = dataclasses.asdict(dtp.finetune_config("<pretrain>", s, rc.preset, rc.seed, eval_episodes=rc.n_eval))
-        stages.append(Stage(f"finetune-{s}", ft, finetune(s), ("pretrain",)))
-    for s in UNSEEN_SCENARIOS:
-        stages.append(Stage(f"evaluate-{s}", {"episodes": rc.n_eval, "seed": EVAL_SEED, "oracle": True,
-                                              "transfer_from": nearest_training_scenarios(s)},
-                            evaluate_unseen(s), ("experts-train", "experts-unseen", "pretrain", f"finetune-{s}")))
+    tracks = rc.tracks
+    stages = []
+    if any(t.name == "paper" for t in tracks):
+        stages.append(Stage("compare", {"preset": rc.preset, "seeds": rc.n_compare_seeds, "eval_episodes": rc.n_eval,
+                                        "system": rc.system.to_dict()}, compare))
+    for track in tracks:
+        stages += _expert_stages(rc, track, ctx)
+    for track in tracks:
+        stages += _dt_stages(rc, track, ctx)
     return Pipeline(out, stages)
-
-
-def evaluate_policies(d: Path, scenario: str, rc: ReproduceConfig, deps: dict[str, Path]) -> dict[str, Any]:
-    """All four kinds of policy on the same seeded episodes of ``scenario``; per-episode CSVs."""
-    from uavris.agents.dt_policy import dt_policy_from_checkpoint
-    from uavris.agents.evaluation import evaluate
-    from uavris.agents.experts import sb3_batch_policy
-    from uavris.agents.oracle import oracle_policy
-    from uavris.experiments.evaluate import write_results
-    from uavris.experiments.stats import summarize
-    from uavris.experiments.training import configure_torch_threads, final_model_path, load_model
-
-    configure_torch_threads()
-    policies: dict[str, tuple[str, Any]] = {}
-    expert_dir = deps["experts-unseen"] / "runs" / scenario
-    policies["expert"] = ("DDPG expert", sb3_batch_policy(load_model(final_model_path(expert_dir), "ddpg")))
-    policies["dt-zero-shot"] = ("zero-shot DT", dt_policy_from_checkpoint(deps["pretrain"] / "model")[0])
-    policies["dt-finetuned"] = ("fine-tuned DT", dt_policy_from_checkpoint(deps[f"finetune-{scenario}"] / "model")[0])
-    for src in nearest_training_scenarios(scenario):
-        model = load_model(final_model_path(deps["experts-train"] / "runs" / src), "ddpg")
-        policies[f"transfer-{src}"] = (f"DDPG transferred from {src}", sb3_batch_policy(model))
-    policies["oracle"] = ("oracle (reference)", oracle_policy())
-    out: dict[str, Any] = {}
-    for key, (label, policy) in policies.items():
-        res = evaluate(policy, rc.system, scenario, rc.n_eval, EVAL_SEED)
-        summary = {"policy": key, "label": label, "scenario": scenario, **res.summary(),
-                   **{f"boot_{k}": v for k, v in summarize(res.avg_sum_rate).items()}}
-        write_results(res, summary, d / key)
-        out[key] = summary
-    return out
 
 
 # ------------------------------------------------------------------------------------------ entry point
@@ -238,12 +273,16 @@ def reproduce(rc: ReproduceConfig, out: str | Path, *, workers: int = 2, backend
     bar.refresh()
 
     def on_stage(rec: StageRecord) -> None:
-        bar.update(1)
-        extra = f" ({rec.error})" if rec.error else ""
-        bar.write(f"stage {rec.name} [{rec.key}]: {rec.status} in {rec.wall_s / 60:.1f} min{extra}")
+        with ctx._lock:
+            bar.update(1)
+            extra = f" ({rec.error})" if rec.error else ""
+            bar.write(f"stage {rec.name} [{rec.key}]: {rec.status} in {rec.wall_s / 60:.1f} min{extra}")
 
     t0 = time.perf_counter()
-    records = pipeline.run(tuple(f for f in force if f != "report"), on_stage)
+    try:
+        records = pipeline.run(tuple(f for f in force if f != "report"), on_stage)
+    finally:
+        ctx.runner.close()
     from uavris.experiments.report import write_report
 
     report = write_report(out, rc, pipeline, records, time.perf_counter() - t0)
@@ -257,10 +296,4 @@ def reproduce(rc: ReproduceConfig, out: str | Path, *, workers: int = 2, backend
     return report
 
 
-def copy_latest(src: Path, dst: Path) -> None:
-    """Copy a file into the report folder (figures referenced by report.md)."""
-    dst.parent.mkdir(parents=True, exist_ok=True)
-    shutil.copyfile(src, dst)
-
-
-__all__ = ["ReproduceConfig", "nearest_training_scenarios", "reproduce", "write_csv", "read_csv"]
+__all__ = ["ReproduceConfig", "nearest_training_scenarios", "reproduce"]

@@ -5,7 +5,8 @@ depends on, so changing a parameter invalidates exactly that stage and everythin
 downstream of it, and nothing else. A stage runs in ``OUT/stages/NAME-KEY/`` and is
 finished when ``stage.json`` exists there (written last, atomically); a rerun skips
 finished stages, and an unfinished one is run again in the same folder, where the
-training code resumes from its checkpoints.
+training code resumes from its checkpoints. Stages whose inputs are ready run
+concurrently (:meth:`Pipeline.run`).
 """
 
 from __future__ import annotations
@@ -14,6 +15,7 @@ import hashlib
 import json
 import shutil
 import time
+from concurrent.futures import FIRST_COMPLETED, Future, ThreadPoolExecutor, wait
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable
@@ -69,40 +71,60 @@ class Pipeline:
         return (self.directory(name) / "stage.json").exists()
 
     def run(self, force: tuple[str, ...] = (), on_stage: Callable[[StageRecord], None] | None = None,
-            stop_on_failure: bool = False) -> list[StageRecord]:
+            concurrent: bool = True) -> list[StageRecord]:
+        """Run every stage whose inputs are ready; returns the records in pipeline order.
+
+        With ``concurrent`` (the default) independent stages run at the same time, each in a
+        thread of this process: their heavy work goes through a shared job runner, which
+        bounds how many jobs run at once, so two tracks of a study interleave on the same
+        workers. A stage whose input failed is recorded as failed without running; the
+        others go on. ``on_stage`` is called in this thread as each stage ends.
+        """
         unknown = [f for f in force if f not in self.stages]
         if unknown:
             raise ValueError(f"--force names unknown stage(s) {unknown}; stages: {list(self.stages)}")
-        records: list[StageRecord] = []
-        failed: set[str] = set()
-        for name, st in self.stages.items():
-            d = self.directory(name)
-            if name in force and d.exists():
-                shutil.rmtree(d)
-            if any(dep in failed for dep in st.deps):
-                rec = StageRecord(name, st.key, d, "failed", 0.0, None, "an upstream stage failed")
-                failed.add(name)
-            elif self.is_done(name):
-                meta = read_json(d / "stage.json")
-                rec = StageRecord(name, st.key, d, "skipped", float(meta.get("wall_s", 0.0)), meta.get("result"))
-            else:
-                d.mkdir(parents=True, exist_ok=True)
-                t0 = time.perf_counter()
-                try:
-                    result = st.run(d, {dep: self.directory(dep) for dep in st.deps})
-                except Exception as e:  # noqa: BLE001 - report the stage, let independent ones go on
-                    rec = StageRecord(name, st.key, d, "failed", time.perf_counter() - t0, None,
-                                      f"{type(e).__name__}: {e}")
-                    failed.add(name)
-                else:
-                    wall = time.perf_counter() - t0
-                    write_json(d / "stage.json", {"name": name, "key": st.key, "config": st.config,
-                                                  "deps": {dep: self.stages[dep].key for dep in st.deps},
-                                                  "wall_s": wall, "result": result})
-                    rec = StageRecord(name, st.key, d, "done", wall, result)
-            records.append(rec)
+        records: dict[str, StageRecord] = {}
+        pending = dict(self.stages)
+        running: dict[Future[StageRecord], str] = {}
+
+        def finish(rec: StageRecord) -> None:
+            records[rec.name] = rec
             if on_stage:
                 on_stage(rec)
-            if stop_on_failure and rec.status == "failed":
-                break
-        return records
+
+        with ThreadPoolExecutor(max_workers=max(1, len(self.stages) if concurrent else 1)) as threads:
+            while pending or running:
+                for name, st in list(pending.items()):
+                    if any(records.get(dep) is not None and records[dep].status == "failed" for dep in st.deps):
+                        del pending[name]
+                        finish(StageRecord(name, st.key, self.directory(name), "failed", 0.0, None,
+                                           "an upstream stage failed"))
+                    elif all(dep in records for dep in st.deps) and (concurrent or not running):
+                        del pending[name]
+                        running[threads.submit(self._run_stage, st, name in force)] = name
+                if not running:
+                    continue
+                done, _ = wait(running, return_when=FIRST_COMPLETED)
+                for fut in done:
+                    del running[fut]
+                    finish(fut.result())
+        return [records[name] for name in self.stages]
+
+    def _run_stage(self, st: Stage, forced: bool) -> StageRecord:
+        d = self.directory(st.name)
+        if forced and d.exists():
+            shutil.rmtree(d)
+        if self.is_done(st.name):
+            meta = read_json(d / "stage.json")
+            return StageRecord(st.name, st.key, d, "skipped", float(meta.get("wall_s", 0.0)), meta.get("result"))
+        d.mkdir(parents=True, exist_ok=True)
+        t0 = time.perf_counter()
+        try:
+            result = st.run(d, {dep: self.directory(dep) for dep in st.deps})
+        except Exception as e:  # noqa: BLE001 - report the stage, let independent ones go on
+            return StageRecord(st.name, st.key, d, "failed", time.perf_counter() - t0, None, f"{type(e).__name__}: {e}")
+        wall = time.perf_counter() - t0
+        write_json(d / "stage.json", {"name": st.name, "key": st.key, "config": st.config,
+                                      "deps": {dep: self.stages[dep].key for dep in st.deps},
+                                      "wall_s": wall, "result": result})
+        return StageRecord(st.name, st.key, d, "done", wall, result)

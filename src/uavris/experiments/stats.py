@@ -52,3 +52,11 @@ def summarize(scores: ArrayLike, seed: int = 0) -> dict[str, float]:
     return {"n": int(x.size), "mean": float(x.mean()), "mean_ci_low": m_lo, "mean_ci_high": m_hi,
             "iqm": float(iqm(x)), "iqm_ci_low": i_lo, "iqm_ci_high": i_hi,
             "std": float(x.std(ddof=1)) if x.size > 1 else 0.0}
+
+
+def versus(low: float, high: float, reference: float) -> str:
+    """Where a score with 95% CI [low, high] stands against a reference value: "above" or
+    "below" when the CI excludes it, "tie" (not resolved) otherwise."""
+    if np.isnan(low) or np.isnan(high):
+        return "n/a"
+    return "above" if low > reference else "below" if high < reference else "tie"

@@ -45,6 +45,7 @@ from uavris.agents.experts import (
 )
 from uavris.agents import resume_state
 from uavris.agents.hybrid import check_phase_control, with_optimised_phases
+from uavris.agents.imitation import ImitationConfig, imitate
 from uavris.agents.sb3_vec_env import UavRisVecEnv
 from uavris.atomic import atomic_write_bytes
 from uavris.config import ConfigError, SystemConfig, get_scenario
@@ -84,6 +85,7 @@ class TrainConfig:
     eval_seed: int = 1_000_000  # evaluation episodes never share seeds with training
     checkpoint_every: int = PRESET_CHECKPOINT["quick"]
     phase_control: str = "agent"  # "optimizer": hybrid controller (uavris.agents.hybrid)
+    imitation: ImitationConfig | None = None  # start from the oracle's demonstrations (uavris.agents.imitation)
     hyperparams: Hyperparams = field(default_factory=Hyperparams)
     system: SystemConfig = field(default_factory=SystemConfig)
 
@@ -93,7 +95,16 @@ class TrainConfig:
         get_scenario(self.scenario).validate_for(self.system)
         if self.preset not in PRESETS:
             raise ConfigError(f"unknown preset {self.preset!r}; choose one of {', '.join(PRESETS)}")
-        for name in ("total_steps", "eval_every", "eval_episodes", "checkpoint_every"):
+        if isinstance(self.imitation, dict):
+            object.__setattr__(self, "imitation", ImitationConfig(**self.imitation))
+        if self.imitation is not None and (self.algo != "ppo" or self.phase_control != "optimizer"):
+            raise ConfigError("TrainConfig.imitation needs algo 'ppo' and phase_control 'optimizer' (the oracle's "
+                              f"motion is what is imitated), got {self.algo!r} and {self.phase_control!r}")
+        # RL steps may be 0 after imitation: the expert is then the imitation alone.
+        least = 0 if self.imitation is not None else 1
+        if self.total_steps < least:
+            raise ConfigError(f"TrainConfig.total_steps must be >= {least}, got {self.total_steps}")
+        for name in ("eval_every", "eval_episodes", "checkpoint_every"):
             if getattr(self, name) < 1:
                 raise ConfigError(f"TrainConfig.{name} must be >= 1, got {getattr(self, name)}")
         if self.seed < 0:
@@ -109,6 +120,8 @@ class TrainConfig:
     def from_dict(cls, d: dict[str, Any]) -> TrainConfig:
         d = dict(d)
         try:
+            if d.get("imitation") is not None:
+                d["imitation"] = ImitationConfig(**d["imitation"])
             d["hyperparams"] = Hyperparams(**d.get("hyperparams", {}))
             d["system"] = SystemConfig.from_stored(d.get("system", {}))
             return cls(**d)
@@ -309,6 +322,7 @@ def train(cfg: TrainConfig, run_dir: str | Path, *, resume: bool = False, force:
     elif run_dir.exists() and not has_config and any(run_dir.iterdir()):
         raise UavrisError(f"{run_dir} exists and is not a uavris run directory")
 
+    t0 = time.perf_counter()
     env = UavRisVecEnv(cfg.hyperparams.n_envs, cfg.system, cfg.scenario, cfg.hyperparams.reward_scale,
                        cfg.phase_control)
     env.seed(cfg.seed * 10_000)
@@ -346,14 +360,13 @@ def train(cfg: TrainConfig, run_dir: str | Path, *, resume: bool = False, force:
             episodes = read_rows(run_dir / "episodes.csv", EPISODE_HEADER, n_ep, _INT_COLUMNS)
             evals = read_rows(run_dir / "evals.csv", EVAL_HEADER, n_ev, _INT_COLUMNS)
         else:
-            model = build_model(cfg.algo, env, cfg.hyperparams, cfg.seed, str(run_dir / "tb"))
+            model = _fresh_model(cfg, env, run_dir, evals, progress)
     else:
         run_dir.mkdir(parents=True, exist_ok=True)
         write_yaml(run_dir / "config.yaml", cfg.to_dict())
-        model = build_model(cfg.algo, env, cfg.hyperparams, cfg.seed, str(run_dir / "tb"))
+        model = _fresh_model(cfg, env, run_dir, evals, progress)
 
     rec = _Recorder(cfg, run_dir, start, episodes, evals, progress, interrupt_at)
-    t0 = time.perf_counter()
     try:
         remaining = cfg.total_steps - start
         if remaining > 0:
@@ -368,10 +381,55 @@ def train(cfg: TrainConfig, run_dir: str | Path, *, resume: bool = False, force:
     tmp = run_dir / ".model.tmp.zip"
     model.save(tmp)
     os.replace(tmp, run_dir / "model.zip")
+    imitation = read_csv(run_dir / "imitation.csv") if (run_dir / "imitation.csv").exists() else []
     write_json(run_dir / "done.json", {"env_steps": int(model.num_timesteps), "episodes": len(episodes),
+                                       "imitation_interactions": int(imitation[-1]["samples"]) if imitation else 0,
                                        "wall_clock_s_last_session": time.perf_counter() - t0,
                                        "final_eval": final})
     return run_dir / "model.zip"
+
+
+IMITATION_HEADER = ("round", "samples", "loss", "student_gap")
+
+
+def _fresh_model(cfg: TrainConfig, env: Any, run_dir: Path, evals: list[list[Any]], progress: bool) -> Any:
+    """A new model; with ``cfg.imitation`` fitted to the teacher first (imitation.csv) and
+    evaluated at env step 0 (when RL follows), so the learning curve starts from it."""
+    model = build_model(cfg.algo, env, cfg.hyperparams, cfg.seed, str(run_dir / "tb"))
+    if cfg.imitation is None:
+        return model
+    rows: list[list[Any]] = []
+    bar = None
+    if progress:
+        from tqdm.auto import tqdm
+
+        bar = tqdm(total=cfg.imitation.rounds, unit="round", desc=f"imitation {cfg.scenario}", dynamic_ncols=True)
+
+    def on_round(row: dict[str, float]) -> None:
+        rows.append([row[h] for h in IMITATION_HEADER])
+        if bar is not None:
+            bar.update(1)
+            bar.set_postfix(loss=f"{row['loss']:.4f}", refresh=False)
+
+    try:
+        imitate(model, cfg.system, cfg.scenario, cfg.imitation, cfg.seed, on_round)
+    finally:
+        if bar is not None:
+            bar.close()
+    write_csv(run_dir / "imitation.csv", IMITATION_HEADER, rows)
+    if cfg.total_steps > 0:  # otherwise the final evaluation is this one
+        res = run_evaluation(model, cfg, cfg.eval_episodes).summary()
+        evals.append([0, res["episodes"], res["mean"], res["ci_low"], res["ci_high"], res["iqm"]])
+    return model
+
+
+def train_job(cfg_dict: dict[str, Any], run_dir: str) -> dict[str, Any]:
+    """Worker entry point (:mod:`uavris.experiments.jobs`): train, or resume, one run; its done.json."""
+    cfg = TrainConfig.from_dict(cfg_dict)
+    path = Path(run_dir)
+    if not is_finished(path):
+        train(cfg, path, resume=(path / "config.yaml").exists(), progress=False)
+    return read_json(path / "done.json")
 
 
 def final_model_path(run_dir: str | Path) -> Path:

@@ -49,6 +49,7 @@ from numpy.typing import NDArray
 
 from uavris import physics as ph
 from uavris.agents.baselines import BatchPolicy, phases_to_action
+from uavris.agents.hybrid import motion_of
 from uavris.agents.oracle.lookahead import choose_moves
 from uavris.agents.oracle.planner import Plan, PlanSettings, approach_speed, plan_target
 from uavris.agents.phase_optimizer import DEFAULT_ITERATIONS, DEFAULT_RESTARTS, optimize_slot_phases
@@ -143,7 +144,10 @@ class PlanningOracle:
             self.plans[key] = plan_target(config, start, self.settings, self._memo.setdefault(config, {}))
         return self.plans[key]
 
-    def __call__(self, obs: NDArray[np.float32], sim: BatchedSimulator) -> NDArray[np.float32]:
+    def motion(self, sim: BatchedSimulator) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """The oracle's move for the simulator's current state: acceleration command ``(n, 3)``
+        (m/s^2) and attitude increments ``(n, 3)`` (rad). A function of the pose and velocity
+        alone, given the plan of the scenario's start."""
         c = sim.config
         plan = self.plan(c, sim.scenario.start)
         accel = approach_command(c, sim.pos, sim.vel, plan.target)
@@ -159,7 +163,16 @@ class PlanningOracle:
         if near.any():
             local, _, _ = choose_moves(c, sim.pos[near], sim.vel[near], sim.att[near], turn=False)
             accel[near] = local
-        return _action(c, accel, datt, _phases(sim, self.restarts, self.iterations, self.seed))
+        return accel, datt
+
+    def motion_action(self, sim: BatchedSimulator) -> NDArray[np.float32]:
+        """:meth:`motion` as the 6 motion entries of an action in [-1, 1] (acceleration, attitude)."""
+        accel, datt = self.motion(sim)
+        return motion_of(_action(sim.config, accel, datt, np.zeros((sim.num_envs, sim.config.num_elements))))
+
+    def __call__(self, obs: NDArray[np.float32], sim: BatchedSimulator) -> NDArray[np.float32]:
+        accel, datt = self.motion(sim)
+        return _action(sim.config, accel, datt, _phases(sim, self.restarts, self.iterations, self.seed))
 
 
 def oracle_policy(*, restarts: int = DEFAULT_RESTARTS, iterations: int = DEFAULT_ITERATIONS, seed: int = 0,
