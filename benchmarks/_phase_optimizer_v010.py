@@ -2,7 +2,7 @@
 
 Kept only so that ``benchmarks/oracle_throughput.py`` can measure today's optimiser against
 it in the same run, on the same slots. The library's optimiser is
-:mod:`uavris.agents.phase_optimizer`; do not import this file from the package.
+:mod:`uavris.physics.phase_opt`; do not import this file from the package.
 
 Original module docstring follows.
 
@@ -129,7 +129,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from uavris import physics as ph
 from uavris.config import SystemConfig
-from uavris.env import streams
+from uavris.physics import streams
 from uavris.env._malloc import tune_allocator
 
 TWO_PI = 2.0 * np.pi
@@ -393,7 +393,7 @@ def optimize_phases(channels: ArrayLike, cos_theta: ArrayLike, pairing: ArrayLik
 def random_starts(channels: NDArray[np.complex128], seed: int, count: int) -> NDArray[np.float64]:
     """``count`` uniform phase vectors in [0, 2 pi) per slot, ``(B, count, N)`` for channels ``(B, K, N)``.
 
-    Counter-based (:mod:`uavris.env.streams`): the key of a slot hashes the seed with the
+    Counter-based (:mod:`uavris.physics.streams`): the key of a slot hashes the seed with the
     bits of the slot's own channels, so a slot gets the same starts whatever batch it is
     in. Results then agree between batch shapes up to floating point: numpy's kernels
     for a batch of one can round differently, and on a non-concave surface a last-bit

@@ -2,7 +2,7 @@
 
 Two measurements, in this one process pinned to a single CPU, one torch thread:
 
-1. **Training samples/s** of ``uavris.agents.dt_model.DecisionTransformer`` against Hugging
+1. **Training samples/s** of ``uavris.agents.dt.model.DecisionTransformer`` against Hugging
    Face ``transformers.DecisionTransformerModel`` at the same size (the DT paper's: context
    20, width 128, 3 layers, 1 head, MLP 512 with ReLU, dropout 0.1; state 158, action 22),
    the same batch (64 windows) and the same training step: forward, masked action MSE
@@ -16,7 +16,7 @@ Two measurements, in this one process pinned to a single CPU, one torch thread:
    by one (batch of 1). Same seeds, same model, same code path. Measured for both
    attention layouts: ``window`` (the DT paper's; every slot re-reads 59 tokens) and
    ``banded`` (every slot adds 3 tokens to a key/value cache; see
-   ``uavris.agents.dt_model``).
+   ``uavris.agents.dt.model``).
 
 Each case is warmed up, then timed ``--repeats`` times; the best timing is kept. The
 script prints the machine, the command, a Markdown table and PASS/FAIL lines against the
@@ -48,9 +48,9 @@ from typing import Any, Callable  # noqa: E402
 import numpy as np  # noqa: E402
 import torch  # noqa: E402
 
-from uavris.agents.dt_data import TrainingWindows, Trajectory, record_episodes  # noqa: E402
-from uavris.agents.dt_model import ATTENTION_LAYOUTS, DecisionTransformer, DTConfig, masked_action_loss  # noqa: E402
-from uavris.agents.dt_policy import DTBatchPolicy  # noqa: E402
+from uavris.agents.dt.trajectories import TrainingWindows, Trajectory, record_episodes  # noqa: E402
+from uavris.agents.dt.model import ATTENTION_LAYOUTS, DecisionTransformer, DTConfig, masked_action_loss  # noqa: E402
+from uavris.agents.dt.policy import DTBatchPolicy  # noqa: E402
 from uavris.config import SystemConfig  # noqa: E402
 from _machine import cpu_model, pin_to_one_core  # noqa: E402  (benchmarks/_machine.py)
 

@@ -36,11 +36,11 @@ from pathlib import Path  # noqa: E402
 import uavris  # noqa: E402
 from _machine import cpu_model, pin_to_one_core  # noqa: E402  (benchmarks/_machine.py)
 from uavris.agents.evaluation import evaluate  # noqa: E402
-from uavris.agents.imitation import ImitationConfig  # noqa: E402
+from uavris.agents.experts.imitation import ImitationConfig  # noqa: E402
 from uavris.agents.references import reference_policy  # noqa: E402
 from uavris.config import SystemConfig  # noqa: E402
-from uavris.experiments.io import read_json  # noqa: E402
-from uavris.experiments.training import preset_config, train  # noqa: E402
+from uavris.experiments.train_expert import preset_config, train  # noqa: E402
+from uavris.io import read_json  # noqa: E402
 
 EVAL_SEED = 1_000_000
 

@@ -50,10 +50,10 @@ from numpy.typing import NDArray  # noqa: E402
 import _phase_optimizer_v010 as v010  # noqa: E402  (benchmarks/_phase_optimizer_v010.py)
 import uavris  # noqa: E402
 from _machine import cpu_model, pin_to_one_core  # noqa: E402  (benchmarks/_machine.py)
-from uavris.agents.baselines import BASELINES  # noqa: E402
 from uavris.agents.evaluation import evaluate  # noqa: E402
 from uavris.agents.oracle import PlanningOracle, greedy_oracle_policy  # noqa: E402
-from uavris.agents.phase_optimizer import DEFAULT_RESTARTS, optimize_slot_phases  # noqa: E402
+from uavris.agents.references import reference_policy  # noqa: E402
+from uavris.physics.phase_opt import DEFAULT_RESTARTS, optimize_slot_phases  # noqa: E402
 from uavris.config import SCENARIOS, SystemConfig  # noqa: E402
 from uavris.env.simulator import BatchedSimulator  # noqa: E402
 
@@ -71,9 +71,8 @@ def make_slots(config: SystemConfig, n: int, seed: int) -> tuple[NDArray, NDArra
     sim.seed(seed + np.arange(n))
     sim.reset()
     rng = np.random.default_rng(seed)
-    sim.pos = np.c_[rng.uniform(0, 40, (n, 2)), rng.uniform(config.z_min, config.z_max, n)]
-    sim.att = rng.uniform(-0.4, 0.4, (n, 3))
-    sim._draw_slot(slice(None))
+    sim.place(np.c_[rng.uniform(0, 40, (n, 2)), rng.uniform(config.z_min, config.z_max, n)],
+              rng.uniform(-0.4, 0.4, (n, 3)))
     return sim.channels.copy(), sim.cos_theta.copy(), sim.pairing.copy()
 
 
@@ -171,7 +170,7 @@ def main(argv: list[str] | None = None) -> int:
     eval_times = []
     for scenario in ("fig2", "unseen2"):
         for name, policy in (("planning oracle", PlanningOracle()), ("greedy oracle", greedy_oracle_policy()),
-                             ("hover (zero action)", BASELINES["hover"](0))):
+                             ("hover (zero action)", reference_policy("hover", config))):
             print(f"evaluating {name} on {episodes} {scenario} episodes ...", file=sys.stderr, flush=True)
             start = time.perf_counter()
             res = evaluate(policy, config, scenario, episodes, EVAL_SEED)

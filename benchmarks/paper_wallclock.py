@@ -35,13 +35,15 @@ import numpy as np  # noqa: E402
 import torch  # noqa: E402
 from stable_baselines3.common.callbacks import BaseCallback  # noqa: E402
 
-from uavris.agents.dt_data import TrainingWindows, Trajectory  # noqa: E402
-from uavris.agents.dt_model import DecisionTransformer  # noqa: E402
-from uavris.agents.experts import ALGORITHMS, build_model, default_hyperparams  # noqa: E402
-from uavris.agents.sb3_vec_env import UavRisVecEnv  # noqa: E402
+from uavris.agents.dt.trainer import make_optimizer, train_steps  # noqa: E402
+from uavris.agents.dt.trajectories import TrainingWindows, Trajectory  # noqa: E402
+from uavris.agents.dt.model import DecisionTransformer  # noqa: E402
+from uavris.agents.experts import ALGORITHMS, default_hyperparams  # noqa: E402
+from uavris.agents.experts.sb3 import build_model  # noqa: E402
+from uavris.agents.experts.vec_env import UavRisVecEnv  # noqa: E402
 from uavris.config import SystemConfig  # noqa: E402
-from uavris.experiments.dt_pipeline import PRETRAIN_PRESETS, _make_optimizer, _train_steps, pretrain_config  # noqa: E402
-from uavris.experiments.training import PRESET_STEPS  # noqa: E402
+from uavris.experiments.pretrain import pretrain_config  # noqa: E402
+from uavris.presets import PRETRAIN, TRAIN_STEPS  # noqa: E402
 from _machine import cpu_model, pin_to_one_core  # noqa: E402  (benchmarks/_machine.py)
 
 SEEDS_PER_ALGO = 5
@@ -81,11 +83,11 @@ def seconds_per_pretrain_step(steps: int) -> float:
                         rng.uniform(0, 30, system.horizon), False, True, "fig2", i) for i in range(32)]
     windows = TrainingWindows(trajs, cfg.context)
     model = DecisionTransformer(cfg.model_config(system.observation_dim, system.action_dim))
-    opt = _make_optimizer(model, cfg.learning_rate, cfg.weight_decay)
+    opt = make_optimizer(model, cfg.learning_rate, cfg.weight_decay)
 
     def train(first: int, count: int) -> None:
-        _train_steps(model, opt, windows, rng, first, count, cfg.batch_size, cfg.learning_rate, cfg.warmup_steps,
-                     cfg.grad_clip)
+        train_steps(model, opt, windows, rng, first, count, cfg.batch_size, cfg.learning_rate, cfg.warmup_steps,
+                    cfg.grad_clip)
 
     train(0, 5)  # warm-up of the allocator and kernels, not timed
     t0 = time.perf_counter()
@@ -102,7 +104,7 @@ def main() -> None:
     torch.set_num_threads(1)
     print(f"# expected wall clock of `reproduce --preset paper`\n\n- cpu: {cpu_model()}; {pinning}; torch threads 1"
           f"\n- command: {' '.join([sys.executable] + sys.argv)}\n")
-    total_steps = PRESET_STEPS["paper"]
+    total_steps = TRAIN_STEPS["paper"]
     print("| part | measured cost | runs x work | core-hours |\n|---|---:|---|---:|")
     jobs_h: list[float] = []
     for algo in ALGORITHMS:
@@ -112,7 +114,7 @@ def main() -> None:
         jobs_h += [hours] * runs
         print(f"| {algo.upper()} training | {s * 1e3:.2f} ms/env step | {runs} x {total_steps:,} steps "
               f"| {runs * hours:.1f} |", flush=True)
-    pre_steps = PRETRAIN_PRESETS["paper"]["steps"]
+    pre_steps = PRETRAIN["paper"]["steps"]
     s = seconds_per_pretrain_step(50)
     pre_h = s * pre_steps / 3600
     print(f"| DT pre-training | {s * 1e3:.0f} ms/step | 1 x {pre_steps:,} steps | {pre_h:.1f} |")

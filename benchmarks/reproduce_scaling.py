@@ -36,9 +36,8 @@ from _machine import cpu_model  # noqa: E402  (benchmarks/_machine.py)
 
 def run_training_jobs(backend: str, workers: int, jobs: int, steps: int) -> tuple[float, list[float]]:
     """(wall clock s, final evaluation means in seed order)."""
-    from uavris.experiments.compare import train_job
     from uavris.experiments.jobs import Job, run_jobs
-    from uavris.experiments.training import preset_config
+    from uavris.experiments.train_expert import preset_config, train_job
 
     with tempfile.TemporaryDirectory(prefix=f"uavris-jobs-{backend}-{workers}-") as tmp:
         out = Path(tmp)

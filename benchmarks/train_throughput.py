@@ -74,7 +74,6 @@ import sys  # noqa: E402
 import time  # noqa: E402
 from collections.abc import Callable  # noqa: E402
 from dataclasses import dataclass, field  # noqa: E402
-from typing import Any  # noqa: E402
 
 import gymnasium as gym  # noqa: E402
 import numpy as np  # noqa: E402
@@ -88,8 +87,9 @@ from stable_baselines3.common.vec_env import DummyVecEnv  # noqa: E402
 
 import uavris  # noqa: E402
 from uavris.agents.evaluation import evaluate  # noqa: E402
-from uavris.agents.experts import build_model, default_hyperparams, sb3_batch_policy  # noqa: E402
-from uavris.agents.sb3_vec_env import UavRisVecEnv  # noqa: E402
+from uavris.agents.experts import default_hyperparams  # noqa: E402
+from uavris.agents.experts.sb3 import SB3Policy, build_model  # noqa: E402
+from uavris.agents.experts.vec_env import UavRisVecEnv  # noqa: E402
 from uavris.config import SystemConfig  # noqa: E402
 from uavris.env import UavRisD2DEnv  # noqa: E402
 from _machine import cpu_model, pin_to_one_core  # noqa: E402  (benchmarks/_machine.py)
@@ -247,7 +247,7 @@ def describe(model: BaseAlgorithm) -> str:
 
 def evaluate_model(model: BaseAlgorithm) -> tuple[float, float, float]:
     """Deterministic average sum rate (mean, 95% CI) on the fixed evaluation episodes."""
-    summary = evaluate(sb3_batch_policy(model), SystemConfig(), SCENARIO, EVAL_EPISODES, EVAL_SEED).summary()
+    summary = evaluate(SB3Policy(model), SystemConfig(), SCENARIO, EVAL_EPISODES, EVAL_SEED).summary()
     return summary["mean"], summary["ci_low"], summary["ci_high"]
 
 

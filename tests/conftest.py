@@ -32,17 +32,18 @@ def random_cn(rng: np.random.Generator, shape: tuple[int, ...]) -> np.ndarray:
 @pytest.fixture(scope="module")
 def expert_trajectories():
     """Two cheap "experts" (baselines) in two scenarios, 3 episodes each (DT tests)."""
-    from uavris.agents.baselines import BASELINES
-    from uavris.agents.dt_data import record_episodes
+    from uavris.agents.dt.trajectories import record_episodes
+    from uavris.agents.references import reference_policy
 
-    a = record_episodes(BASELINES["hover-aligned"](0), SHORT, "train1", [10, 11, 12], expert="hover", expert_algo="b")
-    b = record_episodes(BASELINES["hover-random-phases"](0), SHORT, "train2", [20, 21, 22], expert="rand",
+    a = record_episodes(reference_policy("hover-aligned", SHORT), SHORT, "train1", [10, 11, 12], expert="hover",
+                        expert_algo="b")
+    b = record_episodes(reference_policy("hover-random-phases", SHORT), SHORT, "train2", [20, 21, 22], expert="rand",
                         expert_algo="b")
     return a + b
 
 
 @pytest.fixture(scope="module")
 def dataset_dir(expert_trajectories, tmp_path_factory):
-    from uavris.agents.dt_data import write_dataset
+    from uavris.agents.dt.dataset import write_dataset
 
     return write_dataset(tmp_path_factory.mktemp("ds") / "experts-v0", expert_trajectories, SHORT)

@@ -5,7 +5,7 @@ import stat
 
 import pytest
 
-from uavris.atomic import atomic_write_bytes
+from uavris.io import atomic_write_bytes
 
 
 def test_mode_follows_umask_like_open(tmp_path):

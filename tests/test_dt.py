@@ -8,22 +8,16 @@ import numpy as np
 import pytest
 import torch
 
-from uavris.agents.dt_data import (
-    DatasetError,
-    TrainingWindows,
-    Trajectory,
-    load_dataset,
-    record_episodes,
-    returns_to_go,
-    select_elites,
-    write_dataset,
-)
-from uavris.agents.dt_model import CheckpointError, DecisionTransformer, DTConfig, load_dt, masked_action_loss, save_dt
-from uavris.agents.dt_policy import DTBatchPolicy
+from uavris.agents.dt.checkpoint import load_dt, save_dt
+from uavris.agents.dt.dataset import load_dataset, write_dataset
+from uavris.agents.dt.model import DecisionTransformer, DTConfig, masked_action_loss
+from uavris.agents.dt.trajectories import TrainingWindows, Trajectory, record_episodes, returns_to_go, select_elites
+from uavris.agents.dt.policy import DTBatchPolicy
 from uavris.agents.evaluation import evaluate
 from uavris.cli import main as cli_main
-from uavris.experiments.dt_pipeline import finetune, finetune_config, pretrain, pretrain_config
-from uavris.experiments.io import UavrisError
+from uavris.errors import CheckpointError, DatasetError, UavrisError
+from uavris.experiments.finetune import finetune, finetune_config
+from uavris.experiments.pretrain import pretrain, pretrain_config
 from tests.conftest import SHORT
 
 torch.set_num_threads(1)
@@ -66,10 +60,10 @@ def test_elite_selection_hand_checked():
 def test_target_return_update_hand_checked():
     policy = DTBatchPolicy(tiny_model(), target_return=10.0)
     policy.begin(2)
-    policy.act(np.zeros((2, SHORT.observation_dim), np.float32))
+    policy(np.zeros((2, SHORT.observation_dim), np.float32))
     policy.record(np.zeros((2, SHORT.action_dim), np.float32), np.array([1.5, 4.0]))
     np.testing.assert_array_equal(policy.remaining, [8.5, 6.0])
-    policy.act(np.zeros((2, SHORT.observation_dim), np.float32))
+    policy(np.zeros((2, SHORT.observation_dim), np.float32))
     policy.record(np.zeros((2, SHORT.action_dim), np.float32), np.array([2.5, 0.0]))
     np.testing.assert_array_equal(policy.remaining, [6.0, 6.0])
 
@@ -78,9 +72,9 @@ def test_return_to_go_fed_to_the_model_subtracts_the_simulators_rewards():
     seen = []
 
     class Spy(DTBatchPolicy):
-        def act(self, obs):
+        def __call__(self, obs):
             seen.append(self.remaining.copy())
-            return super().act(obs)
+            return super().__call__(obs)
 
     (tr,) = record_episodes(Spy(tiny_model(), 500.0), SHORT, "fig2", [3])
     expected = 500.0 - np.concatenate([[0.0], np.cumsum(tr.rewards)[:-1]])
@@ -342,7 +336,7 @@ def test_finetune_counts_interactions_and_resumes(dataset_dir, tmp_path):
 
 
 def test_cli_collect_pretrain_evaluate_finetune(tmp_path, capsys):
-    from uavris.experiments.training import preset_config, train
+    from uavris.experiments.train_expert import preset_config, train
 
     expert = tmp_path / "expert"
     train(preset_config("ddpg", "train4", 0, "smoke", eval_episodes=2, system=SHORT), expert, progress=False)

@@ -6,12 +6,14 @@ import numpy as np
 import pytest
 import torch
 
-from uavris.agents.dt_data import TrainingWindows, Trajectory, record_episodes
-from uavris.agents.dt_model import DecisionTransformer, DTConfig, load_dt, save_dt
-from uavris.agents.dt_policy import DTBatchPolicy
+from uavris.agents.dt.checkpoint import load_dt, save_dt
+from uavris.agents.dt.model import DecisionTransformer, DTConfig
+from uavris.agents.dt.trajectories import TrainingWindows, Trajectory, record_episodes
+from uavris.agents.dt.policy import DTBatchPolicy
 from uavris.agents.evaluation import evaluate
 from uavris.config import ConfigError
-from uavris.experiments.dt_pipeline import finetune, finetune_config, pretrain, pretrain_config
+from uavris.experiments.finetune import finetune, finetune_config
+from uavris.experiments.pretrain import pretrain, pretrain_config
 from tests.conftest import SHORT
 from tests.test_dt import random_inputs, tiny_model
 

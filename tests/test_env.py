@@ -10,7 +10,7 @@ import uavris  # noqa: F401  (registers the env)
 from uavris import physics as ph
 from uavris.config import SystemConfig
 from uavris.env import ENV_ID, UavRisD2DEnv, UavRisD2DVectorEnv, observation_layout
-from uavris.env import streams
+from uavris.physics import streams
 
 
 def rollout(env, actions, seed):

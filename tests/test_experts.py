@@ -8,14 +8,15 @@ import torch
 from stable_baselines3.common.env_checker import check_env as sb3_check_env
 from stable_baselines3.common.vec_env import DummyVecEnv
 
-from uavris.agents.baselines import BASELINES
 from uavris.agents.evaluation import evaluate
-from uavris.agents.sb3_vec_env import UavRisVecEnv
+from uavris.agents.experts.sb3 import load_model
+from uavris.agents.experts.vec_env import UavRisVecEnv
+from uavris.agents.references import reference_policy
 from uavris.cli import main as cli_main
 from uavris.config import ConfigError, SystemConfig
 from uavris.env import UavRisD2DEnv
-from uavris.experiments.io import UavrisError
-from uavris.experiments.training import load_model, preset_config, train
+from uavris.errors import UavrisError
+from uavris.experiments.train_expert import preset_config, train
 
 
 def test_sb3_env_checker_passes():
@@ -70,7 +71,7 @@ def test_each_algorithm_trains_saves_loads_and_evaluates(algo, tmp_path):
     assert done["env_steps"] >= cfg.total_steps
     assert (tmp_path / algo / "config.yaml").exists() and any((tmp_path / algo / "tb").iterdir())
     model = load_model(model_path, algo)
-    res = evaluate(lambda o, s: model.predict(o, deterministic=True)[0], cfg.system, "unseen1", 3, 5)
+    res = evaluate(lambda o: model.predict(o, deterministic=True)[0], cfg.system, "unseen1", 3, 5)
     assert res.avg_sum_rate.shape == (3,) and np.all(res.avg_sum_rate > 0)
 
 
@@ -148,9 +149,7 @@ def test_strong_expert_learns_beyond_hovering_with_optimised_phases(tmp_path):
     hovering with the optimiser's phases, on the same 8 evaluation episodes by more than both
     95% CIs. Measured over seeds 0-2 in fig2 and train8: 42.99-43.23 against ~36.4 bps/Hz
     (smaller imitation budgets were unreliable: 17-40 bps/Hz over seeds)."""
-    from uavris.agents.imitation import ImitationConfig
-    from uavris.agents.references import reference_policy
-
+    from uavris.agents.experts.imitation import ImitationConfig
     cfg = preset_config("ppo", "fig2", 0, "quick", eval_episodes=8, total_steps=0, phase_control="optimizer",
                         imitation=ImitationConfig())
     train(cfg, tmp_path / "strong", progress=False)
@@ -168,7 +167,7 @@ def test_paper_track_expert_learns_beyond_random_actions(tmp_path):
     cfg = preset_config("ppo", "fig2", 0, "smoke", total_steps=20_000, eval_episodes=16)
     train(cfg, tmp_path / "learn", progress=False)
     ppo = json.loads((tmp_path / "learn" / "done.json").read_text())["final_eval"]
-    random = evaluate(BASELINES["random"](0), cfg.system, "fig2", 16, cfg.eval_seed).summary()
+    random = evaluate(reference_policy("random"), cfg.system, "fig2", 16, cfg.eval_seed).summary()
     assert ppo["ci_low"] > random["ci_high"], (ppo, random)
 
 
@@ -226,7 +225,6 @@ def test_not_a_run_dir_and_corrupt_checkpoint(tmp_path, capsys):
 
 
 def test_hybrid_controller_trains_and_evaluates_reproducibly(tmp_path):
-    from uavris.agents.hybrid import with_optimised_phases
     from uavris.experiments.evaluate import evaluate_target
 
     env = UavRisVecEnv(2, phase_control="optimizer")
@@ -237,9 +235,9 @@ def test_hybrid_controller_trains_and_evaluates_reproducibly(tmp_path):
     b, _ = evaluate_target(str(tmp_path / "hyb"), None, 2, 11, out=tmp_path / "e2")
     assert a["mean"] == b["mean"] and a["phase_control"] == "as trained"
     # optimised phases on a hovering policy beat its random phases by a wide margin
-    hover = BASELINES["hover-random-phases"](0)
+    hover = reference_policy("hover-random-phases")
     plain = evaluate(hover, cfg.system, "fig2", 2, 1_000_000).summary()["mean"]
-    hybrid = evaluate(with_optimised_phases(hover), cfg.system, "fig2", 2, 1_000_000).summary()["mean"]
+    hybrid = evaluate(hover, cfg.system, "fig2", 2, 1_000_000, phase_control="optimizer").summary()["mean"]
     assert hybrid > plain + 10.0, (hybrid, plain)
     with pytest.raises(ConfigError, match="unknown phase control"):
         preset_config("ddpg", "fig2", 0, "smoke", phase_control="magic")

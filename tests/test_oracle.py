@@ -4,21 +4,21 @@ import numpy as np
 import pytest
 
 from uavris import physics as ph
-from uavris.agents import phase_optimizer as po
 from uavris.agents.baselines import hover_aligned
+from uavris.agents.references import reference_policy
 from uavris.agents.evaluation import evaluate
 from uavris.agents.oracle import (
     choose_moves,
     expected_optimised_rate,
-    expected_sum_rate,
     greedy_oracle_policy,
     link_activity,
     oracle_policy,
 )
 from uavris.agents.oracle.lookahead import move, pose_score
 from uavris.agents.oracle.planner import feasible, pairing_distribution, travel_slots
-from uavris.config import SCENARIOS, SystemConfig
+from uavris.config import SCENARIOS
 from uavris.env.simulator import BatchedSimulator, decode_action
+from uavris.physics import phase_opt as po
 
 
 def slots(config, n, seed, max_pairs=None, tilt=0.4):
@@ -28,9 +28,7 @@ def slots(config, n, seed, max_pairs=None, tilt=0.4):
     sim.seed(seed + np.arange(n))
     sim.reset()
     rng = np.random.default_rng(seed)
-    sim.pos = np.c_[rng.uniform(0, 40, (n, 2)), rng.uniform(2, 8, n)]
-    sim.att = rng.uniform(-tilt, tilt, (n, 3))
-    sim._draw_slot(slice(None))
+    sim.place(np.c_[rng.uniform(0, 40, (n, 2)), rng.uniform(2, 8, n)], rng.uniform(-tilt, tilt, (n, 3)))
     pairing = sim.pairing
     if max_pairs is not None:
         pairing = ph.pairing_from_uniforms(np.full(n, (max_pairs - 0.5) / config.pairs_upper),
@@ -200,21 +198,13 @@ def test_expected_rate_map_agrees_with_monte_carlo(config):
     """R of the planner (exact over pairings, 8 NLoS draws) against hovering at the pose with the
     optimiser's phases in the simulator, 24 episodes (~2,300 slots of fresh draws): within three
     standard errors of the simulation plus 0.3 bps/Hz for the map's own 8 draws."""
-    from uavris.agents.hybrid import with_optimised_phases
+    from uavris.env.rollout import rollout
 
-    hover = with_optimised_phases(lambda obs, sim: np.zeros((obs.shape[0], 6), dtype=np.float32))
+    hover = reference_policy("hover-optimizer", config)
     for pose in ([15.0, 20.0, 4.5], [20.0, 13.0, 2.0], [28.0, 16.5, 2.5]):
         r_map = expected_optimised_rate(config, np.array([pose]), np.zeros(3), draws=8, seed=5)[0]
-        sim = BatchedSimulator(config, pose, 24)
-        sim.seed(7_000 + np.arange(24))
-        sim.reset()
-        rewards = []
-        for _ in range(config.horizon):
-            r, term, trunc, _ = sim.step(hover(sim.observe(), sim))
-            rewards.append(r)
-            if term.any() or trunc.any():
-                break
-        x = np.concatenate(rewards)
+        batch = rollout(hover, config, pose, 7_000 + np.arange(24), record=True)
+        x = np.concatenate([r[:n] for r, n in zip(batch.rewards, batch.lengths)])
         se = x.std(ddof=1) / np.sqrt(x.size)
         assert abs(r_map - x.mean()) < 3 * se + 0.3, (pose, r_map, x.mean(), se)
 

@@ -9,12 +9,13 @@ import time
 import pytest
 
 from uavris.config import SystemConfig
-from uavris.experiments import dt_pipeline
-from uavris.experiments.io import UavrisError, read_json
+from uavris.errors import UavrisError
+from uavris.experiments import pretrain as pretrain_module
+from uavris.io import read_json
 from uavris.experiments.jobs import Job, JobRunner, run_jobs
 from uavris.experiments.reproduce import ReproduceConfig, _Context, build_pipeline, nearest_training_scenarios, reproduce
 from uavris.experiments.stages import Pipeline, Stage
-from uavris.experiments.training import preset_config, train_job
+from uavris.experiments.train_expert import preset_config, train_job
 
 RC = ReproduceConfig("smoke", compare_seeds=1, eval_episodes=4, trajectories=2)
 
@@ -23,7 +24,7 @@ RC = ReproduceConfig("smoke", compare_seeds=1, eval_episodes=4, trajectories=2)
 def smoke_run(tmp_path_factory):
     out = tmp_path_factory.mktemp("reproduce")
     calls = []
-    real_pretrain = dt_pipeline.pretrain
+    real_pretrain = pretrain_module.pretrain
 
     def killed(*args, **kwargs):
         calls.append(1)
@@ -31,12 +32,12 @@ def smoke_run(tmp_path_factory):
 
     # One worker runs the jobs in this process, where the patched function is seen; the
     # killed pre-training fails its stages and what depends on them, the rest finishes.
-    dt_pipeline.pretrain = killed
+    pretrain_module.pretrain = killed
     try:
         with pytest.raises(UavrisError, match="stage"):
             reproduce(RC, out, workers=1, progress=False)
     finally:
-        dt_pipeline.pretrain = real_pretrain
+        pretrain_module.pretrain = real_pretrain
     assert calls
     first_done = sorted(p.parent.name.rsplit("-", 1)[0] for p in (out / "stages").glob("*/stage.json"))
     report = reproduce(RC, out, workers=2, progress=False)

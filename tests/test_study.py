@@ -7,15 +7,16 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from uavris.agents.dt_data import Trajectory, load_dataset, record_episodes, select_elites, write_dataset
+from uavris.agents.dt.dataset import load_dataset, write_dataset
+from uavris.agents.dt.trajectories import Trajectory, record_episodes, select_elites
 from uavris.agents.evaluation import evaluate
-from uavris.agents.hybrid import MOTION_DIM
+from uavris.env.wrappers import MOTION_DIM
 from uavris.agents.references import REFERENCES, reference_policy
 from uavris.cli import main as cli_main
 from uavris.config import ConfigError, SystemConfig
 from uavris.env.simulator import BatchedSimulator
 from uavris.experiments.compare import select_expert
-from uavris.experiments.io import UavrisError
+from uavris.errors import UavrisError
 from tests.conftest import SHORT
 
 
@@ -25,7 +26,7 @@ def test_hover_is_exactly_the_zero_action():
     sim.reset()
     policy = reference_policy("hover")
     for _ in range(5):
-        a = policy(sim.observe(), sim)
+        a = policy(sim.observe())
         assert a.shape == (3, 22) and a.dtype == np.float32
         np.testing.assert_array_equal(a, 0.0)
         sim.step(a)
@@ -84,7 +85,8 @@ def test_paired_elite_selection_hand_checked():
 
 def test_paired_finetune_counts_candidates_and_elites(dataset_dir, tmp_path):
     """N = candidates episodes per round (seeds x rollouts per seed), K elites kept."""
-    from uavris.experiments.dt_pipeline import finetune, finetune_config, pretrain, pretrain_config
+    from uavris.experiments.finetune import finetune, finetune_config
+    from uavris.experiments.pretrain import pretrain, pretrain_config
 
     model = pretrain(pretrain_config(dataset_dir, "smoke", 0), tmp_path / "pre", progress=False)
     cfg = finetune_config(model, "unseen1", "smoke", 0, candidates=6, elites=4, rollouts_per_seed=3)
@@ -106,7 +108,7 @@ def test_optimizer_within_half_a_percent_of_release_0_1_0():
         from oracle_throughput import make_slots
     finally:
         sys.path.pop(0)
-    from uavris.agents.phase_optimizer import optimize_slot_phases
+    from uavris.physics.phase_opt import optimize_slot_phases
 
     config = SystemConfig()
     h, cos, pairing = make_slots(config, 512, 1)
@@ -126,8 +128,8 @@ def motion_dataset(tmp_path_factory):
 
 
 def test_motion_actions_round_trip_through_dataset_and_checkpoint(motion_dataset, tmp_path):
-    from uavris.agents.dt_model import load_dt
-    from uavris.experiments.dt_pipeline import pretrain, pretrain_config
+    from uavris.agents.dt.checkpoint import load_dt
+    from uavris.experiments.pretrain import pretrain, pretrain_config
 
     ds = load_dataset(motion_dataset)
     assert ds.phase_control == "optimizer"
@@ -140,7 +142,8 @@ def test_motion_actions_round_trip_through_dataset_and_checkpoint(motion_dataset
 def test_strong_dt_rollout_in_finetuning_equals_uavris_evaluate(motion_dataset, tmp_path, capsys):
     """The zero-shot evaluation inside fine-tuning (round 0) and `uavris evaluate` of the same
     checkpoint on the same seeds give the same mean; with --phase-control agent it is refused."""
-    from uavris.experiments.dt_pipeline import finetune, finetune_config, pretrain, pretrain_config
+    from uavris.experiments.finetune import finetune, finetune_config
+    from uavris.experiments.pretrain import pretrain, pretrain_config
 
     model_dir = pretrain(pretrain_config(motion_dataset, "smoke", 0), tmp_path / "pre", progress=False)
     cfg = finetune_config(model_dir, "unseen1", "smoke", 0, eval_episodes=3)

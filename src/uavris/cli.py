@@ -15,7 +15,7 @@ from typing import Annotated, Any, Optional
 import tyro
 import yaml
 
-from uavris.config import ConfigError
+from uavris.errors import ConfigError
 
 EXIT_BAD_INPUT = 2
 
@@ -117,7 +117,7 @@ def train_cmd(
         phase_control: agent (policy sets all 22 action entries) or optimizer (policy moves, optimiser sets phases).
         no_progress: no progress bar.
     """
-    from uavris.experiments.training import default_run_dir, preset_config, train
+    from uavris.experiments.train_expert import default_run_dir, preset_config, train
 
     cfg = preset_config(algo, scenario, seed, preset, total_steps=total_steps, eval_every=eval_every,
                         eval_episodes=eval_episodes, checkpoint_every=checkpoint_every,
@@ -126,7 +126,7 @@ def train_cmd(
         cfg = dataclasses.replace(cfg, hyperparams=cfg.hyperparams.replace(**hp.as_dict()))
     run_dir = out or default_run_dir(cfg)
     model = train(cfg, run_dir, resume=resume, force=force, progress=not no_progress)
-    from uavris.experiments.io import read_json
+    from uavris.io import read_json
 
     final = read_json(Path(run_dir) / "done.json")["final_eval"]
     print(f"trained {model}: average sum rate {final['mean']:.2f} bps/Hz "
@@ -232,7 +232,7 @@ def collect_cmd(
         force: replace an existing dataset.
         no_progress: no progress bar.
     """
-    from uavris.experiments.dt_pipeline import collect, dataset_summary
+    from uavris.experiments.collect import collect, dataset_summary
 
     path = collect(experts, trajectories, out, seed=seed, force=force, progress=not no_progress)
     summary = dataset_summary(path)
@@ -288,8 +288,8 @@ def pretrain_dt_cmd(
         attention: window (DT paper: re-reads the last context slots) or banded (sliding band, cached rollouts).
         no_progress: no progress bar.
     """
-    from uavris.experiments.dt_pipeline import default_pretrain_dir, pretrain, pretrain_config
-    from uavris.experiments.io import read_json
+    from uavris.experiments.pretrain import default_pretrain_dir, pretrain, pretrain_config
+    from uavris.io import read_json
 
     cfg = pretrain_config(dataset, preset, seed, steps=steps, batch_size=batch_size, learning_rate=learning_rate,
                           warmup_steps=warmup_steps, checkpoint_every=checkpoint_every, context=context, width=width,
@@ -349,8 +349,8 @@ def finetune_dt_cmd(
         eval_episodes: evaluation episodes after each round.
         no_progress: no progress bar.
     """
-    from uavris.experiments.dt_pipeline import default_finetune_dir, finetune, finetune_config
-    from uavris.experiments.io import read_json
+    from uavris.experiments.finetune import default_finetune_dir, finetune, finetune_config
+    from uavris.io import read_json
 
     cfg = finetune_config(model, scenario, preset, seed, rounds=rounds, candidates=candidates, elites=elites,
                           noise_sigma=noise_sigma, selection=selection, rollouts_per_seed=rollouts_per_seed,
@@ -416,12 +416,12 @@ def reproduce_cmd(
 
 
 def main(argv: list[str] | None = None) -> int:
-    from uavris.experiments.io import UavrisError
+    from uavris.errors import UavrisError
 
     try:
         app.cli(prog="uavris", description="uavris: UAV-mounted RIS D2D simulator, DRL experts and Decision "
                 "Transformer.", args=argv)
-    except (UavrisError, ConfigError) as e:
+    except UavrisError as e:
         print(f"uavris: error: {e}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except KeyboardInterrupt:

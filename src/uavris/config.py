@@ -4,7 +4,11 @@ Every parameter of the paper's simulation section is a field of :class:`SystemCo
 the parameters the paper leaves open (slot length, horizon, speed and acceleration bounds,
 attitude step, noise power, energy budget, flight region) carry documented defaults, see
 ``docs/model.md``. Configs are frozen and validated on construction: a bad value raises
-:class:`ConfigError` naming the field and the allowed range.
+:class:`~uavris.errors.ConfigError` naming the field and the allowed range.
+
+Lives here: :class:`SystemConfig`, :class:`PropulsionParams`, :class:`Scenario` and the
+named scenarios. Not here: the configurations of learning (each with its algorithm) and
+the presets (:mod:`uavris.presets`).
 """
 
 from __future__ import annotations
@@ -12,7 +16,9 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Sequence
+
+from uavris.errors import ConfigError
 
 Vec3 = tuple[float, float, float]
 
@@ -22,10 +28,6 @@ PAPER_USERS: tuple[Vec3, ...] = (
     (30.0, 20.0, 0.1),
     (15.0, 35.0, 0.6),
 )
-
-
-class ConfigError(ValueError):
-    """A configuration value is outside its allowed range."""
 
 
 def _check(ok: bool, owner: str, name: str, allowed: str, value: Any) -> None:
@@ -38,6 +40,14 @@ def _finite(x: Any) -> bool:
         return math.isfinite(float(x))
     except (TypeError, ValueError):
         return False
+
+
+def check_positive(owner: str, cfg: Any, names: Sequence[str]) -> None:
+    """Each field ``names`` of the dataclass ``cfg`` must be a finite number > 0."""
+    for name in names:
+        v = getattr(cfg, name)
+        if not (isinstance(v, (int, float)) and not isinstance(v, bool) and v > 0 and math.isfinite(v)):
+            raise ConfigError(f"{owner}.{name} must be > 0, got {v!r}")
 
 
 @dataclass(frozen=True)

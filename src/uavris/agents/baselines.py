@@ -1,60 +1,52 @@
 """Simple reference policies, evaluated exactly like the learned ones.
 
-A policy here is a callable ``policy(obs, sim) -> actions`` on a batch: ``obs`` is
-``(n, obs_dim)`` and ``sim`` the :class:`~uavris.env.simulator.BatchedSimulator` whose state
-the observation describes (baselines that co-phase the RIS read the channels from it;
-everything they read is also in the observation).
+Lives here: doing nothing (:func:`hover`, the zero action), random actions, hovering with
+random phases, and hovering co-phased for the strongest pair (a privileged reference: it
+reads the simulator's channels). Not here: the oracle (:mod:`uavris.agents.oracle`), the
+registry of all references by name (:mod:`uavris.agents.references`).
 """
 
 from __future__ import annotations
-
-from typing import Callable
 
 import numpy as np
 from numpy.typing import NDArray
 
 from uavris import physics as ph
-from uavris.env.simulator import BatchedSimulator
-
-BatchPolicy = Callable[[NDArray[np.float32], BatchedSimulator], NDArray[np.float32]]
-
-
-def phases_to_action(phase: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Inverse of the action's phase map [-1, 1] -> [0, 2 pi)."""
-    return np.mod(phase, 2 * np.pi) / np.pi - 1.0
+from uavris.agents.policy import Constant, Privileged
+from uavris.config import SystemConfig
+from uavris.env.simulator import BatchedSimulator, phases_to_action
 
 
-def hover() -> BatchPolicy:
+def hover(config: SystemConfig) -> Constant:
     """The zero action: the UAV hovers at its start, level, with all N phases equal (the
     phase action 0 maps to pi). "Doing nothing": every learned policy is read against it."""
-
-    def act(obs: NDArray[np.float32], sim: BatchedSimulator) -> NDArray[np.float32]:
-        return np.zeros((obs.shape[0], sim.config.action_dim), dtype=np.float32)
-
-    return act
+    return Constant(np.zeros(config.action_dim, dtype=np.float32))
 
 
-def random_policy(seed: int) -> BatchPolicy:
-    """Uniform random actions in [-1, 1]."""
-    rng = np.random.default_rng(seed)
+class RandomActions:
+    """Uniform random actions in [-1, 1] (all entries, or only the phases with ``phases_only``)."""
 
-    def act(obs: NDArray[np.float32], sim: BatchedSimulator) -> NDArray[np.float32]:
-        return rng.uniform(-1.0, 1.0, (obs.shape[0], sim.config.action_dim)).astype(np.float32)
+    def __init__(self, config: SystemConfig, seed: int, phases_only: bool = False) -> None:
+        self.config, self.phases_only = config, phases_only
+        self.rng = np.random.default_rng(seed)
 
-    return act
-
-
-def hover_random_phases(seed: int) -> BatchPolicy:
-    """Hover at the start (zero acceleration, attitude kept level) with random phases each slot."""
-    rng = np.random.default_rng(seed)
-
-    def act(obs: NDArray[np.float32], sim: BatchedSimulator) -> NDArray[np.float32]:
-        c = sim.config
-        a = np.zeros((obs.shape[0], c.action_dim), dtype=np.float32)
-        a[:, 3:3 + c.num_elements] = rng.uniform(-1.0, 1.0, (obs.shape[0], c.num_elements))
+    def __call__(self, obs: NDArray[np.float32]) -> NDArray[np.float32]:
+        c, n = self.config, obs.shape[0]
+        if not self.phases_only:
+            return self.rng.uniform(-1.0, 1.0, (n, c.action_dim)).astype(np.float32)
+        a = np.zeros((n, c.action_dim), dtype=np.float32)
+        a[:, 3:3 + c.num_elements] = self.rng.uniform(-1.0, 1.0, (n, c.num_elements))
         return a
 
-    return act
+
+def random_policy(config: SystemConfig, seed: int) -> RandomActions:
+    """Uniform random actions in [-1, 1]."""
+    return RandomActions(config, seed)
+
+
+def hover_random_phases(config: SystemConfig, seed: int) -> RandomActions:
+    """Hover at the start (zero acceleration, attitude kept level) with random phases each slot."""
+    return RandomActions(config, seed, phases_only=True)
 
 
 def co_phasing_presets(sim: BatchedSimulator, tx: NDArray[np.intp], rx: NDArray[np.intp]) -> NDArray[np.complex128]:
@@ -82,22 +74,14 @@ def strongest_active_link(sim: BatchedSimulator) -> tuple[NDArray[np.intp], NDAr
     return best // k, best % k
 
 
-def hover_aligned() -> BatchPolicy:
-    """Hover at the start, phases co-phased for the strongest active pair of each slot."""
-
-    def act(obs: NDArray[np.float32], sim: BatchedSimulator) -> NDArray[np.float32]:
-        c = sim.config
-        tx, rx = strongest_active_link(sim)
-        a = np.zeros((obs.shape[0], c.action_dim), dtype=np.float32)
-        a[:, 3:3 + c.num_elements] = phases_to_action(np.angle(co_phasing_presets(sim, tx, rx)))
-        return a
-
-    return act
+def _hover_aligned(obs: NDArray[np.float32], sim: BatchedSimulator) -> NDArray[np.float32]:
+    c = sim.config
+    tx, rx = strongest_active_link(sim)
+    a = np.zeros((obs.shape[0], c.action_dim), dtype=np.float32)
+    a[:, 3:3 + c.num_elements] = phases_to_action(np.angle(co_phasing_presets(sim, tx, rx)))
+    return a
 
 
-BASELINES: dict[str, Callable[[int], BatchPolicy]] = {
-    "hover": lambda seed: hover(),
-    "random": random_policy,
-    "hover-random-phases": hover_random_phases,
-    "hover-aligned": lambda seed: hover_aligned(),
-}
+def hover_aligned() -> Privileged:
+    """Hover at the start, phases co-phased for the strongest active pair of each slot (privileged)."""
+    return Privileged(_hover_aligned)

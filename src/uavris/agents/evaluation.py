@@ -1,4 +1,7 @@
-"""Batched, seeded evaluation of any batch policy.
+"""Batched, seeded evaluation of any policy: the average sum rate of every episode.
+
+Lives here: :func:`evaluate` and :class:`EpisodeResults`. Not here: the rollout loop
+(:func:`uavris.env.rollout.rollout`) and the interval statistics (:mod:`uavris.stats`).
 
 Evaluation episode j with seed s is the episode a single environment produces after
 ``reset(seed=s + j)``, so every policy is scored on the same channel and pairing draws.
@@ -7,14 +10,14 @@ Evaluation episode j with seed s is the episode a single environment produces af
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import stats
 
-from uavris.agents.baselines import BatchPolicy
+from uavris import stats
 from uavris.config import Scenario, SystemConfig
-from uavris.env.simulator import BatchedSimulator
+from uavris.env.rollout import rollout
 
 
 @dataclass(frozen=True)
@@ -28,44 +31,28 @@ class EpisodeResults:
     seeds: NDArray[np.int64]
 
     def summary(self, confidence: float = 0.95) -> dict[str, float]:
+        """Mean with its Student-t interval over episodes, std, IQM, mean length and energy."""
         x = self.avg_sum_rate
-        mean = float(np.mean(x))
-        if len(x) > 1:
-            half = float(stats.t.ppf(0.5 + confidence / 2, len(x) - 1) * stats.sem(x))
-        else:
-            half = float("nan")
-        return {"episodes": int(len(x)), "mean": mean, "ci_low": mean - half, "ci_high": mean + half,
+        low, high = stats.t_interval(x, confidence)
+        return {"episodes": int(len(x)), "mean": float(np.mean(x)), "ci_low": low, "ci_high": high,
                 "std": float(np.std(x, ddof=1)) if len(x) > 1 else 0.0,
-                "iqm": float(stats.trim_mean(x, 0.25)), "mean_length": float(np.mean(self.length)),
+                "iqm": float(stats.iqm(x)), "mean_length": float(np.mean(self.length)),
                 "mean_energy_j": float(np.mean(self.energy_used))}
 
 
-def evaluate(policy: BatchPolicy, config: SystemConfig, scenario: str | Scenario, episodes: int, seed: int,
-             batch_size: int = 256) -> EpisodeResults:
-    """Run ``episodes`` episodes (seeds ``seed .. seed + episodes - 1``) in batches."""
+def evaluate(policy: Any, config: SystemConfig, scenario: str | Scenario, episodes: int, seed: int,
+             batch_size: int = 256, phase_control: str | None = None) -> EpisodeResults:
+    """Run ``episodes`` episodes (seeds ``seed .. seed + episodes - 1``) in batches of ``batch_size``.
+
+    ``phase_control="optimizer"`` executes the policy's motion with the optimiser's phases
+    (default: the policy's own ``phase_control``).
+    """
     if episodes < 1:
         raise ValueError(f"episodes must be >= 1, got {episodes}")
-    out = []
-    for start in range(0, episodes, batch_size):
-        n = min(batch_size, episodes - start)
-        out.append(_evaluate_batch(policy, config, scenario, seed + start + np.arange(n)))
-    cat = [np.concatenate(parts) for parts in zip(*out)]
-    return EpisodeResults(cat[0] / cat[1], cat[0], cat[1].astype(np.int64), cat[2], seed + np.arange(episodes))
-
-
-def _evaluate_batch(policy: BatchPolicy, config: SystemConfig, scenario: str | Scenario,
-                    seeds: NDArray[np.int64]) -> tuple[NDArray, NDArray, NDArray]:
-    sim = BatchedSimulator(config, scenario, len(seeds))
-    sim.seed(seeds)
-    sim.reset()
-    total = np.zeros(len(seeds))
-    length = np.zeros(len(seeds))
-    energy = np.zeros(len(seeds))
-    alive = np.ones(len(seeds), dtype=bool)
-    while alive.any():
-        reward, terminated, truncated, _ = sim.step(np.asarray(policy(sim.observe(), sim)))
-        total += np.where(alive, reward, 0.0)
-        length += alive
-        energy = np.where(alive, sim.energy, energy)
-        alive &= ~(terminated | truncated)
-    return total, length, energy
+    parts = [rollout(policy, config, scenario, seed + start + np.arange(min(batch_size, episodes - start)),
+                     phase_control=phase_control)
+             for start in range(0, episodes, batch_size)]
+    returns = np.concatenate([p.returns for p in parts])
+    length = np.concatenate([p.lengths for p in parts])
+    energy = np.concatenate([p.energy_used for p in parts])
+    return EpisodeResults(returns / length, returns, length.astype(np.int64), energy, seed + np.arange(episodes))

@@ -13,18 +13,16 @@ H(t+1), P(t+1) are drawn.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from uavris import physics as ph
 from uavris.config import Scenario, SystemConfig, get_scenario
-from uavris.env import streams
+from uavris.errors import ActionError, ConfigError
+from uavris.physics import streams
 from uavris.env._malloc import tune_allocator
-
-
-class ActionError(ValueError):
-    """An action that cannot be applied (wrong shape, NaN or inf)."""
 
 
 @dataclass
@@ -62,6 +60,11 @@ def decode_action(action: NDArray, config: SystemConfig) -> tuple[NDArray, NDArr
     amp = 0.5 * (a[:, 3 + n:3 + 2 * n] + 1.0) if config.learn_amplitudes else None
     d_att = a[:, -3:] * config.attitude_step_rad
     return accel, phase, amp, d_att
+
+
+def phases_to_action(phase: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Inverse of the action's phase map [-1, 1] -> [0, 2 pi): the action entries of phases."""
+    return np.mod(phase, 2 * np.pi) / np.pi - 1.0
 
 
 class BatchedSimulator:
@@ -146,6 +149,14 @@ class BatchedSimulator:
         self.energy[rows] = 0.0
         self._draw_slot(rows)
 
+    def place(self, position: NDArray[np.floating], attitude: NDArray[np.floating]) -> None:
+        """Put every UAV at a pose, at rest, and draw the current slot's channels and pairing
+        there (for analysis and tests: the kinematics, walls and safety separation are bypassed)."""
+        self.pos = np.broadcast_to(np.asarray(position, dtype=np.float64), (self.num_envs, 3)).copy()
+        self.att = np.broadcast_to(np.asarray(attitude, dtype=np.float64), (self.num_envs, 3)).copy()
+        self.vel = np.zeros((self.num_envs, 3))
+        self._draw_slot(slice(None))
+
     # ----------------------------------------------------------------- step
     def step(self, action: NDArray) -> tuple[NDArray, NDArray, NDArray, SlotInfo]:
         """Advance every environment by one slot. Returns (reward, terminated, truncated, info)."""
@@ -208,6 +219,26 @@ def observation_layout(config: SystemConfig) -> dict[str, slice]:
         out[name] = slice(start, start + size)
         start += size
     return out
+
+
+def layout_as_lists(config: SystemConfig) -> dict[str, list[int]]:
+    """The observation layout of ``config`` as ``{name: [start, stop]}`` (JSON-able, stored in files)."""
+    return {name: [s.start, s.stop] for name, s in observation_layout(config).items()}
+
+
+def stored_system(system: Any, layout: Any, where: str, error: type[Exception] = ConfigError) -> SystemConfig:
+    """The system configuration a file (dataset, checkpoint) was made with, checked against the
+    observation layout the current environment gives that system; ``error`` names the problem."""
+    try:
+        config = SystemConfig.from_stored(system)
+    except (ConfigError, TypeError, ValueError, AttributeError) as e:
+        raise error(f"{where}: stored system configuration is invalid ({str(e).splitlines()[0] if str(e) else e!r})"
+                    ) from None
+    current = layout_as_lists(config)
+    if layout != current:
+        raise error(f"{where}: observation layout {layout} differs from the current environment's {current}; "
+                    "it was made by an incompatible version")
+    return config
 
 
 # Box-Muller on 32-bit halves bounds |w| by sqrt(-log(2^-33)): the NLoS draw is never larger.

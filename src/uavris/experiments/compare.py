@@ -17,11 +17,14 @@ from uavris.agents.evaluation import evaluate
 from uavris.agents.experts import ALGORITHMS, check_algorithm, hyperparams_for
 from uavris.agents.references import HOVER_OPTIMIZER, ORACLE, REFERENCES, ZERO_ACTION, reference_policy
 from uavris.config import get_scenario
-from uavris.experiments.io import UavrisError, read_csv, read_json, write_csv, write_json, atomic_write_text
+from uavris import runs
+from uavris.errors import UavrisError
+from uavris.io import atomic_write_text, read_csv, write_csv, write_json
 from uavris.experiments.jobs import Job, JobResult, JobRunner, run_jobs
 from uavris.experiments.plots import learning_curves
-from uavris.experiments.stats import bootstrap_band, summarize, versus
-from uavris.experiments.training import PRESETS, TrainConfig, is_finished, preset_config, train_job
+from uavris.stats import bootstrap_band, summarize, versus
+from uavris.experiments.train_expert import TrainConfig, preset_config, train_job
+from uavris.presets import PRESETS
 
 # The paper's converged average sum rates from [15, 20, 4.5], bps/Hz (docs/model.md).
 PAPER_FIG2 = {"ddpg": 29.5, "ppo": 25.0, "td3": 20.5, "sac": 17.0}
@@ -88,8 +91,8 @@ def compare_algorithms(preset: str = "quick", seeds: int = 5, workers: int = 2, 
     from tqdm.auto import tqdm
 
     bar = tqdm(total=len(jobs), unit="job", desc="compare-algorithms", dynamic_ncols=True, disable=not progress)
-    bar.update(sum(is_finished(Path(j.args[1])) for j in jobs))
-    todo = [j for j in jobs if not is_finished(Path(j.args[1]))]
+    bar.update(sum(runs.is_finished(Path(j.args[1])) for j in jobs))
+    todo = [j for j in jobs if not runs.is_finished(Path(j.args[1]))]
 
     def done(res: JobResult) -> None:
         bar.update(1)
@@ -118,10 +121,10 @@ def write_comparison(out: Path, cfgs: dict[tuple[str, int], TrainConfig], scenar
     curves, rows, per_run = {}, [], []
     for a in algos:
         dirs = [out / "runs" / f"{a}-s{s}" for (b, s) in cfgs if b == a]
-        finished = [d for d in dirs if is_finished(d)]
+        finished = [d for d in dirs if runs.is_finished(d)]
         if not finished:
             continue
-        scores = [read_json(d / "done.json")["final_eval"]["mean"] for d in finished]
+        scores = [runs.read_done(d)["final_eval"]["mean"] for d in finished]
         per_run += [(a, d.name, sc) for d, sc in zip(finished, scores)]
         series = [episode_rates(d) for d in finished]
         summ = learning_curve_summary(series)

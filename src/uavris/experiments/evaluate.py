@@ -1,4 +1,8 @@
-"""Evaluate a run directory or a baseline on seeded episodes and write CSV/JSON."""
+"""``uavris evaluate``: a run, a DT model or a reference on seeded episodes, written as CSV and JSON.
+
+Lives here: resolving what a target names (:func:`resolve_policy`) and writing its
+per-episode results. Not here: the evaluation itself (:func:`uavris.agents.evaluation.evaluate`).
+"""
 
 from __future__ import annotations
 
@@ -9,15 +13,12 @@ from typing import Any
 from uavris.agents.evaluation import EpisodeResults, evaluate
 from uavris.agents.references import REFERENCE_SEED, REFERENCES, reference_policy
 from uavris.config import SystemConfig, get_scenario
-from uavris.experiments.io import UavrisError, write_csv, write_json
-from uavris.agents.hybrid import check_phase_control, with_optimised_phases
-from uavris.experiments.training import (
-    configure_torch_threads,
-    final_model_path,
-    load_model,
-    load_run_config,
-    run_policy,
-)
+from uavris.env.wrappers import check_phase_control
+from uavris.errors import UavrisError
+from uavris.experiments.dt_runs import dt_model_dir, load_dt_policy
+from uavris.experiments.jobs import configure_torch_threads
+from uavris.experiments.train_expert import final_model_path, load_model, load_run_config, run_policy
+from uavris.io import write_csv, write_json
 
 BASELINE_PREFIX = "baseline:"
 
@@ -53,13 +54,12 @@ def resolve_policy(target: str) -> Target:
     """
     name = reference_name(target)
     if name is not None:
-        return Target(reference_policy(name, REFERENCE_SEED), SystemConfig(), None, None, "agent")
+        policy = reference_policy(name, SystemConfig(), REFERENCE_SEED)
+        return Target(policy, SystemConfig(), None, None, getattr(policy, "phase_control", "agent"))
     run_dir = Path(target)
     if not run_dir.is_dir():
         raise UavrisError(f"{run_dir} is not a directory (expected a run directory, a model directory or one of the "
                           f"references {', '.join(REFERENCES)})")
-    from uavris.experiments.dt_pipeline import dt_model_dir, load_dt_policy
-
     if dt_model_dir(run_dir) is not None:  # a Decision Transformer model or DT run directory
         policy, system, scenario = load_dt_policy(run_dir)
         return Target(policy, system, scenario, run_dir, policy.phase_control)
@@ -88,13 +88,11 @@ def evaluate_target(target: str, scenario: str | None, episodes: int, seed: int,
     if phase_control == "agent" and resolved.phase_control == "optimizer":
         raise UavrisError(f"{target} acts on the motion only (trained with the optimiser setting the phases, the "
                           "strong track); it cannot be evaluated with --phase-control agent")
-    if phase_control == "optimizer" and resolved.phase_control == "agent":
-        policy = with_optimised_phases(policy)
     scenario = scenario or own_scenario
     if scenario is None:
         raise UavrisError("--scenario is required for a baseline or a pre-trained DT (it has no scenario of its own)")
     get_scenario(scenario).validate_for(system)
-    res = evaluate(policy, system, scenario, episodes, seed)
+    res = evaluate(policy, system, scenario, episodes, seed, phase_control=phase_control)
     summary = {"target": target, "scenario": scenario, "seed": seed, "phase_control": phase_control or "as trained",
                **res.summary()}
     if out is None:

@@ -44,6 +44,16 @@ class JobResult:
     log: Path
 
 
+def configure_torch_threads() -> None:
+    """One torch thread per worker process (the machine's cores go to parallel jobs)."""
+    import os
+
+    import torch
+
+    torch.set_num_threads(1)
+    os.environ.setdefault("OMP_NUM_THREADS", "1")
+
+
 def _run_logged(job: Job) -> JobResult:
     job.log.parent.mkdir(parents=True, exist_ok=True)
     with open(job.log, "a", encoding="utf-8") as log:

@@ -11,7 +11,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from uavris.experiments.io import atomic_write_bytes  # noqa: E402
+from uavris.io import atomic_write_bytes  # noqa: E402
 
 COLORS = {"ddpg": "#1f77b4", "ppo": "#ff7f0e", "sac": "#2ca02c", "td3": "#d62728"}
 plt.rcParams.update({"font.size": 9, "axes.grid": True, "grid.alpha": 0.3, "figure.dpi": 100,

@@ -28,13 +28,13 @@ import time
 from pathlib import Path
 from typing import Any, Sequence
 
+from uavris import runs
 from uavris.agents.experts import ALGORITHMS
 from uavris.config import TRAINING_SCENARIOS, UNSEEN_SCENARIOS, SystemConfig
-from uavris.experiments.io import UavrisError, read_json
+from uavris.errors import UavrisError
 from uavris.experiments.jobs import BACKENDS, Job, JobResult, JobRunner
 from uavris.experiments.stages import Pipeline, Stage, StageRecord
 from uavris.experiments.study import (
-    EVAL_SEED,
     TRACK_SPECS,
     TRACKS,
     Track,
@@ -45,13 +45,17 @@ from uavris.experiments.study import (
     pretrain_job,
     strong_expert_config,
 )
-from uavris.experiments.training import PRESETS, TrainConfig, is_finished, preset_config, train_job
+from uavris.experiments.train_expert import TrainConfig, preset_config, train_job
+from uavris.io import read_json
+from uavris.presets import (
+    COLLECT_SEED,
+    EVAL_SEED,
+    STUDY_COMPARE_SEEDS,
+    STUDY_EVAL_EPISODES,
+    STUDY_TRAJECTORIES,
+    check_preset,
+)
 
-EVAL_EPISODES = {"smoke": 8, "quick": 32, "paper": 100}
-# quick: 3 seeds (5 before the strong track): both tracks must fit 60 minutes on 2 cores, and the
-# comparison alone took 37.8 min with 5 seeds on the project machine (README); paper keeps 5.
-COMPARE_SEEDS = {"smoke": 2, "quick": 3, "paper": 5}
-TRAJECTORIES = {"smoke": 4, "quick": 100, "paper": 500}  # per training scenario (paper: 500)
 TRACK_CHOICES = ("both",) + TRACKS
 AUTO = "auto"
 # Job priorities: a free worker takes DT-chain jobs first, then experts, then the comparison's
@@ -73,8 +77,7 @@ class ReproduceConfig:
     system: SystemConfig = dataclasses.field(default_factory=SystemConfig)
 
     def __post_init__(self) -> None:
-        if self.preset not in PRESETS:
-            raise UavrisError(f"unknown preset {self.preset!r}; choose one of {', '.join(PRESETS)}")
+        check_preset(self.preset)
         if self.track not in TRACK_CHOICES:
             raise UavrisError(f"unknown track {self.track!r}; choose one of {', '.join(TRACK_CHOICES)}")
         if self.expert_algo not in (AUTO,) + ALGORITHMS:
@@ -87,15 +90,15 @@ class ReproduceConfig:
 
     @property
     def n_compare_seeds(self) -> int:
-        return self.compare_seeds or COMPARE_SEEDS[self.preset]
+        return self.compare_seeds or STUDY_COMPARE_SEEDS[self.preset]
 
     @property
     def n_eval(self) -> int:
-        return self.eval_episodes or EVAL_EPISODES[self.preset]
+        return self.eval_episodes or STUDY_EVAL_EPISODES[self.preset]
 
     @property
     def n_trajectories(self) -> int:
-        return self.trajectories or TRAJECTORIES[self.preset]
+        return self.trajectories or STUDY_TRAJECTORIES[self.preset]
 
     @property
     def tracks(self) -> tuple[Track, ...]:
@@ -145,13 +148,13 @@ class _Context:
 def _run_experts(stage_dir: Path, cfgs: dict[str, TrainConfig], ctx: _Context) -> dict[str, Any]:
     jobs = [Job(f"{cfg.algo}-{s}", train_job, (cfg.to_dict(), str(stage_dir / "runs" / s)),
                 stage_dir / "logs" / f"{s}.log")
-            for s, cfg in cfgs.items() if not is_finished(stage_dir / "runs" / s)]
+            for s, cfg in cfgs.items() if not runs.is_finished(stage_dir / "runs" / s)]
     failures = ctx.run_jobs(jobs, PRIORITY_EXPERTS)
     if failures:
         raise UavrisError(f"{len(failures)} expert job(s) failed: "
                           + "; ".join(f"{f.name} ({f.error}; log {f.log})" for f in failures))
     algos = sorted({cfg.algo for cfg in cfgs.values()})
-    return {"algo": "+".join(algos), "final_evals": {s: read_json(stage_dir / "runs" / s / "done.json")["final_eval"]
+    return {"algo": "+".join(algos), "final_evals": {s: runs.read_done(stage_dir / "runs" / s)["final_eval"]
                                                      for s in cfgs}}
 
 
@@ -179,7 +182,8 @@ def _expert_stages(rc: ReproduceConfig, track: Track, ctx: _Context) -> list[Sta
 
 def _dt_stages(rc: ReproduceConfig, track: Track, ctx: _Context) -> list[Stage]:
     """Dataset, pre-training, fine-tuning and evaluation of ``track``."""
-    from uavris.experiments import dt_pipeline as dtp
+    from uavris.experiments.finetune import finetune_config
+    from uavris.experiments.pretrain import pretrain_config
 
     t = track.stage
 
@@ -189,13 +193,13 @@ def _dt_stages(rc: ReproduceConfig, track: Track, ctx: _Context) -> list[Stage]:
                            d / "job.log")
 
     def pretrain(d: Path, deps: dict[str, Path]) -> dict[str, Any]:
-        cfg = dtp.pretrain_config(deps[t("dataset")] / "dataset", rc.preset, rc.seed)
+        cfg = pretrain_config(deps[t("dataset")] / "dataset", rc.preset, rc.seed)
         return ctx.run_one(t("pretrain"), pretrain_job, (dataclasses.asdict(cfg), str(d / "model")), d / "job.log")
 
     def finetune(scenario: str):
         def run(d: Path, deps: dict[str, Path]) -> dict[str, Any]:
-            cfg = dtp.finetune_config(deps[t("pretrain")] / "model", scenario, rc.preset, rc.seed,
-                                      eval_episodes=rc.n_eval)
+            cfg = finetune_config(deps[t("pretrain")] / "model", scenario, rc.preset, rc.seed,
+                                  eval_episodes=rc.n_eval)
             return ctx.run_one(t(f"finetune-{scenario}"), finetune_job, (dataclasses.asdict(cfg), str(d / "model")),
                                d / "job.log")
         return run
@@ -209,13 +213,13 @@ def _dt_stages(rc: ReproduceConfig, track: Track, ctx: _Context) -> list[Stage]:
         return run
 
     stages = [
-        Stage(t("dataset"), {"trajectories": rc.n_trajectories, "seed": dtp.COLLECT_SEED}, dataset,
+        Stage(t("dataset"), {"trajectories": rc.n_trajectories, "seed": COLLECT_SEED}, dataset,
               (t("experts-train"),)),
-        Stage(t("pretrain"), dataclasses.asdict(dtp.pretrain_config("<dataset>", rc.preset, rc.seed)), pretrain,
+        Stage(t("pretrain"), dataclasses.asdict(pretrain_config("<dataset>", rc.preset, rc.seed)), pretrain,
               (t("dataset"),)),
     ]
     for s in UNSEEN_SCENARIOS:
-        ft = dataclasses.asdict(dtp.finetune_config("<pretrain>", s, rc.preset, rc.seed, eval_episodes=rc.n_eval))
+        ft = dataclasses.asdict(finetune_config("<pretrain>", s, rc.preset, rc.seed, eval_episodes=rc.n_eval))
         stages.append(Stage(t(f"finetune-{s}"), ft, finetune(s), (t("pretrain"),)))
     for s in UNSEEN_SCENARIOS:
         stages.append(Stage(t(f"evaluate-{s}"), {"episodes": rc.n_eval, "seed": EVAL_SEED, "track": track.name,

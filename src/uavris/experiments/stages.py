@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable
 
-from uavris.experiments.io import read_json, to_plain, write_json
+from uavris.io import read_json, to_plain, write_json
 
 
 @dataclass

@@ -12,9 +12,9 @@ a track. Not here: the pipeline and its stages (:mod:`.reproduce`), the report
   imitates them.
 - **strong**: the same study, with learning on the motion and attitude only and the
   per-slot phase optimiser setting the phases at every slot of training, collection,
-  fine-tuning and evaluation (:mod:`uavris.agents.hybrid`). The experts are PPO policies
+  fine-tuning and evaluation (:mod:`uavris.env.wrappers`). The experts are PPO policies
   of the 6 motion entries, initialised by imitation of the planning oracle's motion in
-  their own scenario (behaviour cloning with DAgger, :mod:`uavris.agents.imitation`), then
+  their own scenario (behaviour cloning with DAgger, :mod:`uavris.agents.experts.imitation`), then
   trained by PPO for the preset's RL budget. The DT is the paper's, trained offline on
   those experts' trajectories (motion actions) and deployed with optimised phases.
   Why this recipe: docs/model.md, "Strong track".
@@ -28,23 +28,14 @@ from typing import Any
 
 import numpy as np
 
-from uavris.agents.imitation import ImitationConfig
+from uavris.agents.experts.imitation import ImitationConfig
 from uavris.config import SCENARIOS, TRAINING_SCENARIOS, SystemConfig, get_scenario
-from uavris.experiments.io import read_json
-from uavris.experiments.training import TrainConfig, preset_config
+from uavris.experiments.train_expert import TrainConfig, preset_config
+from uavris.io import read_json
+from uavris.presets import EVAL_SEED, STRONG_IMITATION, STRONG_RL_STEPS
 
-EVAL_SEED = 1_000_000
 TRANSFER_NEIGHBOURS = 2
 TRACKS: tuple[str, ...] = ("paper", "strong")
-
-# The strong track's experts per preset: imitation of the oracle (rounds of DAgger, episodes
-# per round) and the PPO steps after it (measured choice: docs/model.md, "Strong track").
-STRONG_IMITATION: dict[str, dict[str, Any]] = {
-    "smoke": dict(rounds=2, episodes=4, epochs=5),
-    "quick": dict(rounds=6, episodes=32, epochs=30),
-    "paper": dict(rounds=8, episodes=64, epochs=30),
-}
-STRONG_RL_STEPS = {"smoke": 0, "quick": 0, "paper": 0}
 
 
 @dataclass(frozen=True)
@@ -85,27 +76,26 @@ def nearest_training_scenarios(scenario: str, k: int = TRANSFER_NEIGHBOURS) -> l
 # ------------------------------------------------------------------------------ jobs (worker entry points)
 def dataset_job(expert_dirs: list[str], trajectories: int, out: str) -> dict[str, Any]:
     """Collect the experts' trajectories into a dataset; returns its summary."""
-    from uavris.experiments import dt_pipeline as dtp
+    from uavris.experiments.collect import collect, dataset_summary
 
-    path = dtp.collect(expert_dirs, trajectories, out, force=True, progress=False)
-    return dtp.dataset_summary(path)
+    return dataset_summary(collect(expert_dirs, trajectories, out, force=True, progress=False))
 
 
 def pretrain_job(cfg_dict: dict[str, Any], out: str) -> dict[str, Any]:
     """Pre-train (or resume) a DT; returns its done.json."""
-    from uavris.experiments import dt_pipeline as dtp
+    from uavris.experiments.pretrain import PretrainConfig, pretrain
 
     model_dir = Path(out)
-    dtp.pretrain(dtp.PretrainConfig(**cfg_dict), model_dir, resume=model_dir.exists(), progress=False)
+    pretrain(PretrainConfig(**cfg_dict), model_dir, resume=model_dir.exists(), progress=False)
     return read_json(model_dir / "done.json")
 
 
 def finetune_job(cfg_dict: dict[str, Any], out: str) -> dict[str, Any]:
     """Fine-tune (or resume) a DT; returns its done.json."""
-    from uavris.experiments import dt_pipeline as dtp
+    from uavris.experiments.finetune import FinetuneConfig, finetune
 
     model_dir = Path(out)
-    dtp.finetune(dtp.FinetuneConfig(**cfg_dict), model_dir, resume=model_dir.exists(), progress=False)
+    finetune(FinetuneConfig(**cfg_dict), model_dir, resume=model_dir.exists(), progress=False)
     return read_json(model_dir / "done.json")
 
 
@@ -127,11 +117,11 @@ def evaluate_policies(out: Path, scenario: str, track: Track, system: SystemConf
     """
     from uavris.agents.evaluation import evaluate
     from uavris.agents.references import HOVER_OPTIMIZER, ORACLE, REFERENCES, ZERO_ACTION, reference_policy
-    from uavris.experiments.dt_pipeline import load_dt_policy
+    from uavris.experiments.dt_runs import load_dt_policy
     from uavris.experiments.evaluate import write_results
-    from uavris.experiments.stats import summarize
-    from uavris.experiments.training import configure_torch_threads, final_model_path, load_model, load_run_config
-    from uavris.experiments.training import run_policy
+    from uavris.experiments.jobs import configure_torch_threads
+    from uavris.experiments.train_expert import final_model_path, load_model, load_run_config, run_policy
+    from uavris.stats import summarize
 
     configure_torch_threads()
 
@@ -148,7 +138,7 @@ def evaluate_policies(out: Path, scenario: str, track: Track, system: SystemConf
         algo, policy = expert(dirs["experts-train"] / "runs" / src)
         policies[f"transfer-{src}"] = (f"{algo} transferred from {src}", policy)
     for name in (ZERO_ACTION, HOVER_OPTIMIZER, ORACLE):
-        policies[name] = (REFERENCES[name].label, reference_policy(name))
+        policies[name] = (REFERENCES[name].label, reference_policy(name, system))
     result: dict[str, Any] = {}
     for key, (label, policy) in policies.items():
         res = evaluate(policy, system, scenario, episodes, EVAL_SEED)

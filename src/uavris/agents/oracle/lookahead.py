@@ -2,7 +2,7 @@
 
 Lives here: the interference-free expected-rate score of a pose (also the planner's
 screening map), the move grid and :func:`choose_moves`. Not here: the phase optimiser
-(:mod:`uavris.agents.phase_optimizer`) and the global plan (:mod:`.planner`).
+(:mod:`uavris.physics.phase_opt`) and the global plan (:mod:`.planner`).
 
 The lookahead scores a grid of candidate moves for the next slot:
 

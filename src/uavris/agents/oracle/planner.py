@@ -8,7 +8,7 @@ Method (docs/model.md, "The oracle"):
 
 1. **Value of a pose.** ``R(q, zeta)`` = expected sum rate of a hovering UAV at position
    ``q`` and attitude ``zeta`` whose phases are re-optimised every slot
-   (:func:`uavris.agents.phase_optimizer.optimize_slot_phases`). The expectation over the
+   (:func:`uavris.physics.phase_opt.optimize_slot_phases`). The expectation over the
    pairing is exact: every pairing the model can draw is enumerated with its probability
    (24 for K = 4: 12 single links and 12 pairs of links); the expectation over the NLoS
    draw is a Monte-Carlo mean over ``nlos_draws`` draws. The draws are the same at every pose
@@ -52,9 +52,9 @@ from scipy import ndimage
 
 from uavris import physics as ph
 from uavris.agents.oracle.lookahead import pose_score
-from uavris.agents.phase_optimizer import optimize_slot_phases
+from uavris.physics.phase_opt import optimize_slot_phases
 from uavris.config import SystemConfig
-from uavris.env import streams
+from uavris.physics import streams
 
 MAX_ENUMERATED_PAIRINGS = 256  # above this, pairings are sampled (CRN) instead of enumerated
 ARRIVAL_TOLERANCE = 0.05  # m: the trip is over within this distance of the target, at rest

@@ -10,7 +10,7 @@ channels ``H(t)`` and pairing ``P(t)`` and the UAV's pose (position, velocity, a
 They never read the next slot's NLoS draw or pairing (drawn after the action, from
 counters they do not use). Every slot, for every environment of the batch:
 
-1. Phases: :func:`uavris.agents.phase_optimizer.optimize_slot_phases` on ``H(t)``,
+1. Phases: :func:`uavris.physics.phase_opt.optimize_slot_phases` on ``H(t)``,
    ``cos(theta(t))`` and ``P(t)`` (closed form for one active pair; multi-start L-BFGS with
    noise continuation and a nulling polish for several). They act on this slot's ``r(t)``.
 2. Motion, for the move to slot ``t+1``:
@@ -42,19 +42,19 @@ episode gets the same optimiser starts whatever batch it is evaluated in.
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 from numpy.typing import NDArray
 
 from uavris import physics as ph
-from uavris.agents.baselines import BatchPolicy, phases_to_action
-from uavris.agents.hybrid import motion_of
+from uavris.agents.policy import Privileged
+from uavris.env.wrappers import motion_of
 from uavris.agents.oracle.lookahead import choose_moves
 from uavris.agents.oracle.planner import Plan, PlanSettings, approach_speed, plan_target
-from uavris.agents.phase_optimizer import DEFAULT_ITERATIONS, DEFAULT_RESTARTS, optimize_slot_phases
+from uavris.physics.phase_opt import DEFAULT_ITERATIONS, DEFAULT_RESTARTS, optimize_slot_phases
 from uavris.config import SystemConfig
-from uavris.env.simulator import BatchedSimulator
+from uavris.env.simulator import BatchedSimulator, phases_to_action
 
 # Off by default: handing the last half metre to the lookahead cost 0.1 bps/Hz on fig2 and
 # unseen2 (8 episodes each), because its interference-free score pulls the UAV off the
@@ -102,8 +102,9 @@ def _phases(sim: BatchedSimulator, restarts: int, iterations: int, seed: int) ->
 
 
 def greedy_oracle_policy(*, restarts: int = DEFAULT_RESTARTS, iterations: int = DEFAULT_ITERATIONS,
-                         braking_slots: int | None = None, seed: int = 0) -> BatchPolicy:
-    """The greedy oracle ``policy(obs, sim) -> actions``: optimised phases, one-step lookahead motion.
+                         braking_slots: int | None = None, seed: int = 0) -> Privileged:
+    """The greedy oracle (privileged ``policy(obs, sim) -> actions``): optimised phases, one-step
+    lookahead motion.
 
     Args:
         restarts, iterations: phase optimiser settings (random starts; L-BFGS iterations per level).
@@ -118,15 +119,17 @@ def greedy_oracle_policy(*, restarts: int = DEFAULT_RESTARTS, iterations: int = 
         accel, datt, _ = choose_moves(sim.config, sim.pos, sim.vel, sim.att, braking_slots)
         return _action(sim.config, accel, datt, _phases(sim, restarts, iterations, seed))
 
-    return act
+    return Privileged(act)
 
 
 class PlanningOracle:
-    """The planning oracle as a batch policy ``policy(obs, sim) -> actions`` (module docstring).
+    """The planning oracle as a privileged batch policy ``policy(obs, sim) -> actions`` (module docstring).
 
     Plans are cached per (system, start), so one instance evaluates many batches and
     scenarios at the cost of one plan each; :attr:`plans` holds them for reports.
     """
+
+    privileged: ClassVar[bool] = True  # reads the simulator's state (uavris.agents.policy)
 
     def __init__(self, *, restarts: int = DEFAULT_RESTARTS, iterations: int = DEFAULT_ITERATIONS, seed: int = 0,
                  settings: PlanSettings | None = None, final_radius: float = FINAL_RADIUS) -> None:

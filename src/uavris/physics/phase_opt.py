@@ -25,7 +25,7 @@ the optimum is exact: ``SNR = P (sum_n |h_k[n]| |h_i[n]|)^2 / sigma^2``.
 
 *Several active pairs* (no closed form; non-concave, with one basin per "which pair is
 served" and narrow ridges where the cross links are nulled). Three stages, run for every
-slot and start by the compiled kernel :mod:`uavris.agents.phase_kernel`:
+slot and start by the compiled kernel :mod:`uavris.physics.phase_kernel`:
 
 1. Starts. The co-phasing solution of each active pair (so the result is never worse
    than the best single-pair co-phasing, which is what ``hover_aligned`` plays) plus
@@ -119,8 +119,8 @@ from numpy.typing import ArrayLike, NDArray
 
 from uavris import physics as ph
 from uavris.config import SystemConfig
-from uavris.env import streams
-from uavris.agents.phase_kernel import solve_slots
+from uavris.physics import streams
+from uavris.physics.phase_kernel import solve_slots
 
 TWO_PI = 2.0 * np.pi
 LN2 = np.log(2.0)
@@ -348,7 +348,7 @@ def optimize_phases(channels: ArrayLike, cos_theta: ArrayLike, pairing: ArrayLik
 def random_starts(channels: NDArray[np.complex128], seed: int, count: int) -> NDArray[np.float64]:
     """``count`` uniform phase vectors in [0, 2 pi) per slot, ``(B, count, N)`` for channels ``(B, K, N)``.
 
-    Counter-based (:mod:`uavris.env.streams`): the key of a slot hashes the seed with the
+    Counter-based (:mod:`uavris.physics.streams`): the key of a slot hashes the seed with the
     bits of the slot's own channels, so a slot gets the same starts whatever batch it is
     in, and the kernel then solves it on its own.
     """

@@ -1,4 +1,8 @@
-"""DRL experts: DDPG, PPO, SAC and TD3 from Stable-Baselines3 on the batched env.
+"""Hyperparameters of the DRL experts (DDPG, PPO, SAC, TD3), validated, with their reasons.
+
+Lives here: :class:`Hyperparams`, the algorithms' names and which hyperparameters each
+uses. The per-preset values are a table in :mod:`uavris.presets`; building and running
+the SB3 models is :mod:`.sb3`.
 
 The paper gives no hyperparameters. Ours, with their reasons:
 
@@ -28,9 +32,8 @@ import dataclasses
 from dataclasses import dataclass
 from typing import Any
 
-import numpy as np
-
-from uavris.config import ConfigError
+from uavris.errors import ConfigError
+from uavris.presets import ALGO_HYPERPARAMS, HYPERPARAMS, check_preset
 
 ALGORITHMS: tuple[str, ...] = ("ddpg", "ppo", "sac", "td3")
 OFF_POLICY: tuple[str, ...] = ("ddpg", "sac", "td3")
@@ -117,23 +120,11 @@ def _is_float(x: str) -> bool:
 
 
 def default_hyperparams(algo: str, preset: str) -> Hyperparams:
-    """The documented defaults of ``algo`` for a preset (``smoke``, ``quick`` or ``paper``)."""
+    """The documented defaults of ``algo`` for a preset (:data:`uavris.presets.HYPERPARAMS`)."""
     check_algorithm(algo)
-    hp = Hyperparams()
-    if algo == "sac":
-        hp = hp.replace(learning_rate=3e-4)
-    if algo == "ppo":
-        hp = hp.replace(learning_rate=3e-4, n_envs=16, batch_size=256)
-    if preset == "paper":
-        return hp
-    if preset == "quick":
-        return hp.replace(net_arch=(64, 64), batch_size=128 if algo != "ppo" else 256, buffer_size=200_000,
-                          learning_starts=1_000, n_envs=4 if algo != "ppo" else 16, gradient_steps=4,
-                          n_steps=128 if algo == "ppo" else hp.n_steps)
-    if preset == "smoke":
-        return hp.replace(net_arch=(32, 32), batch_size=32, buffer_size=10_000, learning_starts=100,
-                          n_envs=4, gradient_steps=4, n_steps=32, n_epochs=2)
-    raise ConfigError(f"unknown preset {preset!r}; choose one of smoke, quick, paper")
+    check_preset(preset)
+    kind = "ppo" if algo == "ppo" else "off_policy"
+    return Hyperparams(**{**ALGO_HYPERPARAMS[algo], **HYPERPARAMS[preset][kind]})
 
 
 def check_algorithm(algo: str) -> None:
@@ -141,42 +132,3 @@ def check_algorithm(algo: str) -> None:
         raise ConfigError(f"unknown algorithm {algo!r}; choose one of {', '.join(ALGORITHMS)}")
 
 
-def algorithm_class(algo: str) -> type:
-    check_algorithm(algo)
-    from stable_baselines3 import DDPG, PPO, SAC, TD3
-
-    return {"ddpg": DDPG, "ppo": PPO, "sac": SAC, "td3": TD3}[algo]
-
-
-def build_model(algo: str, env: Any, hp: Hyperparams, seed: int, tensorboard_log: str | None = None) -> Any:
-    """A fresh SB3 model of ``algo`` on ``env`` (a VecEnv) with hyperparameters ``hp``."""
-    from stable_baselines3.common.noise import NormalActionNoise
-
-    cls = algorithm_class(algo)
-    common: dict[str, Any] = dict(learning_rate=hp.learning_rate, gamma=hp.gamma, seed=seed, device="cpu",
-                                  verbose=0, tensorboard_log=tensorboard_log,
-                                  policy_kwargs=dict(net_arch=list(hp.net_arch)))
-    if algo == "ppo":
-        return cls("MlpPolicy", env, n_steps=hp.n_steps, batch_size=hp.batch_size, n_epochs=hp.n_epochs,
-                   gae_lambda=hp.gae_lambda, clip_range=hp.clip_range, **common)
-    off = dict(buffer_size=hp.buffer_size, learning_starts=hp.learning_starts, batch_size=hp.batch_size,
-               tau=hp.tau, train_freq=1, gradient_steps=hp.gradient_steps, **common)
-    dim = env.action_space.shape[0]
-    if algo == "sac":
-        ent = hp.ent_coef if hp.ent_coef == "auto" else float(hp.ent_coef)
-        return cls("MlpPolicy", env, ent_coef=ent, **off)
-    noise = NormalActionNoise(np.zeros(dim), hp.action_noise * np.ones(dim)) if hp.action_noise > 0 else None
-    if algo == "td3":
-        return cls("MlpPolicy", env, action_noise=noise, policy_delay=hp.policy_delay,
-                   target_policy_noise=hp.target_policy_noise, **off)
-    return cls("MlpPolicy", env, action_noise=noise, **off)
-
-
-def sb3_batch_policy(model: Any):
-    """Wrap an SB3 model as a deterministic batch policy ``(obs, sim) -> actions``."""
-
-    def act(obs: np.ndarray, sim: Any) -> np.ndarray:
-        action, _ = model.predict(obs, deterministic=True)
-        return action
-
-    return act

@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from uavris.agents.sb3_vec_env import UavRisVecEnv
+from uavris.agents.experts.vec_env import UavRisVecEnv
 
 STATE_VERSION = 1
 _MODEL_FIELDS = ("_last_obs", "_last_episode_starts", "_last_original_obs", "_episode_num")

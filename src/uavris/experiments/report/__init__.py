@@ -15,10 +15,10 @@ import yaml
 
 from uavris.agents.references import HOVER_OPTIMIZER, ORACLE, ZERO_ACTION
 from uavris.config import UNSEEN_SCENARIOS, get_scenario
-from uavris.experiments.io import atomic_write_text, read_json
-from uavris.experiments.report_figures import fig3, interactions_figure, trajectory_figure
+from uavris.io import atomic_write_text, read_json
+from uavris.experiments.report.figures import fig3, interactions_figure, trajectory_figure
 from uavris.experiments.stages import Pipeline, StageRecord
-from uavris.experiments.stats import versus
+from uavris.stats import versus
 from uavris.experiments.study import Track
 
 PAPER_FIG2 = {"DDPG": 29.5, "PPO": 25.0, "TD3": 20.5, "SAC": 17.0}

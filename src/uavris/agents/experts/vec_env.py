@@ -15,7 +15,7 @@ import gymnasium as gym
 import numpy as np
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvIndices, VecEnvStepReturn
 
-from uavris.agents.hybrid import MOTION_DIM, check_phase_control, full_action
+from uavris.env.wrappers import MOTION_DIM, check_phase_control, optimised_action
 from uavris.config import Scenario, SystemConfig
 from uavris.env.simulator import BatchedSimulator, observation_bounds
 
@@ -31,7 +31,7 @@ class UavRisVecEnv(VecEnv):
             times this). Episode statistics in ``info["episode"]`` stay in bps/Hz.
         phase_control: ``"agent"`` (the learner sets all 22 action entries) or
             ``"optimizer"`` (hybrid: the learner sets the 6 motion entries and the per-slot
-            phase optimiser the RIS phases, :mod:`uavris.agents.hybrid`).
+            phase optimiser the RIS phases, :mod:`uavris.env.wrappers`).
     """
 
     def __init__(self, num_envs: int, config: SystemConfig | None = None, scenario: str | Scenario = "fig2",
@@ -82,7 +82,7 @@ class UavRisVecEnv(VecEnv):
             raise RuntimeError("call reset() before step()")
         actions = self._actions.reshape(self.num_envs, -1)
         if self.phase_control == "optimizer":
-            actions = full_action(self.sim, actions)
+            actions = optimised_action(self.sim, actions)
         reward, terminated, truncated, _ = self.sim.step(actions)
         done = terminated | truncated
         self._ep_return += reward

@@ -1,27 +1,26 @@
 """Deploying a Decision Transformer: a stateful batch policy conditioned on a target return.
 
+Lives here: :class:`DTBatchPolicy` and :func:`dt_policy_from_checkpoint`. Not here: the
+model (:mod:`.model`) and the rollout loop that drives it (:func:`uavris.env.rollout.rollout`).
+
 Zero-shot deployment (paper Sec. IV-D): the first action of an episode is predicted from
 the target return R_hat_1 and the first state; after each slot the return-to-go is
 updated as R_hat_{t+1} = R_hat_t - r(t), and the last ``context`` slots of (R_hat, S, A)
 form the next input (window layout), or, for a banded DT, the three new tokens of the slot
-are added to the model's key/value cache (:class:`uavris.agents.dt_model.KVCache`). With
+are added to the model's key/value cache (:class:`uavris.agents.dt.cache.KVCache`). With
 ``noise_sigma`` > 0 the executed action is A_t = clip(A_hat_t + eps_t, -1, 1),
 eps_t ~ N(0, sigma^2 I) (Algorithm 1, stage 2), and the history holds the executed action,
 which is also what the trajectory records.
 
-:class:`DTBatchPolicy` is a batch policy ``policy(obs, sim) -> actions`` like every other
-policy of :mod:`uavris.agents`, so it is scored by :func:`uavris.agents.evaluation.evaluate`
-on the same seeded episodes. All rows of the batch advance together with one forward
-pass per slot. A row whose slot counter ``sim.t`` is 0 starts a new episode.
-
-The policy interface passes no reward, so the policy recomputes r(t) of the slot it just
-acted in from the simulator state it saw then (channels, incidence, pairing) and the
-action it returned, with the very calls :meth:`BatchedSimulator.step` makes
-(:func:`slot_reward`; a test checks it against the simulator's reward).
+:class:`DTBatchPolicy` is an episodic policy (:class:`uavris.agents.policy.EpisodicPolicy`):
+the rollout loop tells it when a batch of episodes starts (:meth:`~DTBatchPolicy.begin`) and
+hands it every slot's actions and rewards (:meth:`~DTBatchPolicy.record`), so it is scored
+by :func:`uavris.agents.evaluation.evaluate` on the same seeded episodes as every other
+policy. All rows advance together with one forward pass per slot.
 
 Strong track (``phase_control="optimizer"``): the model predicts the 6 motion entries and
-the per-slot phase optimiser sets the phases (:func:`uavris.agents.hybrid.full_action`); the
-history holds the motion actions, the reward is that of the full action executed.
+the per-slot phase optimiser sets the phases (:mod:`uavris.env.wrappers`); the history holds
+the motion actions, the reward is that of the full action executed.
 
 Default target return: the checkpoint's ``target_return``, set at pre-training to the
 0.9 quantile of the dataset's episode returns (a high but attained return: conditioning
@@ -37,23 +36,9 @@ import numpy as np
 import torch
 from numpy.typing import NDArray
 
-from uavris import physics as ph
-from uavris.agents.dt_model import DecisionTransformer, load_dt
-from uavris.agents.hybrid import MOTION_DIM, check_phase_control, full_action
-from uavris.config import SystemConfig
-from uavris.env.simulator import BatchedSimulator, decode_action
-
-
-def slot_reward(channels: NDArray[np.complex128], cos_theta: NDArray[np.float64], pairing: NDArray[np.float64],
-                action: NDArray[np.float32], config: SystemConfig) -> NDArray[np.float64]:
-    """r(t) paid for ``action`` in the slot with channels H(t), incidence cosines and pairing P(t)."""
-    _, phase, amp, _ = decode_action(action, config)
-    if amp is None:
-        refl = ph.effective_reflection_from_phases(phase, cos_theta, config.angle_dependent_reflection)
-    else:
-        refl = ph.effective_reflection(amp * np.exp(1j * phase), cos_theta, config.angle_dependent_reflection)
-    gains = ph.cascaded_gains(channels, refl)
-    return ph.pair_rates(gains, pairing, config.tx_power_w, config.noise_w).sum(axis=(-2, -1))
+from uavris.agents.dt.checkpoint import load_dt
+from uavris.agents.dt.model import DecisionTransformer
+from uavris.env.wrappers import MOTION_DIM, check_phase_control
 
 
 class DTBatchPolicy:
@@ -83,9 +68,6 @@ class DTBatchPolicy:
         self.target_return = float(target_return)
         self.noise_sigma = float(noise_sigma)
         self._rng = np.random.default_rng(seed)
-        self._sim: BatchedSimulator | None = None
-        self._n = 0
-        self._pending: tuple[Any, ...] | None = None
 
     # ------------------------------------------------------------------ history
     def begin(self, n: int) -> None:
@@ -93,15 +75,12 @@ class DTBatchPolicy:
         self._n = n
         self._history = _CachedHistory(self.model, n) if self.model.cfg.band is not None else _Window(self.model, n)
         self.remaining = np.full(n, self.target_return)  # R_hat_t of the current slot, float64
-        self._pending = None
 
-    def reset_rows(self, rows: NDArray[np.bool_] | NDArray[np.intp]) -> None:
-        """Start new episodes in ``rows``."""
-        self._history.reset(rows)
-        self.remaining[rows] = self.target_return
-
-    def act(self, obs: NDArray[np.float32]) -> NDArray[np.float32]:
-        """Append S_t with the current R_hat_t and return the action of every row."""
+    def __call__(self, obs: NDArray[np.float32]) -> NDArray[np.float32]:
+        """Append S_t with the current R_hat_t and return the action of every row (motion only
+        under the optimiser). A batch of another size than the last one starts anew (:meth:`begin`)."""
+        if getattr(self, "_n", None) != obs.shape[0]:
+            self.begin(obs.shape[0])
         if self.model.training:  # acting is always deterministic apart from the explicit noise
             self.model.eval()
         with torch.inference_mode():
@@ -114,29 +93,6 @@ class DTBatchPolicy:
         """Store the executed A_t and update R_hat_{t+1} = R_hat_t - r(t)."""
         self._history.record(actions)
         self.remaining = self.remaining - rewards
-
-    # ------------------------------------------------------------------ batch-policy interface
-    def __call__(self, obs: NDArray[np.float32], sim: BatchedSimulator) -> NDArray[np.float32]:
-        n = obs.shape[0]
-        fresh = np.asarray(sim.t) == 0
-        if sim is not self._sim or n != self._n:
-            if not fresh.all():
-                raise ValueError("a DT policy must see its episodes from slot 0 (sim.t == 0 for every row)")
-            self.begin(n)
-            self._sim = sim
-        elif self._pending is not None:
-            channels, cos_theta, pairing, action, executed = self._pending
-            self.record(action, slot_reward(channels, cos_theta, pairing, executed, sim.config))
-            if fresh.any():
-                self.reset_rows(fresh)
-        elif not fresh.all():
-            raise ValueError("a DT policy lost track of its episodes (called twice without a step?)")
-        action = self.act(obs)
-        executed = full_action(sim, action) if self.phase_control == "optimizer" else action
-        # Copies: a partial reset may write into the simulator's current arrays in place.
-        self._pending = (sim.channels.copy(), sim.cos_theta.copy(), sim.pairing.copy(), action, executed)
-        return executed
-
 
 class _Window:
     """The last ``context`` slots of every row, re-read by the model at each slot (window layout)."""
@@ -151,13 +107,6 @@ class _Window:
         self.valid = np.zeros((n, k), dtype=bool)
         self.filled = np.zeros(n, dtype=np.int64)
         self.t = np.zeros(n, dtype=np.int64)
-
-    def reset(self, rows: NDArray[np.bool_] | NDArray[np.intp]) -> None:
-        for buf in (self.rtg, self.states, self.actions, self.steps):
-            buf[rows] = 0
-        self.valid[rows] = False
-        self.filled[rows] = 0
-        self.t[rows] = 0
 
     def predict(self, remaining: NDArray[np.float64], obs: NDArray[np.float32]) -> NDArray[np.float32]:
         for buf in (self.rtg, self.states, self.actions, self.steps, self.valid):
@@ -188,10 +137,6 @@ class _CachedHistory:
         self.cache = model.new_cache(n)
         self.prev_action = np.zeros((n, model.cfg.act_dim), dtype=np.float32)  # read only where t > 0
         self.t = np.zeros(n, dtype=np.int64)
-
-    def reset(self, rows: NDArray[np.bool_] | NDArray[np.intp]) -> None:
-        self.cache.reset(rows)
-        self.t[rows] = 0
 
     def predict(self, remaining: NDArray[np.float64], obs: NDArray[np.float32]) -> NDArray[np.float32]:
         return self.model.step(self.cache, torch.from_numpy(remaining.astype(np.float32)),

@@ -9,7 +9,7 @@ import numpy as np
 
 from uavris.agents.references import REFERENCES
 from uavris.config import get_scenario
-from uavris.experiments.io import read_csv, read_json
+from uavris.io import read_csv, read_json
 from uavris.experiments.plots import REFERENCE_STYLE, plt, reference_lines, save_figure
 
 KIND_STYLE = {"expert": ("#1f77b4", "-"), "dt-finetuned": ("#2ca02c", "-"), "dt-zero-shot": ("#ff7f0e", "-"),
@@ -79,20 +79,18 @@ def trajectory_figure(scenario: str, model_dir: Path, system: Any, stem: Path, s
     """3-D view of one evaluation episode of a DT: UAV path, RIS normal every few slots, devices
     and their safety balls (as circles at the floor of the region)."""
     from uavris import physics as ph
-    from uavris.agents.dt_policy import dt_policy_from_checkpoint
-    from uavris.env.simulator import BatchedSimulator
+    from uavris.agents.dt.policy import dt_policy_from_checkpoint
+    from uavris.env.rollout import rollout
 
     policy, _ = dt_policy_from_checkpoint(model_dir)
-    sim = BatchedSimulator(system, scenario, 1)
-    sim.seed(np.array([seed]))
-    sim.reset()
-    pos, normals = [sim.pos[0].copy()], [ph.ris_axes(sim.att[0])[:, 2]]
-    for _ in range(system.horizon):
-        _, term, trunc, _ = sim.step(policy(sim.observe(), sim))
-        pos.append(sim.pos[0].copy())
-        normals.append(ph.ris_axes(sim.att[0])[:, 2])
-        if term[0] or trunc[0]:
-            break
+    pos, normals = [], []
+
+    def track(sim: Any, obs: Any, executed: Any, alive: Any) -> None:
+        if alive[0]:
+            pos.append(sim.pos[0].copy())
+            normals.append(ph.ris_axes(sim.att[0])[:, 2])
+
+    rollout(policy, system, scenario, [seed], on_slot=track)
     pos, normals = np.array(pos), np.array(normals)
     fig = plt.figure(figsize=(4.8, 4.0))
     ax = fig.add_subplot(projection="3d")

@@ -1,7 +1,9 @@
-"""Atomic file writing and run-directory helpers.
+"""Reading and writing files: atomically, as CSV, JSON or YAML, with one-line errors.
 
-Every artefact is written to a temporary file in the same directory and renamed over
-the target, so a killed process leaves either the old file or the new one, never half.
+Lives here: :func:`atomic_write_bytes`, the one primitive every layer that writes files
+shares (a temporary file in the same directory, fsync, rename: a reader, or a killed
+writer, sees the old file or the new one, never half of either), and the text formats on
+top of it. Not here: what the files mean (run directories: :mod:`uavris.runs`).
 """
 
 from __future__ import annotations
@@ -10,16 +12,44 @@ import csv
 import dataclasses
 import io
 import json
+import os
+import tempfile
 from pathlib import Path
 from typing import Any, Iterable, Sequence
 
 import yaml
 
-from uavris.atomic import atomic_write_bytes
+from uavris.errors import UavrisError
 
 
-class UavrisError(Exception):
-    """A user-facing error: bad input, a run directory that is not one, a corrupt file."""
+def _default_mode() -> int:
+    """0o666 minus the process umask: what ``open(path, "w")`` would have given."""
+    umask = os.umask(0)
+    os.umask(umask)
+    return 0o666 & ~umask
+
+
+# Read once at import: os.umask can only be read by setting it, which is not thread-safe.
+_FILE_MODE = _default_mode()
+
+
+def atomic_write_bytes(path: str | Path, data: bytes) -> None:
+    """Write to a temporary file in the same directory, fsync, rename over ``path``: a
+    reader (or a killed writer) sees the old file or the new one, never half of either."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        # mkstemp creates 0600 files; results are meant to be shared like any other file
+        os.fchmod(fd, _FILE_MODE)
+        with os.fdopen(fd, "wb") as f:
+            f.write(data)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
 
 
 def atomic_write_text(path: str | Path, text: str) -> None:

@@ -15,7 +15,7 @@ with the step counter continuing; a finished run is never retrained unless force
 Checkpoints are taken between a gradient update and the next env step (SB3's
 ``on_rollout_start``: every vector step for the off-policy algorithms, every rollout for
 PPO) and hold the environments mid-episode and every random stream
-(:mod:`uavris.agents.resume_state`), so a killed and resumed run ends with the same model
+(:mod:`uavris.agents.experts.resume_state`), so a killed and resumed run ends with the same model
 and numbers as an uninterrupted one.
 """
 
@@ -23,52 +23,35 @@ from __future__ import annotations
 
 import dataclasses
 import os
-import shutil
 import time
-import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from uavris.agents.evaluation import evaluate
+from uavris import runs
+from uavris.agents.evaluation import EpisodeResults, evaluate
 from uavris.agents.experts import (
     ALGORITHMS,
     OFF_POLICY,
     Hyperparams,
-    algorithm_class,
-    build_model,
     check_algorithm,
     default_hyperparams,
-    sb3_batch_policy,
+    resume_state,
 )
-from uavris.agents import resume_state
-from uavris.agents.hybrid import check_phase_control, with_optimised_phases
-from uavris.agents.imitation import ImitationConfig, imitate
-from uavris.agents.sb3_vec_env import UavRisVecEnv
-from uavris.atomic import atomic_write_bytes
-from uavris.config import ConfigError, SystemConfig, get_scenario
-from uavris.experiments.io import (
-    UavrisError,
-    read_csv,
-    read_json,
-    read_rows,
-    read_yaml,
-    write_csv,
-    write_json,
-    write_yaml,
-)
+from uavris.agents.experts.imitation import ImitationConfig, imitate
+from uavris.agents.experts.sb3 import SB3Policy, build_model, load_model
+from uavris.agents.experts.vec_env import UavRisVecEnv
+from uavris.config import SystemConfig, get_scenario
+from uavris.env.wrappers import check_phase_control
+from uavris.errors import CheckpointError, ConfigError, UavrisError
+from uavris.experiments.jobs import configure_torch_threads
+from uavris.io import atomic_write_bytes, read_csv, read_rows, read_yaml, write_csv, write_yaml
+from uavris.presets import EVAL_SEED, PRESETS, TRAIN_CHECKPOINT, TRAIN_EVAL, TRAIN_STEPS, check_preset
 
-PRESETS: tuple[str, ...] = ("smoke", "quick", "paper")
 EPISODE_HEADER = ("episode", "env_steps", "avg_sum_rate", "return", "length")
 EVAL_HEADER = ("env_steps", "episodes", "mean", "ci_low", "ci_high", "iqm")
-
-# Steps per preset: smoke exercises the code, quick fits the 30-minute comparison on two
-# cores (500 episodes), paper matches the paper's ~25,000 training episodes.
-PRESET_STEPS = {"smoke": 640, "quick": 50_000, "paper": 2_500_000}
-PRESET_EVAL = {"smoke": (320, 8), "quick": (10_000, 32), "paper": (50_000, 100)}  # (every, episodes)
-PRESET_CHECKPOINT = {"smoke": 320, "quick": 10_000, "paper": 50_000}
 
 
 @dataclass(frozen=True)
@@ -79,13 +62,13 @@ class TrainConfig:
     scenario: str = "fig2"
     seed: int = 0
     preset: str = "quick"
-    total_steps: int = PRESET_STEPS["quick"]
-    eval_every: int = PRESET_EVAL["quick"][0]
-    eval_episodes: int = PRESET_EVAL["quick"][1]
-    eval_seed: int = 1_000_000  # evaluation episodes never share seeds with training
-    checkpoint_every: int = PRESET_CHECKPOINT["quick"]
-    phase_control: str = "agent"  # "optimizer": hybrid controller (uavris.agents.hybrid)
-    imitation: ImitationConfig | None = None  # start from the oracle's demonstrations (uavris.agents.imitation)
+    total_steps: int = TRAIN_STEPS["quick"]
+    eval_every: int = TRAIN_EVAL["quick"][0]
+    eval_episodes: int = TRAIN_EVAL["quick"][1]
+    eval_seed: int = EVAL_SEED  # evaluation episodes never share seeds with training
+    checkpoint_every: int = TRAIN_CHECKPOINT["quick"]
+    phase_control: str = "agent"  # "optimizer": hybrid controller (uavris.env.wrappers)
+    imitation: ImitationConfig | None = None  # start from the oracle's demonstrations (uavris.agents.experts.imitation)
     hyperparams: Hyperparams = field(default_factory=Hyperparams)
     system: SystemConfig = field(default_factory=SystemConfig)
 
@@ -93,8 +76,7 @@ class TrainConfig:
         check_algorithm(self.algo)
         check_phase_control(self.phase_control)
         get_scenario(self.scenario).validate_for(self.system)
-        if self.preset not in PRESETS:
-            raise ConfigError(f"unknown preset {self.preset!r}; choose one of {', '.join(PRESETS)}")
+        check_preset(self.preset)
         if isinstance(self.imitation, dict):
             object.__setattr__(self, "imitation", ImitationConfig(**self.imitation))
         if self.imitation is not None and (self.algo != "ppo" or self.phase_control != "optimizer"):
@@ -131,11 +113,10 @@ class TrainConfig:
 
 def preset_config(algo: str, scenario: str, seed: int, preset: str, **overrides: Any) -> TrainConfig:
     """The named preset for ``algo`` with optional field overrides (``hyperparams`` included)."""
-    if preset not in PRESETS:
-        raise ConfigError(f"unknown preset {preset!r}; choose one of {', '.join(PRESETS)}")
-    base = dict(algo=algo, scenario=scenario, seed=seed, preset=preset, total_steps=PRESET_STEPS[preset],
-                eval_every=PRESET_EVAL[preset][0], eval_episodes=PRESET_EVAL[preset][1],
-                checkpoint_every=PRESET_CHECKPOINT[preset], hyperparams=default_hyperparams(algo, preset))
+    check_preset(preset)
+    base = dict(algo=algo, scenario=scenario, seed=seed, preset=preset, total_steps=TRAIN_STEPS[preset],
+                eval_every=TRAIN_EVAL[preset][0], eval_episodes=TRAIN_EVAL[preset][1],
+                checkpoint_every=TRAIN_CHECKPOINT[preset], hyperparams=default_hyperparams(algo, preset))
     base.update({k: v for k, v in overrides.items() if v is not None})
     return TrainConfig(**base)
 
@@ -145,19 +126,7 @@ def default_run_dir(cfg: TrainConfig, root: str | Path = "runs/train") -> Path:
     return Path(root) / f"{cfg.algo}{hybrid}-{cfg.scenario}-s{cfg.seed}-{cfg.preset}"
 
 
-def configure_torch_threads() -> None:
-    """One torch thread per worker process (the machine's cores go to parallel jobs)."""
-    import torch
-
-    torch.set_num_threads(1)
-    os.environ.setdefault("OMP_NUM_THREADS", "1")
-
-
 # ---------------------------------------------------------------------------- run state
-def is_finished(run_dir: Path) -> bool:
-    return (run_dir / "done.json").exists()
-
-
 def load_run_config(run_dir: str | Path) -> TrainConfig:
     run_dir = Path(run_dir)
     if not (run_dir / "config.yaml").exists():
@@ -166,29 +135,6 @@ def load_run_config(run_dir: str | Path) -> TrainConfig:
     if not isinstance(raw, dict):
         raise UavrisError(f"{run_dir / 'config.yaml'} does not describe a training run")
     return TrainConfig.from_dict(raw)
-
-
-def _check_model_file(path: Path) -> None:
-    """SB3 models are zip archives; reject a truncated or foreign file with a clear message."""
-    if not path.exists():
-        raise UavrisError(f"checkpoint {path} is missing")
-    try:
-        with zipfile.ZipFile(path) as z:
-            names = set(z.namelist())
-            bad = z.testzip()
-    except (zipfile.BadZipFile, OSError) as e:
-        raise UavrisError(f"checkpoint {path} is corrupt ({e})") from None
-    if bad is not None or "data" not in names:
-        raise UavrisError(f"checkpoint {path} is corrupt (not a Stable-Baselines3 model)")
-
-
-def load_model(path: str | Path, algo: str, env: Any = None) -> Any:
-    path = Path(path)
-    _check_model_file(path)
-    try:
-        return algorithm_class(algo).load(path, env=env, device="cpu")
-    except Exception as e:  # noqa: BLE001 - SB3 raises many types for a bad archive
-        raise UavrisError(f"checkpoint {path} could not be loaded: {type(e).__name__}: {e}") from None
 
 
 # ---------------------------------------------------------------------------- training
@@ -259,15 +205,15 @@ class _Recorder:
             self.bar.close()
 
 
-def run_policy(model: Any, cfg: TrainConfig) -> Any:
-    """The deterministic batch policy of a trained run (hybrid runs get optimised phases)."""
-    policy = sb3_batch_policy(model)
-    return with_optimised_phases(policy) if cfg.phase_control == "optimizer" else policy
+def run_policy(model: Any, cfg: TrainConfig) -> SB3Policy:
+    """The deterministic policy of a trained run (a hybrid run's acts on the motion, with
+    the optimiser's phases)."""
+    return SB3Policy(model, cfg.phase_control)
 
 
-def run_evaluation(model: Any, cfg: TrainConfig, episodes: int, scenario: str | None = None, seed: int | None = None):
-    return evaluate(run_policy(model, cfg), cfg.system, scenario or cfg.scenario, episodes,
-                    cfg.eval_seed if seed is None else seed)
+def run_evaluation(model: Any, cfg: TrainConfig, episodes: int) -> EpisodeResults:
+    """The run's deterministic evaluation on its own scenario and evaluation episodes."""
+    return evaluate(run_policy(model, cfg), cfg.system, cfg.scenario, episodes, cfg.eval_seed)
 
 
 def save_checkpoint(model: Any, cfg: TrainConfig, run_dir: Path, episodes: list, evals: list) -> Path:
@@ -291,12 +237,12 @@ def save_checkpoint(model: Any, cfg: TrainConfig, run_dir: Path, episodes: list,
         os.replace(tmp_buf, ck / "replay_buffer.pkl")
     write_csv(run_dir / "episodes.csv", EPISODE_HEADER, episodes)
     write_csv(run_dir / "evals.csv", EVAL_HEADER, evals)
-    write_json(ck / "latest.json", {"env_steps": steps, "model": model_path.name, "state": state_path.name,
-                                    "episodes": len(episodes), "evals": len(evals)})
+    runs.write_pointer(run_dir, {"env_steps": steps, "model": model_path.name, "state": state_path.name,
+                                 "episodes": len(episodes), "evals": len(evals)})
     return model_path
 
 
-_INT_COLUMNS = {"episode", "env_steps", "length", "episodes"}
+INT_COLUMNS = {"episode", "env_steps", "length", "episodes"}
 
 
 def train(cfg: TrainConfig, run_dir: str | Path, *, resume: bool = False, force: bool = False,
@@ -309,19 +255,8 @@ def train(cfg: TrainConfig, run_dir: str | Path, *, resume: bool = False, force:
     """
     configure_torch_threads()
     run_dir = Path(run_dir)
-    has_config = (run_dir / "config.yaml").exists()
-    if force and run_dir.exists() and not resume:
-        if not has_config and any(run_dir.iterdir()):
-            raise UavrisError(f"{run_dir} exists and is not a uavris run directory; refusing to overwrite it")
-        shutil.rmtree(run_dir)
-        has_config = False
-    elif is_finished(run_dir):
-        raise UavrisError(f"{run_dir} is a finished run; evaluate it, or pass --force to retrain from scratch")
-    elif has_config and not resume:
-        raise UavrisError(f"{run_dir} already holds a run; pass --resume to continue it or --force to start over")
-    elif run_dir.exists() and not has_config and any(run_dir.iterdir()):
-        raise UavrisError(f"{run_dir} exists and is not a uavris run directory")
-
+    resuming = runs.prepare(run_dir, "config.yaml", lambda p: write_yaml(p, cfg.to_dict()),
+                            lambda p: load_run_config(run_dir) == cfg, resume=resume, force=force)
     t0 = time.perf_counter()
     env = UavRisVecEnv(cfg.hyperparams.n_envs, cfg.system, cfg.scenario, cfg.hyperparams.reward_scale,
                        cfg.phase_control)
@@ -329,19 +264,14 @@ def train(cfg: TrainConfig, run_dir: str | Path, *, resume: bool = False, force:
     episodes: list[list[Any]] = []
     evals: list[list[Any]] = []
     start = 0
-    if resume and has_config:
-        saved = load_run_config(run_dir)
-        if saved != cfg:
-            raise UavrisError(f"{run_dir} was started with a different configuration; resume it without changing "
-                              "parameters, or pass --force to start over")
-        latest_path = run_dir / "checkpoints" / "latest.json"
-        if latest_path.exists():
-            latest = read_json(latest_path)
+    latest = runs.read_pointer(run_dir, "model", "env_steps", "episodes", "evals") if resuming else None
+    if resuming:
+        if latest is not None:
             try:
                 model_path = run_dir / "checkpoints" / latest["model"]
                 start, n_ep, n_ev = int(latest["env_steps"]), int(latest["episodes"]), int(latest["evals"])
-            except (KeyError, TypeError, ValueError):
-                raise UavrisError(f"{latest_path} is corrupt") from None
+            except (TypeError, ValueError):
+                raise UavrisError(f"{run_dir / runs.POINTER} is corrupt") from None
             model = load_model(model_path, cfg.algo, env)
             if cfg.algo in OFF_POLICY:
                 buf = run_dir / "checkpoints" / "replay_buffer.pkl"
@@ -350,20 +280,16 @@ def train(cfg: TrainConfig, run_dir: str | Path, *, resume: bool = False, force:
                 try:
                     model.load_replay_buffer(buf)
                 except Exception as e:  # noqa: BLE001
-                    raise UavrisError(f"replay buffer {buf} is corrupt ({type(e).__name__})") from None
+                    raise CheckpointError(f"replay buffer {buf} is corrupt ({type(e).__name__})") from None
             if "state" in latest:  # older checkpoints have none: the run then starts fresh episodes
                 state_path = run_dir / "checkpoints" / str(latest["state"])
                 try:
                     resume_state.restore(model, state_path.read_bytes())
                 except (OSError, ValueError) as e:
-                    raise UavrisError(f"resume state {state_path} is missing or corrupt ({e})") from None
-            episodes = read_rows(run_dir / "episodes.csv", EPISODE_HEADER, n_ep, _INT_COLUMNS)
-            evals = read_rows(run_dir / "evals.csv", EVAL_HEADER, n_ev, _INT_COLUMNS)
-        else:
-            model = _fresh_model(cfg, env, run_dir, evals, progress)
-    else:
-        run_dir.mkdir(parents=True, exist_ok=True)
-        write_yaml(run_dir / "config.yaml", cfg.to_dict())
+                    raise CheckpointError(f"resume state {state_path} is missing or corrupt ({e})") from None
+            episodes = read_rows(run_dir / "episodes.csv", EPISODE_HEADER, n_ep, INT_COLUMNS)
+            evals = read_rows(run_dir / "evals.csv", EVAL_HEADER, n_ev, INT_COLUMNS)
+    if latest is None:
         model = _fresh_model(cfg, env, run_dir, evals, progress)
 
     rec = _Recorder(cfg, run_dir, start, episodes, evals, progress, interrupt_at)
@@ -382,10 +308,9 @@ def train(cfg: TrainConfig, run_dir: str | Path, *, resume: bool = False, force:
     model.save(tmp)
     os.replace(tmp, run_dir / "model.zip")
     imitation = read_csv(run_dir / "imitation.csv") if (run_dir / "imitation.csv").exists() else []
-    write_json(run_dir / "done.json", {"env_steps": int(model.num_timesteps), "episodes": len(episodes),
-                                       "imitation_interactions": int(imitation[-1]["samples"]) if imitation else 0,
-                                       "wall_clock_s_last_session": time.perf_counter() - t0,
-                                       "final_eval": final})
+    runs.write_done(run_dir, {"env_steps": int(model.num_timesteps), "episodes": len(episodes),
+                              "imitation_interactions": int(imitation[-1]["samples"]) if imitation else 0,
+                              "wall_clock_s_last_session": time.perf_counter() - t0, "final_eval": final})
     return run_dir / "model.zip"
 
 
@@ -427,9 +352,9 @@ def train_job(cfg_dict: dict[str, Any], run_dir: str) -> dict[str, Any]:
     """Worker entry point (:mod:`uavris.experiments.jobs`): train, or resume, one run; its done.json."""
     cfg = TrainConfig.from_dict(cfg_dict)
     path = Path(run_dir)
-    if not is_finished(path):
+    if not runs.is_finished(path):
         train(cfg, path, resume=(path / "config.yaml").exists(), progress=False)
-    return read_json(path / "done.json")
+    return runs.read_done(path)
 
 
 def final_model_path(run_dir: str | Path) -> Path:
@@ -437,9 +362,9 @@ def final_model_path(run_dir: str | Path) -> Path:
     run_dir = Path(run_dir)
     if (run_dir / "model.zip").exists():
         return run_dir / "model.zip"
-    latest = run_dir / "checkpoints" / "latest.json"
-    if latest.exists():
-        return run_dir / "checkpoints" / read_json(latest)["model"]
+    latest = runs.read_pointer(run_dir, "model")
+    if latest is not None:
+        return run_dir / "checkpoints" / str(latest["model"])
     raise UavrisError(f"{run_dir} has no model yet (no model.zip and no checkpoint)")
 
 

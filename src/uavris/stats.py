@@ -1,9 +1,14 @@
-"""Aggregate statistics for reports: mean, IQM and bootstrap confidence intervals.
+"""Statistics of results: mean, IQM, Student-t and bootstrap confidence intervals.
 
-Following Agarwal et al. (NeurIPS 2021), final performance over a few seeds is reported
-as the mean and the interquartile mean (IQM, ``scipy.stats.trim_mean`` with 25% cut)
-with percentile-bootstrap 95% CIs. With one task, the stratified bootstrap resamples
-runs within that task, i.e. an ordinary bootstrap over seeds.
+Lives here: every interval and aggregate a report or an evaluation prints. Not here: how
+the samples are produced.
+
+Over evaluation episodes (many, roughly normal means) the 95% interval of the mean is
+Student's t (:func:`t_interval`). Over a few training seeds, following Agarwal et al.
+(NeurIPS 2021), final performance is the mean and the interquartile mean (IQM,
+``scipy.stats.trim_mean`` with 25% cut) with percentile-bootstrap 95% CIs
+(:func:`summarize`); with one task, the stratified bootstrap resamples runs within that
+task, i.e. an ordinary bootstrap over seeds.
 """
 
 from __future__ import annotations
@@ -15,6 +20,14 @@ from scipy import stats
 
 def iqm(x: ArrayLike, axis: int = -1) -> NDArray[np.float64] | float:
     return stats.trim_mean(np.asarray(x, dtype=np.float64), 0.25, axis=axis)
+
+
+def t_interval(x: ArrayLike, confidence: float = 0.95) -> tuple[float, float]:
+    """Student-t interval of the mean of a 1-D sample (NaN for fewer than 2 values)."""
+    x = np.asarray(x, dtype=np.float64)
+    mean = float(np.mean(x))
+    half = float(stats.t.ppf(0.5 + confidence / 2, len(x) - 1) * stats.sem(x)) if len(x) > 1 else float("nan")
+    return mean - half, mean + half
 
 
 def bootstrap_ci(x: ArrayLike, statistic: str = "mean", confidence: float = 0.95, n_resamples: int = 2000,

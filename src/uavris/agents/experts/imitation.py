@@ -1,9 +1,9 @@
 """Experts initialised from the oracle's demonstrations: behaviour cloning with DAgger.
 
 Lives here: :class:`ImitationConfig` and :func:`imitate`, which fits an SB3 PPO policy
-acting on the 6 motion entries (the hybrid action of :mod:`uavris.agents.hybrid`; the phase
+acting on the 6 motion entries (the hybrid action of :mod:`uavris.env.wrappers`; the phase
 optimiser sets the phases) to the planning oracle's motion. Not here: the run directory,
-checkpoints and the RL that may follow (:mod:`uavris.experiments.training`).
+checkpoints and the RL that may follow (:mod:`uavris.experiments.train_expert`).
 
 Why (docs/model.md, "Strong track"): end-to-end RL does not learn the 16 phases at any
 budget we could afford, and RL on the motion alone needs 100-150k env steps per scenario
@@ -34,6 +34,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from uavris.config import ConfigError, SystemConfig
+from uavris.agents.policy import Privileged
+from uavris.env.rollout import rollout
 from uavris.env.simulator import BatchedSimulator
 
 IMITATION_SEED = 4_000_000
@@ -68,21 +70,21 @@ class ImitationConfig:
 def _rollout(config: SystemConfig, scenario: str, seeds: NDArray[np.int64], teacher: Any,
              student: Any | None) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
     """States visited by the teacher (``student`` None) or the student, with the teacher's labels."""
-    sim = BatchedSimulator(config, scenario, len(seeds))
-    sim.seed(seeds)
-    sim.reset()
-    alive = np.ones(len(seeds), dtype=bool)
-    states, labels = [], []
-    while alive.any():
-        obs = sim.observe()
-        label = teacher.motion_action(sim)
+    states: list[NDArray[np.float32]] = []
+    labels: list[NDArray[np.float32]] = []
+
+    def label(sim: BatchedSimulator, obs: NDArray[np.float32], executed: NDArray, alive: NDArray[np.bool_]) -> None:
         states.append(obs[alive])
-        labels.append(label[alive])
-        motion = label if student is None else student(obs)
-        action = np.zeros((len(seeds), config.action_dim), dtype=np.float32)
+        labels.append(teacher.motion_action(sim)[alive])
+
+    def full(motion: NDArray[np.float32]) -> NDArray[np.float32]:
+        action = np.zeros((len(motion), config.action_dim), dtype=np.float32)  # phases: the zero action's
         action[:, :3], action[:, -3:] = motion[:, :3], motion[:, 3:]
-        _, term, trunc, _ = sim.step(action)
-        alive &= ~(term | trunc)
+        return action
+
+    actor = (Privileged(lambda obs, sim: full(teacher.motion_action(sim))) if student is None
+             else (lambda obs: full(student(obs))))
+    rollout(actor, config, scenario, seeds, on_slot=label)
     return np.concatenate(states), np.concatenate(labels)
 
 

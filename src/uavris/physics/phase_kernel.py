@@ -3,7 +3,7 @@
 Lives here: the objective and its analytic gradient on the active links, monotone
 L-BFGS ascent, the Newton-Raphson null polish and the per-slot driver, compiled with
 numba. Not here: the method's description and reasons, the starts and the closed form
-for one pair (:mod:`uavris.agents.phase_optimizer`, which calls :func:`solve_slots`).
+for one pair (:mod:`uavris.physics.phase_opt`, which calls :func:`solve_slots`).
 
 Why compiled: a slot's problem is tiny (L = 2 links, N = 16 phases); batched numpy spent
 most of its time in array overheads and could not stop a start that had converged or
@@ -59,7 +59,7 @@ def link_rate(phi, txr, txi, rxr, rxi, cos_tx, power, noise, angle_dependent, ne
 
     ``txr, txi, rxr, rxi`` ``(L, N)``: real and imaginary parts of the transmitters' and
     receivers' channels; the remaining arrays are workspace. Same objective and gradient
-    as :func:`uavris.agents.phase_optimizer.sum_rate_and_gradient` restricted to the links.
+    as :func:`uavris.physics.phase_opt.sum_rate_and_gradient` restricted to the links.
     """
     n_links, n_el = txr.shape
     _reflect(phi, cos_tx, angle_dependent, rr, ri, sl)

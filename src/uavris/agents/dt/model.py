@@ -24,7 +24,7 @@ Two attention layouts (``DTConfig.attention``):
   tokens instead of ``3 context - 1``: exact, not an approximation. The first token of a
   slot sees the same ``3 context - 1`` tokens as the window layout at its first layer, but
   deeper blocks reach further back (``depth`` bands). The model is trained on whole
-  episodes (:class:`uavris.agents.dt_data.TrainingWindows` with ``whole_episodes``).
+  episodes (:class:`uavris.agents.dt.data.TrainingWindows` with ``whole_episodes``).
   For histories of at most ``context`` slots both layouts compute the same function.
 
 Two exact savings, both invisible in the outputs:
@@ -39,18 +39,16 @@ Normalisation travels with the weights: ``state_mean``, ``state_std`` and ``retu
 are buffers (saved in the safetensors file) computed from the training dataset; the model
 takes raw observations and raw returns-to-go (bps/Hz summed over slots).
 
-Checkpoint format: a directory with ``model.safetensors`` (every parameter and buffer, no
-pickle) and ``model.json`` (``kind``, ``format_version``, the :class:`DTConfig` and
-caller-supplied metadata), both written atomically.
+Lives here: the model, its configuration, the attention masks and the action loss. Not
+here: the key/value cache of the banded layout (:mod:`.cache`), checkpoints
+(:mod:`.checkpoint`), training (:mod:`.trainer`) and deployment (:mod:`.policy`).
 """
 
 from __future__ import annotations
 
 import dataclasses
-import json
 import math
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -58,19 +56,10 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from uavris.atomic import atomic_write_bytes
+from uavris.agents.dt.cache import KVCache
+from uavris.errors import ConfigError
 
-from uavris.config import ConfigError
-
-MODEL_KIND = "uavris-decision-transformer"
-MODEL_FORMAT_VERSION = 1
-WEIGHTS_FILE = "model.safetensors"
-META_FILE = "model.json"
 ATTENTION_LAYOUTS = ("window", "banded")
-
-
-class CheckpointError(ValueError):
-    """A DT checkpoint directory that is missing, corrupt or does not fit the model."""
 
 
 @dataclass(frozen=True)
@@ -278,53 +267,6 @@ class DecisionTransformer(nn.Module):
                 "return_scale": float(self.return_scale)}
 
 
-class KVCache:
-    """Keys and values of each row's recent tokens, per block (banded DT), in a ring buffer.
-
-    The ring has ``band + 2`` slots: the ``band - 1`` tokens a new slot's three tokens may
-    attend to, plus room for those three, which overwrite the oldest entries in place (no
-    copying of the cache per slot). Attention does not depend on the order of its keys, so
-    only the mask needs each entry's position: ``position`` is the token index of each ring
-    entry (all rows advance in lockstep), ``valid`` marks entries that hold a real token of
-    the row's current episode (all False after :meth:`reset`), so rows may be at different
-    slots of their episodes.
-    """
-
-    def __init__(self, cfg: DTConfig, batch: int, device: torch.device, dtype: torch.dtype) -> None:
-        assert cfg.band is not None
-        self.band = cfg.band
-        size, h = cfg.band + 2, cfg.heads
-        shape = (batch, h, size, cfg.width // h)
-        self.keys = [torch.zeros(shape, device=device, dtype=dtype) for _ in range(cfg.depth)]
-        self.values = [torch.zeros(shape, device=device, dtype=dtype) for _ in range(cfg.depth)]
-        self.valid = torch.zeros(batch, size, dtype=torch.bool, device=device)
-        self.position = torch.full((size,), -(10 ** 9), dtype=torch.long, device=device)
-        self.next_position = 0
-
-    def reset(self, rows: torch.Tensor | np.ndarray) -> None:
-        """Forget the history of ``rows`` (they start new episodes)."""
-        self.valid[torch.as_tensor(rows)] = False
-
-    def insert(self, new_valid: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """Claim ring entries for ``m`` new tokens (``new_valid`` is (B, m)); returns those
-        entries and the ``(B, 1, m, size)`` attention mask of the new tokens over the ring.
-        Each block puts its keys and values there with :meth:`write` before attending."""
-        m = new_valid.shape[1]
-        new_positions = self.next_position + torch.arange(m, device=new_valid.device)
-        slots = new_positions % self.valid.shape[1]
-        self.position[slots] = new_positions
-        self.valid[:, slots] = new_valid
-        query = new_positions[:, None]
-        in_band = (self.position[None, :] <= query) & (query - self.position[None, :] < self.band)
-        own = self.position[None, :] == query  # an invalid new token keeps its own key (no NaN)
-        self.next_position += m
-        return slots, (in_band & (self.valid[:, None, :] | own)).unsqueeze(1)
-
-    def write(self, block: int, slots: torch.Tensor, keys: torch.Tensor, values: torch.Tensor) -> None:
-        self.keys[block][:, :, slots] = keys
-        self.values[block][:, :, slots] = values
-
-
 def attention_mask(valid: torch.Tensor | None, length: int, batch: int, device: torch.device,
                    band: int | None = None) -> torch.Tensor:
     """Boolean ``(B, 1, n, n)`` mask over the ``n = 3 L - 1`` tokens: True where a query may
@@ -359,74 +301,3 @@ def masked_action_loss(pred: torch.Tensor, target: torch.Tensor, valid: torch.Te
     err = (pred - target).pow(2).mean(dim=-1)
     w = valid.to(err.dtype)
     return (err * w).sum() / w.sum().clamp_min(1.0)
-
-
-# ------------------------------------------------------------------------------ checkpoints
-def save_dt(model: DecisionTransformer, directory: str | Path, metadata: dict[str, Any] | None = None) -> Path:
-    """Write ``model.safetensors`` then ``model.json`` into ``directory``; returns it.
-
-    The JSON goes last, so a directory whose ``model.json`` exists has matching weights.
-    """
-    from safetensors.torch import save
-
-    directory = Path(directory)
-    tensors = {k: v.detach().contiguous().clone() for k, v in model.state_dict().items()}
-    atomic_write_bytes(directory / WEIGHTS_FILE, save(tensors))
-    meta = {"kind": MODEL_KIND, "format_version": MODEL_FORMAT_VERSION, "config": model.cfg.to_dict(),
-            **(metadata or {})}
-    atomic_write_bytes(directory / META_FILE, (json.dumps(meta, indent=2) + "\n").encode("utf-8"))
-    return directory
-
-
-def read_dt_metadata(directory: str | Path) -> dict[str, Any]:
-    """The ``model.json`` of a DT checkpoint directory, checked for kind and version."""
-    path = Path(directory) / META_FILE
-    if not path.exists():
-        raise CheckpointError(f"{directory} is not a DT checkpoint (no {META_FILE})")
-    try:
-        meta = json.loads(path.read_text(encoding="utf-8"))
-    except (json.JSONDecodeError, UnicodeDecodeError) as e:
-        raise CheckpointError(f"{path} is corrupt ({e})") from None
-    if not isinstance(meta, dict) or meta.get("kind") != MODEL_KIND:
-        raise CheckpointError(f"{path} does not describe a uavris Decision Transformer")
-    if meta.get("format_version") != MODEL_FORMAT_VERSION:
-        raise CheckpointError(f"{path} has format version {meta.get('format_version')!r}; "
-                              f"this uavris reads version {MODEL_FORMAT_VERSION}")
-    return meta
-
-
-def load_dt(directory: str | Path) -> tuple[DecisionTransformer, dict[str, Any]]:
-    """Rebuild the model of a checkpoint directory (in eval mode) and return its metadata."""
-    from safetensors import SafetensorError
-    from safetensors.torch import load
-
-    directory = Path(directory)
-    meta = read_dt_metadata(directory)
-    try:
-        cfg = DTConfig.from_dict(meta.get("config"))
-    except ConfigError as e:
-        raise CheckpointError(f"{directory / META_FILE} has a bad model config: {e}") from None
-    weights = directory / WEIGHTS_FILE
-    if not weights.exists():
-        raise CheckpointError(f"{weights} is missing")
-    try:
-        tensors = load(weights.read_bytes())
-    except (SafetensorError, ValueError, OSError) as e:
-        raise CheckpointError(f"{weights} is corrupt ({e})") from None
-    model = DecisionTransformer(cfg)
-    expected = model.state_dict()
-    missing = sorted(set(expected) - set(tensors))
-    extra = sorted(set(tensors) - set(expected))
-    if missing or extra:
-        raise CheckpointError(f"{weights} does not match its config (missing {missing[:3]}, unexpected {extra[:3]})")
-    for name, t in tensors.items():
-        if t.shape != expected[name].shape:
-            raise CheckpointError(f"{weights}: {name} has shape {tuple(t.shape)}, "
-                                  f"the config needs {tuple(expected[name].shape)}")
-        if not torch.isfinite(t).all():
-            raise CheckpointError(f"{weights}: {name} contains NaN or inf")
-    model.load_state_dict(tensors)
-    if float(model.return_scale) <= 0 or bool((model.state_std <= 0).any()):
-        raise CheckpointError(f"{weights} has invalid normalisation (non-positive scale)")
-    model.eval()
-    return model, meta

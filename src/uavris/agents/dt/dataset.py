@@ -1,0 +1,223 @@
+"""Expert datasets on disk: Minari (HDF5 backend), read back with validation.
+
+Lives here: :func:`write_dataset`, :func:`load_dataset`, :class:`ExpertDataset`. Not here:
+what a trajectory is and how the model trains on it (:mod:`.trajectories`).
+
+Dataset layout (a directory ``DIR``)::
+
+    DIR/data/metadata.json   Minari metadata plus a "uavris" entry: format version, the
+                             SystemConfig, the observation layout, obs/action sizes and
+                             the phase control ("agent": full actions; "optimizer": the
+                             6 motion entries, the phases being the optimiser's)
+    DIR/data/main_data.hdf5  one group per episode: observations (T+1, obs_dim),
+                             actions (T, act_dim), rewards, terminations, truncations;
+                             attributes seed, scenario, expert, expert_algo
+
+Minari reads it offline: ``minari.MinariDataset("DIR/data")``, or
+``minari.load_dataset(ID)`` with ``MINARI_DATASETS_PATH`` set to DIR's parent, where ID is
+the dataset id stored in the metadata (DIR's name, with ``-v0`` appended unless it ends in
+``-vN``). Nothing is ever downloaded.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+import shutil
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+from numpy.typing import NDArray
+
+from uavris.agents.dt.trajectories import Trajectory
+from uavris.config import SystemConfig
+from uavris.env.simulator import layout_as_lists, observation_bounds, stored_system
+from uavris.env.wrappers import PHASE_CONTROLS, action_dim_for
+from uavris.errors import DatasetError
+
+DATASET_FORMAT_VERSION = 1
+
+
+@dataclass(frozen=True)
+class ExpertDataset:
+    """A loaded, validated dataset."""
+
+    path: Path
+    dataset_id: str
+    system: SystemConfig
+    trajectories: list[Trajectory]
+    description: str
+    phase_control: str = "agent"  # "optimizer": the actions are the 6 motion entries (strong track)
+
+    @property
+    def scenarios(self) -> list[str]:
+        return sorted({tr.scenario for tr in self.trajectories})
+
+    @property
+    def num_slots(self) -> int:
+        return sum(tr.length for tr in self.trajectories)
+
+
+def dataset_id_for(path: Path) -> str:
+    """Minari id of a dataset directory: its name, ``-v0`` appended unless it ends in ``-vN``."""
+    name = re.sub(r"[^-_\w]", "_", path.name) or "uavris"
+    return name if re.fullmatch(r"[-_\w]+-v\d+", name) else f"{name}-v0"
+
+
+def write_dataset(path: str | Path, trajectories: Sequence[Trajectory], system: SystemConfig, *,
+                  description: str = "", force: bool = False, phase_control: str = "agent") -> Path:
+    """Write ``trajectories`` as a Minari dataset at ``path`` (see the module docstring).
+
+    The dataset is built in a temporary sibling directory and renamed into place, so an
+    interrupted write never leaves a half dataset. An existing dataset is replaced only
+    with ``force``; a non-empty directory that is not a dataset is never touched.
+    """
+    import gymnasium as gym
+    import minari
+    from minari.data_collector import EpisodeBuffer
+    from minari.dataset.minari_storage import MinariStorage
+
+    given = Path(path)
+    path = given.absolute()  # Minari mis-joins relative paths when it sizes the dataset
+    if not trajectories:
+        raise DatasetError("no trajectories to write")
+    if path.exists():
+        if not (path / "data" / "metadata.json").exists() and any(path.iterdir()):
+            raise DatasetError(f"{path} exists and is not a dataset; refusing to overwrite it")
+        if not force:
+            raise DatasetError(f"{path} already exists; pass --force to replace it")
+    act_dim = action_dim_for(system, phase_control)
+    for tr in trajectories:
+        _check_trajectory(tr, system.observation_dim, act_dim, f"trajectory (seed {tr.seed})")
+    tmp = path.parent / f".{path.name}.tmp"
+    shutil.rmtree(tmp, ignore_errors=True)
+    tmp.mkdir(parents=True)
+    try:
+        low, high = observation_bounds(system)
+        storage = MinariStorage.new(tmp / "data", observation_space=gym.spaces.Box(low, high, dtype=np.float32),
+                                    action_space=gym.spaces.Box(-1.0, 1.0, (act_dim,), dtype=np.float32),
+                                    data_format="hdf5", jpeg_encoding=False)
+        algos = sorted({tr.expert_algo for tr in trajectories if tr.expert_algo})
+        storage.update_metadata({
+            "dataset_id": dataset_id_for(path),
+            "minari_version": minari.__version__,
+            "algorithm_name": "+".join(algos) or "unknown",
+            "description": description or "uavris expert trajectories",
+            "uavris": {"format_version": DATASET_FORMAT_VERSION, "system": system.to_dict(),
+                       "observation_layout": layout_as_lists(system), "observation_dim": system.observation_dim,
+                       "action_dim": act_dim, "phase_control": phase_control},
+        })
+        storage.update_episodes(
+            EpisodeBuffer(id=i, seed=tr.seed, observations=tr.observations, actions=tr.actions, rewards=tr.rewards,
+                          terminations=_flag_last(tr.length, tr.terminated),
+                          truncations=_flag_last(tr.length, tr.truncated))
+            for i, tr in enumerate(trajectories))
+        storage.update_episode_metadata(
+            [{"scenario": tr.scenario, "expert": tr.expert, "expert_algo": tr.expert_algo} for tr in trajectories])
+        if path.exists():
+            old = path.parent / f".{path.name}.old"
+            shutil.rmtree(old, ignore_errors=True)
+            path.rename(old)
+            tmp.rename(path)
+            shutil.rmtree(old, ignore_errors=True)
+        else:
+            tmp.rename(path)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    return given
+
+
+def _flag_last(length: int, flag: bool) -> NDArray[np.bool_]:
+    """Per-slot flags of an episode: ``flag`` at its last slot, False before."""
+    out = np.zeros(length, dtype=bool)
+    out[-1] = flag
+    return out
+
+
+def _data_dir(path: Path) -> Path:
+    if (path / "data" / "metadata.json").exists():
+        return path / "data"
+    if (path / "metadata.json").exists():
+        return path
+    raise DatasetError(f"{path} is not a Minari dataset (no data/metadata.json)")
+
+
+def load_dataset(path: str | Path) -> ExpertDataset:
+    """Read and validate a dataset written by :func:`write_dataset`.
+
+    Raises :class:`DatasetError` with one line naming the problem: not a dataset, not
+    readable by Minari, missing uavris metadata or per-episode fields, wrong array
+    shapes, non-finite values, or an observation layout different from the one the
+    current environment produces for the stored system configuration.
+    """
+    import minari
+
+    path = Path(path)
+    data_dir = _data_dir(path).absolute()
+    try:
+        ds = minari.MinariDataset(data_dir)
+        meta = ds.storage.metadata
+    except (ValueError, KeyError, OSError, AssertionError, TypeError, json.JSONDecodeError) as e:
+        raise DatasetError(f"{path} is not a readable Minari dataset ({_one_line(e)})") from None
+    info = meta.get("uavris")
+    if not isinstance(info, dict):
+        raise DatasetError(f"{path} was not written by uavris collect (no 'uavris' metadata)")
+    for key in ("format_version", "system", "observation_layout", "observation_dim", "action_dim"):
+        if key not in info:
+            raise DatasetError(f"{path}: the uavris metadata is missing the field {key!r}")
+    if info["format_version"] != DATASET_FORMAT_VERSION:
+        raise DatasetError(f"{path} has dataset format {info['format_version']!r}; "
+                           f"this uavris reads format {DATASET_FORMAT_VERSION}")
+    system = stored_system(info["system"], info["observation_layout"], str(path), DatasetError)
+    phase_control = info.get("phase_control", "agent")  # datasets from before the field: full actions
+    if phase_control not in PHASE_CONTROLS:
+        raise DatasetError(f"{path}: unknown phase control {phase_control!r} in the uavris metadata")
+    obs_dim, act_dim = system.observation_dim, action_dim_for(system, phase_control)
+    if info["observation_dim"] != obs_dim or info["action_dim"] != act_dim \
+            or ds.observation_space.shape != (obs_dim,) or ds.action_space.shape != (act_dim,):
+        raise DatasetError(f"{path}: observation/action sizes {ds.observation_space.shape}/{ds.action_space.shape} "
+                           f"do not match the environment's ({obs_dim},)/({act_dim},)")
+    if ds.total_episodes < 1:
+        raise DatasetError(f"{path} holds no episodes")
+    trajectories = []
+    try:
+        episodes = ds.storage.get_episodes(range(ds.total_episodes))
+        metas = ds.storage.get_episode_metadata(range(ds.total_episodes))
+        for i, (ep, em) in enumerate(zip(episodes, metas)):
+            for key in ("scenario", "expert", "seed"):
+                if key not in em:
+                    raise DatasetError(f"{path}: episode {i} is missing the metadata field {key!r}")
+            rewards = np.asarray(ep["rewards"], dtype=np.float64)
+            term, trunc = np.asarray(ep["terminations"]), np.asarray(ep["truncations"])
+            tr = Trajectory(np.asarray(ep["observations"]), np.asarray(ep["actions"]), rewards,
+                            bool(term[-1]) if term.size else False, bool(trunc[-1]) if trunc.size else False,
+                            str(em["scenario"]), int(em["seed"]), str(em["expert"]), str(em.get("expert_algo", "")))
+            _check_trajectory(tr, obs_dim, act_dim, f"{path}: episode {i}")
+            trajectories.append(tr)
+    except (KeyError, ValueError, OSError, TypeError, AssertionError, IndexError) as e:
+        if isinstance(e, DatasetError):
+            raise
+        raise DatasetError(f"{path}: episode data is unreadable ({_one_line(e)})") from None
+    return ExpertDataset(path, str(meta.get("dataset_id", "")), system, trajectories, str(meta.get("description", "")),
+                         phase_control)
+
+
+def _check_trajectory(tr: Trajectory, obs_dim: int, act_dim: int, where: str) -> None:
+    t = tr.rewards.shape[0] if tr.rewards.ndim == 1 else -1
+    if t < 1:
+        raise DatasetError(f"{where}: rewards must be a non-empty vector, got shape {tr.rewards.shape}")
+    if tr.observations.shape != (t + 1, obs_dim):
+        raise DatasetError(f"{where}: observations have shape {tr.observations.shape}, expected ({t + 1}, {obs_dim})")
+    if tr.actions.shape != (t, act_dim):
+        raise DatasetError(f"{where}: actions have shape {tr.actions.shape}, expected ({t}, {act_dim})")
+    for name, arr in (("observations", tr.observations), ("actions", tr.actions), ("rewards", tr.rewards)):
+        if not np.all(np.isfinite(arr)):
+            raise DatasetError(f"{where}: {name} contain NaN or inf")
+
+
+def _one_line(e: BaseException) -> str:
+    text = str(e).strip().splitlines()
+    return f"{type(e).__name__}: {text[0]}" if text else type(e).__name__

@@ -1,0 +1,78 @@
+"""The policy interface: observations in, actions out; and the explicit interface of the references
+that see more than the observation.
+
+Lives here: the protocols every policy of uavris follows, as the rollout loop
+(:func:`uavris.env.rollout.rollout`) uses them, and :class:`Privileged`, the marker of a
+reference that reads the simulator's state. Not here: any policy (baselines, experts,
+the Decision Transformer and the oracle each live with their family).
+
+- :class:`Policy`: ``policy(obs) -> actions`` on a batch, ``obs`` ``(n, obs_dim)`` float32,
+  actions ``(n, act_dim)`` in [-1, 1]. ``act_dim`` is the environment's action size, or
+  the 6 motion entries for a policy whose ``phase_control`` is ``"optimizer"`` (the
+  per-slot optimiser then sets the phases).
+- :class:`EpisodicPolicy`: a policy with a memory of its episodes (the Decision
+  Transformer): told when a batch of episodes starts and given the rewards of each slot.
+- :class:`PrivilegedPolicy`: a reference that reads the simulator's state (this slot's
+  channels, incidence and pairing, the pose, the scenario), e.g. the oracle; it is called
+  ``policy(obs, sim)``. Everything a learned policy may use is in ``obs``.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Callable, ClassVar, Protocol, runtime_checkable
+
+import numpy as np
+from numpy.typing import NDArray
+
+from uavris.env.simulator import BatchedSimulator
+
+
+@runtime_checkable
+class Policy(Protocol):
+    def __call__(self, obs: NDArray[np.float32]) -> NDArray[np.float32]: ...
+
+
+@runtime_checkable
+class EpisodicPolicy(Protocol):
+    def __call__(self, obs: NDArray[np.float32]) -> NDArray[np.float32]: ...
+
+    def begin(self, n: int) -> None:
+        """``n`` episodes start (slot 0 for every row)."""
+
+    def record(self, actions: NDArray[np.float32], rewards: NDArray[np.float64]) -> None:
+        """The actions just taken (as returned, clipped to [-1, 1]) and the slot's rewards r(t)."""
+
+
+@runtime_checkable
+class PrivilegedPolicy(Protocol):
+    privileged: ClassVar[bool]
+
+    def __call__(self, obs: NDArray[np.float32], sim: BatchedSimulator) -> NDArray[np.float32]: ...
+
+
+class Privileged:
+    """A function ``fn(obs, sim) -> actions`` marked as a privileged reference."""
+
+    privileged: ClassVar[bool] = True
+
+    def __init__(self, fn: Callable[[NDArray[np.float32], BatchedSimulator], NDArray[np.float32]],
+                 phase_control: str = "agent") -> None:
+        self.fn = fn
+        self.phase_control = phase_control
+
+    def __call__(self, obs: NDArray[np.float32], sim: BatchedSimulator) -> NDArray[np.float32]:
+        return self.fn(obs, sim)
+
+
+class Constant:
+    """The same action in every row and slot (the zero action: doing nothing)."""
+
+    def __init__(self, action: NDArray[np.float32], phase_control: str = "agent") -> None:
+        self.action = np.asarray(action, dtype=np.float32)
+        self.phase_control = phase_control
+
+    def __call__(self, obs: NDArray[np.float32]) -> NDArray[np.float32]:
+        return np.broadcast_to(self.action, (obs.shape[0], self.action.size)).copy()
+
+
+AnyPolicy = Any  # Policy | EpisodicPolicy | PrivilegedPolicy

@@ -1,0 +1,141 @@
+"""Decision Transformer run directories: checkpoints, resume, and loading a DT for deployment.
+
+Lives here: what DT pre-training and fine-tuning share about their run directories (the
+guard, checkpoints of model plus trainer state, the latest-checkpoint pointer, the
+TensorBoard writer, the progress bar) and how a DT target (a run directory or any model
+directory) becomes a policy. Not here: the training itself (:mod:`.pretrain`,
+:mod:`.finetune`, :mod:`uavris.agents.dt.trainer`).
+
+Run directories (every file written atomically; ``--resume`` continues from the last
+checkpoint with identical results; a finished run is never redone without ``--force``)::
+
+    config.json          the resolved PretrainConfig / FinetuneConfig ("kind" says which)
+    train_log.csv        pre-training: step, loss, learning rate, samples/s
+    finetune.csv         fine-tuning: one row per round (round 0 = zero-shot)
+    tb/                  TensorBoard logs
+    checkpoints/step_N/  model.safetensors + model.json (a loadable model) and, for the
+                         latest only, trainer.safetensors + trainer.json (optimizer, RNGs);
+                         fine-tuning names them round_N, one per completed round
+    checkpoints/latest.json
+    model.safetensors, model.json, done.json   the final model and the completion record
+
+A model directory (the run directory, or any ``checkpoints/step_N`` / ``round_N``) is what
+``uavris evaluate``, ``uavris finetune-dt --model`` and :func:`load_dt_policy` accept.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from uavris import runs
+from uavris.agents.dt.checkpoint import load_dt, save_dt
+from uavris.agents.dt.model import DecisionTransformer
+from uavris.agents.dt.policy import DTBatchPolicy
+from uavris.agents.dt.trainer import save_trainer_state
+from uavris.config import SystemConfig
+from uavris.env.simulator import stored_system
+from uavris.errors import CheckpointError, UavrisError
+from uavris.io import read_json, write_json
+
+PRETRAIN_KIND = "uavris-dt-pretrain"
+FINETUNE_KIND = "uavris-dt-finetune"
+INT_COLUMNS = {"step", "round", "env_interactions", "gradient_steps"}
+
+
+def progress_bar(total: int, desc: str, unit: str, enabled: bool, initial: int = 0) -> Any:
+    """A tqdm bar, or None when progress output is off."""
+    if not enabled:
+        return None
+    from tqdm.auto import tqdm
+
+    return tqdm(total=total, initial=initial, unit=unit, desc=desc, dynamic_ncols=True)
+
+
+def prepare_run_dir(run_dir: Path, kind: str, cfg_dict: dict[str, Any], resume: bool, force: bool) -> bool:
+    """The run-directory guard (:func:`uavris.runs.prepare`) for a DT run; True when resuming."""
+    record = {"kind": kind, **cfg_dict}
+    return runs.prepare(run_dir, "config.json", lambda p: write_json(p, record), lambda p: read_json(p) == record,
+                        resume=resume, force=force, what="uavris DT run")
+
+
+def write_checkpoint(run_dir: Path, step: int, model: DecisionTransformer, model_meta: dict[str, Any], opt: Any,
+                     rng: np.random.Generator, extra: dict[str, Any], prefix: str = "step") -> Path:
+    """Model, trainer state, then the ``latest.json`` pointer; older trainer states are
+    removed only after the pointer has moved, so a kill at any point leaves a usable one."""
+    ck_root = run_dir / "checkpoints"
+    ck = ck_root / f"{prefix}_{step}"
+    save_dt(model, ck, model_meta)
+    save_trainer_state(ck, opt, rng, extra)
+    runs.write_pointer(run_dir, {"step": step, "dir": ck.name})
+    for old in ck_root.glob(f"{prefix}_*"):
+        if old != ck:
+            for name in ("trainer.safetensors", "trainer.json"):
+                (old / name).unlink(missing_ok=True)
+    return ck
+
+
+def latest_checkpoint(run_dir: Path) -> tuple[int, Path] | None:
+    """(step or round, directory) of the newest checkpoint, or None."""
+    info = runs.read_pointer(run_dir, "step", "dir")
+    if info is None:
+        return None
+    try:
+        return int(info["step"]), run_dir / "checkpoints" / str(info["dir"])
+    except (TypeError, ValueError):
+        raise UavrisError(f"{run_dir / runs.POINTER} is corrupt") from None
+
+
+def restore_weights(model: DecisionTransformer, ck: Path) -> None:
+    saved, _ = load_dt(ck)
+    model.load_state_dict(saved.state_dict())
+
+
+def tb_writer(run_dir: Path, start: int) -> Any:
+    from torch.utils.tensorboard import SummaryWriter
+
+    return SummaryWriter(str(run_dir / "tb"), purge_step=start if start > 0 else None)
+
+
+def checkpoint_system(meta: dict[str, Any], where: Path) -> SystemConfig:
+    """The system a checkpoint was trained on, checked against today's observation layout."""
+    if "system" not in meta:
+        raise CheckpointError(f"{where} stores no system configuration")
+    return stored_system(meta["system"], meta.get("observation_layout"), str(where), CheckpointError)
+
+
+def dt_model_dir(path: str | Path) -> Path | None:
+    """The model directory of a DT target: the directory itself when it holds model.json,
+    the latest checkpoint of an unfinished DT run, or None when ``path`` is not a DT target."""
+    path = Path(path)
+    if (path / "model.json").exists():
+        return path
+    cfg = path / "config.json"
+    if cfg.exists():
+        saved = read_json(cfg)
+        if isinstance(saved, dict) and saved.get("kind") in (PRETRAIN_KIND, FINETUNE_KIND):
+            latest = latest_checkpoint(path)
+            if latest is None:
+                raise UavrisError(f"{path} has no model yet (no model.json and no checkpoint)")
+            return latest[1]
+    return None
+
+
+def load_dt_policy(path: str | Path, target_return: float | None = None) -> tuple[DTBatchPolicy, SystemConfig,
+                                                                                     str | None]:
+    """(deterministic batch policy, its system config, its own scenario or None) of a DT target."""
+    from uavris.experiments.train_expert import configure_torch_threads
+
+    configure_torch_threads()
+    model_dir = dt_model_dir(path)
+    if model_dir is None:
+        raise UavrisError(f"{path} is not a DT model directory (no model.json)")
+    model, meta = load_dt(model_dir)
+    system = checkpoint_system(meta, model_dir)
+    target = meta.get("target_return") if target_return is None else target_return
+    if target is None:
+        raise UavrisError(f"{model_dir} stores no target return")
+    return (DTBatchPolicy(model, float(target), phase_control=meta.get("phase_control", "agent")), system,
+            meta.get("scenario"))

@@ -1,0 +1,184 @@
+"""Pre-training (paper Algorithm 1, stage 1): the Decision Transformer offline on an expert dataset.
+
+Lives here: :class:`PretrainConfig` and :func:`pretrain`. Not here: the model and its
+training step (:mod:`uavris.agents.dt`), the run directory's machinery (:mod:`.dt_runs`).
+
+The loss L_OFF (eq. 16) on
+context windows of the dataset, AdamW with decoupled weight decay on the weight matrices,
+a linear learning-rate warm-up then a constant rate, gradient-norm clipping. These are
+the DT paper's settings (lr 1e-4, weight decay 1e-4, warm-up 10,000 steps, clip 0.25,
+batch 64, 100,000 steps in ``paper``). The default target return of the model is the 0.9
+quantile of the dataset's episode returns, stored in the checkpoint. With
+``attention="banded"`` (:mod:`uavris.agents.dt.model`) a sample is a whole episode instead of
+a window, and ``batch_size`` counts episodes.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from uavris.agents.dt.checkpoint import save_dt
+from uavris.agents.dt.dataset import load_dataset
+from uavris.agents.dt.model import DecisionTransformer, DTConfig
+from uavris.agents.dt.trainer import load_trainer_state, make_optimizer, train_steps
+from uavris.agents.dt.trajectories import TrainingWindows, default_target_return, normalisation_from
+from uavris.config import check_positive
+from uavris.env.simulator import layout_as_lists
+from uavris.env.wrappers import action_dim_for
+from uavris.errors import ConfigError
+from uavris.experiments.dt_runs import (
+    INT_COLUMNS,
+    PRETRAIN_KIND,
+    latest_checkpoint,
+    prepare_run_dir,
+    progress_bar,
+    restore_weights,
+    tb_writer,
+    write_checkpoint,
+)
+from uavris.experiments.jobs import configure_torch_threads
+from uavris.io import read_rows, write_csv, write_json
+from uavris.presets import PRETRAIN, check_preset
+
+TARGET_QUANTILE = 0.9
+LOG_HEADER = ("step", "loss", "learning_rate", "samples_per_s")
+
+
+@dataclass(frozen=True)
+class PretrainConfig:
+    """Everything that determines a pre-training run (dumped as config.json)."""
+
+    dataset: str
+    preset: str = "quick"
+    seed: int = 0
+    steps: int = 1500
+    batch_size: int = 64
+    learning_rate: float = 1e-4
+    weight_decay: float = 1e-4
+    warmup_steps: int = 150
+    grad_clip: float = 0.25
+    checkpoint_every: int = 500
+    log_every: int = 50
+    context: int = 20
+    width: int = 128
+    depth: int = 3
+    heads: int = 1
+    dropout: float = 0.1
+    attention: str = "window"
+    target_quantile: float = TARGET_QUANTILE
+
+    def __post_init__(self) -> None:
+        check_preset(self.preset)
+        check_positive("PretrainConfig", self, ("steps", "batch_size", "learning_rate", "warmup_steps", "grad_clip",
+                                                 "checkpoint_every", "log_every"))
+        if self.seed < 0 or self.weight_decay < 0:
+            raise ConfigError("PretrainConfig.seed and weight_decay must be >= 0")
+        if not 0 < self.target_quantile <= 1:
+            raise ConfigError(f"PretrainConfig.target_quantile must be in (0, 1], got {self.target_quantile}")
+        self.model_config(1, 1)  # validates the model size fields
+
+    def model_config(self, state_dim: int, act_dim: int, max_timestep: int = 100) -> DTConfig:
+        return DTConfig(state_dim, act_dim, context=self.context, width=self.width, depth=self.depth, heads=self.heads,
+                        dropout=self.dropout, max_timestep=max_timestep, attention=self.attention)
+
+
+def pretrain_config(dataset: str | Path, preset: str = "quick", seed: int = 0, **overrides: Any) -> PretrainConfig:
+    """The named preset with optional field overrides (``None`` values are ignored)."""
+    check_preset(preset)
+    base = dict(dataset=str(dataset), preset=preset, seed=seed, **PRETRAIN[preset])
+    base.update({k: v for k, v in overrides.items() if v is not None})
+    return PretrainConfig(**base)
+
+
+def default_pretrain_dir(cfg: PretrainConfig, root: str | Path = "runs/dt") -> Path:
+    layout = "" if cfg.attention == "window" else f"-{cfg.attention}"
+    return Path(root) / f"pretrain-{Path(cfg.dataset).name}-s{cfg.seed}-{cfg.preset}{layout}"
+
+
+def pretrain(cfg: PretrainConfig, run_dir: str | Path, *, resume: bool = False, force: bool = False,
+             progress: bool = True, interrupt_at: int | None = None) -> Path:
+    """Pre-train a DT on ``cfg.dataset`` (Algorithm 1, stage 1); returns the model directory.
+
+    ``interrupt_at`` is a test hook that stops training after that step.
+    """
+    import torch
+
+    configure_torch_threads()
+    run_dir = Path(run_dir)
+    ds = load_dataset(cfg.dataset)
+    resuming = prepare_run_dir(run_dir, PRETRAIN_KIND, dataclasses.asdict(cfg), resume, force)
+    system = ds.system
+    torch.manual_seed(cfg.seed)
+    rng = np.random.default_rng(cfg.seed)
+    norm = normalisation_from(ds.trajectories)
+    model = DecisionTransformer(cfg.model_config(system.observation_dim, action_dim_for(system, ds.phase_control),
+                                                 system.horizon),
+                                norm.state_mean, norm.state_std, norm.return_scale)
+    opt = make_optimizer(model, cfg.learning_rate, cfg.weight_decay)
+    windows = TrainingWindows.for_model(ds.trajectories, model.cfg)
+    model_meta = {
+        "stage": "pretrain", "scenario": None, "scenarios": ds.scenarios, "dataset": str(cfg.dataset),
+        "dataset_id": ds.dataset_id, "system": system.to_dict(), "observation_layout": layout_as_lists(system),
+        "target_return": default_target_return(ds.trajectories, cfg.target_quantile),
+        "target_return_rule": f"{cfg.target_quantile} quantile of the dataset's episode returns",
+        "env_interactions": 0, "phase_control": ds.phase_control,
+    }
+    start, log = 0, []
+    if resuming and (latest := latest_checkpoint(run_dir)) is not None:
+        start, ck = latest
+        restore_weights(model, ck)
+        meta = load_trainer_state(ck, opt, rng)
+        log = read_rows(run_dir / "train_log.csv", LOG_HEADER, int(meta.get("log_rows", 0)), INT_COLUMNS)
+    writer = tb_writer(run_dir, start)
+    bar = progress_bar(cfg.steps, "pretrain-dt", "step", progress, start)
+    t0 = time.perf_counter()
+    window_losses: list[float] = []
+    window_t = time.perf_counter()
+
+    def on_step(step: int, loss: float) -> None:
+        nonlocal window_t
+        window_losses.append(loss)
+        writer.add_scalar("train/loss", loss, step)
+        if bar is not None:
+            bar.update(1)
+        if step % cfg.log_every == 0 or step == cfg.steps:
+            now = time.perf_counter()
+            rate = len(window_losses) * cfg.batch_size / max(now - window_t, 1e-9)
+            lr = opt.param_groups[0]["lr"]
+            log.append([step, float(np.mean(window_losses)), lr, rate])
+            writer.add_scalar("train/learning_rate", lr, step)
+            writer.add_scalar("perf/samples_per_s", rate, step)
+            if bar is not None:
+                bar.set_postfix(loss=f"{np.mean(window_losses):.4f}", refresh=False)
+            window_losses.clear()
+            window_t = now
+        if step % cfg.checkpoint_every == 0 and step < cfg.steps:
+            write_csv(run_dir / "train_log.csv", LOG_HEADER, log)
+            write_checkpoint(run_dir, step, model, {**model_meta, "gradient_steps": step}, opt, rng,
+                              {"log_rows": len(log)})
+        if interrupt_at is not None and step >= interrupt_at:
+            raise KeyboardInterrupt(f"interrupted at step {step} (test hook)")
+
+    try:
+        losses = train_steps(model, opt, windows, rng, start, cfg.steps - start, cfg.batch_size, cfg.learning_rate,
+                              cfg.warmup_steps, cfg.grad_clip, on_step)
+    finally:
+        writer.close()
+        if bar is not None:
+            bar.close()
+    write_csv(run_dir / "train_log.csv", LOG_HEADER, log)
+    write_checkpoint(run_dir, cfg.steps, model, {**model_meta, "gradient_steps": cfg.steps}, opt, rng,
+                      {"log_rows": len(log)})
+    save_dt(model, run_dir, {**model_meta, "gradient_steps": cfg.steps})
+    final_loss = float(np.mean(losses[-cfg.log_every:])) if losses else (log[-1][1] if log else float("nan"))
+    write_json(run_dir / "done.json", {"gradient_steps": cfg.steps, "final_loss": final_loss,
+                                       "episodes": len(ds.trajectories), "slots": ds.num_slots,
+                                       "target_return": model_meta["target_return"],
+                                       "wall_clock_s_last_session": time.perf_counter() - t0})
+    return run_dir

@@ -1,0 +1,89 @@
+"""Every preset table and every seed base, in one place.
+
+Lives here: the budgets of the ``smoke`` (seconds, for tests), ``quick`` (the laptop
+study) and ``paper`` (sized like the paper) presets for expert training, the DT's
+pre-training and fine-tuning, the strong track's experts and the study; and the seed
+bases that keep evaluation, collection, fine-tuning and imitation episodes apart. Not
+here: what the numbers mean and why (the module that uses a table explains its values)
+and the algorithms' hyperparameters (:mod:`uavris.agents.experts.hyperparams`).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+PRESETS: tuple[str, ...] = ("smoke", "quick", "paper")
+
+# Seed bases: episode j of a kind uses BASE + j, so the kinds never share an episode.
+EVAL_SEED = 1_000_000  # evaluation episodes: every policy of a report is scored on these
+COLLECT_SEED = 2_000_000  # expert trajectories for the DT's dataset
+FINETUNE_SEED = 3_000_000  # the DT's fine-tuning candidates
+IMITATION_SEED = 4_000_000  # the strong experts' imitation rollouts
+
+# Expert training: env steps, (evaluation interval, episodes) and checkpoint interval.
+# smoke exercises the code; quick is 500 episodes per run; paper matches the paper's
+# ~25,000 training episodes.
+TRAIN_STEPS = {"smoke": 640, "quick": 50_000, "paper": 2_500_000}
+TRAIN_EVAL = {"smoke": (320, 8), "quick": (10_000, 32), "paper": (50_000, 100)}
+TRAIN_CHECKPOINT = {"smoke": 320, "quick": 10_000, "paper": 50_000}
+
+# DT pre-training: smoke exercises the code in a second; quick is a few minutes on one
+# core with the DT paper's model size; paper is the DT paper's training schedule.
+PRETRAIN: dict[str, dict[str, Any]] = {
+    "smoke": dict(steps=20, batch_size=8, warmup_steps=5, checkpoint_every=10, log_every=5, learning_rate=1e-3,
+                  context=4, width=16, depth=1, heads=1),
+    "quick": dict(steps=1500, batch_size=64, warmup_steps=150, checkpoint_every=500, log_every=50),
+    "paper": dict(steps=100_000, batch_size=64, warmup_steps=10_000, checkpoint_every=5_000, log_every=200),
+}
+
+# DT fine-tuning (Algorithm 1, stage 2).
+FINETUNE: dict[str, dict[str, Any]] = {
+    "smoke": dict(rounds=1, candidates=4, elites=2, rollouts_per_seed=2, epochs_per_round=1, batch_size=8,
+                  warmup_steps=2, eval_episodes=2),
+    "quick": dict(rounds=3, epochs_per_round=2, eval_episodes=16),
+    "paper": dict(rounds=10, epochs_per_round=5, eval_episodes=100),
+}
+
+# The strong track's experts: imitation of the oracle (DAgger rounds, episodes per round,
+# epochs) and the PPO steps after it (docs/model.md section 20).
+STRONG_IMITATION: dict[str, dict[str, Any]] = {
+    "smoke": dict(rounds=2, episodes=4, epochs=5),
+    "quick": dict(rounds=6, episodes=32, epochs=30),
+    "paper": dict(rounds=8, episodes=64, epochs=30),
+}
+STRONG_RL_STEPS = {"smoke": 0, "quick": 0, "paper": 0}
+
+# The study (``uavris reproduce``): evaluation episodes per policy, comparison seeds per
+# algorithm, expert trajectories per training scenario (the paper: 500). quick: 3 seeds (5
+# before the strong track): both tracks must fit 60 minutes on 2 cores, and the comparison
+# alone took 37.8 min with 5 seeds on the project machine (README); paper keeps 5.
+STUDY_EVAL_EPISODES = {"smoke": 8, "quick": 32, "paper": 100}
+STUDY_COMPARE_SEEDS = {"smoke": 2, "quick": 3, "paper": 5}
+STUDY_TRAJECTORIES = {"smoke": 4, "quick": 100, "paper": 500}
+
+
+def check_preset(preset: str) -> None:
+    from uavris.errors import ConfigError
+
+    if preset not in PRESETS:
+        raise ConfigError(f"unknown preset {preset!r}; choose one of {', '.join(PRESETS)}")
+
+# Algorithm hyperparameters (uavris.agents.experts.hyperparams, which gives the reasons):
+# each algorithm's own defaults, then the preset's overrides for off-policy algorithms and
+# for PPO. The paper preset is Hyperparams' defaults.
+ALGO_HYPERPARAMS: dict[str, dict[str, Any]] = {
+    "ddpg": {}, "td3": {}, "sac": dict(learning_rate=3e-4),
+    "ppo": dict(learning_rate=3e-4, n_envs=16, batch_size=256),
+}
+_SMOKE_HP = dict(net_arch=(32, 32), batch_size=32, buffer_size=10_000, learning_starts=100, n_envs=4,
+                 gradient_steps=4, n_steps=32, n_epochs=2)
+HYPERPARAMS: dict[str, dict[str, dict[str, Any]]] = {
+    "paper": {"off_policy": {}, "ppo": {}},
+    "quick": {
+        "off_policy": dict(net_arch=(64, 64), batch_size=128, buffer_size=200_000, learning_starts=1_000, n_envs=4,
+                           gradient_steps=4),
+        "ppo": dict(net_arch=(64, 64), batch_size=256, buffer_size=200_000, learning_starts=1_000, n_envs=16,
+                    gradient_steps=4, n_steps=128),
+    },
+    "smoke": {"off_policy": _SMOKE_HP, "ppo": _SMOKE_HP},
+}
