@@ -73,14 +73,18 @@ def write_yaml(path: str | Path, obj: Any) -> None:
     atomic_write_text(path, yaml.safe_dump(to_plain(obj), sort_keys=False))
 
 
-def read_yaml(path: str | Path) -> Any:
+def _read(path: str | Path, parse: Any, errors: tuple[type[Exception], ...], kind: str) -> Any:
     try:
         with open(path, encoding="utf-8") as f:
-            return yaml.safe_load(f)
+            return parse(f)
     except FileNotFoundError:
         raise UavrisError(f"{path} does not exist") from None
-    except yaml.YAMLError as e:
-        raise UavrisError(f"{path} is not valid YAML: {str(e).splitlines()[0]}") from None
+    except errors as e:
+        raise UavrisError(f"{path} is not valid {kind}: {str(e).splitlines()[0]}") from None
+
+
+def read_yaml(path: str | Path) -> Any:
+    return _read(path, yaml.safe_load, (yaml.YAMLError,), "YAML")
 
 
 def write_json(path: str | Path, obj: Any) -> None:
@@ -88,13 +92,7 @@ def write_json(path: str | Path, obj: Any) -> None:
 
 
 def read_json(path: str | Path) -> Any:
-    try:
-        with open(path, encoding="utf-8") as f:
-            return json.load(f)
-    except FileNotFoundError:
-        raise UavrisError(f"{path} does not exist") from None
-    except json.JSONDecodeError as e:
-        raise UavrisError(f"{path} is not valid JSON: {e}") from None
+    return _read(path, json.load, (json.JSONDecodeError,), "JSON")
 
 
 def write_csv(path: str | Path, header: Sequence[str], rows: Iterable[Sequence[Any]]) -> None:

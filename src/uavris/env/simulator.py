@@ -208,6 +208,26 @@ class BatchedSimulator:
         return obs
 
 
+def step_info(sim: BatchedSimulator, slot: SlotInfo | None) -> dict[str, NDArray]:
+    """The environments' ``info`` after a reset (``slot`` None) or a step, one row per environment."""
+    out: dict[str, NDArray] = {
+        "position": sim.pos.copy(),
+        "velocity": sim.vel.copy(),
+        "attitude": sim.att.copy(),
+        "energy_used": sim.energy.copy(),
+        "energy_remaining": np.maximum(sim.config.energy_budget_j - sim.energy, 0.0),
+        "slot": sim.t.copy(),
+    }
+    if slot is None:
+        out["pairing"] = sim.pairing.copy()
+        out["incidence_deg"] = np.degrees(np.arccos(np.clip(sim.cos_theta, -1, 1)))
+    else:
+        out.update(sum_rate=slot.reward.copy(), pair_rates=slot.pair_rates, pairing=slot.pairing,
+                   incidence_deg=np.degrees(np.arccos(np.clip(slot.cos_theta, -1, 1))),
+                   acceleration=slot.accel, slot_energy=slot.slot_energy)
+    return out
+
+
 def observation_layout(config: SystemConfig) -> dict[str, slice]:
     """Named slices of the observation vector."""
     K, N = config.num_users, config.num_elements

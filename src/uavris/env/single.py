@@ -9,33 +9,15 @@ import numpy as np
 from numpy.typing import NDArray
 
 from uavris.config import Scenario, SystemConfig
-from uavris.env.simulator import BatchedSimulator, SlotInfo, observation_bounds
+from uavris.env.simulator import BatchedSimulator, observation_bounds, step_info
 
 
-def slot_info_row(sim: BatchedSimulator, info: SlotInfo | None, i: int) -> dict[str, Any]:
-    """The ``info`` dict of environment ``i`` of a simulator after a reset or step."""
-    c = sim.config
-    out: dict[str, Any] = {
-        "position": sim.pos[i].copy(),
-        "velocity": sim.vel[i].copy(),
-        "attitude": sim.att[i].copy(),
-        "energy_used": float(sim.energy[i]),
-        "energy_remaining": float(max(c.energy_budget_j - sim.energy[i], 0.0)),
-        "slot": int(sim.t[i]),
-    }
-    if info is None:
-        out["pairing"] = sim.pairing[i].copy()
-        out["incidence_deg"] = np.degrees(np.arccos(np.clip(sim.cos_theta[i], -1, 1)))
-    else:
-        out.update(
-            sum_rate=float(info.reward[i]),
-            pair_rates=info.pair_rates[i],
-            pairing=info.pairing[i],
-            incidence_deg=np.degrees(np.arccos(np.clip(info.cos_theta[i], -1, 1))),
-            acceleration=info.accel[i],
-            slot_energy=float(info.slot_energy[i]),
-        )
-    return out
+_SCALARS = {"energy_used": float, "energy_remaining": float, "slot": int, "sum_rate": float, "slot_energy": float}
+
+
+def _row(info: dict[str, NDArray], i: int = 0) -> dict[str, Any]:
+    """Row ``i`` of a batched ``info`` (:func:`uavris.env.simulator.step_info`), scalars as Python numbers."""
+    return {k: _SCALARS[k](v[i]) if k in _SCALARS else v[i] for k, v in info.items()}
 
 
 class UavRisD2DEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
@@ -79,11 +61,11 @@ class UavRisD2DEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         else:
             self.sim.reset(next_episode=True)
         self._seeded = True
-        return self.sim.observe()[0], slot_info_row(self.sim, None, 0)
+        return self.sim.observe()[0], _row(step_info(self.sim, None))
 
     def step(self, action: NDArray):
         if not self._seeded:
             raise RuntimeError("call reset() before step()")
         reward, terminated, truncated, info = self.sim.step(np.asarray(action).reshape(1, -1))
         return (self.sim.observe()[0], float(reward[0]), bool(terminated[0]), bool(truncated[0]),
-                slot_info_row(self.sim, info, 0))
+                _row(step_info(self.sim, info)))

@@ -18,7 +18,7 @@ from gymnasium.vector.utils import batch_space
 from numpy.typing import NDArray
 
 from uavris.config import Scenario, SystemConfig
-from uavris.env.simulator import BatchedSimulator, SlotInfo, observation_bounds
+from uavris.env.simulator import BatchedSimulator, SlotInfo, observation_bounds, step_info
 
 
 class UavRisD2DVectorEnv(VectorEnv):
@@ -101,19 +101,7 @@ class UavRisD2DVectorEnv(VectorEnv):
         return sim.observe(), reward, terminated, truncated, infos
 
     def _info(self, slot: SlotInfo | None) -> dict[str, Any]:
-        sim, c = self.sim, self.config
-        out: dict[str, Any] = {
-            "position": sim.pos.copy(),
-            "velocity": sim.vel.copy(),
-            "attitude": sim.att.copy(),
-            "energy_used": sim.energy.copy(),
-            "energy_remaining": np.maximum(c.energy_budget_j - sim.energy, 0.0),
-            "slot": sim.t.copy(),
-        }
-        if slot is not None:
-            out.update(sum_rate=slot.reward.copy(), pair_rates=slot.pair_rates, pairing=slot.pairing,
-                       incidence_deg=np.degrees(np.arccos(np.clip(slot.cos_theta, -1, 1))),
-                       acceleration=slot.accel, slot_energy=slot.slot_energy)
+        out: dict[str, Any] = step_info(self.sim, slot)
         mask = np.ones(self.num_envs, dtype=bool)
         for key in list(out):
             out["_" + key] = mask

@@ -1,0 +1,84 @@
+"""Run directories: the guard against overwriting, the checkpoint pointer, the completion record.
+
+Lives here: the one implementation of what every training command (expert training,
+DT pre-training and fine-tuning) does with its run directory. Not here: what a run writes
+besides (its logs, checkpoints and models, each written by its own command).
+
+A run directory holds its configuration (``config.yaml`` or ``config.json``), a
+``checkpoints/latest.json`` pointer to the newest checkpoint (moved last and atomically,
+so a kill at any moment leaves the previous checkpoint usable) and, once finished,
+``done.json``. A finished run is never redone without ``force``; an unfinished one is
+continued only with ``resume`` and the same configuration.
+"""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+from typing import Any, Callable
+
+from uavris.errors import UavrisError
+from uavris.io import read_json, write_json
+
+DONE_FILE = "done.json"
+POINTER = Path("checkpoints") / "latest.json"
+
+
+def is_finished(run_dir: str | Path) -> bool:
+    return (Path(run_dir) / DONE_FILE).exists()
+
+
+def prepare(run_dir: Path, config_file: str, write_config: Callable[[Path], None], same_config: Callable[[Path], bool],
+            *, resume: bool, force: bool, what: str = "uavris run") -> bool:
+    """Check ``run_dir`` before training into it; returns True when an unfinished run is resumed.
+
+    ``write_config(path)`` writes a new run's configuration; ``same_config(path)`` says
+    whether the stored one equals the requested one. Raises :class:`UavrisError` for a
+    finished run (unless ``force``), an existing run without ``resume`` or ``force``, a
+    resume with another configuration, and a directory that is not a run (never deleted).
+    """
+    cfg_path = run_dir / config_file
+    has_config = cfg_path.exists()
+    if force and run_dir.exists() and not resume:
+        if not has_config and any(run_dir.iterdir()):
+            raise UavrisError(f"{run_dir} exists and is not a {what} directory; refusing to overwrite it")
+        shutil.rmtree(run_dir)
+        has_config = False
+    elif is_finished(run_dir):
+        raise UavrisError(f"{run_dir} is a finished run; evaluate it, or pass --force to redo it from scratch")
+    elif has_config and not resume:
+        raise UavrisError(f"{run_dir} already holds a run; pass --resume to continue it or --force to start over")
+    elif run_dir.exists() and not has_config and any(run_dir.iterdir()):
+        raise UavrisError(f"{run_dir} exists and is not a {what} directory")
+    if has_config:
+        if not same_config(cfg_path):
+            raise UavrisError(f"{run_dir} was started with a different configuration; resume it without changing "
+                              "parameters, or pass --force to start over")
+        return True
+    run_dir.mkdir(parents=True, exist_ok=True)
+    write_config(cfg_path)
+    return False
+
+
+def write_pointer(run_dir: Path, info: dict[str, Any]) -> None:
+    """Point ``checkpoints/latest.json`` at a checkpoint (call it after the checkpoint is complete)."""
+    write_json(run_dir / POINTER, info)
+
+
+def read_pointer(run_dir: Path, *fields: str) -> dict[str, Any] | None:
+    """The latest checkpoint's pointer, or None when there is none; ``fields`` must be present."""
+    path = run_dir / POINTER
+    if not path.exists():
+        return None
+    info = read_json(path)
+    if not isinstance(info, dict) or any(f not in info for f in fields):
+        raise UavrisError(f"{path} is corrupt")
+    return info
+
+
+def write_done(run_dir: Path, record: dict[str, Any]) -> None:
+    write_json(run_dir / DONE_FILE, record)
+
+
+def read_done(run_dir: Path) -> dict[str, Any]:
+    return read_json(Path(run_dir) / DONE_FILE)
