@@ -15,9 +15,10 @@ run: $(STAMP)
 	$(VENV)/bin/uavris reproduce --preset quick --out runs/quick
 
 demo: $(STAMP)
-	$(PY) -m uavris.demo
+	$(VENV)/bin/uavris demo
 
 test: $(STAMP)
+	$(VENV)/bin/ruff check src tests benchmarks
 	$(PY) -m pytest -q
 
 bench: $(STAMP)

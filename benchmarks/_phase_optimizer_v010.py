@@ -129,8 +129,8 @@ from numpy.typing import ArrayLike, NDArray
 
 from uavris import physics as ph
 from uavris.config import SystemConfig
-from uavris.physics import streams
 from uavris.env._malloc import tune_allocator
+from uavris.physics import streams
 
 TWO_PI = 2.0 * np.pi
 LN2 = np.log(2.0)

@@ -54,10 +54,10 @@ from typing import Any  # noqa: E402
 
 import gymnasium as gym  # noqa: E402
 import numpy as np  # noqa: E402
+from _machine import cpu_model, pin_to_one_core  # noqa: E402  (benchmarks/_machine.py)
 from numpy.typing import NDArray  # noqa: E402
 
 import uavris  # noqa: E402  (registers the environment id)
-from _machine import cpu_model, pin_to_one_core  # noqa: E402  (benchmarks/_machine.py)
 
 SEED = 0
 ACTION_POOL_BATCHES = 256  # pre-generated action batches, cycled through when stepping

@@ -32,9 +32,9 @@ import tempfile  # noqa: E402
 import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 
+from _machine import cpu_model, pin_to_one_core  # noqa: E402  (benchmarks/_machine.py)
 
 import uavris  # noqa: E402
-from _machine import cpu_model, pin_to_one_core  # noqa: E402  (benchmarks/_machine.py)
 from uavris.agents.evaluation import evaluate  # noqa: E402
 from uavris.agents.experts.imitation import ImitationConfig  # noqa: E402
 from uavris.agents.references import reference_policy  # noqa: E402

@@ -44,18 +44,18 @@ import shlex  # noqa: E402
 import sys  # noqa: E402
 import time  # noqa: E402
 
+import _phase_optimizer_v010 as v010  # noqa: E402  (benchmarks/_phase_optimizer_v010.py)
 import numpy as np  # noqa: E402
+from _machine import cpu_model, pin_to_one_core  # noqa: E402  (benchmarks/_machine.py)
 from numpy.typing import NDArray  # noqa: E402
 
-import _phase_optimizer_v010 as v010  # noqa: E402  (benchmarks/_phase_optimizer_v010.py)
 import uavris  # noqa: E402
-from _machine import cpu_model, pin_to_one_core  # noqa: E402  (benchmarks/_machine.py)
 from uavris.agents.evaluation import evaluate  # noqa: E402
 from uavris.agents.oracle import PlanningOracle, greedy_oracle_policy  # noqa: E402
 from uavris.agents.references import reference_policy  # noqa: E402
-from uavris.physics.phase_opt import DEFAULT_RESTARTS, optimize_slot_phases  # noqa: E402
 from uavris.config import SCENARIOS, SystemConfig  # noqa: E402
 from uavris.env.simulator import BatchedSimulator  # noqa: E402
+from uavris.physics.phase_opt import DEFAULT_RESTARTS, optimize_slot_phases  # noqa: E402
 
 SEED = 0
 EVAL_SEED = 1_000_000

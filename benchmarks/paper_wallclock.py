@@ -33,18 +33,18 @@ import time  # noqa: E402
 
 import numpy as np  # noqa: E402
 import torch  # noqa: E402
+from _machine import cpu_model, pin_to_one_core  # noqa: E402  (benchmarks/_machine.py)
 from stable_baselines3.common.callbacks import BaseCallback  # noqa: E402
 
+from uavris.agents.dt.model import DecisionTransformer  # noqa: E402
 from uavris.agents.dt.trainer import make_optimizer, train_steps  # noqa: E402
 from uavris.agents.dt.trajectories import TrainingWindows, Trajectory  # noqa: E402
-from uavris.agents.dt.model import DecisionTransformer  # noqa: E402
 from uavris.agents.experts import ALGORITHMS, default_hyperparams  # noqa: E402
 from uavris.agents.experts.sb3 import build_model  # noqa: E402
 from uavris.agents.experts.vec_env import UavRisVecEnv  # noqa: E402
 from uavris.config import SystemConfig  # noqa: E402
 from uavris.experiments.pretrain import pretrain_config  # noqa: E402
 from uavris.presets import PRETRAIN, TRAIN_STEPS  # noqa: E402
-from _machine import cpu_model, pin_to_one_core  # noqa: E402  (benchmarks/_machine.py)
 
 SEEDS_PER_ALGO = 5
 SCENARIO_EXPERTS = 10  # 8 training + 2 unseen scenarios, DDPG

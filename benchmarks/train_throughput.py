@@ -79,6 +79,7 @@ import gymnasium as gym  # noqa: E402
 import numpy as np  # noqa: E402
 import stable_baselines3 as sb3  # noqa: E402
 import torch  # noqa: E402
+from _machine import cpu_model, pin_to_one_core  # noqa: E402  (benchmarks/_machine.py)
 from stable_baselines3 import DDPG  # noqa: E402
 from stable_baselines3.common.base_class import BaseAlgorithm  # noqa: E402
 from stable_baselines3.common.callbacks import BaseCallback  # noqa: E402
@@ -92,7 +93,6 @@ from uavris.agents.experts.sb3 import SB3Policy, build_model  # noqa: E402
 from uavris.agents.experts.vec_env import UavRisVecEnv  # noqa: E402
 from uavris.config import SystemConfig  # noqa: E402
 from uavris.env import UavRisD2DEnv  # noqa: E402
-from _machine import cpu_model, pin_to_one_core  # noqa: E402  (benchmarks/_machine.py)
 
 SEED = 0
 SCENARIO = "fig2"

@@ -9,7 +9,7 @@ settings.register_profile("ci", derandomize=True, max_examples=200)
 if os.environ.get("CI"):
     settings.load_profile("ci")
 
-from uavris.config import SystemConfig
+from uavris.config import SystemConfig  # noqa: E402 - after the hypothesis profile is registered
 
 # Decision Transformer tests: short episodes keep rollouts cheap; the layout does not depend on T.
 SHORT = SystemConfig(horizon=16)

@@ -1,8 +1,8 @@
 import numpy as np
 import pytest
 
-from uavris import physics as ph
 from tests.conftest import random_cn
+from uavris import physics as ph
 
 KW = dict(rician_factor=8.0, pathloss_exponent=2.4, nx=4, ny=4)
 LEVEL = ph.ris_axes([0.0, 0.0, 0.0])

@@ -1,5 +1,6 @@
 """Decision Transformer: model invariants, dataset round trip, checkpoints, rollouts, pipeline."""
 
+import csv
 import json
 import math
 
@@ -8,17 +9,17 @@ import numpy as np
 import pytest
 import torch
 
+from tests.conftest import SHORT
 from uavris.agents.dt.checkpoint import load_dt, save_dt
 from uavris.agents.dt.dataset import load_dataset, write_dataset
 from uavris.agents.dt.model import DecisionTransformer, DTConfig, masked_action_loss
-from uavris.agents.dt.trajectories import TrainingWindows, Trajectory, record_episodes, returns_to_go, select_elites
 from uavris.agents.dt.policy import DTBatchPolicy
+from uavris.agents.dt.trajectories import TrainingWindows, Trajectory, record_episodes, returns_to_go, select_elites
 from uavris.agents.evaluation import evaluate
 from uavris.cli import main as cli_main
 from uavris.errors import CheckpointError, DatasetError, UavrisError
 from uavris.experiments.finetune import finetune, finetune_config
 from uavris.experiments.pretrain import pretrain, pretrain_config
-from tests.conftest import SHORT
 
 torch.set_num_threads(1)
 
@@ -53,8 +54,10 @@ def test_elite_selection_hand_checked():
     assert [t.seed for t in select_elites(trajs, 2)] == [1, 3]  # tie at 7 keeps collection order
     assert [t.seed for t in select_elites(trajs, 3)] == [1, 3, 2]
     assert [t.seed for t in select_elites(trajs, 5)] == [1, 3, 2, 0, 4]
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match=r"k must be in \[1, 5\], got 6"):
         select_elites(trajs, 6)
+    with pytest.raises(ValueError, match=r"k must be in \[1, 5\], got 0"):
+        select_elites(trajs, 0)
 
 
 def test_target_return_update_hand_checked():
@@ -128,6 +131,7 @@ def test_padding_does_not_change_predictions_of_real_slots():
         torch.testing.assert_close(model(rp, sp, ap, tp, valid, last_only=True), real[:, -1], rtol=0, atol=1e-5)
 
 
+@pytest.mark.slow
 def test_small_model_overfits_a_tiny_dataset(expert_trajectories):
     data = expert_trajectories[:2]
     model = tiny_model(context=4, width=64, depth=2, heads=1).train()
@@ -335,6 +339,7 @@ def test_finetune_counts_interactions_and_resumes(dataset_dir, tmp_path):
     assert json.loads((tmp_path / "ft" / "model.json").read_text())["scenario"] == "unseen1"
 
 
+@pytest.mark.slow
 def test_cli_collect_pretrain_evaluate_finetune(tmp_path, capsys):
     from uavris.experiments.train_expert import preset_config, train
 
@@ -355,6 +360,20 @@ def test_cli_collect_pretrain_evaluate_finetune(tmp_path, capsys):
     assert cli_main(["evaluate", str(ft), "--episodes", "2"]) == 0  # its own scenario by default
     out = capsys.readouterr().out
     assert "pre-trained" in out and "fine-tuned" in out and "environment interactions" in out
-    summary = json.loads((ft / "eval" / "unseen2-seed1000000-n2.json").read_text())
-    assert summary["episodes"] == 2 and summary["mean"] > 0
+    stem = ft / "eval" / "unseen2-seed1000000-n2"
+    summary = json.loads(stem.with_suffix(".json").read_text())
+    with open(stem.with_suffix(".csv"), newline="") as f:
+        episodes = list(csv.DictReader(f))
+    rates = [float(e["avg_sum_rate"]) for e in episodes]
+    assert [int(e["seed"]) for e in episodes] == [1_000_000, 1_000_001]
+    assert summary["episodes"] == len(rates) == 2 and summary["scenario"] == "unseen2"
+    assert summary["mean"] == pytest.approx(np.mean(rates), rel=1e-12) and summary["mean"] > 0
+    assert summary["ci_low"] <= summary["mean"] <= summary["ci_high"]
+    assert summary["mean_length"] == pytest.approx(np.mean([int(e["length"]) for e in episodes]))
+    for e in episodes:
+        assert float(e["avg_sum_rate"]) == pytest.approx(float(e["return"]) / int(e["length"]), rel=1e-12)
+    # the smoke fine-tuning evaluates on these same 2 episodes: `evaluate` reproduces its final score
+    final = json.loads((ft / "done.json").read_text())["final_eval"]
+    assert (final["episodes"], final["seed"]) == (2, 1_000_000)
+    assert summary["mean"] == pytest.approx(final["mean"], abs=1e-9)
     assert cli_main(["finetune-dt", "--model", str(tmp_path), "--scenario", "unseen2", "--preset", "smoke"]) == 2

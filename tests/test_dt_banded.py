@@ -6,16 +6,16 @@ import numpy as np
 import pytest
 import torch
 
+from tests.conftest import SHORT
+from tests.test_dt import random_inputs, tiny_model
 from uavris.agents.dt.checkpoint import load_dt, save_dt
 from uavris.agents.dt.model import DecisionTransformer, DTConfig
-from uavris.agents.dt.trajectories import TrainingWindows, Trajectory, record_episodes
 from uavris.agents.dt.policy import DTBatchPolicy
+from uavris.agents.dt.trajectories import TrainingWindows, Trajectory, record_episodes
 from uavris.agents.evaluation import evaluate
 from uavris.config import ConfigError
 from uavris.experiments.finetune import finetune, finetune_config
 from uavris.experiments.pretrain import pretrain, pretrain_config
-from tests.conftest import SHORT
-from tests.test_dt import random_inputs, tiny_model
 
 torch.set_num_threads(1)
 
@@ -130,12 +130,18 @@ def test_banded_pipeline_pretrains_finetunes_and_round_trips(dataset_dir, tmp_pa
     pre = pretrain(pretrain_config(dataset_dir, "smoke", attention="banded"), tmp_path / "pre", progress=False)
     model, meta = load_dt(pre)
     assert model.cfg.attention == "banded"
-    ft = finetune(finetune_config(pre, "unseen1", "smoke"), tmp_path / "ft", progress=False)
-    tuned, _ = load_dt(ft)
+    cfg = finetune_config(pre, "unseen1", "smoke")
+    ft = finetune(cfg, tmp_path / "ft", progress=False)
+    tuned, tuned_meta = load_dt(ft)
     assert tuned.cfg.attention == "banded"
     assert not all(torch.equal(p, q) for p, q in zip(model.parameters(), tuned.parameters()))
     res = evaluate(DTBatchPolicy(tuned, meta["target_return"]), SHORT, "unseen1", 2, 0).summary()
-    assert np.isfinite(res["mean"])
+    assert np.isfinite(res["mean"]) and res["ci_low"] <= res["mean"] <= res["ci_high"]
+    # the saved banded model is the one fine-tuning evaluated last: same score on the same episodes
+    final = json.loads((ft / "done.json").read_text())["final_eval"]
+    again = evaluate(DTBatchPolicy(tuned, tuned_meta["target_return"]), SHORT, "unseen1", cfg.eval_episodes,
+                     cfg.eval_seed).summary()
+    assert again["mean"] == pytest.approx(final["mean"], abs=1e-9), (again, final)
     # Save/load keeps the layout; a checkpoint written before the field existed reads as "window".
     save_dt(tuned, tmp_path / "copy")
     assert load_dt(tmp_path / "copy")[0].cfg.attention == "banded"

@@ -16,7 +16,7 @@ from uavris.cli import main as cli_main
 from uavris.config import ConfigError, SystemConfig
 from uavris.env import UavRisD2DEnv
 from uavris.errors import UavrisError
-from uavris.experiments.train_expert import preset_config, train
+from uavris.experiments.train_expert import preset_config, run_policy, train
 
 
 def test_sb3_env_checker_passes():
@@ -47,22 +47,33 @@ def test_vec_env_adapter_matches_dummy_vec_env():
     ref.seed(42)
     np.testing.assert_array_equal(ours.reset(), ref.reset())
     rng = np.random.default_rng(0)
-    for t in range(steps):
+    episodes_ended = np.zeros(n, dtype=np.int64)
+    truncated_flags = set()
+    for _ in range(steps):
         a = rng.uniform(-1, 1, (n, 22)).astype(np.float32)
         o1, r1, d1, i1 = ours.step(a)
         o2, r2, d2, i2 = ref.step(a)
         np.testing.assert_array_equal(o1, o2)
         np.testing.assert_allclose(r1, r2, rtol=1e-6)
         np.testing.assert_array_equal(d1, d2)
+        episodes_ended += d1
         for k in np.flatnonzero(d1):
             np.testing.assert_array_equal(i1[k]["terminal_observation"], i2[k]["terminal_observation"])
             assert i1[k]["TimeLimit.truncated"] == i2[k]["TimeLimit.truncated"]
-    assert d1.any() or t == steps - 1
+            truncated_flags.add(i1[k]["TimeLimit.truncated"])
+    # The comparison covered the auto-reset path: 230 steps span two horizons (T = 100), so
+    # every environment ended at least two episodes, and both ways an episode ends occurred
+    # (these seeds run out of energy in some episodes, reach the horizon in others).
+    assert np.all(episodes_ended >= steps // cfg.horizon), episodes_ended
+    assert truncated_flags == {True, False}, truncated_flags
     # a later reset() without seeds continues with the next episodes in both
     np.testing.assert_array_equal(ours.reset(), ref.reset())
 
 
-@pytest.mark.parametrize("algo", ["ddpg", "ppo", "sac", "td3"])
+# ddpg and td3 also train in the quick resume and error tests below
+@pytest.mark.parametrize("algo", [pytest.param("ddpg", marks=pytest.mark.slow), "ppo",
+                                  pytest.param("sac", marks=pytest.mark.slow),
+                                  pytest.param("td3", marks=pytest.mark.slow)])
 def test_each_algorithm_trains_saves_loads_and_evaluates(algo, tmp_path):
     cfg = preset_config(algo, "fig2", 0, "smoke", eval_episodes=4)
     model_path = train(cfg, tmp_path / algo, progress=False)
@@ -71,8 +82,16 @@ def test_each_algorithm_trains_saves_loads_and_evaluates(algo, tmp_path):
     assert done["env_steps"] >= cfg.total_steps
     assert (tmp_path / algo / "config.yaml").exists() and any((tmp_path / algo / "tb").iterdir())
     model = load_model(model_path, algo)
+    # the saved model is the evaluated one: it reproduces the run's final evaluation exactly
+    again = evaluate(run_policy(model, cfg), cfg.system, cfg.scenario, cfg.eval_episodes, cfg.eval_seed).summary()
+    assert done["final_eval"] == again, (done["final_eval"], again)
     res = evaluate(lambda o: model.predict(o, deterministic=True)[0], cfg.system, "unseen1", 3, 5)
     assert res.avg_sum_rate.shape == (3,) and np.all(res.avg_sum_rate > 0)
+    np.testing.assert_array_equal(res.seeds, [5, 6, 7])
+    assert np.all((res.length >= 1) & (res.length <= cfg.system.horizon))
+    # episode j is the one seeded 5 + j, whatever else is in the batch
+    alone = evaluate(lambda o: model.predict(o, deterministic=True)[0], cfg.system, "unseen1", 1, 6)
+    assert alone.avg_sum_rate[0] == pytest.approx(res.avg_sum_rate[1], rel=1e-5)
 
 
 def test_resume_continues_step_count_and_keeps_first_checkpoint(tmp_path):
@@ -95,7 +114,8 @@ def test_resume_continues_step_count_and_keeps_first_checkpoint(tmp_path):
         train(cfg, run, resume=True, progress=False)
 
 
-@pytest.mark.parametrize("algo, interrupt", [("ddpg", 400), ("td3", 400), ("ppo", 300)])
+@pytest.mark.parametrize("algo, interrupt", [pytest.param("ddpg", 400, marks=pytest.mark.slow),
+                                             pytest.param("td3", 400, marks=pytest.mark.slow), ("ppo", 300)])
 def test_killed_and_resumed_run_equals_uninterrupted_run(tmp_path, algo, interrupt):
     """Checkpoints carry the environments mid-episode and every random stream, so a resume
     continues exactly: same episodes, same evaluations, same final weights."""
@@ -133,6 +153,7 @@ def test_resume_with_changed_config_is_refused(tmp_path):
         train(other, tmp_path / "r", resume=True, progress=False)
 
 
+@pytest.mark.slow
 def test_identical_seeds_give_identical_evaluation(tmp_path):
     cfg = preset_config("td3", "fig2", 3, "smoke", eval_episodes=4)
     train(cfg, tmp_path / "a", progress=False)
@@ -143,6 +164,7 @@ def test_identical_seeds_give_identical_evaluation(tmp_path):
     assert a == (tmp_path / "b" / "evals.csv").read_text()
 
 
+@pytest.mark.slow
 def test_strong_expert_learns_beyond_hovering_with_optimised_phases(tmp_path):
     """The strong track's expert as the quick preset makes it (PPO on the motion, 6 DAgger
     rounds of 32 episodes imitating the planning oracle, about 15 s) beats its baseline,
@@ -159,6 +181,7 @@ def test_strong_expert_learns_beyond_hovering_with_optimised_phases(tmp_path):
     assert (tmp_path / "strong" / "imitation.csv").read_text().count("\n") == 1 + ImitationConfig().rounds
 
 
+@pytest.mark.slow
 def test_paper_track_expert_learns_beyond_random_actions(tmp_path):
     """The paper track's expert algorithm (PPO, the quick comparison's winner) learns at a
     CI-sized budget: 20,000 env steps beat uniform random actions on 16 episodes by more than
@@ -183,7 +206,7 @@ def _run_cli(args, capsys):
         (["train", "--algo", "a2c", "--preset", "smoke"], "unknown algorithm 'a2c'"),
         (["train", "--scenario", "mars", "--preset", "smoke"], "unknown scenario 'mars'"),
         (["train", "--preset", "huge"], "unknown preset 'huge'"),
-        (["train", "--preset", "smoke", "--system", "v_max=-1"], "SystemConfig.v_max must be"),
+        (["train", "--preset", "smoke", "--system.v-max", "-1"], "SystemConfig.v_max must be"),
         (["evaluate", "/nonexistent/run"], "is not a directory"),
         (["evaluate", "baseline:nothing", "--scenario", "fig2"], "unknown baseline 'nothing'"),
     ],
@@ -194,6 +217,7 @@ def test_bad_cli_input_is_one_line_exit_2(args, message, capsys):
     assert message in err and len(err.splitlines()) == 1 and err.startswith("uavris: error:")
 
 
+@pytest.mark.slow
 def test_not_a_run_dir_and_corrupt_checkpoint(tmp_path, capsys):
     (tmp_path / "junk").mkdir()
     (tmp_path / "junk" / "notes.txt").write_text("keep me")

@@ -54,7 +54,7 @@ def test_slot_energy_matches_numerical_integral(rng):
     for _ in range(20):
         v = ph.limit_norm(rng.uniform(-5, 5, 3), 5.0)
         a = ph.feasible_acceleration(v, rng.uniform(-2, 2, 3), 0.5, 5.0, 2.0)
-        ref, _ = integrate.quad(lambda t: float(ph.propulsion_power(np.linalg.norm(v + a * t))), 0, 0.5,
+        ref, _ = integrate.quad(lambda t, v0=v, a0=a: float(ph.propulsion_power(np.linalg.norm(v0 + a0 * t))), 0, 0.5,
                                 epsabs=1e-10, epsrel=1e-12)
         np.testing.assert_allclose(ph.slot_energy(v, a, 0.5, **POWER), ref, rtol=1e-8)
 

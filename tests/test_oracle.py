@@ -5,7 +5,6 @@ import pytest
 
 from uavris import physics as ph
 from uavris.agents.baselines import hover_aligned
-from uavris.agents.references import reference_policy
 from uavris.agents.evaluation import evaluate
 from uavris.agents.oracle import (
     choose_moves,
@@ -16,6 +15,7 @@ from uavris.agents.oracle import (
 )
 from uavris.agents.oracle.lookahead import move, pose_score
 from uavris.agents.oracle.planner import feasible, pairing_distribution, travel_slots
+from uavris.agents.references import reference_policy
 from uavris.config import SCENARIOS
 from uavris.env.simulator import BatchedSimulator, decode_action
 from uavris.physics import phase_opt as po
@@ -194,6 +194,7 @@ def test_travel_time_model_matches_the_kinematics(config):
     assert np.all(np.diff(slots) > 0)
 
 
+@pytest.mark.slow
 def test_expected_rate_map_agrees_with_monte_carlo(config):
     """R of the planner (exact over pairings, 8 NLoS draws) against hovering at the pose with the
     optimiser's phases in the simulator, 24 episodes (~2,300 slots of fresh draws): within three
@@ -233,6 +234,7 @@ def test_oracle_action_is_valid_and_does_not_peek_at_the_next_slot(config):
     np.testing.assert_allclose(r0, sol.sum_rate, rtol=1e-5)
 
 
+@pytest.mark.slow
 def test_oracle_evaluation_reproducible_and_beats_hover_aligned(config):
     """Three fig2 episodes (seed 1_000_000): the planning oracle is reproducible and far above
     co-phasing for the strongest pair while hovering (measured: margins of about 28 bps/Hz)."""
@@ -247,6 +249,7 @@ def test_oracle_evaluation_reproducible_and_beats_hover_aligned(config):
     assert first.avg_sum_rate.mean() - base.avg_sum_rate.mean() > 25.0
 
 
+@pytest.mark.slow
 def test_config_variants_run(config):
     """Ideal RIS and amplitude-learning actions are handled (smoke, one step)."""
     for cfg in (config.replace(angle_dependent_reflection=False), config.replace(learn_amplitudes=True)):
@@ -259,14 +262,15 @@ def test_config_variants_run(config):
 
 
 def test_rejects_bad_settings():
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match="noise_levels must be a non-empty tuple"):
         po.optimize_phases(np.zeros((4, 16)), np.ones(4), np.zeros((4, 4)), 1.0, 1e-11, noise_levels=())
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match="braking_slots must be >= 0"):
         greedy_oracle_policy(braking_slots=-1)
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match="seed must be >= 0"):
         oracle_policy(seed=-1)
 
 
+@pytest.mark.slow
 def test_planning_oracle_is_at_least_the_greedy_one_in_every_named_scenario(config):
     """Means over the same 3 seeded episodes: planning >= greedy in all 11 named scenarios
     (the greedy oracle stops at the nearest local optimum; the planner goes to the best
@@ -281,6 +285,7 @@ def test_planning_oracle_is_at_least_the_greedy_one_in_every_named_scenario(conf
     assert gaps["unseen2"] > 1.0, gaps
 
 
+@pytest.mark.slow
 def test_planning_oracle_reaches_the_best_region_from_unseen2(config):
     """The plan from unseen2 [25, 25] goes past device 3 (the greedy oracle's stop, 39 bps/Hz)
     to the region between devices 1 and 2, and the UAV arrives there and stays."""

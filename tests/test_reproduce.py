@@ -11,11 +11,17 @@ import pytest
 from uavris.config import SystemConfig
 from uavris.errors import UavrisError
 from uavris.experiments import pretrain as pretrain_module
-from uavris.io import read_json
 from uavris.experiments.jobs import Job, JobRunner, run_jobs
-from uavris.experiments.reproduce import ReproduceConfig, _Context, build_pipeline, nearest_training_scenarios, reproduce
+from uavris.experiments.reproduce import (
+    ReproduceConfig,
+    _Context,
+    build_pipeline,
+    nearest_training_scenarios,
+    reproduce,
+)
 from uavris.experiments.stages import Pipeline, Stage
 from uavris.experiments.train_expert import preset_config, train_job
+from uavris.io import read_json
 
 RC = ReproduceConfig("smoke", compare_seeds=1, eval_episodes=4, trajectories=2)
 
@@ -44,6 +50,7 @@ def smoke_run(tmp_path_factory):
     return out, report, first_done
 
 
+@pytest.mark.slow
 def test_all_artefacts_exist(smoke_run):
     out, report, _ = smoke_run
     assert report == out / "report.md"
@@ -66,6 +73,7 @@ def test_all_artefacts_exist(smoke_run):
     assert experts["algo"] == chosen
 
 
+@pytest.mark.slow
 def test_report_numbers_come_from_evaluation_files(smoke_run):
     out, report, _ = smoke_run
     text = report.read_text()
@@ -84,6 +92,7 @@ def test_report_numbers_come_from_evaluation_files(smoke_run):
         assert f"| {result['expert']['mean'] / oracle:.0%} |" in text
 
 
+@pytest.mark.slow
 def test_rerun_after_kill_skips_finished_stages(smoke_run):
     out, _, first_done = smoke_run
     # the kill hit pre-training: everything before it had finished and was not redone
@@ -133,6 +142,7 @@ def test_stage_keys_chain_through_dependencies(tmp_path):
     assert ran[-1] == "b"
 
 
+@pytest.mark.slow
 def test_ray_backend_gives_the_same_numbers_as_the_process_pool(smoke_run, tmp_path):
     pytest.importorskip("ray")
     out, _, _ = smoke_run
@@ -183,6 +193,7 @@ def test_job_runner_starts_the_highest_priority_waiting_job_first(tmp_path):
     assert _ORDER == ["first", "high", "low"]
 
 
+@pytest.mark.slow
 def test_job_runner_pool_returns_every_result(tmp_path):
     with JobRunner(2) as runner:
         res = runner.run([Job(f"j{i}", _record, (f"j{i}",), tmp_path / f"{i}.log") for i in range(4)])

@@ -7,17 +7,17 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from tests.conftest import SHORT
 from uavris.agents.dt.dataset import load_dataset, write_dataset
 from uavris.agents.dt.trajectories import Trajectory, record_episodes, select_elites
 from uavris.agents.evaluation import evaluate
-from uavris.env.wrappers import MOTION_DIM
 from uavris.agents.references import REFERENCES, reference_policy
 from uavris.cli import main as cli_main
 from uavris.config import ConfigError, SystemConfig
 from uavris.env.simulator import BatchedSimulator
-from uavris.experiments.compare import select_expert
+from uavris.env.wrappers import MOTION_DIM
 from uavris.errors import UavrisError
-from tests.conftest import SHORT
+from uavris.experiments.compare import select_expert
 
 
 def test_hover_is_exactly_the_zero_action():
@@ -32,7 +32,7 @@ def test_hover_is_exactly_the_zero_action():
         sim.step(a)
 
 
-@pytest.mark.parametrize("name", ["oracle", "hover-optimizer", "hover"])
+@pytest.mark.parametrize("name", [pytest.param("oracle", marks=pytest.mark.slow), "hover-optimizer", "hover"])
 def test_references_evaluate_from_the_cli_as_from_python(name, tmp_path, capsys):
     """``uavris evaluate NAME`` (and ``baseline:NAME``) give the per-episode numbers of the
     Python API on the same seeds."""

@@ -50,6 +50,14 @@ def check_positive(owner: str, cfg: Any, names: Sequence[str]) -> None:
             raise ConfigError(f"{owner}.{name} must be > 0, got {v!r}")
 
 
+def check_non_negative(owner: str, cfg: Any, names: Sequence[str]) -> None:
+    """Each field ``names`` of the dataclass ``cfg`` must be a finite number >= 0 (NaN is not)."""
+    for name in names:
+        v = getattr(cfg, name)
+        if not (isinstance(v, (int, float)) and not isinstance(v, bool) and v >= 0 and math.isfinite(v)):
+            raise ConfigError(f"{owner}.{name} must be >= 0, got {v!r}")
+
+
 @dataclass(frozen=True)
 class PropulsionParams:
     """Rotary-wing propulsion power model of Zeng, Xu and Zhang (IEEE TWC 2019).
@@ -75,7 +83,7 @@ class PropulsionParams:
 
 @dataclass(frozen=True)
 class SystemConfig:
-    """The UAV-mounted RIS D2D system (paper Sec. II and V, MODEL.md).
+    """The UAV-mounted RIS D2D system (paper Sec. II and V, docs/model.md).
 
     Units: metres, seconds, watts, joules, dBm for the noise power.
     """

@@ -79,6 +79,10 @@ def _read(path: str | Path, parse: Any, errors: tuple[type[Exception], ...], kin
             return parse(f)
     except FileNotFoundError:
         raise UavrisError(f"{path} does not exist") from None
+    except IsADirectoryError:
+        raise UavrisError(f"{path} is a directory, not a {kind} file") from None
+    except UnicodeDecodeError:
+        raise UavrisError(f"{path} is not a {kind} file (not UTF-8 text)") from None
     except errors as e:
         raise UavrisError(f"{path} is not valid {kind}: {str(e).splitlines()[0]}") from None
 

@@ -1,11 +1,13 @@
 """Every preset table and every seed base, in one place.
 
-Lives here: the budgets of the ``smoke`` (seconds, for tests), ``quick`` (the laptop
-study) and ``paper`` (sized like the paper) presets for expert training, the DT's
-pre-training and fine-tuning, the strong track's experts and the study; and the seed
-bases that keep evaluation, collection, fine-tuning and imitation episodes apart. Not
-here: what the numbers mean and why (the module that uses a table explains its values)
-and the algorithms' hyperparameters (:mod:`uavris.agents.experts.hyperparams`).
+Lives here: :data:`PRESETS`, :func:`check_preset` and the budgets of the ``smoke``
+(seconds, for tests), ``quick`` (the laptop study) and ``paper`` (sized like the paper)
+presets for expert training (:data:`TRAIN_STEPS`, ...), the DT's pre-training and
+fine-tuning (:data:`PRETRAIN`, :data:`FINETUNE`), the strong track's experts and the study;
+the experts' hyperparameter tables (:data:`HYPERPARAMS`, :data:`ALGO_HYPERPARAMS`); and the
+seed bases (:data:`EVAL_SEED`, ...) that keep evaluation, collection, fine-tuning and
+imitation episodes apart. Not here: what the numbers mean and why (the module that uses a
+table explains its values; :mod:`uavris.agents.experts.hyperparams` for the hyperparameters).
 """
 
 from __future__ import annotations

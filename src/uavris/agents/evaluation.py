@@ -17,7 +17,7 @@ from numpy.typing import NDArray
 
 from uavris import stats
 from uavris.config import Scenario, SystemConfig
-from uavris.env.rollout import rollout
+from uavris.env.rollout import SlotHook, rollout
 
 
 @dataclass(frozen=True)
@@ -41,16 +41,18 @@ class EpisodeResults:
 
 
 def evaluate(policy: Any, config: SystemConfig, scenario: str | Scenario, episodes: int, seed: int,
-             batch_size: int = 256, phase_control: str | None = None) -> EpisodeResults:
+             batch_size: int = 256, phase_control: str | None = None,
+             on_slot: SlotHook | None = None) -> EpisodeResults:
     """Run ``episodes`` episodes (seeds ``seed .. seed + episodes - 1``) in batches of ``batch_size``.
 
     ``phase_control="optimizer"`` executes the policy's motion with the optimiser's phases
-    (default: the policy's own ``phase_control``).
+    (default: the policy's own ``phase_control``); ``on_slot`` is passed to
+    :func:`~uavris.env.rollout.rollout` (progress bars use it).
     """
     if episodes < 1:
         raise ValueError(f"episodes must be >= 1, got {episodes}")
     parts = [rollout(policy, config, scenario, seed + start + np.arange(min(batch_size, episodes - start)),
-                     phase_control=phase_control)
+                     phase_control=phase_control, on_slot=on_slot)
              for start in range(0, episodes, batch_size)]
     returns = np.concatenate([p.returns for p in parts])
     length = np.concatenate([p.lengths for p in parts])

@@ -1,10 +1,45 @@
-"""Gymnasium environments of the UAV-RIS D2D system."""
+"""Gymnasium environments of the UAV-RIS D2D system.
 
+``uavris/UavRisD2D-v0`` is registered here, not with the classes as entry points but with
+:func:`make_env` / :func:`make_vector_env`: an ``EnvSpec`` is stored as JSON (Minari
+datasets keep one), so its ``config`` kwarg comes back as a plain dict, and
+``gymnasium.make(spec)`` must accept that as well as a :class:`SystemConfig`.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Mapping
+
+import gymnasium as gym
+
+from uavris.config import Scenario, SystemConfig
 from uavris.env.simulator import ActionError, BatchedSimulator, decode_action, observation_layout
 from uavris.env.single import UavRisD2DEnv
 from uavris.env.vector import UavRisD2DVectorEnv
 
 ENV_ID = "uavris/UavRisD2D-v0"
 
+
+def _system(config: SystemConfig | Mapping[str, Any] | None) -> SystemConfig | None:
+    # A partial dict takes today's defaults for the missing fields, like SystemConfig.from_dict.
+    return SystemConfig.from_dict(dict(config)) if isinstance(config, Mapping) else config
+
+
+def make_env(config: SystemConfig | Mapping[str, Any] | None = None, scenario: str | Scenario = "fig2",
+             **kwargs: Any) -> UavRisD2DEnv:
+    """:class:`UavRisD2DEnv`, ``config`` also as a dict (``SystemConfig.to_dict()``)."""
+    return UavRisD2DEnv(_system(config), scenario, **kwargs)
+
+
+def make_vector_env(num_envs: int = 1, config: SystemConfig | Mapping[str, Any] | None = None,
+                    scenario: str | Scenario = "fig2", **kwargs: Any) -> UavRisD2DVectorEnv:
+    """:class:`UavRisD2DVectorEnv`, ``config`` also as a dict."""
+    return UavRisD2DVectorEnv(num_envs, _system(config), scenario, **kwargs)
+
+
+# Registered once per process, whichever of `import uavris` or `import uavris.env` comes first.
+if ENV_ID not in gym.registry:
+    gym.register(id=ENV_ID, entry_point="uavris.env:make_env", vector_entry_point="uavris.env:make_vector_env")
+
 __all__ = ["ENV_ID", "ActionError", "BatchedSimulator", "UavRisD2DEnv", "UavRisD2DVectorEnv", "decode_action",
-           "observation_layout"]
+           "make_env", "make_vector_env", "observation_layout"]

@@ -5,6 +5,10 @@ blocks that size with fresh ``mmap`` calls and returns them on free, so every te
 pays page faults; that alone cost ~40% of the step time in our benchmark. Raising the
 mmap and trim thresholds keeps those blocks in the heap and reuses them. Set
 ``UAVRIS_NO_MALLOC_TUNING=1`` to leave the allocator alone.
+
+Lives here: :func:`tune_allocator`, which :class:`uavris.env.simulator.BatchedSimulator`
+calls for 64 environments or more (docs/model.md section 17). Not here: the one torch
+thread per worker process (:func:`uavris.experiments.jobs.configure_torch_threads`).
 """
 
 from __future__ import annotations

@@ -1,12 +1,18 @@
 """The batched simulator shared by the single and the vector environment.
 
+Lives here: :class:`BatchedSimulator` and :class:`SlotInfo`, the action map
+(:func:`decode_action`, :func:`phases_to_action`), the observation (:func:`observation_layout`,
+:func:`observation_bounds`) and the ``info`` dict (:func:`step_info`). Not here: the physics
+it composes (:mod:`uavris.physics`), the Gymnasium interfaces (:mod:`.single`, :mod:`.vector`,
+registered in :mod:`uavris.env`) and the optimised-phase control (:mod:`.wrappers`).
+
 State lives in arrays with a leading environment axis; every quantity is computed with
 one numpy call per step for the whole batch. The single environment is this simulator
 with one row, which is why both agree bit for bit.
 
-Slot timing (MODEL.md): the observation of slot t holds the pose of slot t, the channels
-H(t) (NLoS included) and the pairing P(t). The action's phases apply to slot t; its
-acceleration and attitude increments then move the UAV to its slot t+1 pose, and
+Slot timing (docs/model.md section 11): the observation of slot t holds the pose of slot t,
+the channels H(t) (NLoS included) and the pairing P(t). The action's phases apply to slot t;
+its acceleration and attitude increments then move the UAV to its slot t+1 pose, and
 H(t+1), P(t+1) are drawn.
 """
 
@@ -20,9 +26,9 @@ from numpy.typing import NDArray
 
 from uavris import physics as ph
 from uavris.config import Scenario, SystemConfig, get_scenario
+from uavris.env._malloc import tune_allocator
 from uavris.errors import ActionError, ConfigError
 from uavris.physics import streams
-from uavris.env._malloc import tune_allocator
 
 
 @dataclass

@@ -1,4 +1,10 @@
-"""Gymnasium environment ``uavris/UavRisD2D-v0`` (one UAV-RIS system)."""
+"""Gymnasium environment ``uavris/UavRisD2D-v0`` (one UAV-RIS system).
+
+Lives here: :class:`UavRisD2DEnv`, a one-row :class:`uavris.env.simulator.BatchedSimulator`
+behind Gymnasium's ``reset`` and ``step`` (spaces, reward, termination: its docstring). Not
+here: the dynamics (:mod:`.simulator`), the batched environment (:mod:`.vector`) and the
+registration with :func:`uavris.env.make_env` (:mod:`uavris.env`).
+"""
 
 from __future__ import annotations
 
@@ -10,7 +16,6 @@ from numpy.typing import NDArray
 
 from uavris.config import Scenario, SystemConfig
 from uavris.env.simulator import BatchedSimulator, observation_bounds, step_info
-
 
 _SCALARS = {"energy_used": float, "energy_remaining": float, "slot": int, "sum_rate": float, "slot_energy": float}
 
@@ -29,8 +34,8 @@ class UavRisD2DEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
             ``"unseen2"``), a :class:`Scenario`, or a start position ``[x, y, z]``.
 
     Action: ``Box(-1, 1, (22,), float32)`` = acceleration (x a_max), 16 RIS phases
-    (mapped to [0, 2 pi]; 0 and 2 pi are the same phasor), attitude increments (x the per-slot bound). Out-of-range values
-    are clipped; NaN or inf raise ``ValueError``.
+    (mapped to [0, 2 pi]; 0 and 2 pi are the same phasor), attitude increments (x the per-slot
+    bound). Out-of-range values are clipped; NaN or inf raise ``ValueError``.
     Observation: ``Box((158,), float32)``, every component of order 1, see
     :func:`uavris.env.simulator.observation_layout`.
     Reward: the sum rate r(t) of the active pairs in bps/Hz.

@@ -5,6 +5,10 @@ Same dynamics as :class:`uavris.env.single.UavRisD2DEnv` on arrays of shape
 environment i with ``s + i`` (Gymnasium's convention), so environment i reproduces a
 single environment reset with seed ``s + i`` and driven with the same actions, across
 auto-resets too.
+
+Lives here: :class:`UavRisD2DVectorEnv`. Not here: the dynamics (:mod:`.simulator`), the
+Stable-Baselines3 ``VecEnv`` over the same simulator (:mod:`uavris.agents.experts.vec_env`)
+and :func:`uavris.env.make_vector_env` (:mod:`uavris.env`).
 """
 
 from __future__ import annotations

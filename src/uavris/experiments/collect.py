@@ -9,6 +9,10 @@ expert, batched; all trajectories go into one Minari dataset (:mod:`uavris.agent
 with per-episode scenario, expert and seed. Episode seeds are ``seed + k N + j`` for expert
 k (default seed 2,000,000: never an evaluation seed, which start at 1,000,000, and never a
 fine-tuning seed, which start at 3,000,000).
+
+The dataset id is ``uavris/<name>-vN``, ``<name>`` being the output directory's name
+(:func:`uavris.agents.dt.dataset.dataset_id_for`), so ``minari.load_dataset(id)`` finds a
+dataset written to ``$MINARI_DATASETS_PATH/uavris/<name>-vN``.
 """
 
 from __future__ import annotations
@@ -18,7 +22,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from uavris.agents.dt.dataset import load_dataset, write_dataset
+from uavris.agents.dt.dataset import DATASET_NAMESPACE, load_dataset, write_dataset
 from uavris.agents.dt.trajectories import Trajectory, record_episodes
 from uavris.agents.experts.sb3 import load_model
 from uavris.errors import UavrisError
@@ -30,7 +34,12 @@ from uavris.presets import COLLECT_SEED
 
 def collect(experts: Sequence[str | Path], trajectories: int, out: str | Path, *, seed: int = COLLECT_SEED,
             force: bool = False, progress: bool = True) -> Path:
-    """Roll every expert out ``trajectories`` times in its own scenario and write a dataset."""
+    """Roll every expert out ``trajectories`` times in its own scenario and write a dataset.
+
+    The dataset records the environment spec (``uavris/UavRisD2D-v0``, the experts' system)
+    for Minari's ``recover_environment``, in the first expert's scenario: a spec holds one
+    scenario, each episode's own scenario is in its metadata.
+    """
     configure_torch_threads()
     if not experts:
         raise UavrisError("give at least one expert run directory (--experts RUN_DIR ...)")
@@ -71,7 +80,8 @@ def collect(experts: Sequence[str | Path], trajectories: int, out: str | Path, *
             bar.close()
     description = (f"uavris expert trajectories: {len(runs)} experts x {trajectories} deterministic episodes "
                    f"({', '.join(sorted({cfg.scenario for _, cfg in runs}))})")
-    return write_dataset(out, trajs, system, description=description, force=force, phase_control=phase_control)
+    return write_dataset(out, trajs, system, description=description, force=force, phase_control=phase_control,
+                         namespace=DATASET_NAMESPACE, scenario=runs[0][1].scenario)
 
 
 def dataset_summary(path: str | Path) -> dict[str, Any]:

@@ -1,7 +1,13 @@
 """Algorithm comparison (paper Fig. 2): DDPG, PPO, SAC and TD3 over seeds.
 
+Lives here: :func:`compare_algorithms` (train every run, then :func:`write_comparison`),
+:func:`select_expert` (the algorithm the study's experts use), :func:`learning_curve_summary`
+and :func:`render_report`. Not here: training one run (:mod:`.train_expert`), the figure
+(:func:`uavris.experiments.plots.learning_curves`) and the statistics (:mod:`uavris.stats`).
+
 Outputs in ``OUT``: ``runs/ALGO-sSEED`` (one training run each, resumable),
-``learning_curves.{png,pdf}``, ``final_performance.csv``, ``report.md``.
+``learning_curves.{png,pdf}``, ``final_performance.csv``, ``final_per_run.csv``,
+``summary.json``, ``report.md``.
 """
 
 from __future__ import annotations
@@ -13,18 +19,18 @@ from typing import Any, Sequence
 
 import numpy as np
 
+from uavris import runs
 from uavris.agents.evaluation import evaluate
 from uavris.agents.experts import ALGORITHMS, check_algorithm, hyperparams_for
 from uavris.agents.references import HOVER_OPTIMIZER, ORACLE, REFERENCES, ZERO_ACTION, reference_policy
 from uavris.config import get_scenario
-from uavris import runs
 from uavris.errors import UavrisError
-from uavris.io import atomic_write_text, read_csv, write_csv, write_json
 from uavris.experiments.jobs import Job, JobResult, JobRunner, run_jobs
 from uavris.experiments.plots import learning_curves
-from uavris.stats import bootstrap_band, summarize, versus
 from uavris.experiments.train_expert import TrainConfig, preset_config, train_job
+from uavris.io import atomic_write_text, read_csv, write_csv, write_json
 from uavris.presets import PRESETS
+from uavris.stats import bootstrap_band, summarize, versus
 
 # The paper's converged average sum rates from [15, 20, 4.5], bps/Hz (docs/model.md).
 PAPER_FIG2 = {"ddpg": 29.5, "ppo": 25.0, "td3": 20.5, "sac": 17.0}
@@ -71,21 +77,22 @@ def compare_algorithms(preset: str = "quick", seeds: int = 5, workers: int = 2, 
                        algos: Sequence[str] = ALGORITHMS, scenario: str = "fig2",
                        eval_episodes: int | None = None, backend: str = "local",
                        ray_address: str | None = None, progress: bool = True,
-                       runner: JobRunner | None = None) -> Path:
+                       runner: JobRunner | None = None, device: str = "cpu") -> Path:
     """Train ``algos`` x ``seeds`` in ``scenario`` and write the comparison into ``out``; returns
     the report path. Jobs go to ``runner`` when given (shared with other work), else to a
     pool of ``workers`` of their own."""
     if preset not in PRESETS:
         raise UavrisError(f"unknown preset {preset!r}; choose one of {', '.join(PRESETS)}")
-    if seeds < 1 or workers < 1:
-        raise UavrisError("--seeds and --workers must be >= 1")
+    for flag, value in (("--seeds", seeds), ("--workers", workers), ("--eval-episodes", eval_episodes)):
+        if value is not None and value < 1:
+            raise UavrisError(f"{flag} must be >= 1, got {value}")
     for a in algos:
         check_algorithm(a)
     get_scenario(scenario)
     out = Path(out or f"runs/compare-{preset}")
     n_eval = eval_episodes or (100 if preset == "paper" else 32)
     cfgs = {(a, s): preset_config(a, scenario, s, preset, eval_episodes=n_eval) for a in algos for s in range(seeds)}
-    jobs = [Job(f"{a}-s{s}", train_job, (cfg.to_dict(), str(out / "runs" / f"{a}-s{s}")),
+    jobs = [Job(f"{a}-s{s}", train_job, (cfg.to_dict(), str(out / "runs" / f"{a}-s{s}"), device),
                 out / "logs" / f"{a}-s{s}.log") for (a, s), cfg in cfgs.items()]
     t0 = time.perf_counter()
     from tqdm.auto import tqdm

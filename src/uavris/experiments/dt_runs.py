@@ -123,8 +123,8 @@ def dt_model_dir(path: str | Path) -> Path | None:
     return None
 
 
-def load_dt_policy(path: str | Path, target_return: float | None = None) -> tuple[DTBatchPolicy, SystemConfig,
-                                                                                     str | None]:
+def load_dt_policy(path: str | Path, target_return: float | None = None,
+                   device: str = "cpu") -> tuple[DTBatchPolicy, SystemConfig, str | None]:
     """(deterministic batch policy, its system config, its own scenario or None) of a DT target."""
     from uavris.experiments.train_expert import configure_torch_threads
 
@@ -132,7 +132,7 @@ def load_dt_policy(path: str | Path, target_return: float | None = None) -> tupl
     model_dir = dt_model_dir(path)
     if model_dir is None:
         raise UavrisError(f"{path} is not a DT model directory (no model.json)")
-    model, meta = load_dt(model_dir)
+    model, meta = load_dt(model_dir, device)
     system = checkpoint_system(meta, model_dir)
     target = meta.get("target_return") if target_return is None else target_return
     if target is None:

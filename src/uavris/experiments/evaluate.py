@@ -45,7 +45,7 @@ class Target:
     phase_control: str  # how it was trained: "agent" (all entries) or "optimizer" (motion only)
 
 
-def resolve_policy(target: str) -> Target:
+def resolve_policy(target: str, device: str = "cpu") -> Target:
     """Resolve a run directory, DT model directory or reference name.
 
     References use their own fixed seed (:data:`uavris.agents.references.REFERENCE_SEED`),
@@ -61,11 +61,11 @@ def resolve_policy(target: str) -> Target:
         raise UavrisError(f"{run_dir} is not a directory (expected a run directory, a model directory or one of the "
                           f"references {', '.join(REFERENCES)})")
     if dt_model_dir(run_dir) is not None:  # a Decision Transformer model or DT run directory
-        policy, system, scenario = load_dt_policy(run_dir)
+        policy, system, scenario = load_dt_policy(run_dir, device=device)
         return Target(policy, system, scenario, run_dir, policy.phase_control)
     cfg = load_run_config(run_dir)
     configure_torch_threads()
-    model = load_model(final_model_path(run_dir), cfg.algo)
+    model = load_model(final_model_path(run_dir), cfg.algo, device=device)
     return Target(run_policy(model, cfg), cfg.system, cfg.scenario, run_dir, cfg.phase_control)
 
 
@@ -77,13 +77,17 @@ def write_results(res: EpisodeResults, summary: dict[str, Any], stem: Path) -> N
 
 
 def evaluate_target(target: str, scenario: str | None, episodes: int, seed: int,
-                    out: Path | None = None, phase_control: str | None = None) -> tuple[dict[str, Any], Path]:
-    """Evaluate ``target``; ``phase_control="optimizer"`` replaces its phases by the optimiser's."""
+                    out: Path | None = None, phase_control: str | None = None, device: str = "cpu",
+                    progress: bool = False) -> tuple[dict[str, Any], Path]:
+    """Evaluate ``target``; ``phase_control="optimizer"`` replaces its phases by the optimiser's.
+
+    With ``progress`` a bar counts the simulated slots (the optimiser and the oracle take
+    milliseconds per slot, so a long evaluation is visibly alive)."""
     if episodes < 1:
         raise UavrisError(f"--episodes must be >= 1, got {episodes}")
     if phase_control is not None:
         check_phase_control(phase_control)
-    resolved = resolve_policy(target)
+    resolved = resolve_policy(target, device)
     policy, system, own_scenario, run_dir = resolved.policy, resolved.system, resolved.scenario, resolved.run_dir
     if phase_control == "agent" and resolved.phase_control == "optimizer":
         raise UavrisError(f"{target} acts on the motion only (trained with the optimiser setting the phases, the "
@@ -92,7 +96,12 @@ def evaluate_target(target: str, scenario: str | None, episodes: int, seed: int,
     if scenario is None:
         raise UavrisError("--scenario is required for a baseline or a pre-trained DT (it has no scenario of its own)")
     get_scenario(scenario).validate_for(system)
-    res = evaluate(policy, system, scenario, episodes, seed, phase_control=phase_control)
+    from tqdm.auto import tqdm
+
+    with tqdm(total=episodes * system.horizon, unit="slot", desc=f"evaluate {scenario}", disable=not progress,
+              dynamic_ncols=True, leave=False) as bar:
+        res = evaluate(policy, system, scenario, episodes, seed, phase_control=phase_control,
+                       on_slot=lambda sim, obs, executed, alive: bar.update(int(alive.sum())))
     summary = {"target": target, "scenario": scenario, "seed": seed, "phase_control": phase_control or "as trained",
                **res.summary()}
     if out is None:

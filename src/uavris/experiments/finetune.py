@@ -48,7 +48,7 @@ from uavris.agents.dt.policy import DTBatchPolicy
 from uavris.agents.dt.trainer import load_trainer_state, make_optimizer, train_steps
 from uavris.agents.dt.trajectories import ELITE_RULES, TrainingWindows, record_episodes, select_elites
 from uavris.agents.evaluation import evaluate
-from uavris.config import check_positive, get_scenario
+from uavris.config import check_non_negative, check_positive, get_scenario
 from uavris.errors import ConfigError, UavrisError
 from uavris.experiments.dt_runs import (
     FINETUNE_KIND,
@@ -109,8 +109,8 @@ class FinetuneConfig:
                                                and self.candidates % self.rollouts_per_seed == 0):
             raise ConfigError(f"FinetuneConfig.rollouts_per_seed must be an integer >= 2 dividing candidates "
                               f"({self.candidates}) for paired selection, got {self.rollouts_per_seed!r}")
-        if self.noise_sigma < 0 or self.seed < 0 or self.weight_decay < 0:
-            raise ConfigError("FinetuneConfig.noise_sigma, seed and weight_decay must be >= 0")
+        check_non_negative("FinetuneConfig", self, ("noise_sigma", "seed", "weight_decay", "eval_seed",
+                                                    "collect_seed"))
         if self.target_return is not None and not math.isfinite(self.target_return):
             raise ConfigError(f"FinetuneConfig.target_return must be finite, got {self.target_return}")
 
@@ -129,7 +129,7 @@ def default_finetune_dir(cfg: FinetuneConfig, root: str | Path = "runs/dt") -> P
 
 
 def finetune(cfg: FinetuneConfig, run_dir: str | Path, *, resume: bool = False, force: bool = False,
-             progress: bool = True, interrupt_after_round: int | None = None) -> Path:
+             progress: bool = True, interrupt_after_round: int | None = None, device: str = "cpu") -> Path:
     """Fine-tune a pre-trained DT in ``cfg.scenario`` (Algorithm 1, stage 2); returns the
     model directory. ``interrupt_after_round`` is a test hook."""
     import torch
@@ -137,7 +137,7 @@ def finetune(cfg: FinetuneConfig, run_dir: str | Path, *, resume: bool = False, 
     configure_torch_threads()
     run_dir = Path(run_dir)
     model_dir = dt_model_dir(cfg.model) or Path(cfg.model)  # a run directory stands for its final model
-    model, pre_meta = load_dt(model_dir)
+    model, pre_meta = load_dt(model_dir, device)
     system = checkpoint_system(pre_meta, model_dir)
     get_scenario(cfg.scenario).validate_for(system)
     target = cfg.target_return if cfg.target_return is not None else pre_meta.get("target_return")

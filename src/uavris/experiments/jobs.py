@@ -1,5 +1,9 @@
 """Run independent jobs on a local process pool or on Ray; report failures with their logs.
 
+Lives here: :class:`Job`, :class:`JobResult`, :class:`JobRunner`, :func:`run_jobs` and
+:func:`configure_torch_threads`. Not here: what the jobs do (:mod:`.train_expert`,
+:mod:`.study`) and the stages that submit them (:mod:`.stages`, :mod:`.reproduce`).
+
 Each job runs in its own process (spawned, so torch and numpy start clean) with one torch
 thread, writes its own log file, and is retried by nobody: a failed job is reported and
 the others go on. The caller decides the exit code from the returned failures.

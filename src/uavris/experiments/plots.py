@@ -1,4 +1,10 @@
-"""Figures in a style fit for a paper: PNG (200 dpi) and PDF side by side."""
+"""Figures in a style fit for a paper: PNG (200 dpi) and PDF side by side.
+
+Lives here: :func:`save_figure`, the shared colours and reference lines (:data:`COLORS`,
+:data:`REFERENCE_STYLE`, :func:`reference_lines`) and :func:`learning_curves`, the
+comparison's figure. Not here: the report's figures (:mod:`uavris.experiments.report.figures`)
+and the curves of individual runs (:mod:`.run_curves`).
+"""
 
 from __future__ import annotations
 

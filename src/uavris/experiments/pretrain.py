@@ -28,7 +28,7 @@ from uavris.agents.dt.dataset import load_dataset
 from uavris.agents.dt.model import DecisionTransformer, DTConfig
 from uavris.agents.dt.trainer import load_trainer_state, make_optimizer, train_steps
 from uavris.agents.dt.trajectories import TrainingWindows, default_target_return, normalisation_from
-from uavris.config import check_positive
+from uavris.config import check_non_negative, check_positive
 from uavris.env.simulator import layout_as_lists
 from uavris.env.wrappers import action_dim_for
 from uavris.errors import ConfigError
@@ -77,8 +77,7 @@ class PretrainConfig:
         check_preset(self.preset)
         check_positive("PretrainConfig", self, ("steps", "batch_size", "learning_rate", "warmup_steps", "grad_clip",
                                                  "checkpoint_every", "log_every"))
-        if self.seed < 0 or self.weight_decay < 0:
-            raise ConfigError("PretrainConfig.seed and weight_decay must be >= 0")
+        check_non_negative("PretrainConfig", self, ("seed", "weight_decay"))
         if not 0 < self.target_quantile <= 1:
             raise ConfigError(f"PretrainConfig.target_quantile must be in (0, 1], got {self.target_quantile}")
         self.model_config(1, 1)  # validates the model size fields
@@ -102,8 +101,9 @@ def default_pretrain_dir(cfg: PretrainConfig, root: str | Path = "runs/dt") -> P
 
 
 def pretrain(cfg: PretrainConfig, run_dir: str | Path, *, resume: bool = False, force: bool = False,
-             progress: bool = True, interrupt_at: int | None = None) -> Path:
-    """Pre-train a DT on ``cfg.dataset`` (Algorithm 1, stage 1); returns the model directory.
+             progress: bool = True, interrupt_at: int | None = None, device: str = "cpu") -> Path:
+    """Pre-train a DT on ``cfg.dataset`` (Algorithm 1, stage 1) on the torch ``device``; returns
+    the model directory.
 
     ``interrupt_at`` is a test hook that stops training after that step.
     """
@@ -119,7 +119,7 @@ def pretrain(cfg: PretrainConfig, run_dir: str | Path, *, resume: bool = False, 
     norm = normalisation_from(ds.trajectories)
     model = DecisionTransformer(cfg.model_config(system.observation_dim, action_dim_for(system, ds.phase_control),
                                                  system.horizon),
-                                norm.state_mean, norm.state_std, norm.return_scale)
+                                norm.state_mean, norm.state_std, norm.return_scale).to(device)
     opt = make_optimizer(model, cfg.learning_rate, cfg.weight_decay)
     windows = TrainingWindows.for_model(ds.trajectories, model.cfg)
     model_meta = {

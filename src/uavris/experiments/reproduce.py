@@ -1,5 +1,10 @@
 """``uavris reproduce``: the paper's whole study in two tracks, resumable, on a process pool or Ray.
 
+Lives here: :class:`ReproduceConfig`, :func:`build_pipeline` (the stages below, their
+configurations and dependencies) and :func:`reproduce`. Not here: the work of each stage and
+what sets the tracks apart (:mod:`.study`), keying and skipping stages (:mod:`.stages`), the
+processes (:mod:`.jobs`) and the report (:mod:`.report`).
+
 Stages (each in ``OUT/stages/NAME-KEY``, keyed by its configuration and its inputs):
 
 1. ``compare``: DDPG, PPO, SAC, TD3 over seeds in the Fig. 2 scenario (paper Fig. 2).
@@ -87,6 +92,8 @@ class ReproduceConfig:
             v = getattr(self, name)
             if v is not None and v < 1:
                 raise UavrisError(f"--{name.replace('_', '-')} must be >= 1, got {v}")
+        if self.seed < 0:
+            raise UavrisError(f"--seed must be >= 0, got {self.seed}")
 
     @property
     def n_compare_seeds(self) -> int:
@@ -108,8 +115,9 @@ class ReproduceConfig:
 class _Context:
     """The job runner and the progress bar shared by the stages (which may run concurrently)."""
 
-    def __init__(self, workers: int, backend: str, ray_address: str | None, bar: Any) -> None:
+    def __init__(self, workers: int, backend: str, ray_address: str | None, bar: Any, device: str = "cpu") -> None:
         self.workers, self.backend, self.ray_address, self.bar = workers, backend, ray_address, bar
+        self.device = device
         self.runner = JobRunner(workers, backend, ray_address)
         self.failures: list[JobResult] = []
         self._lock = threading.Lock()
@@ -124,7 +132,8 @@ class _Context:
             with self._lock:
                 if self.bar is not None:
                     self.bar.update(1)
-                    self.bar.write(f"  job {res.name}: " + ("done" if res.ok else f"FAILED ({res.error}); log: {res.log}"))
+                    status = "done" if res.ok else f"FAILED ({res.error}); log: {res.log}"
+                    self.bar.write(f"  job {res.name}: {status}")
 
         results = self.runner.run(jobs, done, priority)
         failed = [r for r in results if not r.ok]
@@ -146,7 +155,7 @@ class _Context:
 
 # ------------------------------------------------------------------------------------------ stages
 def _run_experts(stage_dir: Path, cfgs: dict[str, TrainConfig], ctx: _Context) -> dict[str, Any]:
-    jobs = [Job(f"{cfg.algo}-{s}", train_job, (cfg.to_dict(), str(stage_dir / "runs" / s)),
+    jobs = [Job(f"{cfg.algo}-{s}", train_job, (cfg.to_dict(), str(stage_dir / "runs" / s), ctx.device),
                 stage_dir / "logs" / f"{s}.log")
             for s, cfg in cfgs.items() if not runs.is_finished(stage_dir / "runs" / s)]
     failures = ctx.run_jobs(jobs, PRIORITY_EXPERTS)
@@ -194,13 +203,15 @@ def _dt_stages(rc: ReproduceConfig, track: Track, ctx: _Context) -> list[Stage]:
 
     def pretrain(d: Path, deps: dict[str, Path]) -> dict[str, Any]:
         cfg = pretrain_config(deps[t("dataset")] / "dataset", rc.preset, rc.seed)
-        return ctx.run_one(t("pretrain"), pretrain_job, (dataclasses.asdict(cfg), str(d / "model")), d / "job.log")
+        return ctx.run_one(t("pretrain"), pretrain_job, (dataclasses.asdict(cfg), str(d / "model"), ctx.device),
+                           d / "job.log")
 
     def finetune(scenario: str):
         def run(d: Path, deps: dict[str, Path]) -> dict[str, Any]:
             cfg = finetune_config(deps[t("pretrain")] / "model", scenario, rc.preset, rc.seed,
                                   eval_episodes=rc.n_eval)
-            return ctx.run_one(t(f"finetune-{scenario}"), finetune_job, (dataclasses.asdict(cfg), str(d / "model")),
+            return ctx.run_one(t(f"finetune-{scenario}"), finetune_job,
+                               (dataclasses.asdict(cfg), str(d / "model"), ctx.device),
                                d / "job.log")
         return run
 
@@ -235,7 +246,7 @@ def build_pipeline(rc: ReproduceConfig, out: Path, ctx: _Context) -> Pipeline:
         from uavris.experiments.compare import compare_algorithms
 
         compare_algorithms(preset=rc.preset, seeds=rc.n_compare_seeds, workers=ctx.workers, out=d,
-                           eval_episodes=rc.n_eval, progress=False, runner=ctx.runner)
+                           eval_episodes=rc.n_eval, progress=False, runner=ctx.runner, device=ctx.device)
         summary = read_json(d / "summary.json")
         return {"rows": summary["rows"], "expert": summary["expert"]}
 
@@ -253,8 +264,9 @@ def build_pipeline(rc: ReproduceConfig, out: Path, ctx: _Context) -> Pipeline:
 
 # ------------------------------------------------------------------------------------------ entry point
 def reproduce(rc: ReproduceConfig, out: str | Path, *, workers: int = 2, backend: str = "local",
-              ray_address: str | None = None, force: Sequence[str] = (), progress: bool = True) -> Path:
-    """Run (or resume) the whole study into ``out``; returns the report path.
+              ray_address: str | None = None, force: Sequence[str] = (), progress: bool = True,
+              device: str = "cpu") -> Path:
+    """Run (or resume) the whole study into ``out`` (torch on ``device``); returns the report path.
 
     Raises :class:`UavrisError` at the end when any job or stage failed (after writing the
     report of everything that finished).
@@ -266,7 +278,7 @@ def reproduce(rc: ReproduceConfig, out: str | Path, *, workers: int = 2, backend
     out = Path(out)
     from tqdm.auto import tqdm
 
-    ctx = _Context(workers, backend, ray_address, None)
+    ctx = _Context(workers, backend, ray_address, None, device)
     pipeline = build_pipeline(rc, out, ctx)
     unknown = [f for f in force if f not in pipeline.stages and f != "report"]
     if unknown:

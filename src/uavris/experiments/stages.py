@@ -1,5 +1,9 @@
 """Resumable stages keyed by the hash of their resolved configuration.
 
+Lives here: :class:`Stage`, :func:`stage_key`, :class:`StageRecord` and :class:`Pipeline`.
+Not here: the study's stages (:mod:`.reproduce`), the processes their jobs run on
+(:mod:`.jobs`) and the resume of a training run within a stage (:mod:`uavris.runs`).
+
 A stage's key hashes its own configuration together with the keys of the stages it
 depends on, so changing a parameter invalidates exactly that stage and everything
 downstream of it, and nothing else. A stage runs in ``OUT/stages/NAME-KEY/`` and is

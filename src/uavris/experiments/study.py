@@ -81,21 +81,21 @@ def dataset_job(expert_dirs: list[str], trajectories: int, out: str) -> dict[str
     return dataset_summary(collect(expert_dirs, trajectories, out, force=True, progress=False))
 
 
-def pretrain_job(cfg_dict: dict[str, Any], out: str) -> dict[str, Any]:
+def pretrain_job(cfg_dict: dict[str, Any], out: str, device: str = "cpu") -> dict[str, Any]:
     """Pre-train (or resume) a DT; returns its done.json."""
     from uavris.experiments.pretrain import PretrainConfig, pretrain
 
     model_dir = Path(out)
-    pretrain(PretrainConfig(**cfg_dict), model_dir, resume=model_dir.exists(), progress=False)
+    pretrain(PretrainConfig(**cfg_dict), model_dir, resume=model_dir.exists(), progress=False, device=device)
     return read_json(model_dir / "done.json")
 
 
-def finetune_job(cfg_dict: dict[str, Any], out: str) -> dict[str, Any]:
+def finetune_job(cfg_dict: dict[str, Any], out: str, device: str = "cpu") -> dict[str, Any]:
     """Fine-tune (or resume) a DT; returns its done.json."""
     from uavris.experiments.finetune import FinetuneConfig, finetune
 
     model_dir = Path(out)
-    finetune(FinetuneConfig(**cfg_dict), model_dir, resume=model_dir.exists(), progress=False)
+    finetune(FinetuneConfig(**cfg_dict), model_dir, resume=model_dir.exists(), progress=False, device=device)
     return read_json(model_dir / "done.json")
 
 

@@ -1,5 +1,11 @@
 """Training one expert: run directory, checkpoints, resume, logs and evaluation.
 
+Lives here: :class:`TrainConfig`, :func:`preset_config`, :func:`train`, :func:`train_job`,
+:func:`save_checkpoint`, :func:`run_evaluation`, :func:`run_policy` and
+:func:`final_model_path`. Not here: the overwrite guard and the checkpoint pointer
+(:mod:`uavris.runs`), the SB3 models (:mod:`uavris.agents.experts.sb3`) and the flags of
+``uavris train`` (:mod:`uavris.cli.training`).
+
 A run directory holds::
 
     config.yaml            the resolved TrainConfig (system, scenario, hyperparameters)
@@ -15,8 +21,8 @@ with the step counter continuing; a finished run is never retrained unless force
 Checkpoints are taken between a gradient update and the next env step (SB3's
 ``on_rollout_start``: every vector step for the off-policy algorithms, every rollout for
 PPO) and hold the environments mid-episode and every random stream
-(:mod:`uavris.agents.experts.resume_state`), so a killed and resumed run ends with the same model
-and numbers as an uninterrupted one.
+(:mod:`uavris.agents.experts.resume_state`), so a killed and resumed run ends with the same
+model and numbers as an uninterrupted one.
 """
 
 from __future__ import annotations
@@ -89,8 +95,9 @@ class TrainConfig:
         for name in ("eval_every", "eval_episodes", "checkpoint_every"):
             if getattr(self, name) < 1:
                 raise ConfigError(f"TrainConfig.{name} must be >= 1, got {getattr(self, name)}")
-        if self.seed < 0:
-            raise ConfigError(f"TrainConfig.seed must be >= 0, got {self.seed}")
+        for name in ("seed", "eval_seed"):
+            if getattr(self, name) < 0:
+                raise ConfigError(f"TrainConfig.{name} must be >= 0, got {getattr(self, name)}")
 
     def to_dict(self) -> dict[str, Any]:
         d = dataclasses.asdict(self)
@@ -246,8 +253,8 @@ INT_COLUMNS = {"episode", "env_steps", "length", "episodes"}
 
 
 def train(cfg: TrainConfig, run_dir: str | Path, *, resume: bool = False, force: bool = False,
-          progress: bool = True, interrupt_at: int | None = None) -> Path:
-    """Train ``cfg`` into ``run_dir``; returns the final model path.
+          progress: bool = True, interrupt_at: int | None = None, device: str = "cpu") -> Path:
+    """Train ``cfg`` into ``run_dir`` on the torch ``device``; returns the final model path.
 
     Raises :class:`UavrisError` for a finished run (unless ``force``), an existing
     unfinished run without ``resume``/``force``, a resume whose config differs, or a
@@ -272,7 +279,7 @@ def train(cfg: TrainConfig, run_dir: str | Path, *, resume: bool = False, force:
                 start, n_ep, n_ev = int(latest["env_steps"]), int(latest["episodes"]), int(latest["evals"])
             except (TypeError, ValueError):
                 raise UavrisError(f"{run_dir / runs.POINTER} is corrupt") from None
-            model = load_model(model_path, cfg.algo, env)
+            model = load_model(model_path, cfg.algo, env, device)
             if cfg.algo in OFF_POLICY:
                 buf = run_dir / "checkpoints" / "replay_buffer.pkl"
                 if not buf.exists():
@@ -290,7 +297,7 @@ def train(cfg: TrainConfig, run_dir: str | Path, *, resume: bool = False, force:
             episodes = read_rows(run_dir / "episodes.csv", EPISODE_HEADER, n_ep, INT_COLUMNS)
             evals = read_rows(run_dir / "evals.csv", EVAL_HEADER, n_ev, INT_COLUMNS)
     if latest is None:
-        model = _fresh_model(cfg, env, run_dir, evals, progress)
+        model = _fresh_model(cfg, env, run_dir, evals, progress, device)
 
     rec = _Recorder(cfg, run_dir, start, episodes, evals, progress, interrupt_at)
     try:
@@ -317,10 +324,11 @@ def train(cfg: TrainConfig, run_dir: str | Path, *, resume: bool = False, force:
 IMITATION_HEADER = ("round", "samples", "loss", "student_gap")
 
 
-def _fresh_model(cfg: TrainConfig, env: Any, run_dir: Path, evals: list[list[Any]], progress: bool) -> Any:
+def _fresh_model(cfg: TrainConfig, env: Any, run_dir: Path, evals: list[list[Any]], progress: bool,
+                 device: str = "cpu") -> Any:
     """A new model; with ``cfg.imitation`` fitted to the teacher first (imitation.csv) and
     evaluated at env step 0 (when RL follows), so the learning curve starts from it."""
-    model = build_model(cfg.algo, env, cfg.hyperparams, cfg.seed, str(run_dir / "tb"))
+    model = build_model(cfg.algo, env, cfg.hyperparams, cfg.seed, str(run_dir / "tb"), device)
     if cfg.imitation is None:
         return model
     rows: list[list[Any]] = []
@@ -348,12 +356,12 @@ def _fresh_model(cfg: TrainConfig, env: Any, run_dir: Path, evals: list[list[Any
     return model
 
 
-def train_job(cfg_dict: dict[str, Any], run_dir: str) -> dict[str, Any]:
+def train_job(cfg_dict: dict[str, Any], run_dir: str, device: str = "cpu") -> dict[str, Any]:
     """Worker entry point (:mod:`uavris.experiments.jobs`): train, or resume, one run; its done.json."""
     cfg = TrainConfig.from_dict(cfg_dict)
     path = Path(run_dir)
     if not runs.is_finished(path):
-        train(cfg, path, resume=(path / "config.yaml").exists(), progress=False)
+        train(cfg, path, resume=(path / "config.yaml").exists(), progress=False, device=device)
     return runs.read_done(path)
 
 

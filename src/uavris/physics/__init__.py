@@ -1,5 +1,15 @@
 """Functional physics API: pure, numpy-batched functions of the paper's system model.
 
+Modules: :mod:`.geometry` (attitude, RIS axes, incidence), :mod:`.channel` (UPA channels,
+cascaded gains), :mod:`.reflection` (angle-dependent reflection), :mod:`.rates` (SINR, sum
+rate), :mod:`.pairing` (link activation), :mod:`.motion` (kinematics, propulsion energy),
+:mod:`.streams` (counter-based random numbers), :mod:`.phase_opt` and :mod:`.phase_kernel`
+(the per-slot phase optimiser).
+
+Lives here: the re-exports of the first six modules' functions (``__all__``). Not here:
+:mod:`.streams` and :mod:`.phase_opt`, imported from their modules, and the per-slot
+composition of these functions into a simulator (:mod:`uavris.env.simulator`).
+
 Every function works on arrays with arbitrary leading (batch) dimensions. Example: the
 sum rate of one geometry, attitude, NLoS draw, phase vector and pairing::
 

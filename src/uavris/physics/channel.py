@@ -1,4 +1,10 @@
-"""Rician UPA channels and cascaded RIS gains (paper eq. 1-4, MODEL.md)."""
+"""Rician UPA channels and cascaded RIS gains (paper eq. 1-4, docs/model.md sections 4, 5 and 7).
+
+Lives here: :func:`array_response`, :func:`rician_channels`, :func:`effective_reflection`,
+:func:`effective_reflection_from_phases` and :func:`cascaded_gains`. Not here: the reflection
+model (:mod:`.reflection`), the incidence angles (:mod:`.geometry`), the NLoS draws
+(:mod:`.streams`, drawn by :mod:`uavris.env.simulator`) and the rates (:mod:`.rates`).
+"""
 
 from __future__ import annotations
 
@@ -48,7 +54,7 @@ def rician_channels(
 
     h_k = dist^(-alpha/2) (sqrt(kappa/(kappa+1)) g_k + sqrt(1/(kappa+1)) w_k), with
     ``nlos`` = w_k ~ CN(0, I) of shape ``(..., K, N)``. Users behind the RIS plane
-    (cos(theta) <= 0) are blocked: their channel is zero (MODEL.md).
+    (cos(theta) <= 0) are blocked: their channel is zero (docs/model.md section 3).
     """
     kappa = float(rician_factor)
     g = array_response(u, v, nx, ny, spacing)
@@ -77,7 +83,7 @@ def effective_reflection(
 
 
 def cascaded_gains(channels: ArrayLike, reflection: ArrayLike) -> NDArray[np.complex128]:
-    """c[k, i] = sum_n h_k[n] r_n(theta_k) h_i[n], link k -> i via the RIS (MODEL.md).
+    """c[k, i] = sum_n h_k[n] r_n(theta_k) h_i[n], link k -> i via the RIS (docs/model.md section 7).
 
     Args:
         channels: h, ``(..., K, N)``.

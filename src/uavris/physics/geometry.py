@@ -1,6 +1,11 @@
 """UAV attitude and RIS geometry (paper eq. 10, 11-12 and Remark 1).
 
 All functions are pure and batched over leading dimensions.
+
+Lives here: :func:`wrap_angle`, :func:`accumulate_attitude`, :func:`rotation_matrix`,
+:func:`ris_axes` and :func:`incidence`. Not here: the UAV's position and velocity
+(:mod:`.motion`) and what the incidence feeds: the array response and back-side blocking
+(:mod:`.channel`), the angle-dependent reflection (:mod:`.reflection`).
 """
 
 from __future__ import annotations
@@ -19,7 +24,7 @@ def wrap_angle(angle: ArrayLike) -> NDArray[np.float64]:
 
 
 def accumulate_attitude(attitude: ArrayLike, increment: ArrayLike) -> NDArray[np.float64]:
-    """zeta(t+1) = wrap(zeta(t) + delta_zeta(t)), attitude = (yaw, pitch, roll) (MODEL.md)."""
+    """zeta(t+1) = wrap(zeta(t) + delta_zeta(t)), attitude = (yaw, pitch, roll) (docs/model.md section 1)."""
     return wrap_angle(np.asarray(attitude, dtype=np.float64) + np.asarray(increment, dtype=np.float64))
 
 

@@ -1,4 +1,10 @@
-"""UAV kinematics (paper eq. 9) and propulsion energy (Zeng, Xu, Zhang, IEEE TWC 2019)."""
+"""UAV kinematics (paper eq. 9) and propulsion energy (Zeng, Xu, Zhang, IEEE TWC 2019).
+
+Lives here: :func:`kinematic_step`, :func:`feasible_acceleration`, :func:`limit_norm`,
+:func:`separation`, :func:`propulsion_power` and :func:`slot_energy`. Not here: the attitude
+(:mod:`.geometry`), the action's scaling (:func:`uavris.env.simulator.decode_action`) and
+the energy budget that ends an episode (:class:`uavris.env.simulator.BatchedSimulator`).
+"""
 
 from __future__ import annotations
 
@@ -23,7 +29,7 @@ def propulsion_power(
     rotor_solidity: float = 0.05,
     rotor_disc_area: float = 0.503,
 ) -> NDArray[np.float64]:
-    """Rotary-wing propulsion power P(V) in W (MODEL.md; P(0) = 168.49 W).
+    """Rotary-wing propulsion power P(V) in W (docs/model.md section 13; P(0) = 168.49 W).
 
     P(V) = P0 (1 + 3V^2/U^2) + Pi (sqrt(1 + V^4/(4 v0^4)) - V^2/(2 v0^2))^(1/2)
            + 0.5 d0 rho s A V^3.
@@ -45,7 +51,8 @@ def limit_norm(vec: ArrayLike, bound: float) -> NDArray[np.float64]:
     return x * np.minimum(1.0, bound / np.maximum(n, 1e-300))
 
 
-def feasible_acceleration(velocity: ArrayLike, accel: ArrayLike, dt: float, v_max: float, a_max: float) -> NDArray[np.float64]:
+def feasible_acceleration(velocity: ArrayLike, accel: ArrayLike, dt: float, v_max: float,
+                          a_max: float) -> NDArray[np.float64]:
     """Acceleration actually applied in a slot, honouring |a| <= a_max and |v| <= v_max.
 
     The commanded acceleration is first limited to a_max; if the end-of-slot velocity

@@ -1,4 +1,11 @@
-"""Random D2D link activation (paper Sec. II, MODEL.md 'Links')."""
+"""Random D2D link activation (paper Sec. II, docs/model.md section 10).
+
+Lives here: :func:`pairing_from_uniforms` (the simulator's, fed by :mod:`.streams`) and
+:func:`sample_pairing`. Not here: the rates of the active pairs (:mod:`.rates`) and the
+pairing's probabilities, which the oracles use
+(:func:`uavris.agents.oracle.planner.pairing_distribution`,
+:func:`uavris.agents.oracle.lookahead.link_activity`).
+"""
 
 from __future__ import annotations
 
@@ -29,6 +36,7 @@ def pairing_from_uniforms(u_count: ArrayLike, u_perm: ArrayLike, max_pairs: int)
     return P
 
 
-def sample_pairing(rng: np.random.Generator, num_users: int, max_pairs: int, size: tuple[int, ...] = ()) -> NDArray[np.float64]:
+def sample_pairing(rng: np.random.Generator, num_users: int, max_pairs: int,
+                   size: tuple[int, ...] = ()) -> NDArray[np.float64]:
     """Draw pairing matrices with a numpy Generator (convenience for users of the physics API)."""
     return pairing_from_uniforms(rng.random(size), rng.random(size + (num_users,)), max_pairs)

@@ -1,8 +1,14 @@
 """Per-slot RIS phase optimiser: the phases that maximise one slot's sum rate.
 
-Problem (docs/model.md sections 6-8). Given this slot's channels ``h`` ``(..., K, N)``, incidence cosines
-``cos_theta`` ``(..., K)`` and pairing ``P`` ``(..., K, K)``, choose unit-modulus presets
-``r_pre_n = exp(j phi_n)`` to maximise
+Lives here: :func:`optimize_phases` and :func:`optimize_slot_phases` (the entry point of the
+oracles and of the ``"optimizer"`` phase control), :class:`PhaseSolution`, the one-pair
+closed form (:func:`co_phasing_phases`, :func:`single_pair_snr`),
+:func:`sum_rate_and_gradient` and :func:`random_starts`. Not here: the compiled multi-pair
+stages (:mod:`uavris.physics.phase_kernel`) and the phase control (:mod:`uavris.env.wrappers`).
+
+Problem (docs/model.md sections 6-8). Given this slot's channels ``h`` ``(..., K, N)``,
+incidence cosines ``cos_theta`` ``(..., K)`` and pairing ``P`` ``(..., K, K)``, choose
+unit-modulus presets ``r_pre_n = exp(j phi_n)`` to maximise
 
     R(phi) = sum_{P[k,i]=1} log2(1 + P|c_ki|^2 / (sum_{j active tx, j != k} P|c_ji|^2 + sigma^2)),
     c_ji   = sum_n h_j[n] r_n(theta_j) h_i[n],

@@ -1,4 +1,9 @@
-"""SINR, pair rates and the sum rate (paper eq. 7-8, corrected with |.|^2 in MODEL.md)."""
+"""SINR, pair rates and the sum rate (paper eq. 7-8, corrected with |.|^2 in docs/model.md section 8).
+
+Lives here: :func:`pair_sinr`, :func:`pair_rates` and :func:`sum_rate` (the reward). Not
+here: the cascaded gains they take (:mod:`.channel`) and the phases that maximise them
+(:mod:`.phase_opt`).
+"""
 
 from __future__ import annotations
 

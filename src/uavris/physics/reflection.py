@@ -1,4 +1,10 @@
-"""Angle-dependent RIS reflection (paper eq. 5-6 as corrected in MODEL.md).
+"""Angle-dependent RIS reflection (paper eq. 5-6 as corrected in docs/model.md section 6).
+
+Lives here: :func:`reflection_coefficient`, :func:`unit_reflection_coefficient` (the
+phase-only case), :func:`preset_for_target` (its inverse), and :func:`lambda_coefficients`
+with :func:`reflection_coefficient_eq5` (eq. 5-6 literally, for checking). Not here: the
+vector each transmitter sees (:func:`uavris.physics.channel.effective_reflection`) and the
+choice of presets (:mod:`.phase_opt`).
 
 With eta = 120*pi, lambda1 = (2/eta)(1 - r_pre)/(1 + r_pre) and
 lambda2 = 2*eta*(1 + r_pre)/(1 - r_pre), eq. (5) reduces to the Moebius map

@@ -6,12 +6,19 @@ one numpy call per quantity, and environment i of a batch sees exactly the numbe
 single environment with the same seed sees, whatever the batch size. The mixer is the
 SplitMix64 finaliser (Steele, Lea, Flood 2014), which passes BigCrush as a hash of a
 counter.
+
+Lives here: :func:`seed_key`, :func:`slot_key`, :func:`mix64`, :func:`raw_bits`,
+:func:`uniforms` and :func:`complex_normals`. Not here: what is drawn from them (the NLoS
+and pairing draws: :class:`uavris.env.simulator.BatchedSimulator`; the optimiser's starts:
+:mod:`.phase_opt`) and the seed bases of each kind of episode (:mod:`uavris.presets`).
 """
 
 from __future__ import annotations
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+
+from uavris.errors import ConfigError
 
 _GOLDEN = np.uint64(0x9E3779B97F4A7C15)
 _M1 = np.uint64(0xBF58476D1CE4E5B9)
@@ -34,7 +41,7 @@ def seed_key(seed: ArrayLike) -> NDArray[np.uint64]:
     """Key of an environment from a non-negative integer seed."""
     s = np.asarray(seed)
     if np.any(s < 0):
-        raise ValueError(f"seeds must be non-negative integers, got {seed!r}")
+        raise ConfigError(f"seeds must be non-negative integers, got {seed!r}")
     with np.errstate(over="ignore"):
         return mix64(s.astype(np.uint64) + _GOLDEN)
 

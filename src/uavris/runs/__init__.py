@@ -45,7 +45,8 @@ def prepare(run_dir: Path, config_file: str, write_config: Callable[[Path], None
         shutil.rmtree(run_dir)
         has_config = False
     elif is_finished(run_dir):
-        raise UavrisError(f"{run_dir} is a finished run; evaluate it, or pass --force to redo it from scratch")
+        raise UavrisError(f"{run_dir} is a finished run; evaluate it, pass --force to redo it from scratch, or "
+                          "--out DIR to run this configuration elsewhere")
     elif has_config and not resume:
         raise UavrisError(f"{run_dir} already holds a run; pass --resume to continue it or --force to start over")
     elif run_dir.exists() and not has_config and any(run_dir.iterdir()):

@@ -4,5 +4,9 @@ Modules: :mod:`.model` (the transformer and its configuration), :mod:`.cache` (t
 layout's key/value cache), :mod:`.checkpoint` (safetensors + JSON), :mod:`.trajectories`
 (eq. 14-18: trajectories, returns-to-go, elites, windows), :mod:`.dataset` (Minari files),
 :mod:`.trainer` (the optimiser, the learning-rate schedule and the training step),
-:mod:`.policy` (deployment). The pipelines that use them are in :mod:`uavris.experiments`.
+:mod:`.policy` (deployment).
+
+Lives here: nothing at package level; import from the modules. Not here: the pipelines that
+use them (:mod:`uavris.experiments.collect`, :mod:`uavris.experiments.pretrain`,
+:mod:`uavris.experiments.finetune`) and DT run directories (:mod:`uavris.experiments.dt_runs`).
 """

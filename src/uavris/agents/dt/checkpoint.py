@@ -16,8 +16,8 @@ from typing import Any
 import torch
 
 from uavris.agents.dt.model import DecisionTransformer, DTConfig
-from uavris.io import atomic_write_bytes
 from uavris.errors import CheckpointError, ConfigError
+from uavris.io import atomic_write_bytes
 
 MODEL_KIND = "uavris-decision-transformer"
 MODEL_FORMAT_VERSION = 1
@@ -33,7 +33,7 @@ def save_dt(model: DecisionTransformer, directory: str | Path, metadata: dict[st
     from safetensors.torch import save
 
     directory = Path(directory)
-    tensors = {k: v.detach().contiguous().clone() for k, v in model.state_dict().items()}
+    tensors = {k: v.detach().cpu().contiguous().clone() for k, v in model.state_dict().items()}
     atomic_write_bytes(directory / WEIGHTS_FILE, save(tensors))
     meta = {"kind": MODEL_KIND, "format_version": MODEL_FORMAT_VERSION, "config": model.cfg.to_dict(),
             **(metadata or {})}
@@ -58,8 +58,8 @@ def read_dt_metadata(directory: str | Path) -> dict[str, Any]:
     return meta
 
 
-def load_dt(directory: str | Path) -> tuple[DecisionTransformer, dict[str, Any]]:
-    """Rebuild the model of a checkpoint directory (in eval mode) and return its metadata."""
+def load_dt(directory: str | Path, device: str = "cpu") -> tuple[DecisionTransformer, dict[str, Any]]:
+    """Rebuild the model of a checkpoint directory (in eval mode, on ``device``) and return its metadata."""
     from safetensors import SafetensorError
     from safetensors.torch import load
 
@@ -91,5 +91,5 @@ def load_dt(directory: str | Path) -> tuple[DecisionTransformer, dict[str, Any]]
     model.load_state_dict(tensors)
     if float(model.return_scale) <= 0 or bool((model.state_std <= 0).any()):
         raise CheckpointError(f"{weights} has invalid normalisation (non-positive scale)")
-    model.eval()
+    model.to(device).eval()
     return model, meta

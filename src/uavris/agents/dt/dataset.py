@@ -8,19 +8,32 @@ Dataset layout (a directory ``DIR``)::
     DIR/data/metadata.json   Minari metadata plus a "uavris" entry: format version, the
                              SystemConfig, the observation layout, obs/action sizes and
                              the phase control ("agent": full actions; "optimizer": the
-                             6 motion entries, the phases being the optimiser's)
+                             6 motion entries, the phases being the optimiser's);
+                             env_spec and eval_env_spec: uavris/UavRisD2D-v0 with kwargs
+                             config (SystemConfig.to_dict()) and scenario (a name)
     DIR/data/main_data.hdf5  one group per episode: observations (T+1, obs_dim),
                              actions (T, act_dim), rewards, terminations, truncations;
                              attributes seed, scenario, expert, expert_algo
 
-Minari reads it offline: ``minari.MinariDataset("DIR/data")``, or
-``minari.load_dataset(ID)`` with ``MINARI_DATASETS_PATH`` set to DIR's parent, where ID is
-the dataset id stored in the metadata (DIR's name, with ``-v0`` appended unless it ends in
-``-vN``). Nothing is ever downloaded.
+Minari reads it offline: ``minari.MinariDataset("DIR/data")``, or ``minari.load_dataset(ID)``
+where ID is the dataset id stored in the metadata and DIR sits at
+``$MINARI_DATASETS_PATH/ID`` (Minari's own layout). Nothing is ever downloaded. The id is
+derived from DIR's name (:func:`dataset_id_for`): ``uavris/<name>-vN`` for datasets from
+``uavris collect``; without a namespace for datasets written before ids had one, or by
+:func:`write_dataset` without ``namespace``.
+
+``dataset.recover_environment()`` (and ``eval_env=True``, the same environment) gives
+``uavris/UavRisD2D-v0`` with the dataset's system in the dataset's recorded scenario, the
+first trajectory's unless the writer named one (``collect``: the first expert's). An episode's
+own scenario is in its metadata. Under phase control "optimizer" that environment still
+takes full actions, the dataset's being the 6 motion entries (``optimised_action`` adds the
+phases). Datasets written before env_spec was recorded still load here; Minari cannot
+recover their environment.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import re
 import shutil
@@ -32,12 +45,14 @@ import numpy as np
 from numpy.typing import NDArray
 
 from uavris.agents.dt.trajectories import Trajectory
-from uavris.config import SystemConfig
+from uavris.config import SystemConfig, get_scenario
+from uavris.env import ENV_ID
 from uavris.env.simulator import layout_as_lists, observation_bounds, stored_system
 from uavris.env.wrappers import PHASE_CONTROLS, action_dim_for
-from uavris.errors import DatasetError
+from uavris.errors import ConfigError, DatasetError
 
-DATASET_FORMAT_VERSION = 1
+DATASET_FORMAT_VERSION = 1  # env_spec is optional within it: older datasets lack it
+DATASET_NAMESPACE = "uavris"
 
 
 @dataclass(frozen=True)
@@ -60,15 +75,53 @@ class ExpertDataset:
         return sum(tr.length for tr in self.trajectories)
 
 
-def dataset_id_for(path: Path) -> str:
-    """Minari id of a dataset directory: its name, ``-v0`` appended unless it ends in ``-vN``."""
-    name = re.sub(r"[^-_\w]", "_", path.name) or "uavris"
-    return name if re.fullmatch(r"[-_\w]+-v\d+", name) else f"{name}-v0"
+def dataset_id_for(path: Path, namespace: str | None = None) -> str:
+    """Minari id of a dataset directory: its name, ``-v0`` appended unless it ends in ``-vN``.
+
+    With ``namespace``, ``namespace/name-vN`` with the name lower-cased and runs of other
+    characters than ``a-z0-9`` made one ``-`` (``runs/Experts_A`` -> ``uavris/experts-a-v0``).
+    Without, the id of datasets from before namespaces, unchanged.
+    """
+    if namespace is None:
+        name = re.sub(r"[^-_\w]", "_", path.name) or "uavris"
+        return name if re.fullmatch(r"[-_\w]+-v\d+", name) else f"{name}-v0"
+    name = re.sub(r"[^a-z0-9]+", "-", path.name.lower()).strip("-") or "experts"
+    if not re.fullmatch(r"[a-z0-9-]+-v\d+", name):
+        name += "-v0"
+    return f"{namespace}/{name}"
+
+
+def env_spec_for(system: SystemConfig, scenario: str):
+    """The registered env's spec with the kwargs that rebuild ``system`` in ``scenario``.
+
+    The kwargs are JSON-native (Minari stores the spec as JSON) and survive the round trip
+    exactly; the registered entry point takes the config as a dict.
+    """
+    import gymnasium as gym
+    from gymnasium.envs.registration import EnvSpec
+
+    if not isinstance(scenario, str):
+        raise DatasetError(f"the recorded scenario must be a scenario name, got {scenario!r}")
+    try:
+        get_scenario(scenario).validate_for(system)
+    except ConfigError as e:
+        raise DatasetError(f"cannot record scenario {scenario!r} for the dataset's system ({_one_line(e)})") from None
+    kwargs = {"config": system.to_dict(), "scenario": scenario}
+    spec = dataclasses.replace(gym.spec(ENV_ID), kwargs=kwargs)
+    if EnvSpec.from_json(spec.to_json()).kwargs != kwargs:
+        raise DatasetError(f"the environment spec of {ENV_ID} does not survive JSON: {kwargs}")
+    return spec
 
 
 def write_dataset(path: str | Path, trajectories: Sequence[Trajectory], system: SystemConfig, *,
-                  description: str = "", force: bool = False, phase_control: str = "agent") -> Path:
+                  description: str = "", force: bool = False, phase_control: str = "agent",
+                  namespace: str | None = None, scenario: str | None = None) -> Path:
     """Write ``trajectories`` as a Minari dataset at ``path`` (see the module docstring).
+
+    The id is :func:`dataset_id_for` ``(path, namespace)``. The environment spec recorded
+    for ``recover_environment`` (and as the evaluation one) is ``system`` in ``scenario``,
+    by default the first trajectory's: a spec holds one scenario while a dataset may mix
+    several, each episode's being in its metadata.
 
     The dataset is built in a temporary sibling directory and renamed into place, so an
     interrupted write never leaves a half dataset. An existing dataset is replaced only
@@ -91,6 +144,7 @@ def write_dataset(path: str | Path, trajectories: Sequence[Trajectory], system: 
     act_dim = action_dim_for(system, phase_control)
     for tr in trajectories:
         _check_trajectory(tr, system.observation_dim, act_dim, f"trajectory (seed {tr.seed})")
+    env_spec = env_spec_for(system, trajectories[0].scenario if scenario is None else scenario)
     tmp = path.parent / f".{path.name}.tmp"
     shutil.rmtree(tmp, ignore_errors=True)
     tmp.mkdir(parents=True)
@@ -98,10 +152,12 @@ def write_dataset(path: str | Path, trajectories: Sequence[Trajectory], system: 
         low, high = observation_bounds(system)
         storage = MinariStorage.new(tmp / "data", observation_space=gym.spaces.Box(low, high, dtype=np.float32),
                                     action_space=gym.spaces.Box(-1.0, 1.0, (act_dim,), dtype=np.float32),
-                                    data_format="hdf5", jpeg_encoding=False)
+                                    env_spec=env_spec, data_format="hdf5", jpeg_encoding=False)
         algos = sorted({tr.expert_algo for tr in trajectories if tr.expert_algo})
         storage.update_metadata({
-            "dataset_id": dataset_id_for(path),
+            "dataset_id": dataset_id_for(path, namespace),
+            # Minari falls back to env_spec without it; recorded so the intent is explicit.
+            "eval_env_spec": env_spec.to_json(),
             "minari_version": minari.__version__,
             "algorithm_name": "+".join(algos) or "unknown",
             "description": description or "uavris expert trajectories",
@@ -150,8 +206,9 @@ def load_dataset(path: str | Path) -> ExpertDataset:
 
     Raises :class:`DatasetError` with one line naming the problem: not a dataset, not
     readable by Minari, missing uavris metadata or per-episode fields, wrong array
-    shapes, non-finite values, or an observation layout different from the one the
-    current environment produces for the stored system configuration.
+    shapes, non-finite values, an observation layout different from the one the
+    current environment produces for the stored system configuration, or a recorded
+    environment spec that would recover another environment or system.
     """
     import minari
 
@@ -172,6 +229,7 @@ def load_dataset(path: str | Path) -> ExpertDataset:
         raise DatasetError(f"{path} has dataset format {info['format_version']!r}; "
                            f"this uavris reads format {DATASET_FORMAT_VERSION}")
     system = stored_system(info["system"], info["observation_layout"], str(path), DatasetError)
+    _check_env_spec(ds.env_spec, system, str(path))
     phase_control = info.get("phase_control", "agent")  # datasets from before the field: full actions
     if phase_control not in PHASE_CONTROLS:
         raise DatasetError(f"{path}: unknown phase control {phase_control!r} in the uavris metadata")
@@ -203,6 +261,22 @@ def load_dataset(path: str | Path) -> ExpertDataset:
         raise DatasetError(f"{path}: episode data is unreadable ({_one_line(e)})") from None
     return ExpertDataset(path, str(meta.get("dataset_id", "")), system, trajectories, str(meta.get("description", "")),
                          phase_control)
+
+
+def _check_env_spec(spec, system: SystemConfig, where: str) -> None:
+    """Minari's ``recover_environment`` must rebuild the system the data was collected in."""
+    if spec is None:  # datasets written before the spec was recorded: nothing to recover, nothing to check
+        return
+    if spec.id != ENV_ID:
+        raise DatasetError(f"{where}: the recorded environment is {spec.id!r}, not {ENV_ID!r}")
+    config = spec.kwargs.get("config")
+    try:
+        same = isinstance(config, dict) and SystemConfig.from_stored(config) == system
+    except (ConfigError, TypeError, ValueError):
+        same = False
+    if not same:
+        raise DatasetError(f"{where}: the recorded environment spec has another system configuration than "
+                           "the uavris metadata")
 
 
 def _check_trajectory(tr: Trajectory, obs_dim: int, act_dim: int, where: str) -> None:

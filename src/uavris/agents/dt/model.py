@@ -24,7 +24,7 @@ Two attention layouts (``DTConfig.attention``):
   tokens instead of ``3 context - 1``: exact, not an approximation. The first token of a
   slot sees the same ``3 context - 1`` tokens as the window layout at its first layer, but
   deeper blocks reach further back (``depth`` bands). The model is trained on whole
-  episodes (:class:`uavris.agents.dt.data.TrainingWindows` with ``whole_episodes``).
+  episodes (:class:`uavris.agents.dt.trajectories.TrainingWindows` with ``whole_episodes``).
   For histories of at most ``context`` slots both layouts compute the same function.
 
 Two exact savings, both invisible in the outputs:
@@ -39,9 +39,11 @@ Normalisation travels with the weights: ``state_mean``, ``state_std`` and ``retu
 are buffers (saved in the safetensors file) computed from the training dataset; the model
 takes raw observations and raw returns-to-go (bps/Hz summed over slots).
 
-Lives here: the model, its configuration, the attention masks and the action loss. Not
-here: the key/value cache of the banded layout (:mod:`.cache`), checkpoints
-(:mod:`.checkpoint`), training (:mod:`.trainer`) and deployment (:mod:`.policy`).
+Lives here: the model (:class:`DecisionTransformer`), its configuration (:class:`DTConfig`),
+the attention masks (:func:`attention_mask`) and the action loss (:func:`masked_action_loss`).
+Not here: the key/value cache of the banded layout (:mod:`.cache`), the training windows
+(:mod:`.trajectories`), checkpoints (:mod:`.checkpoint`), training (:mod:`.trainer`) and
+deployment (:mod:`.policy`).
 """
 
 from __future__ import annotations

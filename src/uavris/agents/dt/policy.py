@@ -94,6 +94,15 @@ class DTBatchPolicy:
         self._history.record(actions)
         self.remaining = self.remaining - rewards
 
+def _tensor(x: np.ndarray, model: DecisionTransformer) -> torch.Tensor:
+    # On the CPU .to() returns the same tensor: no copy, and the numbers stay bit-identical.
+    return torch.from_numpy(x).to(model.return_scale.device)
+
+
+def _numpy(t: torch.Tensor) -> NDArray[np.float32]:
+    return t.cpu().numpy()
+
+
 class _Window:
     """The last ``context`` slots of every row, re-read by the model at each slot (window layout)."""
 
@@ -120,9 +129,9 @@ class _Window:
         # When every row is early in its episode the leading columns are padding for all
         # rows: drop them (exact, and the forward pass gets shorter).
         sl = slice(self.model.cfg.context - int(self.filled.max()), None)
-        return self.model(torch.from_numpy(self.rtg[:, sl]), torch.from_numpy(self.states[:, sl]),
-                          torch.from_numpy(self.actions[:, sl]), torch.from_numpy(self.steps[:, sl]),
-                          torch.from_numpy(self.valid[:, sl]), last_only=True).numpy()
+        m = self.model
+        return _numpy(m(_tensor(self.rtg[:, sl], m), _tensor(self.states[:, sl], m), _tensor(self.actions[:, sl], m),
+                        _tensor(self.steps[:, sl], m), _tensor(self.valid[:, sl], m), last_only=True))
 
     def record(self, actions: NDArray[np.float32]) -> None:
         self.actions[:, -1] = actions
@@ -139,9 +148,10 @@ class _CachedHistory:
         self.t = np.zeros(n, dtype=np.int64)
 
     def predict(self, remaining: NDArray[np.float64], obs: NDArray[np.float32]) -> NDArray[np.float32]:
-        return self.model.step(self.cache, torch.from_numpy(remaining.astype(np.float32)),
-                               torch.from_numpy(np.ascontiguousarray(obs, dtype=np.float32)),
-                               torch.from_numpy(self.prev_action), torch.from_numpy(self.t)).numpy()
+        m = self.model
+        return _numpy(m.step(self.cache, _tensor(remaining.astype(np.float32), m),
+                             _tensor(np.ascontiguousarray(obs, dtype=np.float32), m),
+                             _tensor(self.prev_action, m), _tensor(self.t, m)))
 
     def record(self, actions: NDArray[np.float32]) -> None:
         self.prev_action = np.asarray(actions, dtype=np.float32).copy()
@@ -149,10 +159,10 @@ class _CachedHistory:
 
 
 def dt_policy_from_checkpoint(directory: str | Path, target_return: float | None = None, noise_sigma: float = 0.0,
-                              seed: int | None = None) -> tuple[DTBatchPolicy, dict[str, Any]]:
+                              seed: int | None = None, device: str = "cpu") -> tuple[DTBatchPolicy, dict[str, Any]]:
     """Load a checkpoint directory as a deterministic (or noisy) batch policy; returns it and
     the checkpoint's metadata. ``target_return`` defaults to the checkpoint's."""
-    model, meta = load_dt(directory)
+    model, meta = load_dt(directory, device)
     target = meta.get("target_return") if target_return is None else target_return
     if target is None:
         raise ValueError(f"{directory} stores no target return; pass one")

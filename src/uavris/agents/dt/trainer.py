@@ -49,9 +49,10 @@ def train_steps(model: DecisionTransformer, opt: torch.optim.Optimizer, windows:
     """
     schedule = warmup_schedule(opt, lr, warmup, first_step)
     model.train()
+    device = next(model.parameters()).device
     losses = []
     for i in range(count):
-        batch = windows.sample(batch_size, rng)
+        batch = {k: v.to(device) for k, v in windows.sample(batch_size, rng).items()}
         pred = model(batch["returns_to_go"], batch["states"], batch["actions"], batch["timesteps"], batch["valid"])
         loss = masked_action_loss(pred, batch["actions"], batch["valid"])
         opt.zero_grad(set_to_none=True)
@@ -75,7 +76,7 @@ def save_trainer_state(directory: Path, opt: torch.optim.Optimizer, rng: np.rand
     tensors = {"torch_rng": torch.get_rng_state()}
     for pid, st in state["state"].items():
         for key, value in st.items():
-            tensors[f"optimizer.{pid}.{key}"] = value.detach().contiguous().clone()
+            tensors[f"optimizer.{pid}.{key}"] = value.detach().cpu().contiguous().clone()
     groups = [{k: (list(v) if isinstance(v, tuple) else v) for k, v in g.items()} for g in state["param_groups"]]
     atomic_write_bytes(directory / "trainer.safetensors", save(tensors))
     write_json(directory / "trainer.json", {"param_groups": groups, "numpy_rng": rng.bit_generator.state, **extra})

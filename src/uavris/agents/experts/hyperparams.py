@@ -1,8 +1,10 @@
 """Hyperparameters of the DRL experts (DDPG, PPO, SAC, TD3), validated, with their reasons.
 
-Lives here: :class:`Hyperparams`, the algorithms' names and which hyperparameters each
-uses. The per-preset values are a table in :mod:`uavris.presets`; building and running
-the SB3 models is :mod:`.sb3`.
+Lives here: :class:`Hyperparams`, the algorithms' names (:data:`ALGORITHMS`,
+:data:`OFF_POLICY`, :func:`check_algorithm`), which hyperparameters each uses
+(:func:`hyperparams_for`) and a preset's defaults (:func:`default_hyperparams`). Not here:
+the per-preset values (tables in :mod:`uavris.presets`) and building and running the SB3
+models (:mod:`.sb3`).
 
 The paper gives no hyperparameters. Ours, with their reasons:
 

@@ -33,8 +33,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from uavris.config import ConfigError, SystemConfig
 from uavris.agents.policy import Privileged
+from uavris.config import ConfigError, SystemConfig
 from uavris.env.rollout import rollout
 from uavris.env.simulator import BatchedSimulator
 
@@ -137,7 +137,8 @@ def imitate(model: Any, config: SystemConfig, scenario: str, cfg: ImitationConfi
                 opt.step()
                 losses.append(loss.item())
         policy.eval()
-        row = {"round": r, "samples": int(len(x_all)), "loss": float(np.mean(losses[-max(1, len(losses) // cfg.epochs):])),
+        last_epoch = losses[-max(1, len(losses) // cfg.epochs):]
+        row = {"round": r, "samples": int(len(x_all)), "loss": float(np.mean(last_epoch)),
                "student_gap": gap if r > 0 else float("nan")}
         log.append(row)
         if on_round is not None:

@@ -1,6 +1,11 @@
 """The training state a checkpoint needs, beyond SB3's model and replay buffer, for a resumed
 run to continue exactly as an uninterrupted one would.
 
+Lives here: :func:`capture`, :func:`restore` and :data:`STATE_VERSION`. Not here: when a
+checkpoint is taken and what else it holds
+(:func:`uavris.experiments.train_expert.save_checkpoint`) and the ``latest.json`` pointer
+(:mod:`uavris.runs`).
+
 ``model.save`` keeps weights, optimisers and counters, and ``save_replay_buffer`` the
 buffer. Not kept by SB3: the environments mid-episode (``load`` discards ``_last_obs``, so
 a resumed run would start fresh episodes) and the random streams of exploration noise,

@@ -18,6 +18,7 @@ from numpy.typing import NDArray
 from uavris.agents.experts.hyperparams import Hyperparams, check_algorithm
 from uavris.errors import CheckpointError
 
+
 def algorithm_class(algo: str) -> type:
     check_algorithm(algo)
     from stable_baselines3 import DDPG, PPO, SAC, TD3
@@ -25,12 +26,13 @@ def algorithm_class(algo: str) -> type:
     return {"ddpg": DDPG, "ppo": PPO, "sac": SAC, "td3": TD3}[algo]
 
 
-def build_model(algo: str, env: Any, hp: Hyperparams, seed: int, tensorboard_log: str | None = None) -> Any:
-    """A fresh SB3 model of ``algo`` on ``env`` (a VecEnv) with hyperparameters ``hp``."""
+def build_model(algo: str, env: Any, hp: Hyperparams, seed: int, tensorboard_log: str | None = None,
+                device: str = "cpu") -> Any:
+    """A fresh SB3 model of ``algo`` on ``env`` (a VecEnv) with hyperparameters ``hp``, on ``device``."""
     from stable_baselines3.common.noise import NormalActionNoise
 
     cls = algorithm_class(algo)
-    common: dict[str, Any] = dict(learning_rate=hp.learning_rate, gamma=hp.gamma, seed=seed, device="cpu",
+    common: dict[str, Any] = dict(learning_rate=hp.learning_rate, gamma=hp.gamma, seed=seed, device=device,
                                   verbose=0, tensorboard_log=tensorboard_log,
                                   policy_kwargs=dict(net_arch=list(hp.net_arch)))
     if algo == "ppo":

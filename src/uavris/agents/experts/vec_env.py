@@ -1,5 +1,10 @@
 """Stable-Baselines3 ``VecEnv`` over the batched simulator.
 
+Lives here: :class:`UavRisVecEnv`, with the learner's ``reward_scale`` and the
+``phase_control`` of :mod:`uavris.env.wrappers`. Not here: the dynamics
+(:class:`uavris.env.simulator.BatchedSimulator`) and Gymnasium's vector environment
+(:mod:`uavris.env.vector`).
+
 One numpy call per quantity serves all parallel environments, where SB3's
 ``DummyVecEnv`` would loop over Python environments. Semantics are DummyVecEnv's:
 same-step auto-reset with the last observation in ``info["terminal_observation"]``,
@@ -15,9 +20,9 @@ import gymnasium as gym
 import numpy as np
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvIndices, VecEnvStepReturn
 
-from uavris.env.wrappers import MOTION_DIM, check_phase_control, optimised_action
 from uavris.config import Scenario, SystemConfig
 from uavris.env.simulator import BatchedSimulator, observation_bounds
+from uavris.env.wrappers import MOTION_DIM, check_phase_control, optimised_action
 
 
 class UavRisVecEnv(VecEnv):

@@ -4,6 +4,11 @@
 :func:`greedy_oracle_policy` is the one-step-lookahead oracle of earlier releases, kept for
 comparison. Modules: :mod:`.lookahead` (the local move choice and its expected-rate score),
 :mod:`.planner` (the global plan), :mod:`.policy` (the batch policies).
+
+Lives here: the re-exports of those modules (:class:`PlanningOracle`, :func:`plan_target`,
+:class:`Plan`, :class:`PlanSettings`, :func:`choose_moves`, ...). Not here: the per-slot
+phase optimiser both oracles call (:mod:`uavris.physics.phase_opt`) and the references by
+name (:mod:`uavris.agents.references`).
 """
 
 from uavris.agents.oracle.lookahead import (

@@ -52,9 +52,9 @@ from scipy import ndimage
 
 from uavris import physics as ph
 from uavris.agents.oracle.lookahead import pose_score
-from uavris.physics.phase_opt import optimize_slot_phases
 from uavris.config import SystemConfig
 from uavris.physics import streams
+from uavris.physics.phase_opt import optimize_slot_phases
 
 MAX_ENUMERATED_PAIRINGS = 256  # above this, pairings are sampled (CRN) instead of enumerated
 ARRIVAL_TOLERANCE = 0.05  # m: the trip is over within this distance of the target, at rest

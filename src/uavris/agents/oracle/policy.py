@@ -48,13 +48,13 @@ import numpy as np
 from numpy.typing import NDArray
 
 from uavris import physics as ph
-from uavris.agents.policy import Privileged
-from uavris.env.wrappers import motion_of
 from uavris.agents.oracle.lookahead import choose_moves
 from uavris.agents.oracle.planner import Plan, PlanSettings, approach_speed, plan_target
-from uavris.physics.phase_opt import DEFAULT_ITERATIONS, DEFAULT_RESTARTS, optimize_slot_phases
+from uavris.agents.policy import Privileged
 from uavris.config import SystemConfig
 from uavris.env.simulator import BatchedSimulator, phases_to_action
+from uavris.env.wrappers import motion_of
+from uavris.physics.phase_opt import DEFAULT_ITERATIONS, DEFAULT_RESTARTS, optimize_slot_phases
 
 # Off by default: handing the last half metre to the lookahead cost 0.1 bps/Hz on fig2 and
 # unseen2 (8 episodes each), because its interference-free score pulls the UAV off the

@@ -1,7 +1,8 @@
 """``report.md`` of ``uavris reproduce``: both tracks side by side, every number read from stage files.
 
-Lives here: the report's text (tables, the paper's claims checked on each track). The
-figures are drawn by :mod:`.report_figures`.
+Lives here: :func:`write_report`, the report's text (tables, the paper's claims checked on
+each track). Not here: its figures (:mod:`.figures`) and the stage files it reads (written by
+:mod:`uavris.experiments.compare` and :mod:`uavris.experiments.study`).
 """
 
 from __future__ import annotations
@@ -15,11 +16,11 @@ import yaml
 
 from uavris.agents.references import HOVER_OPTIMIZER, ORACLE, ZERO_ACTION
 from uavris.config import UNSEEN_SCENARIOS, get_scenario
-from uavris.io import atomic_write_text, read_json
 from uavris.experiments.report.figures import fig3, interactions_figure, trajectory_figure
 from uavris.experiments.stages import Pipeline, StageRecord
-from uavris.stats import versus
 from uavris.experiments.study import Track
+from uavris.io import atomic_write_text, read_json
+from uavris.stats import versus
 
 PAPER_FIG2 = {"DDPG": 29.5, "PPO": 25.0, "TD3": 20.5, "SAC": 17.0}
 WITHIN_EXPERT = 0.05  # "nearly the same performance": within 5% of the expert's mean
@@ -107,9 +108,10 @@ class _Report:
                          f"{_frac(s['mean'], oracle)} |")
             self.add("")
             self._claims(track, scenario, res)
-            if i == 0 and (self.pipeline.directory(track.stage(f"finetune-{scenario}")) / "model" / "done.json").exists():
+            finetuned = self.pipeline.directory(track.stage(f"finetune-{scenario}")) / "model"
+            if i == 0 and (finetuned / "done.json").exists():
                 tstem = f"{track.prefix}trajectory_{scenario}"
-                trajectory_figure(scenario, self.pipeline.directory(track.stage(f"finetune-{scenario}")) / "model",
+                trajectory_figure(scenario, finetuned,
                                   self.rc.system, self.figs / tstem, 1_000_000)
                 self.add(f"![trajectory, {track.name} track](figures/{tstem}.png)", "")
         return results
@@ -136,7 +138,8 @@ class _Report:
             self.add(f"![interactions, {track.name} track](figures/{istem}.png)", "")
             interactions = (f" Fine-tuning used {info['finetune_interactions']:,.0f} environment interactions; the "
                             f"expert was trained with {info['expert_steps']:,.0f}"
-                            + (f" and first reached the fine-tuned DT's level after {info['expert_steps_to_match']:,.0f}"
+                            + (" and first reached the fine-tuned DT's level after "
+                               f"{info['expert_steps_to_match']:,.0f}"
                                if not math.isnan(info["expert_steps_to_match"]) else
                                " and never reached the fine-tuned DT's level in its periodic evaluations") + ".")
         self.claims.append(f"- {where}: **fine-tuned DT within {WITHIN_EXPERT:.0%} of the expert**: "

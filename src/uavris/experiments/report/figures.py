@@ -1,4 +1,9 @@
-"""Figures of the study's report: Fig. 3 per track, interactions, a 3-D trajectory."""
+"""Figures of the study's report: Fig. 3 per track, interactions, a 3-D trajectory.
+
+Lives here: :func:`fig3`, :func:`interactions_figure`, :func:`trajectory_figure` and the
+style of each kind of policy (:data:`KIND_STYLE`). Not here: saving and the shared styles
+(:mod:`uavris.experiments.plots`) and the report's text (:mod:`uavris.experiments.report`).
+"""
 
 from __future__ import annotations
 
@@ -9,8 +14,8 @@ import numpy as np
 
 from uavris.agents.references import REFERENCES
 from uavris.config import get_scenario
-from uavris.io import read_csv, read_json
 from uavris.experiments.plots import REFERENCE_STYLE, plt, reference_lines, save_figure
+from uavris.io import read_csv, read_json
 
 KIND_STYLE = {"expert": ("#1f77b4", "-"), "dt-finetuned": ("#2ca02c", "-"), "dt-zero-shot": ("#ff7f0e", "-"),
               "transfer": ("#7f7f7f", "--")}

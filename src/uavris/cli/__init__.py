@@ -1,0 +1,89 @@
+"""Command-line interface ``uavris COMMAND [FLAGS]``.
+
+Commands:
+  train               train a DRL expert (DDPG, PPO, SAC, TD3) in one scenario
+  evaluate            evaluate a run, a DT model or a reference on seeded episodes
+  compare-algorithms  the paper's Fig. 2: several algorithms over several seeds
+  collect             roll experts out into a Minari dataset
+  pretrain-dt         pre-train the Decision Transformer offline (Algorithm 1, stage 1)
+  finetune-dt         fine-tune it online in a scenario (Algorithm 1, stage 2)
+  reproduce           the whole study in two tracks, with figures and report
+  plot                learning curves of one or more runs (PNG and PDF)
+  demo                a few simple policies side by side
+
+Lives here: dispatch to a command and the one rule for failures: any bad input (a flag
+that does not parse, a value out of range, a path that is missing or of the wrong kind, a
+corrupt file) prints one line ``uavris: error: ...`` on stderr and exits with code 2; a
+traceback means a bug. Not here: the flags of each command (:mod:`.training`,
+:mod:`.evaluation`), which are the fields of the library's config dataclasses.
+"""
+
+from __future__ import annotations
+
+import importlib
+import sys
+from typing import Callable
+
+from uavris.errors import UavrisError
+
+EXIT_BAD_INPUT = 2
+PROG = "uavris"
+
+
+# Each command's module is imported only when it runs, so `uavris evaluate` does not load
+# the training stack and `uavris --help` loads nothing.
+COMMANDS: dict[str, tuple[str, str]] = {
+    "train": ("training", "train_command"),
+    "evaluate": ("evaluation", "evaluate_command"),
+    "compare-algorithms": ("training", "compare_command"),
+    "collect": ("evaluation", "collect_command"),
+    "pretrain-dt": ("training", "pretrain_command"),
+    "finetune-dt": ("training", "finetune_command"),
+    "reproduce": ("training", "reproduce_command"),
+    "plot": ("evaluation", "plot_command"),
+    "demo": ("evaluation", "demo_command"),
+}
+
+
+def command(name: str) -> Callable[[list[str]], None]:
+    """The function that runs command ``name`` on its arguments."""
+    module, attr = COMMANDS[name]
+    return getattr(importlib.import_module(f"uavris.cli.{module}"), attr)
+
+
+def _usage() -> str:
+    doc = (__doc__ or "").split("Lives here:")[0].strip()
+    return (f"uavris: UAV-mounted RIS D2D simulator, DRL experts and Decision Transformer.\n\n"
+            f"usage: {doc.split(chr(10), 1)[0].strip('.')}\n\n{doc.split(chr(10), 1)[1].strip()}\n\n"
+            f"`{PROG} COMMAND --help` lists a command's flags and what it writes.\n")
+
+
+def _run(argv: list[str]) -> None:
+    if not argv or argv[0] in ("-h", "--help"):
+        print(_usage())
+        return
+    from uavris.cli.parsing import UsageError
+
+    name, rest = argv[0], argv[1:]
+    if name not in COMMANDS:
+        raise UsageError(f"unknown command {name!r}; choose one of {', '.join(COMMANDS)} (see {PROG} --help)")
+    command(name)(rest)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run ``uavris`` on ``argv`` (default: the process's); returns the exit code."""
+    try:
+        _run(list(sys.argv[1:] if argv is None else argv))
+    except UavrisError as e:
+        print(f"{PROG}: error: {' '.join(str(e).split())}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except KeyboardInterrupt:
+        print(f"{PROG}: interrupted; rerun with --resume to continue from the last checkpoint", file=sys.stderr)
+        return 130
+    except SystemExit as e:  # --help
+        return int(e.code or 0) if not isinstance(e.code, str) else EXIT_BAD_INPUT
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,53 @@
+"""The flags commands share, beside the config dataclasses tyro reads.
+
+Lives here: :class:`RunOptions` (where a training run goes and whether it resumes) and
+:func:`check_run_options`, the one place that says what ``--resume`` and ``--force`` mean
+on the command line. Not here: the run directory itself (:mod:`uavris.runs`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Optional
+
+from uavris.agents.torch_device import resolve_device
+from uavris.cli.parsing import UsageError
+
+
+@dataclass(frozen=True)
+class RunOptions:
+    """Where a training run is written and how it starts."""
+
+    out: Optional[Path] = None
+    """run directory (default: under runs/, named after the configuration)"""
+    resume: bool = False
+    """continue the interrupted run in OUT from its last checkpoint (an error if OUT holds no run)"""
+    force: bool = False
+    """delete the run in OUT and start from scratch"""
+    device: str = "cpu"
+    """torch device: cpu, cuda, or auto (CUDA when torch sees one)"""
+    no_progress: bool = False
+    """no progress bar"""
+
+
+def check_run_options(opts: RunOptions, run_dir: Path, config_file: str) -> str:
+    """Reject contradictory or empty resumes; returns the resolved torch device.
+
+    The library's ``resume=True`` means "continue if there is something to continue" (the
+    study relies on it); a user who types ``--resume`` means "continue this run", so here a
+    resume with nothing to continue is an error rather than a silent fresh start.
+    """
+    if run_dir.exists() and not run_dir.is_dir():
+        raise UsageError(f"--out {run_dir}: exists and is not a directory")
+    if opts.resume and opts.force:
+        raise UsageError("--resume (continue the run) and --force (delete it and start over) contradict each "
+                         "other; pass one of them")
+    if opts.resume:
+        if not run_dir.exists():
+            raise UsageError(f"--resume: {run_dir} does not exist, so there is no run to resume; drop --resume to "
+                             "start a new run")
+        if not (run_dir / config_file).exists():
+            raise UsageError(f"--resume: {run_dir} holds no run ({config_file} is missing); drop --resume to start "
+                             "a new run")
+    return resolve_device(opts.device)

@@ -1,0 +1,247 @@
+"""The commands that train: ``train``, ``compare-algorithms``, ``pretrain-dt``, ``finetune-dt``, ``reproduce``.
+
+Lives here: for each command, the dataclass tyro reads (the library's config dataclass,
+flattened, plus :class:`~uavris.cli.options.RunOptions`) and the function that runs it.
+The flags *are* the config's fields: a preset (``--preset``) or a YAML file (``train
+--config``) supplies the defaults, and any field given on the command line overrides them.
+Not here: what the commands do (:mod:`uavris.experiments`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Annotated, Any, Callable, Optional
+
+import tyro
+
+from uavris.cli.options import RunOptions, check_run_options
+from uavris.cli.parsing import UsageError, load_overrides, output_dir, parse, peek, peek_int
+from uavris.experiments.finetune import FinetuneConfig
+from uavris.experiments.pretrain import PretrainConfig
+from uavris.experiments.reproduce import ReproduceConfig
+from uavris.experiments.train_expert import TrainConfig
+
+Flat = tyro.conf.arg(name="")  # the config's fields become the command's own flags
+HELP = ("-h", "--help")
+
+
+def _is_help(args: list[str]) -> bool:
+    return any(a in HELP for a in args)
+
+
+# ------------------------------------------------------------------------------------------ train
+@dataclass(frozen=True)
+class TrainArgs:
+    run: Annotated[TrainConfig, Flat]
+    options: Annotated[RunOptions, Flat] = RunOptions()
+    config: Optional[Path] = None
+    """YAML file of TrainConfig fields (e.g. RUN/config.yaml); the preset fills what it leaves out, flags override it"""
+
+
+def _nested_update(base: dict[str, Any], changes: dict[str, Any], where: str) -> dict[str, Any]:
+    out = dict(base)
+    for key, value in changes.items():
+        if key not in base:
+            raise UsageError(f"{where}: unknown field {key!r}; known: {', '.join(base)}")
+        if isinstance(base[key], dict) and isinstance(value, dict):
+            out[key] = _nested_update(base[key], value, f"{where}.{key}")
+        else:
+            out[key] = value
+    return out
+
+
+def train_defaults(args: list[str]) -> TrainConfig:
+    """The preset chosen on the command line (or in ``--config``), with the file's fields on top."""
+    from uavris.experiments.train_expert import preset_config
+
+    file = peek(args, "--config")
+    data = load_overrides(Path(file), "TrainConfig") if file else {}
+    pick = {k: peek(args, f"--{k}", data.get(k, d)) for k, d in (("algo", "ddpg"), ("scenario", "fig2"),
+                                                                  ("preset", "quick"))}
+    seed = peek_int(args, "--seed", int(data.get("seed", 0)))
+    base = preset_config(pick["algo"], pick["scenario"], seed, pick["preset"])
+    if not data:
+        return base
+    merged = _nested_update(base.to_dict(), data, f"--config {file}")
+    return TrainConfig.from_dict({**merged, **pick, "seed": seed})
+
+
+def train_command(args: list[str]) -> None:
+    """Train a DRL expert (ddpg, ppo, sac or td3) in one scenario.
+
+    Writes the run directory OUT (default runs/train/ALGO-SCENARIO-sSEED-PRESET): config.yaml
+    (rerun it with --config), episodes.csv, evals.csv, TensorBoard logs (tb/), checkpoints/
+    and model.zip. Every TrainConfig field is a flag; --preset and --algo choose the defaults.
+    """
+    from uavris.experiments.train_expert import default_run_dir, train
+    from uavris.runs import read_done
+
+    a = parse(TrainArgs, args, "uavris train", train_command.__doc__ or "",
+              default=TrainArgs(train_defaults(args)))
+    run_dir = a.options.out or default_run_dir(a.run)
+    device = check_run_options(a.options, run_dir, "config.yaml")
+    model = train(a.run, run_dir, resume=a.options.resume, force=a.options.force,
+                  progress=not a.options.no_progress, device=device)
+    final = read_done(run_dir)["final_eval"]
+    print(f"trained {model}: average sum rate {final['mean']:.2f} bps/Hz "
+          f"(95% CI {final['ci_low']:.2f}-{final['ci_high']:.2f}, {final['episodes']} episodes)")
+
+
+# ------------------------------------------------------------------------------ compare-algorithms
+@dataclass(frozen=True)
+class CompareArgs:
+    preset: str = "quick"
+    """smoke, quick or paper (hours)"""
+    seeds: int = 5
+    """seeds per algorithm"""
+    workers: int = 2
+    """parallel training processes"""
+    out: Optional[Path] = None
+    """output directory (default runs/compare-PRESET)"""
+    algos: tuple[str, ...] = ("ddpg", "ppo", "sac", "td3")
+    """algorithms to compare"""
+    scenario: str = "fig2"
+    """scenario (the paper's Fig. 2 uses fig2 = [15, 20, 4.5])"""
+    eval_episodes: Optional[int] = None
+    """final evaluation episodes per run (default: 32 smoke/quick, 100 paper)"""
+    backend: str = "local"
+    """local (process pool) or ray (pip install 'uavris[ray]')"""
+    ray_address: Optional[str] = None
+    """address of a running Ray cluster (default: start a local instance)"""
+    device: str = "cpu"
+    """torch device: cpu, cuda, or auto"""
+
+
+def compare_command(args: list[str]) -> None:
+    """Train several algorithms over several seeds in one scenario and compare them (paper Fig. 2).
+
+    Writes to OUT: learning curves (PNG, PDF), a results table (CSV, Markdown) with mean, IQM
+    and bootstrap CIs beside the zero action, the references and the paper's values, and
+    report.md. Finished jobs are skipped on a rerun; interrupted ones resume.
+    """
+    from uavris.agents.torch_device import resolve_device
+    from uavris.experiments.compare import compare_algorithms
+
+    a = parse(CompareArgs, args, "uavris compare-algorithms", compare_command.__doc__ or "")
+    output_dir(a.out)
+    report = compare_algorithms(preset=a.preset, seeds=a.seeds, workers=a.workers, out=a.out, algos=a.algos,
+                                scenario=a.scenario, eval_episodes=a.eval_episodes, backend=a.backend,
+                                ray_address=a.ray_address, device=resolve_device(a.device))
+    print(f"report: {report}")
+
+
+def _run_dt(fn: Callable[..., Path], cfg: Any, opts: RunOptions, default_dir: Callable[[Any], Path]) -> Path:
+    """Run a DT stage (pre-training or fine-tuning) as the options say; its run directory."""
+    run_dir = opts.out or default_dir(cfg)
+    device = check_run_options(opts, run_dir, "config.json")
+    return fn(cfg, run_dir, resume=opts.resume, force=opts.force, progress=not opts.no_progress, device=device)
+
+
+# ------------------------------------------------------------------------------------- pretrain-dt
+@dataclass(frozen=True)
+class PretrainArgs:
+    run: Annotated[PretrainConfig, Flat]
+    options: Annotated[RunOptions, Flat] = RunOptions()
+
+
+def pretrain_command(args: list[str]) -> None:
+    """Pre-train a Decision Transformer offline on an expert dataset (paper Algorithm 1, stage 1).
+
+    --dataset is a directory written by `uavris collect`. Writes the run directory OUT
+    (default runs/dt/pretrain-DATASET-sSEED-PRESET): config.json, train_log.csv, TensorBoard
+    logs (tb/), checkpoints/ and model/ (model.safetensors + model.json), which `uavris
+    evaluate` and `uavris finetune-dt --model` accept.
+    """
+    from uavris.experiments.pretrain import default_pretrain_dir, pretrain, pretrain_config
+    from uavris.runs import read_done
+
+    dataset = peek(args, "--dataset", "DATASET" if _is_help(args) else None)
+    if dataset is None:
+        raise UsageError("pretrain-dt: --dataset DIR is required (a dataset written by `uavris collect`)")
+    default = PretrainArgs(pretrain_config(dataset, str(peek(args, "--preset", "quick")),
+                                           peek_int(args, "--seed", 0)))
+    a = parse(PretrainArgs, args, "uavris pretrain-dt", pretrain_command.__doc__ or "", default=default)
+    run_dir = _run_dt(pretrain, a.run, a.options, default_pretrain_dir)
+    done = read_done(run_dir)
+    print(f"pre-trained {run_dir}: {done['gradient_steps']} steps, final action loss {done['final_loss']:.4f}, "
+          f"default target return {done['target_return']:.1f}")
+
+
+# ------------------------------------------------------------------------------------- finetune-dt
+@dataclass(frozen=True)
+class FinetuneArgs:
+    run: Annotated[FinetuneConfig, Flat]
+    options: Annotated[RunOptions, Flat] = RunOptions()
+
+
+def finetune_command(args: list[str]) -> None:
+    """Fine-tune a pre-trained Decision Transformer online in a scenario (paper Algorithm 1, stage 2).
+
+    --model is a `uavris pretrain-dt` run or model directory, --scenario the one to adapt
+    to. Each round collects CANDIDATES noisy trajectories, keeps ELITES of them (by
+    --selection) and fine-tunes on them; the zero-shot policy and every round are evaluated
+    on the same seeded episodes. Writes OUT (default runs/dt/finetune-SCENARIO-sSEED-PRESET):
+    finetune.csv (with the environment interactions used), TensorBoard logs, checkpoints/
+    and model/.
+    """
+    from uavris.experiments.finetune import default_finetune_dir, finetune, finetune_config
+    from uavris.runs import read_done
+
+    placeholder = _is_help(args)
+    model = peek(args, "--model", "MODEL" if placeholder else None)
+    scenario = peek(args, "--scenario", "unseen1" if placeholder else None)
+    if model is None or scenario is None:
+        raise UsageError("finetune-dt: --model DIR and --scenario NAME are required")
+    default = FinetuneArgs(finetune_config(model, scenario, str(peek(args, "--preset", "quick")),
+                                           peek_int(args, "--seed", 0)))
+    a = parse(FinetuneArgs, args, "uavris finetune-dt", finetune_command.__doc__ or "", default=default)
+    run_dir = _run_dt(finetune, a.run, a.options, default_finetune_dir)
+    done = read_done(run_dir)
+    z, f = done["zero_shot_eval"], done["final_eval"]
+    print(f"fine-tuned {run_dir} in {a.run.scenario}: average sum rate {z['mean']:.2f} (zero-shot) -> "
+          f"{f['mean']:.2f} bps/Hz after {done['rounds']} rounds, {done['env_interactions']} environment "
+          "interactions")
+
+
+# --------------------------------------------------------------------------------------- reproduce
+@dataclass(frozen=True)
+class ReproduceArgs:
+    study: Annotated[ReproduceConfig, Flat]
+    out: Optional[Path] = None
+    """output directory (default runs/PRESET); a rerun skips finished stages and resumes the rest"""
+    workers: int = 2
+    """parallel job processes (local backend) or CPUs of a local Ray instance"""
+    backend: str = "local"
+    """local (process pool) or ray (pip install 'uavris[ray]')"""
+    ray_address: Optional[str] = None
+    """address of a running Ray cluster (default: start a local instance)"""
+    force: tuple[str, ...] = ()
+    """stage(s) to rerun even if finished, e.g. --force pretrain"""
+    device: str = "cpu"
+    """torch device: cpu, cuda, or auto"""
+    no_progress: bool = False
+    """no progress bar"""
+
+
+def reproduce_command(args: list[str]) -> None:
+    """Reproduce the paper's study end to end, in two tracks, and write the report.
+
+    Paper track: compare, experts-train, experts-unseen, dataset, pretrain, finetune-unseen1/2,
+    evaluate-unseen1/2 (experts: the comparison's winner). Strong track (learned motion,
+    optimised phases, experts imitating the oracle): the same stages prefixed strong-. Each
+    stage is stored under OUT/stages/NAME-KEY (KEY: a hash of its configuration and inputs);
+    independent stages run concurrently. Writes OUT/report.md and OUT/figures/.
+    """
+    from uavris.agents.torch_device import resolve_device
+    from uavris.experiments.reproduce import reproduce
+
+    a = parse(ReproduceArgs, args, "uavris reproduce", reproduce_command.__doc__ or "",
+              default=ReproduceArgs(ReproduceConfig()))
+    output_dir(a.out)
+    report = reproduce(a.study, a.out or Path("runs") / a.study.preset, workers=a.workers, backend=a.backend,
+                       ray_address=a.ray_address, force=a.force, progress=not a.no_progress,
+                       device=resolve_device(a.device))
+    print(f"report: {report}")
+
+

@@ -1,0 +1,254 @@
+"""The command line: bad input is one line and exit code 2, never a traceback, never a changed file.
+
+The fuzz walks every numeric flag of every command (read from the dataclasses the CLI
+parses, so a new config field is fuzzed without editing this file) with values that are
+wrong for it, plus wrong paths, and checks the contract of :mod:`uavris.cli`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import typing
+from pathlib import Path
+
+import pytest
+
+from uavris.cli import COMMANDS, main
+from uavris.cli.evaluation import CollectArgs, DemoArgs, EvaluateArgs
+from uavris.cli.training import CompareArgs, FinetuneArgs, PretrainArgs, ReproduceArgs, TrainArgs
+
+# Arguments that make each command parse up to its numeric flags (paths that exist are
+# added per test); the fuzzed flag comes last, so it is the one that fails.
+BASE = {
+    "train": ["train", "--preset", "smoke"],
+    "evaluate": ["evaluate", "hover", "--scenario", "fig2"],
+    "compare-algorithms": ["compare-algorithms", "--preset", "smoke"],
+    "collect": ["collect"],
+    "pretrain-dt": ["pretrain-dt", "--preset", "smoke"],
+    "finetune-dt": ["finetune-dt", "--scenario", "unseen1", "--preset", "smoke"],
+    "reproduce": ["reproduce", "--preset", "smoke"],
+    "demo": ["demo"],
+}
+ARGS = {"train": TrainArgs, "evaluate": EvaluateArgs, "compare-algorithms": CompareArgs, "collect": CollectArgs,
+        "pretrain-dt": PretrainArgs, "finetune-dt": FinetuneArgs, "reproduce": ReproduceArgs, "demo": DemoArgs}
+BAD_INT = ["-1", "abc", "1.5"]
+BAD_FLOAT = ["nan", "inf", "-inf", "abc"]
+# Float fields for which a negative value is meaningful (so only nan/inf/text are wrong).
+SIGNED = {"noise_dbm", "target_return"}
+# Integers for which 0 is a valid count or seed; every other integer flag must be >= 1.
+ZERO_OK = {"seed", "eval_seed", "collect_seed", "learning_starts", "warmup_steps", "total_steps"}
+
+
+def _numeric_flags(cls: type, prefix: str = "") -> list[tuple[str, str, type]]:
+    """(flag, field name, int or float) for every numeric field, nested configs included."""
+    hints = typing.get_type_hints(cls, include_extras=True)
+    out = []
+    for f in dataclasses.fields(cls):
+        hint = hints[f.name]
+        flat = typing.get_origin(hint) is typing.Annotated and any(
+            getattr(m, "name", None) == "" for m in hint.__metadata__)
+        base = typing.get_args(hint)[0] if typing.get_origin(hint) is typing.Annotated else hint
+        args = [a for a in typing.get_args(base) if a is not type(None)] or [base]
+        inner = args[0]
+        if dataclasses.is_dataclass(inner) and len(args) == 1 and f.default is not None:
+            out += _numeric_flags(inner, prefix if flat else f"{prefix}{f.name}.")
+        elif inner in (int, float) and len(args) == 1:
+            out.append((f"--{prefix}{f.name.replace('_', '-')}", f.name, inner))
+    return out
+
+
+def _cases() -> list[tuple[str, str, str]]:
+    cases = []
+    for cmd, cls in ARGS.items():
+        for flag, name, kind in _numeric_flags(cls):
+            values = BAD_INT if kind is int else BAD_FLOAT
+            cases += [(cmd, flag, v) for v in values]
+            if kind is float and name not in SIGNED:
+                cases.append((cmd, flag, "-1"))
+            if kind is int and name not in ZERO_OK:
+                cases.append((cmd, flag, "0"))
+    return cases
+
+
+CASES = _cases()
+
+
+@pytest.fixture(scope="module")
+def existing_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A directory that looks like a finished run; the fuzz must leave its files untouched."""
+    run = tmp_path_factory.mktemp("cli") / "run"
+    run.mkdir()
+    (run / "config.yaml").write_text("algo: ddpg\n")
+    (run / "done.json").write_text("{}\n")
+    (run / "evals.csv").write_text("env_steps,episodes,mean,ci_low,ci_high,iqm\n")
+    return run
+
+
+def _snapshot(d: Path) -> dict[str, bytes]:
+    return {str(p.relative_to(d)): p.read_bytes() for p in sorted(d.rglob("*")) if p.is_file()}
+
+
+def _with_paths(cmd: str, args: list[str], run: Path) -> list[str]:
+    """Make the command's required paths exist so that parsing reaches the fuzzed flag."""
+    extra = {"collect": ["--experts", str(run), "--out", str(run)], "pretrain-dt": ["--dataset", str(run)],
+             "finetune-dt": ["--model", str(run)]}.get(cmd, [])
+    if cmd in ("train", "pretrain-dt", "finetune-dt", "evaluate", "compare-algorithms", "reproduce") \
+            and "--out" not in extra:
+        extra += ["--out", str(run)]
+    return args[:1] + extra + args[1:]
+
+
+def _check_one_line(capsys: pytest.CaptureFixture[str], code: int, what: str) -> str:
+    out, err = capsys.readouterr()
+    assert code == 2, f"{what}: exit {code}, stderr {err!r}"
+    assert "Traceback" not in err + out, what
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("uavris: error: "), f"{what}: {err!r}"
+    return lines[0]
+
+
+def test_fuzz_surface_is_wide() -> None:
+    """The fuzz reaches every command with numeric flags, including nested config fields."""
+    flags = {(c, f) for c, f, _ in CASES}
+    assert {c for c, _ in flags} == set(ARGS)
+    assert ("train", "--hyperparams.learning-rate") in flags and ("train", "--system.v-max") in flags
+    assert ("pretrain-dt", "--steps") in flags and ("finetune-dt", "--noise-sigma") in flags
+    assert len(flags) > 80
+
+
+# train and reproduce parse the full system config (~0.3 s per command line, hundreds of cases).
+@pytest.mark.parametrize("cmd", [pytest.param(c, marks=pytest.mark.slow) if c in ("train", "reproduce") else c
+                                 for c in sorted(ARGS)])
+def test_bad_numbers_fail_in_one_line(cmd: str, existing_run: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    before = _snapshot(existing_run)
+    for c, flag, value in CASES:
+        if c != cmd:
+            continue
+        args = _with_paths(cmd, BASE[cmd], existing_run) + [flag, value]
+        line = _check_one_line(capsys, main(args), " ".join(args))
+        assert len(line) < 400
+    assert _snapshot(existing_run) == before
+
+
+@pytest.mark.parametrize("args", [
+    ["evaluate", "/no/such/run"],
+    ["evaluate", "hover", "--scenario", "fig2", "--out", "FILE"],
+    ["collect", "--experts", "/no/such/run"],
+    ["collect", "--experts", "FILE"],
+    ["pretrain-dt", "--dataset", "/no/such/dataset"],
+    ["pretrain-dt", "--dataset", "FILE"],
+    ["finetune-dt", "--model", "/no/such/model", "--scenario", "unseen1"],
+    ["finetune-dt", "--model", "FILE", "--scenario", "unseen1"],
+    ["train", "--preset", "smoke", "--out", "FILE"],
+    ["train", "--config", "/no/such.yaml"],
+    ["train", "--config", "FILE"],
+    ["plot", "/no/such/run"],
+    ["plot", "FILE"],
+    ["reproduce", "--out", "FILE"],
+    ["evaluate"],
+    ["train", "--algo"],
+    ["train", "--no-such-flag"],
+    ["nonsense"],
+    ["evaluate", "hover", "--scenario", "mars"],
+    ["train", "--preset", "huge"],
+    ["reproduce", "--track", "fast"],
+])
+def test_bad_paths_and_names_fail_in_one_line(args: list[str], tmp_path: Path,
+                                             capsys: pytest.CaptureFixture[str]) -> None:
+    file = tmp_path / "file.bin"
+    file.write_bytes(b"\x00\xff not yaml, not a directory")
+    args = [str(file) if a == "FILE" else a for a in args]
+    _check_one_line(capsys, main(args), " ".join(args))
+
+
+def test_every_command_has_help(capsys: pytest.CaptureFixture[str]) -> None:
+    """`--help` exits 0 and names what the command writes and its positional arguments."""
+    for name in COMMANDS:
+        assert main([name, "--help"]) == 0, name
+        out = capsys.readouterr().out
+        assert f"usage: uavris {name}" in out
+        assert "Writes" in out or name == "demo", name
+    assert main(["evaluate", "--help"]) == 0
+    assert "RUN|MODEL|REFERENCE" in capsys.readouterr().out
+    assert main([]) == 0
+    out = capsys.readouterr().out
+    assert all(name in out for name in COMMANDS)
+
+
+def test_resume_and_force_say_what_they_do(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    missing = tmp_path / "never-trained"
+    line = _check_one_line(capsys, main(["train", "--preset", "smoke", "--out", str(missing), "--resume"]), "resume")
+    assert "no run to resume" in line and not missing.exists()
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    line = _check_one_line(capsys, main(["pretrain-dt", "--dataset", str(tmp_path), "--out", str(empty),
+                                         "--resume"]), "resume empty")
+    assert "holds no run" in line
+    line = _check_one_line(capsys, main(["train", "--preset", "smoke", "--out", str(empty), "--resume", "--force"]),
+                           "resume+force")
+    assert "contradict" in line
+
+
+def test_config_file_unknown_field(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    cfg = tmp_path / "c.yaml"
+    cfg.write_text("algo: ppo\nhyperparams:\n  learning_rat: 0.1\n")
+    line = _check_one_line(capsys, main(["train", "--config", str(cfg)]), "unknown field")
+    assert "learning_rat" in line
+
+
+def test_config_file_then_flags(tmp_path: Path) -> None:
+    """A partial YAML fills from the preset; flags override the file; the result is validated."""
+    from uavris.cli.training import train_defaults
+    from uavris.experiments.train_expert import preset_config
+
+    cfg = tmp_path / "c.yaml"
+    cfg.write_text("algo: ppo\npreset: smoke\ntotal_steps: 320\nhyperparams:\n  learning_rate: 0.001\n"
+                   "system:\n  noise_dbm: -90\n")
+    got = train_defaults(["--config", str(cfg), "--seed", "3"])
+    want = preset_config("ppo", "fig2", 3, "smoke")
+    assert got.total_steps == 320 and got.seed == 3 and got.hyperparams.learning_rate == 0.001
+    assert got.system.noise_dbm == -90 and got.system.v_max == want.system.v_max
+    assert got.hyperparams.n_steps == want.hyperparams.n_steps
+
+
+def test_device_flag(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    import torch
+
+    from uavris.agents.torch_device import resolve_device
+
+    assert resolve_device("cpu") == "cpu"
+    assert resolve_device("auto") == ("cuda" if torch.cuda.is_available() else "cpu")
+    if not torch.cuda.is_available():
+        for cmd in (["train", "--preset", "smoke", "--out", str(tmp_path / "r")],
+                    ["evaluate", "hover", "--scenario", "fig2", "--episodes", "1"],
+                    ["reproduce", "--preset", "smoke", "--out", str(tmp_path / "s")]):
+            line = _check_one_line(capsys, main(cmd + ["--device", "cuda"]), "cuda")
+            assert "CUDA" in line
+        assert not (tmp_path / "r").exists() and not (tmp_path / "s").exists()
+    line = _check_one_line(capsys, main(["evaluate", "hover", "--scenario", "fig2", "--device", "tpu"]), "tpu")
+    assert "unknown device 'tpu'" in line
+
+
+def test_evaluate_writes_what_it_prints(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """The printed mean is the JSON's, which is the mean of the per-episode CSV."""
+    import json
+
+    from uavris.io import read_csv
+
+    assert main(["evaluate", "hover", "--scenario", "fig2", "--episodes", "3", "--out", str(tmp_path),
+                 "--no-progress"]) == 0
+    printed = capsys.readouterr().out
+    summary = json.loads((tmp_path / "fig2-seed1000000-n3.json").read_text())
+    rows = read_csv(tmp_path / "fig2-seed1000000-n3.csv")
+    assert len(rows) == 3
+    assert summary["mean"] == pytest.approx(sum(float(r["avg_sum_rate"]) for r in rows) / 3)
+    assert f"{summary['mean']:.2f} bps/Hz" in printed
+
+
+def test_demo_prints_every_policy(capsys: pytest.CaptureFixture[str]) -> None:
+    from uavris.agents.references import REFERENCES
+    from uavris.demo import DEMO_POLICIES
+
+    assert main(["demo", "--episodes", "2"]) == 0
+    out = capsys.readouterr().out
+    assert all(REFERENCES[name].label in out for name in DEMO_POLICIES)

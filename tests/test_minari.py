@@ -1,0 +1,141 @@
+"""Datasets from ``collect`` under Minari's own loader: namespaced id, recoverable environment."""
+
+import json
+import re
+import shutil
+from pathlib import Path
+
+import gymnasium as gym
+import minari
+import numpy as np
+import pytest
+
+import uavris.experiments.collect as collect_mod
+from tests.conftest import SHORT
+from uavris.agents.dt.dataset import dataset_id_for, load_dataset
+from uavris.agents.dt.trajectories import record_episodes
+from uavris.agents.references import reference_policy
+from uavris.env import ENV_ID
+from uavris.errors import DatasetError
+from uavris.experiments.train_expert import preset_config
+
+# The first expert's scenario is deliberately not the alphabetically first one.
+EXPERTS = {"expert-a": ("train2", "hover-aligned"), "expert-b": ("train1", "hover-random-phases")}
+EPISODES = 2
+SEED = 2_000_000
+
+
+def _fake_expert_runs(monkeypatch):
+    """Training a real expert takes ~10 s; collect's own code runs, the experts are baselines."""
+    cfgs = {name: preset_config("ddpg", scen, 0, "smoke", eval_episodes=2, system=SHORT)
+            for name, (scen, _) in EXPERTS.items()}
+    monkeypatch.setattr(collect_mod, "load_run_config", lambda run_dir: cfgs[Path(run_dir).name])
+    monkeypatch.setattr(collect_mod, "final_model_path", lambda run_dir: Path(run_dir).name)
+    monkeypatch.setattr(collect_mod, "load_model", lambda name, algo: name)
+    monkeypatch.setattr(collect_mod, "run_policy", lambda name, cfg: reference_policy(EXPERTS[name][1], SHORT))
+
+
+@pytest.fixture(scope="module")
+def collected(tmp_path_factory):
+    """Minari's datasets root, with one collected dataset at ``uavris/experts-tiny-v0``."""
+    root = tmp_path_factory.mktemp("minari")
+    runs = [root / "runs" / name for name in EXPERTS]
+    for run in runs:
+        run.mkdir(parents=True)
+    with pytest.MonkeyPatch.context() as mp:
+        _fake_expert_runs(mp)
+        collect_mod.collect(runs, EPISODES, root / "uavris" / "experts-tiny-v0", seed=SEED, progress=False)
+    return root
+
+
+@pytest.fixture
+def native(collected, monkeypatch):
+    monkeypatch.setenv("MINARI_DATASETS_PATH", str(collected))
+    return minari.load_dataset("uavris/experts-tiny-v0")  # offline, Minari's own loader
+
+
+def test_dataset_id_is_namespaced(collected, native):
+    assert native.spec.dataset_id == "uavris/experts-tiny-v0"
+    assert (native.spec.namespace, native.spec.dataset_name, native.spec.version) == ("uavris", "experts-tiny", 0)
+    assert load_dataset(collected / "uavris" / "experts-tiny-v0").dataset_id == native.spec.dataset_id
+    for name, want in [("experts-tiny-v0", "uavris/experts-tiny-v0"), ("Experts_Tiny", "uavris/experts-tiny-v0"),
+                       ("ds.2", "uavris/ds-2-v0"), ("run 7-v12", "uavris/run-7-v12"), ("__", "uavris/experts-v0")]:
+        got = dataset_id_for(Path("somewhere") / name, "uavris")
+        assert got == want and re.fullmatch(r"uavris/[a-z0-9-]+-v\d+", got)
+        assert minari.dataset.minari_dataset.parse_dataset_id(got)[0] == "uavris"
+    assert dataset_id_for(Path("experts"), None) == "experts-v0"  # without a namespace: as before
+
+
+@pytest.mark.parametrize("eval_env", [False, True])
+def test_recovered_environment_is_the_registered_env_with_the_datasets_system(collected, native, eval_env):
+    env = native.recover_environment(eval_env=eval_env)
+    assert env.spec.id == ENV_ID
+    assert env.unwrapped.config == SHORT == load_dataset(collected / "uavris" / "experts-tiny-v0").system
+    assert env.unwrapped.scenario.name == "train2"  # the first expert's
+    assert env.observation_space == native.observation_space and env.action_space == native.action_space
+    first = next(native.iterate_episodes())
+    obs, _ = env.reset(seed=SEED)  # the first episode's seed: the same start
+    np.testing.assert_array_equal(obs, first.observations[0])
+    obs, reward, *_ = env.step(first.actions[0])
+    np.testing.assert_array_equal(obs, first.observations[1])
+    assert reward == first.rewards[0]
+
+
+def test_env_spec_kwargs_survive_json_and_make_accepts_them(collected):
+    meta = json.loads((collected / "uavris" / "experts-tiny-v0" / "data" / "metadata.json").read_text())
+    for key in ("env_spec", "eval_env_spec"):
+        kwargs = json.loads(meta[key])["kwargs"]
+        assert kwargs == {"config": json.loads(json.dumps(SHORT.to_dict())), "scenario": "train2"}
+        env = gym.make(ENV_ID, **kwargs)
+        assert env.unwrapped.config == SHORT
+        env.reset(seed=0)
+        env.step(env.action_space.sample())
+
+
+def test_episode_data_is_the_experts_rollouts(collected):
+    got = load_dataset(collected / "uavris" / "experts-tiny-v0").trajectories
+    want = []
+    for k, (scenario, ref) in enumerate(EXPERTS.values()):
+        seeds = SEED + k * EPISODES + np.arange(EPISODES)
+        want += record_episodes(reference_policy(ref, SHORT), SHORT, scenario, seeds)
+    assert [t.scenario for t in got] == ["train2"] * EPISODES + ["train1"] * EPISODES
+    for g, w in zip(got, want, strict=True):
+        np.testing.assert_array_equal(g.observations, w.observations)
+        np.testing.assert_array_equal(g.actions, w.actions)
+        np.testing.assert_array_equal(g.rewards, w.rewards)
+
+
+def _edit_metadata(path, fn):
+    meta_path = path / "data" / "metadata.json"
+    meta = json.loads(meta_path.read_text())
+    fn(meta)
+    meta_path.write_text(json.dumps(meta))
+
+
+def _as_before_env_spec(meta):
+    del meta["env_spec"], meta["eval_env_spec"]
+    meta["dataset_id"] = "old-v0"
+
+
+def test_dataset_written_before_env_spec_still_loads(collected, tmp_path):
+    old = shutil.copytree(collected / "uavris" / "experts-tiny-v0", tmp_path / "old-v0")
+    _edit_metadata(old, _as_before_env_spec)
+    ds = load_dataset(old)
+    assert ds.dataset_id == "old-v0" and ds.system == SHORT
+    assert len(ds.trajectories) == len(EXPERTS) * EPISODES
+    with pytest.raises(ValueError, match="env_spec is None"):  # Minari's own behaviour for such datasets
+        minari.MinariDataset(old / "data").recover_environment()
+
+
+def test_env_spec_with_another_system_is_rejected(collected, tmp_path):
+    bad = shutil.copytree(collected / "uavris" / "experts-tiny-v0", tmp_path / "bad-v0")
+
+    def other_system(meta):
+        spec = json.loads(meta["env_spec"])
+        spec["kwargs"]["config"]["horizon"] = 17
+        meta["env_spec"] = json.dumps(spec)
+
+    _edit_metadata(bad, other_system)
+    with pytest.raises(DatasetError, match="another system configuration") as err:
+        load_dataset(bad)
+    assert len(str(err.value).splitlines()) == 1

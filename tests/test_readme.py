@@ -1,0 +1,47 @@
+"""The README runs: every Python block executes on its own, and what it says about presets is the code's."""
+
+from __future__ import annotations
+
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+README = Path(__file__).resolve().parents[1] / "README.md"
+SKIP_MARK = "# readme: skip"  # in a block that is too long for the suite (documented there)
+
+
+def _python_blocks() -> list[str]:
+    return re.findall(r"^```python\n(.*?)^```", README.read_text(encoding="utf-8"), flags=re.S | re.M)
+
+
+def test_readme_has_python_blocks() -> None:
+    assert len(_python_blocks()) >= 3
+
+
+@pytest.mark.parametrize("index", range(len(_python_blocks())))
+def test_python_block_runs_on_its_own(index: int, tmp_path: Path) -> None:
+    """Each block in a fresh interpreter (no imports carried over from another block)."""
+    block = _python_blocks()[index]
+    if SKIP_MARK in block:
+        pytest.skip("marked as too long for the test suite")
+    script = tmp_path / f"block{index}.py"
+    script.write_text(block, encoding="utf-8")
+    proc = subprocess.run([sys.executable, str(script)], cwd=tmp_path, capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, f"README block {index} failed:\n{block}\n{proc.stderr[-2000:]}"
+
+
+def test_preset_numbers_are_the_codes() -> None:
+    """The README's preset sentence states the training budgets and evaluation episodes of
+    :mod:`uavris.presets`."""
+    from uavris.presets import TRAIN_EVAL, TRAIN_STEPS
+
+    text = " ".join(README.read_text(encoding="utf-8").split())
+    for preset in ("smoke", "quick", "paper"):
+        m = re.search(rf"`{preset}` \(([\d,.]+) (M )?env steps per run, (\d+) evaluation episodes", text)
+        assert m, f"README does not state the {preset} preset's budget"
+        steps = float(m.group(1).replace(",", "")) * (1_000_000 if m.group(2) else 1)
+        assert steps == TRAIN_STEPS[preset], preset
+        assert int(m.group(3)) == TRAIN_EVAL[preset][1], preset
