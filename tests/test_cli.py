@@ -252,3 +252,39 @@ def test_demo_prints_every_policy(capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["demo", "--episodes", "2"]) == 0
     out = capsys.readouterr().out
     assert all(REFERENCES[name].label in out for name in DEMO_POLICIES)
+
+
+def test_plot_overlays_runs_of_every_kind(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """`uavris plot` reads the logs each kind of run writes and draws one panel per kind (PNG and PDF)."""
+    import matplotlib.image as mpimg
+
+    from uavris.experiments.finetune import ROUND_HEADER
+    from uavris.experiments.pretrain import LOG_HEADER
+    from uavris.experiments.train_expert import EPISODE_HEADER, EVAL_HEADER
+    from uavris.io import write_csv
+
+    runs = []
+    for name, seed in (("a", 0), ("b", 1)):
+        d = tmp_path / name
+        d.mkdir()
+        write_csv(d / "episodes.csv", EPISODE_HEADER, [[i, 100 * (i + 1), 10 + seed + 0.1 * i, 1000, 100]
+                                                       for i in range(20)])
+        write_csv(d / "evals.csv", EVAL_HEADER, [[s, 8, 10 + seed + s / 1000, 9 + seed, 11 + seed, 10 + seed]
+                                                 for s in (0, 1000, 2000)])
+        runs.append(d)
+    pre = tmp_path / "pre"
+    pre.mkdir()
+    write_csv(pre / "train_log.csv", LOG_HEADER, [[s, 1 / s, 1e-4, 100.0] for s in range(1, 50)])
+    ft = tmp_path / "ft"
+    ft.mkdir()
+    write_csv(ft / "finetune.csv", ROUND_HEADER, [[r, 8000 * r, 100 * r] + [1.0] * 5 + [40 + r, 39 + r, 41 + r]
+                                                  for r in range(4)])
+    stem = tmp_path / "out" / "curves"
+    assert main(["plot", *map(str, runs + [pre, ft]), "--out", str(stem)]) == 0
+    assert "curves.png" in capsys.readouterr().out
+    image = mpimg.imread(stem.with_suffix(".png"))
+    assert image.ndim == 3 and image.shape[1] > 2.5 * image.shape[0]  # three panels side by side
+    assert image[..., :3].std() > 0.05  # something is drawn
+    assert stem.with_suffix(".pdf").read_bytes().startswith(b"%PDF")
+    line = _check_one_line(capsys, main(["plot", str(runs[0]), "--labels", "one", "two"]), "labels")
+    assert "--labels" in line

@@ -1,7 +1,7 @@
 """Learning curves of individual runs, several overlaid (``uavris plot RUN...``).
 
 Lives here: reading what a run logged and drawing it: an expert run's training episodes
-(thin) and periodic deterministic evaluations (mean with its 95% CI band) against
+(dots) and periodic deterministic evaluations (mean with its 95% CI band) against
 environment steps; a DT pre-training run's action loss against gradient steps; a DT
 fine-tuning run's evaluation after each round against environment interactions. Not
 here: the study's figures (:mod:`uavris.experiments.report.figures`), the comparison's
@@ -47,8 +47,9 @@ def _draw(ax: Any, run_dir: Path, kind: str, label: str, color: Any) -> None:
     if kind == "expert":
         episodes = read_csv(run_dir / "episodes.csv") if (run_dir / "episodes.csv").exists() else []
         if episodes:
-            ax.plot(_column(episodes, "env_steps"), _column(episodes, "avg_sum_rate"), color=color, lw=0.5,
-                    alpha=0.35)
+            # Batched envs finish episodes at the same step: dots, not a line through them.
+            ax.scatter(_column(episodes, "env_steps"), _column(episodes, "avg_sum_rate"), color=color, s=2,
+                       alpha=0.3, lw=0)
         evals = read_csv(run_dir / "evals.csv")
         if evals:
             x = _column(evals, "env_steps")
@@ -84,7 +85,7 @@ def plot_runs(run_dirs: list[Path], stem: Path, labels: list[str] | None = None)
     for ax, kind in zip(axes[0], present):
         xlabel, ylabel, title = PANELS[kind]
         ax.set(xlabel=xlabel, ylabel=ylabel)
-        ax.set_title(title + (" (thin: training episodes; band: 95% CI)" if kind == "expert" else ""), fontsize=8)
+        ax.set_title(title + (" (dots: training episodes; band: 95% CI)" if kind == "expert" else ""), fontsize=8)
         ax.legend(fontsize=7, frameon=False)
     Path(stem).parent.mkdir(parents=True, exist_ok=True)
     return save_figure(fig, Path(stem))
