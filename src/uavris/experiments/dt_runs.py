@@ -33,7 +33,7 @@ import numpy as np
 from uavris import runs
 from uavris.agents.dt.checkpoint import load_dt, save_dt
 from uavris.agents.dt.model import DecisionTransformer
-from uavris.agents.dt.policy import DTBatchPolicy
+from uavris.agents.dt.policy import DTBatchPolicy, dt_policy_from_checkpoint
 from uavris.agents.dt.trainer import save_trainer_state
 from uavris.config import SystemConfig
 from uavris.env.simulator import stored_system
@@ -132,10 +132,5 @@ def load_dt_policy(path: str | Path, target_return: float | None = None,
     model_dir = dt_model_dir(path)
     if model_dir is None:
         raise UavrisError(f"{path} is not a DT model directory (no model.json)")
-    model, meta = load_dt(model_dir, device)
-    system = checkpoint_system(meta, model_dir)
-    target = meta.get("target_return") if target_return is None else target_return
-    if target is None:
-        raise UavrisError(f"{model_dir} stores no target return")
-    return (DTBatchPolicy(model, float(target), phase_control=meta.get("phase_control", "agent")), system,
-            meta.get("scenario"))
+    policy, meta = dt_policy_from_checkpoint(model_dir, target_return, device=device)
+    return policy, checkpoint_system(meta, model_dir), meta.get("scenario")

@@ -39,6 +39,7 @@ from numpy.typing import NDArray
 from uavris.agents.dt.checkpoint import load_dt
 from uavris.agents.dt.model import DecisionTransformer
 from uavris.env.wrappers import MOTION_DIM, check_phase_control
+from uavris.errors import CheckpointError
 
 
 class DTBatchPolicy:
@@ -165,5 +166,5 @@ def dt_policy_from_checkpoint(directory: str | Path, target_return: float | None
     model, meta = load_dt(directory, device)
     target = meta.get("target_return") if target_return is None else target_return
     if target is None:
-        raise ValueError(f"{directory} stores no target return; pass one")
+        raise CheckpointError(f"{directory} stores no target return; pass one")
     return DTBatchPolicy(model, float(target), noise_sigma, seed, meta.get("phase_control", "agent")), meta

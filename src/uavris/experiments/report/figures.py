@@ -14,6 +14,7 @@ import numpy as np
 
 from uavris.agents.references import REFERENCES
 from uavris.config import get_scenario
+from uavris.experiments.dt_runs import load_dt_policy
 from uavris.experiments.plots import REFERENCE_STYLE, plt, reference_lines, save_figure
 from uavris.io import read_csv, read_json
 
@@ -84,10 +85,9 @@ def trajectory_figure(scenario: str, model_dir: Path, system: Any, stem: Path, s
     """3-D view of one evaluation episode of a DT: UAV path, RIS normal every few slots, devices
     and their safety balls (as circles at the floor of the region)."""
     from uavris import physics as ph
-    from uavris.agents.dt.policy import dt_policy_from_checkpoint
     from uavris.env.rollout import rollout
 
-    policy, _ = dt_policy_from_checkpoint(model_dir)
+    policy, _, _ = load_dt_policy(model_dir)
     pos, normals = [], []
 
     def track(sim: Any, obs: Any, executed: Any, alive: Any) -> None:
