@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import sys
 
-from uavris.agents.evaluation import evaluate
+from uavris.agents.evaluation import check_episodes, evaluate
 from uavris.agents.references import REFERENCES, reference_policy
 from uavris.config import SystemConfig, get_scenario
 
@@ -18,6 +18,7 @@ DEMO_POLICIES = ("hover", "random", "hover-aligned")
 
 def run_demo(episodes: int = 32, seed: int = 0, scenario: str = "fig2") -> dict[str, float]:
     """Print and return each demo policy's mean average sum rate over ``episodes`` seeded episodes."""
+    check_episodes(episodes, seed)
     cfg = SystemConfig()
     start = get_scenario(scenario).start
     print(f"uavris demo: scenario {scenario} {start}, {episodes} episodes, T = {cfg.horizon} slots of {cfg.slot_s} s")

@@ -18,6 +18,7 @@ from numpy.typing import NDArray
 from uavris import stats
 from uavris.config import Scenario, SystemConfig
 from uavris.env.rollout import SlotHook, rollout
+from uavris.errors import ConfigError
 
 
 @dataclass(frozen=True)
@@ -40,6 +41,18 @@ class EpisodeResults:
                 "mean_energy_j": float(np.mean(self.energy_used))}
 
 
+def check_episodes(episodes: int, seed: int) -> None:
+    """Episodes ``seed .. seed + episodes - 1`` must be at least one, with non-negative seeds.
+
+    Callers that do work before :func:`evaluate` (load a model, open a progress bar, print a
+    header) call it first, so bad input fails before anything is shown or loaded.
+    """
+    if episodes < 1:
+        raise ConfigError(f"--episodes must be >= 1, got {episodes}")
+    if seed < 0:
+        raise ConfigError(f"--seed must be >= 0, got {seed}")
+
+
 def evaluate(policy: Any, config: SystemConfig, scenario: str | Scenario, episodes: int, seed: int,
              batch_size: int = 256, phase_control: str | None = None,
              on_slot: SlotHook | None = None) -> EpisodeResults:
@@ -49,8 +62,7 @@ def evaluate(policy: Any, config: SystemConfig, scenario: str | Scenario, episod
     (default: the policy's own ``phase_control``); ``on_slot`` is passed to
     :func:`~uavris.env.rollout.rollout` (progress bars use it).
     """
-    if episodes < 1:
-        raise ValueError(f"episodes must be >= 1, got {episodes}")
+    check_episodes(episodes, seed)
     parts = [rollout(policy, config, scenario, seed + start + np.arange(min(batch_size, episodes - start)),
                      phase_control=phase_control, on_slot=on_slot)
              for start in range(0, episodes, batch_size)]

@@ -12,7 +12,7 @@ from typing import Annotated, Optional
 
 import tyro
 
-from uavris.cli.parsing import UsageError, check_non_negative, check_positive, existing_dir, output_dir, parse
+from uavris.cli.parsing import output_dir, parse
 from uavris.presets import COLLECT_SEED, EVAL_SEED
 
 
@@ -49,8 +49,6 @@ def evaluate_command(args: list[str]) -> None:
     from uavris.experiments.evaluate import evaluate_target
 
     a = parse(EvaluateArgs, args, "uavris evaluate", evaluate_command.__doc__ or "")
-    check_positive(a.episodes, "--episodes")
-    check_non_negative(a.seed, "--seed")
     output_dir(a.out)
     summary, path = evaluate_target(a.target, scenario=a.scenario, episodes=a.episodes, seed=a.seed, out=a.out,
                                     phase_control=a.phase_control, device=resolve_device(a.device),
@@ -87,12 +85,6 @@ def collect_command(args: list[str]) -> None:
     from uavris.experiments.collect import collect, dataset_summary
 
     a = parse(CollectArgs, args, "uavris collect", collect_command.__doc__ or "")
-    if not a.experts:
-        raise UsageError("collect: --experts RUN [RUN ...] is required")
-    for d in a.experts:
-        existing_dir(d, "--experts")
-    check_positive(a.trajectories, "--trajectories")
-    check_non_negative(a.seed, "--seed")
     output_dir(a.out)
     path = collect(a.experts, a.trajectories, a.out, seed=a.seed, force=a.force, progress=not a.no_progress)
     summary = dataset_summary(path)
@@ -117,8 +109,6 @@ def demo_command(args: list[str]) -> None:
     from uavris.demo import run_demo
 
     a = parse(DemoArgs, args, "uavris demo", demo_command.__doc__ or "")
-    check_positive(a.episodes, "--episodes")
-    check_non_negative(a.seed, "--seed")
     run_demo(a.episodes, a.seed, a.scenario)
 
 
@@ -143,10 +133,6 @@ def plot_command(args: list[str]) -> None:
     from uavris.experiments.run_curves import plot_runs
 
     a = parse(PlotArgs, args, "uavris plot", plot_command.__doc__ or "")
-    if not a.runs:
-        raise UsageError("plot: pass at least one RUN directory")
-    for d in a.runs:
-        existing_dir(d, "RUN")
     output_dir(a.out.parent, "--out's folder")
     paths = plot_runs(list(a.runs), a.out, list(a.labels) if a.labels else None)
     print("wrote " + ", ".join(str(p) for p in paths))

@@ -12,7 +12,7 @@ from pathlib import Path
 from typing import Optional
 
 from uavris.agents.torch_device import resolve_device
-from uavris.cli.parsing import UsageError
+from uavris.cli.parsing import UsageError, output_dir
 
 
 @dataclass(frozen=True)
@@ -38,8 +38,7 @@ def check_run_options(opts: RunOptions, run_dir: Path, config_file: str) -> str:
     study relies on it); a user who types ``--resume`` means "continue this run", so here a
     resume with nothing to continue is an error rather than a silent fresh start.
     """
-    if run_dir.exists() and not run_dir.is_dir():
-        raise UsageError(f"--out {run_dir}: exists and is not a directory")
+    output_dir(run_dir)
     if opts.resume and opts.force:
         raise UsageError("--resume (continue the run) and --force (delete it and start over) contradict each "
                          "other; pass one of them")

@@ -91,44 +91,20 @@ def peek_int(args: list[str], name: str, default: int) -> int:
         raise UsageError(f"{name} expects an integer, got {raw!r}") from None
 
 
-def existing_dir(path: Path | None, flag: str) -> Path:
-    """``path`` if it is an existing directory; otherwise one clear error naming ``flag``."""
-    if path is None or str(path) == "":
-        raise UsageError(f"{flag} is required")
-    p = Path(path)
-    if not p.exists():
-        raise UsageError(f"{flag} {p}: no such directory")
-    if not p.is_dir():
-        raise UsageError(f"{flag} {p}: not a directory")
-    return p
-
-
 def output_dir(path: Path | None, flag: str = "--out") -> None:
     """An output directory may exist (as a directory) or not yet; a file in its place is an error."""
     if path is not None and Path(path).exists() and not Path(path).is_dir():
         raise UsageError(f"{flag} {path}: exists and is not a directory")
 
 
-def check_non_negative(value: int, flag: str) -> None:
-    if value < 0:
-        raise UsageError(f"{flag} must be >= 0, got {value}")
-
-
-def check_positive(value: int, flag: str) -> None:
-    if value < 1:
-        raise UsageError(f"{flag} must be >= 1, got {value}")
-
-
 def load_overrides(path: Path, kind: str) -> dict[str, Any]:
     """A YAML mapping of config fields (``--config``)."""
     from uavris.io import read_yaml
 
-    if not Path(path).is_file():
-        raise UsageError(f"--config {path}: no such file")
     try:
-        data = read_yaml(path)
-    except Exception as e:  # noqa: BLE001 - any YAML problem becomes one line naming the file
-        raise UsageError(f"--config {path}: not a YAML file ({type(e).__name__})") from None
+        data = read_yaml(path)  # a missing, unreadable or malformed file is already one line
+    except UavrisError as e:
+        raise UsageError(f"--config: {e}") from None
     if not isinstance(data, dict):
         raise UsageError(f"--config {path}: expected a mapping of {kind} fields, got {type(data).__name__}")
     return data

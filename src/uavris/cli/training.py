@@ -59,7 +59,9 @@ def train_defaults(args: list[str]) -> TrainConfig:
     data = load_overrides(Path(file), "TrainConfig") if file else {}
     pick = {k: peek(args, f"--{k}", data.get(k, d)) for k, d in (("algo", "ddpg"), ("scenario", "fig2"),
                                                                   ("preset", "quick"))}
-    seed = peek_int(args, "--seed", int(data.get("seed", 0)))
+    if not isinstance(data.get("seed", 0), int):
+        raise UsageError(f"--config {file}: seed must be an integer, got {data['seed']!r}")
+    seed = peek_int(args, "--seed", data.get("seed", 0))
     base = preset_config(pick["algo"], pick["scenario"], seed, pick["preset"])
     if not data:
         return base

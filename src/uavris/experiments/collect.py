@@ -45,6 +45,8 @@ def collect(experts: Sequence[str | Path], trajectories: int, out: str | Path, *
         raise UavrisError("give at least one expert run directory (--experts RUN_DIR ...)")
     if trajectories < 1:
         raise UavrisError(f"--trajectories must be >= 1, got {trajectories}")
+    if seed < 0:
+        raise UavrisError(f"--seed must be >= 0, got {seed}")
     out = Path(out)
     runs = []
     for run_dir in experts:
@@ -81,7 +83,7 @@ def collect(experts: Sequence[str | Path], trajectories: int, out: str | Path, *
     description = (f"uavris expert trajectories: {len(runs)} experts x {trajectories} deterministic episodes "
                    f"({', '.join(sorted({cfg.scenario for _, cfg in runs}))})")
     return write_dataset(out, trajs, system, description=description, force=force, phase_control=phase_control,
-                         namespace=DATASET_NAMESPACE, scenario=runs[0][1].scenario)
+                         namespace=DATASET_NAMESPACE)
 
 
 def dataset_summary(path: str | Path) -> dict[str, Any]:

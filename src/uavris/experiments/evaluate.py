@@ -10,7 +10,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from uavris.agents.evaluation import EpisodeResults, evaluate
+from uavris.agents.evaluation import EpisodeResults, check_episodes, evaluate
 from uavris.agents.references import REFERENCE_SEED, REFERENCES, reference_policy
 from uavris.config import SystemConfig, get_scenario
 from uavris.env.wrappers import check_phase_control
@@ -83,8 +83,7 @@ def evaluate_target(target: str, scenario: str | None, episodes: int, seed: int,
 
     With ``progress`` a bar counts the simulated slots (the optimiser and the oracle take
     milliseconds per slot, so a long evaluation is visibly alive)."""
-    if episodes < 1:
-        raise UavrisError(f"--episodes must be >= 1, got {episodes}")
+    check_episodes(episodes, seed)
     if phase_control is not None:
         check_phase_control(phase_control)
     resolved = resolve_policy(target, device)
