@@ -3,6 +3,7 @@ episodes, 2 trajectories per expert to keep CI at a few minutes), killed once an
 
 import dataclasses
 import re
+import shutil
 import threading
 import time
 
@@ -132,14 +133,31 @@ def test_stage_keys_chain_through_dependencies(tmp_path):
         return Pipeline(tmp_path, [Stage("a", a_cfg, make("a")), Stage("b", {"x": 1}, make("b")),
                                    Stage("c", {}, make("c"), ("a",))])
 
-    pipe({"v": 1}).run()
+    # sequential runs start stages in pipeline order, so the order is part of the contract
+    pipe({"v": 1}).run(concurrent=False)
     assert ran == ["a", "b", "c"]
-    pipe({"v": 1}).run()
+    pipe({"v": 1}).run(concurrent=False)
     assert ran == ["a", "b", "c"]  # nothing redone
-    pipe({"v": 2}).run()
+    pipe({"v": 2}).run(concurrent=False)
     assert ran == ["a", "b", "c", "a", "c"]  # b does not depend on a
-    pipe({"v": 2}).run(force=("b",))
+    pipe({"v": 2}).run(force=("b",), concurrent=False)
     assert ran[-1] == "b"
+
+
+def test_concurrent_run_respects_dependencies(tmp_path):
+    """Independent stages may start in any order; a dependent one only after its input."""
+    ran = []
+
+    def make(name):
+        return lambda d, deps: ran.append(name) or {"name": name}
+
+    for _ in range(20):
+        ran.clear()
+        shutil.rmtree(tmp_path / "stages", ignore_errors=True)
+        Pipeline(tmp_path, [Stage("a", {}, make("a")), Stage("b", {}, make("b")),
+                            Stage("c", {}, make("c"), ("a",))]).run()
+        assert sorted(ran) == ["a", "b", "c"]
+        assert ran.index("c") > ran.index("a")
 
 
 @pytest.mark.slow
