@@ -41,8 +41,7 @@ from uavris.agents.references import reference_policy  # noqa: E402
 from uavris.config import SystemConfig  # noqa: E402
 from uavris.experiments.train_expert import preset_config, train  # noqa: E402
 from uavris.io import read_json  # noqa: E402
-
-EVAL_SEED = 1_000_000
+from uavris.presets import EVAL_SEED  # noqa: E402
 
 
 def verdict(s: dict, base: dict) -> str:

@@ -56,9 +56,9 @@ from uavris.agents.references import reference_policy  # noqa: E402
 from uavris.config import SCENARIOS, SystemConfig  # noqa: E402
 from uavris.env.simulator import BatchedSimulator  # noqa: E402
 from uavris.physics.phase_opt import DEFAULT_RESTARTS, optimize_slot_phases  # noqa: E402
+from uavris.presets import EVAL_SEED  # noqa: E402
 
 SEED = 0
-EVAL_SEED = 1_000_000
 SPEED_TARGET = 5.0
 QUALITY_TARGET = 0.005
 PLAN_LIMIT_S = 10.0

@@ -93,10 +93,10 @@ from uavris.agents.experts.sb3 import SB3Policy, build_model  # noqa: E402
 from uavris.agents.experts.vec_env import UavRisVecEnv  # noqa: E402
 from uavris.config import SystemConfig  # noqa: E402
 from uavris.env import UavRisD2DEnv  # noqa: E402
+from uavris.presets import EVAL_SEED  # noqa: E402
 
 SEED = 0
 SCENARIO = "fig2"
-EVAL_SEED = 1_000_000
 EVAL_EPISODES = 16
 FULL_BUDGET_S = 240.0
 QUICK_BUDGET_S = 60.0

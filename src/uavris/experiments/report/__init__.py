@@ -20,6 +20,7 @@ from uavris.experiments.report.figures import fig3, interactions_figure, traject
 from uavris.experiments.stages import Pipeline, StageRecord
 from uavris.experiments.study import Track
 from uavris.io import atomic_write_text, read_json
+from uavris.presets import EVAL_SEED
 from uavris.stats import versus
 
 PAPER_FIG2 = {"DDPG": 29.5, "PPO": 25.0, "TD3": 20.5, "SAC": 17.0}
@@ -112,7 +113,7 @@ class _Report:
             if i == 0 and (finetuned / "done.json").exists():
                 tstem = f"{track.prefix}trajectory_{scenario}"
                 trajectory_figure(scenario, finetuned,
-                                  self.rc.system, self.figs / tstem, 1_000_000)
+                                  self.rc.system, self.figs / tstem, EVAL_SEED)
                 self.add(f"![trajectory, {track.name} track](figures/{tstem}.png)", "")
         return results
 
@@ -184,7 +185,8 @@ def write_report(out: Path, rc: Any, pipeline: Pipeline, records: Sequence[Stage
     rep.add(f"# uavris reproduction of the paper, preset `{rc.preset}`", "",
             f"Everything below is read from the stage files under `{out / 'stages'}`; rerunning `uavris reproduce` "
             "with the same parameters skips finished stages. Evaluation: deterministic policies on "
-            f"{rc.n_eval} seeded episodes (seeds 1000000..{1000000 + rc.n_eval - 1}), the same episodes for every "
+            f"{rc.n_eval} seeded episodes (seeds {EVAL_SEED}..{EVAL_SEED + rc.n_eval - 1}), "
+            "the same episodes for every "
             "policy of a scenario. Every policy is read against doing nothing (the zero action: hover at the start, "
             "level, all phases equal) and the oracle (`uavris.agents.oracle`: optimised phases every slot, motion "
             "planned over the whole room; docs/model.md section 19). 'vs zero action' says whether the policy's 95% "
