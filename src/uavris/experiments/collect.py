@@ -22,7 +22,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from uavris.agents.dt.dataset import DATASET_NAMESPACE, load_dataset, write_dataset
+from uavris.agents.dt.dataset import DATASET_NAMESPACE, check_dataset_target, load_dataset, write_dataset
 from uavris.agents.dt.trajectories import Trajectory, record_episodes
 from uavris.agents.experts.sb3 import load_model
 from uavris.errors import UavrisError
@@ -63,8 +63,7 @@ def collect(experts: Sequence[str | Path], trajectories: int, out: str | Path, *
         if cfg.phase_control != phase_control:
             raise UavrisError(f"{run_dir} sets the phases with phase control {cfg.phase_control!r}, {runs[0][0]} "
                               f"with {phase_control!r}; a dataset holds one action layout")
-    if out.exists() and not force:  # checked before the rollouts, not only when writing
-        raise UavrisError(f"{out} already exists; pass --force to replace it")
+    check_dataset_target(out, force)  # before the rollouts, not only when writing
     bar = progress_bar(len(runs) * trajectories, "collect", "episode", progress)
     trajs: list[Trajectory] = []
     try:
@@ -75,11 +74,9 @@ def collect(experts: Sequence[str | Path], trajectories: int, out: str | Path, *
                 batch = record_episodes(policy, system, cfg.scenario, seeds[start:start + 256], expert=str(run_dir),
                                         expert_algo=cfg.algo, phase_control=phase_control)
                 trajs.extend(batch)
-                if bar is not None:
-                    bar.update(len(batch))
+                bar.update(len(batch))
     finally:
-        if bar is not None:
-            bar.close()
+        bar.close()
     description = (f"uavris expert trajectories: {len(runs)} experts x {trajectories} deterministic episodes "
                    f"({', '.join(sorted({cfg.scenario for _, cfg in runs}))})")
     return write_dataset(out, trajs, system, description=description, force=force, phase_control=phase_control,

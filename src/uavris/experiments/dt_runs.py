@@ -46,12 +46,10 @@ INT_COLUMNS = {"step", "round", "env_interactions", "gradient_steps"}
 
 
 def progress_bar(total: int, desc: str, unit: str, enabled: bool, initial: int = 0) -> Any:
-    """A tqdm bar, or None when progress output is off."""
-    if not enabled:
-        return None
+    """A tqdm bar; a disabled one (its calls do nothing) when progress output is off."""
     from tqdm.auto import tqdm
 
-    return tqdm(total=total, initial=initial, unit=unit, desc=desc, dynamic_ncols=True)
+    return tqdm(total=total, initial=initial, unit=unit, desc=desc, dynamic_ncols=True, disable=not enabled)
 
 
 def prepare_run_dir(run_dir: Path, kind: str, cfg_dict: dict[str, Any], resume: bool, force: bool) -> bool:
@@ -126,7 +124,7 @@ def dt_model_dir(path: str | Path) -> Path | None:
 def load_dt_policy(path: str | Path, target_return: float | None = None,
                    device: str = "cpu") -> tuple[DTBatchPolicy, SystemConfig, str | None]:
     """(deterministic batch policy, its system config, its own scenario or None) of a DT target."""
-    from uavris.experiments.train_expert import configure_torch_threads
+    from uavris.experiments.jobs import configure_torch_threads
 
     configure_torch_threads()
     model_dir = dt_model_dir(path)

@@ -43,13 +43,13 @@ from typing import Any
 
 import numpy as np
 
-from uavris.agents.dt.checkpoint import load_dt, save_dt
-from uavris.agents.dt.policy import DTBatchPolicy
+from uavris.agents.dt.checkpoint import save_dt
+from uavris.agents.dt.policy import DTBatchPolicy, dt_policy_from_checkpoint
 from uavris.agents.dt.trainer import load_trainer_state, make_optimizer, train_steps
 from uavris.agents.dt.trajectories import ELITE_RULES, TrainingWindows, record_episodes, select_elites
 from uavris.agents.evaluation import evaluate
 from uavris.config import check_non_negative, check_positive, get_scenario
-from uavris.errors import ConfigError, UavrisError
+from uavris.errors import ConfigError
 from uavris.experiments.dt_runs import (
     FINETUNE_KIND,
     INT_COLUMNS,
@@ -63,8 +63,9 @@ from uavris.experiments.dt_runs import (
     write_checkpoint,
 )
 from uavris.experiments.jobs import configure_torch_threads
-from uavris.io import read_rows, write_csv, write_json
+from uavris.io import read_rows, write_csv
 from uavris.presets import EVAL_SEED, FINETUNE, FINETUNE_SEED, check_preset
+from uavris.runs import write_done
 
 ROUND_HEADER = ("round", "env_interactions", "gradient_steps", "candidate_mean_return", "candidate_avg_sum_rate",
                 "elite_mean_return", "elite_min_return", "loss", "eval_mean", "eval_ci_low", "eval_ci_high")
@@ -137,12 +138,10 @@ def finetune(cfg: FinetuneConfig, run_dir: str | Path, *, resume: bool = False, 
     configure_torch_threads()
     run_dir = Path(run_dir)
     model_dir = dt_model_dir(cfg.model) or Path(cfg.model)  # a run directory stands for its final model
-    model, pre_meta = load_dt(model_dir, device)
+    base, pre_meta = dt_policy_from_checkpoint(model_dir, cfg.target_return, device=device)
+    model, target, phase_control = base.model, base.target_return, base.phase_control
     system = checkpoint_system(pre_meta, model_dir)
     get_scenario(cfg.scenario).validate_for(system)
-    target = cfg.target_return if cfg.target_return is not None else pre_meta.get("target_return")
-    if target is None:
-        raise UavrisError(f"{cfg.model} stores no target return; pass --target-return")
     resuming = prepare_run_dir(run_dir, FINETUNE_KIND, dataclasses.asdict(cfg), resume, force)
     torch.manual_seed(cfg.seed)
     rng = np.random.default_rng(cfg.seed)
@@ -150,7 +149,6 @@ def finetune(cfg: FinetuneConfig, run_dir: str | Path, *, resume: bool = False, 
     model_meta = {**{k: v for k, v in pre_meta.items() if k not in ("kind", "format_version", "config")},
                   "stage": "finetune", "scenario": cfg.scenario, "pretrained_model": str(cfg.model),
                   "target_return": float(target)}
-    phase_control = pre_meta.get("phase_control", "agent")
 
     def dt_policy(sigma: float = 0.0, noise_seed: int | None = None) -> DTBatchPolicy:
         return DTBatchPolicy(model, target, sigma, noise_seed, phase_control)
@@ -201,18 +199,16 @@ def finetune(cfg: FinetuneConfig, run_dir: str | Path, *, resume: bool = False, 
             write_checkpoint(run_dir, h, model, {**model_meta, "env_interactions": interactions,
                                                   "finetune_rounds": h, "finetune_gradient_steps": steps}, opt, rng,
                               {"gradient_steps": steps, "env_interactions": interactions}, prefix="round")
-            if bar is not None:
-                bar.update(1)
-                bar.set_postfix(eval=f"{ev['mean']:.2f}", refresh=False)
+            bar.update(1)
+            bar.set_postfix(eval=f"{ev['mean']:.2f}", refresh=False)
             if interrupt_after_round is not None and h >= interrupt_after_round:
                 raise KeyboardInterrupt(f"interrupted after round {h} (test hook)")
     finally:
         writer.close()
-        if bar is not None:
-            bar.close()
+        bar.close()
     save_dt(model, run_dir, {**model_meta, "env_interactions": interactions, "finetune_rounds": cfg.rounds,
                              "finetune_gradient_steps": steps})
-    write_json(run_dir / "done.json", {
+    write_done(run_dir, {
         "rounds": cfg.rounds, "env_interactions": interactions, "gradient_steps": steps,
         "zero_shot_eval": {"mean": rows[0][8], "ci_low": rows[0][9], "ci_high": rows[0][10]},
         "final_eval": {"mean": rows[-1][8], "ci_low": rows[-1][9], "ci_high": rows[-1][10],

@@ -43,8 +43,9 @@ from uavris.experiments.dt_runs import (
     write_checkpoint,
 )
 from uavris.experiments.jobs import configure_torch_threads
-from uavris.io import read_rows, write_csv, write_json
+from uavris.io import read_rows, write_csv
 from uavris.presets import PRETRAIN, check_preset
+from uavris.runs import write_done
 
 TARGET_QUANTILE = 0.9
 LOG_HEADER = ("step", "loss", "learning_rate", "samples_per_s")
@@ -145,8 +146,7 @@ def pretrain(cfg: PretrainConfig, run_dir: str | Path, *, resume: bool = False, 
         nonlocal window_t
         window_losses.append(loss)
         writer.add_scalar("train/loss", loss, step)
-        if bar is not None:
-            bar.update(1)
+        bar.update(1)
         if step % cfg.log_every == 0 or step == cfg.steps:
             now = time.perf_counter()
             rate = len(window_losses) * cfg.batch_size / max(now - window_t, 1e-9)
@@ -154,8 +154,7 @@ def pretrain(cfg: PretrainConfig, run_dir: str | Path, *, resume: bool = False, 
             log.append([step, float(np.mean(window_losses)), lr, rate])
             writer.add_scalar("train/learning_rate", lr, step)
             writer.add_scalar("perf/samples_per_s", rate, step)
-            if bar is not None:
-                bar.set_postfix(loss=f"{np.mean(window_losses):.4f}", refresh=False)
+            bar.set_postfix(loss=f"{np.mean(window_losses):.4f}", refresh=False)
             window_losses.clear()
             window_t = now
         if step % cfg.checkpoint_every == 0 and step < cfg.steps:
@@ -170,15 +169,13 @@ def pretrain(cfg: PretrainConfig, run_dir: str | Path, *, resume: bool = False, 
                               cfg.warmup_steps, cfg.grad_clip, on_step)
     finally:
         writer.close()
-        if bar is not None:
-            bar.close()
+        bar.close()
     write_csv(run_dir / "train_log.csv", LOG_HEADER, log)
     write_checkpoint(run_dir, cfg.steps, model, {**model_meta, "gradient_steps": cfg.steps}, opt, rng,
                       {"log_rows": len(log)})
     save_dt(model, run_dir, {**model_meta, "gradient_steps": cfg.steps})
     final_loss = float(np.mean(losses[-cfg.log_every:])) if losses else (log[-1][1] if log else float("nan"))
-    write_json(run_dir / "done.json", {"gradient_steps": cfg.steps, "final_loss": final_loss,
-                                       "episodes": len(ds.trajectories), "slots": ds.num_slots,
-                                       "target_return": model_meta["target_return"],
-                                       "wall_clock_s_last_session": time.perf_counter() - t0})
+    write_done(run_dir, {"gradient_steps": cfg.steps, "final_loss": final_loss, "episodes": len(ds.trajectories),
+                         "slots": ds.num_slots, "target_return": model_meta["target_return"],
+                         "wall_clock_s_last_session": time.perf_counter() - t0})
     return run_dir

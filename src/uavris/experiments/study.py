@@ -31,8 +31,8 @@ import numpy as np
 from uavris.agents.experts.imitation import ImitationConfig
 from uavris.config import SCENARIOS, TRAINING_SCENARIOS, SystemConfig, get_scenario
 from uavris.experiments.train_expert import TrainConfig, preset_config
-from uavris.io import read_json
 from uavris.presets import EVAL_SEED, STRONG_IMITATION, STRONG_RL_STEPS
+from uavris.runs import read_done
 
 TRANSFER_NEIGHBOURS = 2
 TRACKS: tuple[str, ...] = ("paper", "strong")
@@ -87,7 +87,7 @@ def pretrain_job(cfg_dict: dict[str, Any], out: str, device: str = "cpu") -> dic
 
     model_dir = Path(out)
     pretrain(PretrainConfig(**cfg_dict), model_dir, resume=model_dir.exists(), progress=False, device=device)
-    return read_json(model_dir / "done.json")
+    return read_done(model_dir)
 
 
 def finetune_job(cfg_dict: dict[str, Any], out: str, device: str = "cpu") -> dict[str, Any]:
@@ -96,7 +96,7 @@ def finetune_job(cfg_dict: dict[str, Any], out: str, device: str = "cpu") -> dic
 
     model_dir = Path(out)
     finetune(FinetuneConfig(**cfg_dict), model_dir, resume=model_dir.exists(), progress=False, device=device)
-    return read_json(model_dir / "done.json")
+    return read_done(model_dir)
 
 
 def evaluate_job(out: str, scenario: str, track: str, system_dict: dict[str, Any], episodes: int,

@@ -17,7 +17,7 @@ import torch
 
 from uavris.agents.dt.model import DecisionTransformer, DTConfig
 from uavris.errors import CheckpointError, ConfigError
-from uavris.io import atomic_write_bytes
+from uavris.io import atomic_write_bytes, write_json
 
 MODEL_KIND = "uavris-decision-transformer"
 MODEL_FORMAT_VERSION = 1
@@ -37,7 +37,7 @@ def save_dt(model: DecisionTransformer, directory: str | Path, metadata: dict[st
     atomic_write_bytes(directory / WEIGHTS_FILE, save(tensors))
     meta = {"kind": MODEL_KIND, "format_version": MODEL_FORMAT_VERSION, "config": model.cfg.to_dict(),
             **(metadata or {})}
-    atomic_write_bytes(directory / META_FILE, (json.dumps(meta, indent=2) + "\n").encode("utf-8"))
+    write_json(directory / META_FILE, meta)
     return directory
 
 

@@ -113,15 +113,27 @@ def env_spec_for(system: SystemConfig, scenario: str):
     return spec
 
 
+def check_dataset_target(path: Path, force: bool) -> None:
+    """Refuse to write a dataset at ``path`` when something is there: a dataset without
+    ``force``, and a non-empty directory that is not a dataset ever."""
+    if path.exists():
+        if not path.is_dir():
+            raise DatasetError(f"{path} exists and is not a directory; refusing to overwrite it")
+        if not (path / "data" / "metadata.json").exists() and any(path.iterdir()):
+            raise DatasetError(f"{path} exists and is not a dataset; refusing to overwrite it")
+        if not force:
+            raise DatasetError(f"{path} already exists; pass --force to replace it")
+
+
 def write_dataset(path: str | Path, trajectories: Sequence[Trajectory], system: SystemConfig, *,
                   description: str = "", force: bool = False, phase_control: str = "agent",
-                  namespace: str | None = None, scenario: str | None = None) -> Path:
+                  namespace: str | None = None) -> Path:
     """Write ``trajectories`` as a Minari dataset at ``path`` (see the module docstring).
 
     The id is :func:`dataset_id_for` ``(path, namespace)``. The environment spec recorded
-    for ``recover_environment`` (and as the evaluation one) is ``system`` in ``scenario``,
-    by default the first trajectory's: a spec holds one scenario while a dataset may mix
-    several, each episode's being in its metadata.
+    for ``recover_environment`` (and as the evaluation one) is ``system`` in the first
+    trajectory's scenario: a spec holds one scenario while a dataset may mix several, each
+    episode's being in its metadata.
 
     The dataset is built in a temporary sibling directory and renamed into place, so an
     interrupted write never leaves a half dataset. An existing dataset is replaced only
@@ -136,15 +148,11 @@ def write_dataset(path: str | Path, trajectories: Sequence[Trajectory], system: 
     path = given.absolute()  # Minari mis-joins relative paths when it sizes the dataset
     if not trajectories:
         raise DatasetError("no trajectories to write")
-    if path.exists():
-        if not (path / "data" / "metadata.json").exists() and any(path.iterdir()):
-            raise DatasetError(f"{path} exists and is not a dataset; refusing to overwrite it")
-        if not force:
-            raise DatasetError(f"{path} already exists; pass --force to replace it")
+    check_dataset_target(path, force)
     act_dim = action_dim_for(system, phase_control)
     for tr in trajectories:
         _check_trajectory(tr, system.observation_dim, act_dim, f"trajectory (seed {tr.seed})")
-    env_spec = env_spec_for(system, trajectories[0].scenario if scenario is None else scenario)
+    env_spec = env_spec_for(system, trajectories[0].scenario)
     tmp = path.parent / f".{path.name}.tmp"
     shutil.rmtree(tmp, ignore_errors=True)
     tmp.mkdir(parents=True)

@@ -166,5 +166,5 @@ def dt_policy_from_checkpoint(directory: str | Path, target_return: float | None
     model, meta = load_dt(directory, device)
     target = meta.get("target_return") if target_return is None else target_return
     if target is None:
-        raise CheckpointError(f"{directory} stores no target return; pass one")
+        raise CheckpointError(f"{directory} stores no target return; pass one (--target-return)")
     return DTBatchPolicy(model, float(target), noise_sigma, seed, meta.get("phase_control", "agent")), meta

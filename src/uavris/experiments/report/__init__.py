@@ -21,6 +21,7 @@ from uavris.experiments.stages import Pipeline, StageRecord
 from uavris.experiments.study import Track
 from uavris.io import atomic_write_text, read_json
 from uavris.presets import EVAL_SEED
+from uavris.runs import is_finished
 from uavris.stats import versus
 
 PAPER_FIG2 = {"DDPG": 29.5, "PPO": 25.0, "TD3": 20.5, "SAC": 17.0}
@@ -110,7 +111,7 @@ class _Report:
             self.add("")
             self._claims(track, scenario, res)
             finetuned = self.pipeline.directory(track.stage(f"finetune-{scenario}")) / "model"
-            if i == 0 and (finetuned / "done.json").exists():
+            if i == 0 and is_finished(finetuned):
                 tstem = f"{track.prefix}trajectory_{scenario}"
                 trajectory_figure(scenario, finetuned,
                                   self.rc.system, self.figs / tstem, EVAL_SEED)
