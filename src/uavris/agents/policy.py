@@ -19,7 +19,7 @@ the Decision Transformer and the oracle each live with their family).
 
 from __future__ import annotations
 
-from typing import Any, Callable, ClassVar, Protocol, runtime_checkable
+from typing import Callable, ClassVar, Protocol, runtime_checkable
 
 import numpy as np
 from numpy.typing import NDArray
@@ -55,10 +55,8 @@ class Privileged:
 
     privileged: ClassVar[bool] = True
 
-    def __init__(self, fn: Callable[[NDArray[np.float32], BatchedSimulator], NDArray[np.float32]],
-                 phase_control: str = "agent") -> None:
+    def __init__(self, fn: Callable[[NDArray[np.float32], BatchedSimulator], NDArray[np.float32]]) -> None:
         self.fn = fn
-        self.phase_control = phase_control
 
     def __call__(self, obs: NDArray[np.float32], sim: BatchedSimulator) -> NDArray[np.float32]:
         return self.fn(obs, sim)
@@ -74,5 +72,3 @@ class Constant:
     def __call__(self, obs: NDArray[np.float32]) -> NDArray[np.float32]:
         return np.broadcast_to(self.action, (obs.shape[0], self.action.size)).copy()
 
-
-AnyPolicy = Any  # Policy | EpisodicPolicy | PrivilegedPolicy

@@ -13,11 +13,12 @@ from typing import Any
 from uavris.agents.evaluation import EpisodeResults, check_episodes, evaluate
 from uavris.agents.references import REFERENCE_SEED, REFERENCES, reference_policy
 from uavris.config import SystemConfig, get_scenario
+from uavris.env.rollout import policy_phase_control
 from uavris.env.wrappers import check_phase_control
 from uavris.errors import UavrisError
 from uavris.experiments.dt_runs import dt_model_dir, load_dt_policy
 from uavris.experiments.jobs import configure_torch_threads
-from uavris.experiments.train_expert import final_model_path, load_model, load_run_config, run_policy
+from uavris.experiments.train_expert import load_run_policy
 from uavris.io import write_csv, write_json
 
 BASELINE_PREFIX = "baseline:"
@@ -42,7 +43,6 @@ class Target:
     system: SystemConfig
     scenario: str | None  # the run's own scenario (None: a reference or a pre-trained DT)
     run_dir: Path | None  # None for a reference
-    phase_control: str  # how it was trained: "agent" (all entries) or "optimizer" (motion only)
 
 
 def resolve_policy(target: str, device: str = "cpu") -> Target:
@@ -55,18 +55,17 @@ def resolve_policy(target: str, device: str = "cpu") -> Target:
     name = reference_name(target)
     if name is not None:
         policy = reference_policy(name, SystemConfig(), REFERENCE_SEED)
-        return Target(policy, SystemConfig(), None, None, getattr(policy, "phase_control", "agent"))
+        return Target(policy, SystemConfig(), None, None)
     run_dir = Path(target)
     if not run_dir.is_dir():
         raise UavrisError(f"{run_dir} is not a directory (expected a run directory, a model directory or one of the "
                           f"references {', '.join(REFERENCES)})")
     if dt_model_dir(run_dir) is not None:  # a Decision Transformer model or DT run directory
         policy, system, scenario = load_dt_policy(run_dir, device=device)
-        return Target(policy, system, scenario, run_dir, policy.phase_control)
-    cfg = load_run_config(run_dir)
+        return Target(policy, system, scenario, run_dir)
     configure_torch_threads()
-    model = load_model(final_model_path(run_dir), cfg.algo, device=device)
-    return Target(run_policy(model, cfg), cfg.system, cfg.scenario, run_dir, cfg.phase_control)
+    cfg, policy = load_run_policy(run_dir, device)
+    return Target(policy, cfg.system, cfg.scenario, run_dir)
 
 
 def write_results(res: EpisodeResults, summary: dict[str, Any], stem: Path) -> None:
@@ -88,7 +87,7 @@ def evaluate_target(target: str, scenario: str | None, episodes: int, seed: int,
         check_phase_control(phase_control)
     resolved = resolve_policy(target, device)
     policy, system, own_scenario, run_dir = resolved.policy, resolved.system, resolved.scenario, resolved.run_dir
-    if phase_control == "agent" and resolved.phase_control == "optimizer":
+    if phase_control == "agent" and policy_phase_control(policy) == "optimizer":
         raise UavrisError(f"{target} acts on the motion only (trained with the optimiser setting the phases, the "
                           "strong track); it cannot be evaluated with --phase-control agent")
     scenario = scenario or own_scenario

@@ -120,14 +120,14 @@ def evaluate_policies(out: Path, scenario: str, track: Track, system: SystemConf
     from uavris.experiments.dt_runs import load_dt_policy
     from uavris.experiments.evaluate import write_results
     from uavris.experiments.jobs import configure_torch_threads
-    from uavris.experiments.train_expert import final_model_path, load_model, load_run_config, run_policy
+    from uavris.experiments.train_expert import load_run_policy
     from uavris.stats import summarize
 
     configure_torch_threads()
 
     def expert(run_dir: Path) -> tuple[str, Any]:
-        cfg = load_run_config(run_dir)
-        return cfg.algo.upper(), run_policy(load_model(final_model_path(run_dir), cfg.algo), cfg)
+        cfg, policy = load_run_policy(run_dir)
+        return cfg.algo.upper(), policy
 
     policies: dict[str, tuple[str, Any]] = {}
     algo, policy = expert(dirs["experts-unseen"] / "runs" / scenario)

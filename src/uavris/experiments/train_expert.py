@@ -218,6 +218,12 @@ def run_policy(model: Any, cfg: TrainConfig) -> SB3Policy:
     return SB3Policy(model, cfg.phase_control)
 
 
+def load_run_policy(run_dir: str | Path, device: str = "cpu") -> tuple[TrainConfig, SB3Policy]:
+    """A finished run's configuration and its deterministic policy (the final model)."""
+    cfg = load_run_config(run_dir)
+    return cfg, run_policy(load_model(final_model_path(run_dir), cfg.algo, device=device), cfg)
+
+
 def run_evaluation(model: Any, cfg: TrainConfig, episodes: int) -> EpisodeResults:
     """The run's deterministic evaluation on its own scenario and evaluation episodes."""
     return evaluate(run_policy(model, cfg), cfg.system, cfg.scenario, episodes, cfg.eval_seed)

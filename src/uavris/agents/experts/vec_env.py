@@ -22,7 +22,7 @@ from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvIndices,
 
 from uavris.config import Scenario, SystemConfig
 from uavris.env.simulator import BatchedSimulator, observation_bounds
-from uavris.env.wrappers import MOTION_DIM, check_phase_control, optimised_action
+from uavris.env.wrappers import action_dim_for, check_phase_control, optimised_action
 
 
 class UavRisVecEnv(VecEnv):
@@ -47,8 +47,7 @@ class UavRisVecEnv(VecEnv):
         self.phase_control = phase_control
         low, high = observation_bounds(self.config)
         obs_space = gym.spaces.Box(low, high, dtype=np.float32)
-        dim = MOTION_DIM if phase_control == "optimizer" else self.config.action_dim
-        act_space = gym.spaces.Box(-1.0, 1.0, (dim,), dtype=np.float32)
+        act_space = gym.spaces.Box(-1.0, 1.0, (action_dim_for(self.config, phase_control),), dtype=np.float32)
         super().__init__(num_envs, obs_space, act_space)
         self.reward_scale = float(reward_scale)
         self._actions: np.ndarray | None = None
