@@ -73,9 +73,10 @@ def write_yaml(path: str | Path, obj: Any) -> None:
     atomic_write_text(path, yaml.safe_dump(to_plain(obj), sort_keys=False))
 
 
-def _read(path: str | Path, parse: Any, errors: tuple[type[Exception], ...], kind: str) -> Any:
+def _read(path: str | Path, parse: Any, errors: tuple[type[Exception], ...], kind: str,
+          newline: str | None = None) -> Any:
     try:
-        with open(path, encoding="utf-8") as f:
+        with open(path, encoding="utf-8", newline=newline) as f:
             return parse(f)
     except FileNotFoundError:
         raise UavrisError(f"{path} does not exist") from None
@@ -126,8 +127,4 @@ def read_rows(path: str | Path, header: Sequence[str], limit: int, int_columns: 
 
 
 def read_csv(path: str | Path) -> list[dict[str, str]]:
-    try:
-        with open(path, encoding="utf-8", newline="") as f:
-            return list(csv.DictReader(f))
-    except FileNotFoundError:
-        raise UavrisError(f"{path} does not exist") from None
+    return _read(path, lambda f: list(csv.DictReader(f)), (csv.Error,), "CSV", newline="")

@@ -35,8 +35,11 @@ def prepare(run_dir: Path, config_file: str, write_config: Callable[[Path], None
     ``write_config(path)`` writes a new run's configuration; ``same_config(path)`` says
     whether the stored one equals the requested one. Raises :class:`UavrisError` for a
     finished run (unless ``force``), an existing run without ``resume`` or ``force``, a
-    resume with another configuration, and a directory that is not a run (never deleted).
+    resume with another configuration, a file in the run directory's place, and a
+    directory that is not a run (never deleted).
     """
+    if run_dir.exists() and not run_dir.is_dir():
+        raise UavrisError(f"{run_dir} exists and is not a directory")
     cfg_path = run_dir / config_file
     has_config = cfg_path.exists()
     if force and run_dir.exists() and not resume:
