@@ -88,14 +88,19 @@ def trajectory_figure(scenario: str, model_dir: Path, system: Any, stem: Path, s
     from uavris.env.rollout import rollout
 
     policy, _, _ = load_dt_policy(model_dir)
-    pos, normals = [], []
+    pos, normals, sims = [], [], []
+
+    def pose(sim: Any) -> None:
+        pos.append(sim.pos[0].copy())
+        normals.append(ph.ris_axes(sim.att[0])[:, 2])
 
     def track(sim: Any, obs: Any, executed: Any, alive: Any) -> None:
+        sims[:] = [sim]
         if alive[0]:
-            pos.append(sim.pos[0].copy())
-            normals.append(ph.ris_axes(sim.att[0])[:, 2])
+            pose(sim)
 
     rollout(policy, system, scenario, [seed], on_slot=track)
+    pose(sims[0])  # the hook sees the state before each step; the path ends where the last step left it
     pos, normals = np.array(pos), np.array(normals)
     fig = plt.figure(figsize=(4.8, 4.0))
     ax = fig.add_subplot(projection="3d")
