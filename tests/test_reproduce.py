@@ -111,16 +111,26 @@ def test_changed_parameter_invalidates_exactly_its_dependents(tmp_path):
 
     def changed(**kw):
         other = build_pipeline(dataclasses.replace(RC, **kw), tmp_path, ctx)
-        return {n for n in base.stages if base.stages[n].key != other.stages[n].key}
+        return {n for n in base.stages if n not in other.stages or base.stages[n].key != other.stages[n].key}
 
     dt = {"dataset", "pretrain", "finetune-unseen1", "finetune-unseen2", "evaluate-unseen1", "evaluate-unseen2"}
-    assert changed(trajectories=3) == dt | {f"strong-{n}" for n in dt}
+    deploy = {n for n in base.stages if n.startswith("deploy-")}
+    assert deploy == {"deploy-experts-train", "deploy-dataset", "deploy-pretrain", "deploy-bc", "deploy-pretrain-n1",
+                      "deploy-finetune-layout-unseen-0", "deploy-finetune-layout-unseen-1",
+                      "deploy-evaluate-layout-unseen-0", "deploy-evaluate-layout-unseen-1"}
+    assert changed(trajectories=3) == dt | {f"strong-{n}" for n in dt} | deploy - {"deploy-experts-train"}
     # the paper track's experts follow the comparison (they are its winner's)
     assert changed(compare_seeds=2) == {"compare", "experts-train", "experts-unseen"} | dt
     assert changed(expert_algo="ppo") == {"experts-train", "experts-unseen"} | dt
     assert changed(system=SystemConfig(noise_dbm=-90.0)) == set(base.stages)
+    # other layouts: only the deployment track's stages
+    assert changed(layout_seed=1) == deploy
+    assert changed(scaling=()) == {"deploy-pretrain-n1", "deploy-evaluate-layout-unseen-0",
+                                   "deploy-evaluate-layout-unseen-1"}
     assert set(build_pipeline(dataclasses.replace(RC, track="strong"), tmp_path, ctx).stages) == {
         n for n in base.stages if n.startswith("strong-")}
+    assert set(build_pipeline(dataclasses.replace(RC, track="deployment"), tmp_path, ctx).stages) == deploy
+    assert "compare" not in build_pipeline(dataclasses.replace(RC, track="deployment"), tmp_path, ctx).stages
 
 
 def test_stage_keys_chain_through_dependencies(tmp_path):

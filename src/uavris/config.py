@@ -16,7 +16,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass, field
-from typing import Any, Sequence
+from typing import Any, Mapping, Sequence
 
 from uavris.errors import ConfigError
 
@@ -40,6 +40,14 @@ def _finite(x: Any) -> bool:
         return math.isfinite(float(x))
     except (TypeError, ValueError):
         return False
+
+
+def float_tuple(value: Any, owner: str, name: str, allowed: str) -> tuple[float, ...]:
+    """``value`` as a tuple of floats, or a one-line :class:`ConfigError` naming the field."""
+    try:
+        return tuple(float(v) for v in value)
+    except (TypeError, ValueError):
+        raise ConfigError(f"{owner}.{name} must be {allowed}, got {value!r}") from None
 
 
 def check_positive(owner: str, cfg: Any, names: Sequence[str]) -> None:
@@ -105,26 +113,29 @@ class SystemConfig:
     z_min: float = 2.0
     z_max: float = 8.0
     safety_distance: float = 3.0  # least UAV-device distance, m (docs/model.md, defaults table)
+    min_device_spacing: float = 5.0  # least horizontal distance between two devices, m (docs/model.md, section 21)
     energy_budget_j: float = 8000.0  # E_max
     max_active_pairs: int | None = None  # None: floor(K/2)
     angle_dependent_reflection: bool = True  # False: r = r_pre (ideal RIS)
     learn_amplitudes: bool = False  # True: N extra action entries set |r_pre| in [0, 1]
     channel_ref_distance: float = 10.0  # observation scale for channels, m
+    observe_devices: bool = False  # True: the observation ends with the device positions (docs/model.md, section 21)
     propulsion: PropulsionParams = field(default_factory=PropulsionParams)
 
     def __post_init__(self) -> None:
         o = "SystemConfig"
         # Normalise list inputs (from YAML or the CLI) to tuples so the config stays hashable.
-        object.__setattr__(self, "room", tuple(float(v) for v in self.room))
-        object.__setattr__(self, "users", tuple(tuple(float(c) for c in u) for u in self.users))
+        object.__setattr__(self, "room", float_tuple(self.room, o, "room", "three finite lengths > 0 (x, y, z in m)"))
+        _check(isinstance(self.users, (list, tuple)), o, "users", "a list of [x, y, z] device positions (m)",
+               self.users)
+        object.__setattr__(self, "users", tuple(float_tuple(u, o, f"users[{k}]", "a point [x, y, z] (m)")
+                                                for k, u in enumerate(self.users)))
         if isinstance(self.propulsion, dict):
             object.__setattr__(self, "propulsion", PropulsionParams(**self.propulsion))
         _check(len(self.room) == 3 and all(_finite(v) and v > 0 for v in self.room), o, "room",
                "three finite lengths > 0 (x, y, z in m)", self.room)
         _check(len(self.users) >= 2, o, "users", "a list of at least 2 positions (K >= 2)", len(self.users))
-        for k, u in enumerate(self.users):
-            inside = len(u) == 3 and all(_finite(c) and 0.0 <= c <= r for c, r in zip(u, self.room))
-            _check(inside, o, f"users[{k}]", f"a point inside the room [0, {self.room}]", u)
+        _check(isinstance(self.observe_devices, bool), o, "observe_devices", "true or false", self.observe_devices)
         for name in ("nx", "ny", "horizon"):
             v = getattr(self, name)
             _check(isinstance(v, int) and not isinstance(v, bool) and v >= 1, o, name, "an integer >= 1", v)
@@ -142,10 +153,30 @@ class SystemConfig:
                "a finite distance >= 0 (m)", self.safety_distance)
         _check(_finite(self.z_min) and _finite(self.z_max) and 0 <= self.z_min < self.z_max <= self.room[2],
                o, "z_min/z_max", f"0 <= z_min < z_max <= room height {self.room[2]}", (self.z_min, self.z_max))
+        self._check_devices()
         kmax = self.num_users // 2
         if self.max_active_pairs is not None:
             v = self.max_active_pairs
             _check(isinstance(v, int) and 1 <= v <= kmax, o, "max_active_pairs", f"an integer in [1, {kmax}]", v)
+
+    def _check_devices(self) -> None:
+        """Every device inside the room, below the UAV's floor, and apart from the others."""
+        o = "SystemConfig"
+        for k, u in enumerate(self.users):
+            inside = len(u) == 3 and all(_finite(c) and 0.0 <= c <= r for c, r in zip(u, self.room))
+            _check(inside, o, f"users[{k}]", f"a point inside the room [0, {self.room}]", list(u))
+            # The model has every device below the RIS (docs/model.md, section 3): a device above
+            # the UAV's floor would be cut off by back-side blocking whenever the UAV flies lower.
+            _check(u[2] < self.z_min, o, f"users[{k}]", f"below the UAV's floor z_min = {self.z_min:g} m "
+                   f"(a device height < {self.z_min:g})", list(u))
+        _check(_finite(self.min_device_spacing) and self.min_device_spacing >= 0, o, "min_device_spacing",
+               "a finite distance >= 0 (m)", self.min_device_spacing)
+        for i in range(len(self.users)):
+            for j in range(i + 1, len(self.users)):
+                gap = math.dist(self.users[i][:2], self.users[j][:2])
+                _check(gap >= self.min_device_spacing, o, f"users[{j}]",
+                       f"at least min_device_spacing = {self.min_device_spacing:g} m (horizontally) from every other "
+                       f"device, but it is {gap:.2f} m from users[{i}] = {list(self.users[i])}", list(self.users[j]))
 
     @property
     def num_users(self) -> int:
@@ -176,7 +207,7 @@ class SystemConfig:
     @property
     def observation_dim(self) -> int:
         k, n = self.num_users, self.num_elements
-        return 3 + 3 + 6 + 2 * k * n + k * k + 2
+        return 3 + 3 + 6 + 2 * k * n + k * k + 2 + (3 * k if self.observe_devices else 0)
 
     @property
     def region_low(self) -> Vec3:
@@ -219,7 +250,7 @@ class SystemConfig:
 
 
 # Values of fields that did not exist when older run files were written (see from_stored).
-STORED_BEFORE_FIELD: dict[str, Any] = {"safety_distance": 0.0}
+STORED_BEFORE_FIELD: dict[str, Any] = {"safety_distance": 0.0, "min_device_spacing": 0.0}
 
 
 @dataclass(frozen=True)
@@ -233,6 +264,10 @@ class Scenario:
         object.__setattr__(self, "start", tuple(float(c) for c in self.start))
         _check(len(self.start) == 3 and all(_finite(c) for c in self.start), "Scenario", "start",
                "three finite coordinates", self.start)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-native form that :func:`get_scenario` reads back."""
+        return {"name": self.name, "start": list(self.start)}
 
     def validate_for(self, config: SystemConfig) -> None:
         """The start must lie in the flight region and keep the safety distance from every device."""
@@ -269,14 +304,26 @@ TRAINING_SCENARIOS: tuple[str, ...] = tuple(f"train{i}" for i in range(1, 9))
 UNSEEN_SCENARIOS: tuple[str, ...] = ("unseen1", "unseen2")
 
 
-def get_scenario(scenario: str | Scenario | tuple[float, float, float] | list[float]) -> Scenario:
-    """Resolve a scenario name, a :class:`Scenario`, or a start position ``[x, y, z]``."""
+def get_scenario(scenario: str | Scenario | Mapping[str, Any] | Sequence[float]) -> Scenario:
+    """Resolve a scenario name, a :class:`Scenario`, ``{"name": ..., "start": [x, y, z]}`` (as
+    :meth:`Scenario.to_dict` writes it, e.g. in an environment spec) or a start ``[x, y, z]``."""
     if isinstance(scenario, Scenario):
         return scenario
     if isinstance(scenario, str):
         if scenario not in SCENARIOS:
             raise ConfigError(f"unknown scenario {scenario!r}; choose one of {sorted(SCENARIOS)}")
         return SCENARIOS[scenario]
+    if isinstance(scenario, Mapping) and set(scenario) == {"name", "start"}:
+        return Scenario(str(scenario["name"]), tuple(scenario["start"]))
     if isinstance(scenario, (tuple, list)) and len(scenario) == 3:
         return Scenario("custom", tuple(scenario))
     raise ConfigError(f"scenario must be a name, a Scenario or [x, y, z], got {scenario!r}")
+
+
+def scenario_at(name: str, start: Sequence[float] | None) -> Scenario:
+    """The scenario ``name`` starting at ``start``; a named scenario's own start when ``start`` is None.
+
+    Configs that may run in a hall of their own (a layout, :mod:`uavris.layouts`) store the
+    scenario's name and its start, so they hold everything the run needs.
+    """
+    return get_scenario(name) if start is None else Scenario(name, tuple(start))

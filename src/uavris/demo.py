@@ -11,20 +11,24 @@ import sys
 
 from uavris.agents.evaluation import check_episodes, evaluate
 from uavris.agents.references import REFERENCES, reference_policy
-from uavris.config import SystemConfig, get_scenario
+from uavris.config import Scenario, SystemConfig, get_scenario
 
 DEMO_POLICIES = ("hover", "random", "hover-aligned")
 
 
-def run_demo(episodes: int = 32, seed: int = 0, scenario: str = "fig2") -> dict[str, float]:
-    """Print and return each demo policy's mean average sum rate over ``episodes`` seeded episodes."""
+def run_demo(episodes: int = 32, seed: int = 0, scenario: str | Scenario = "fig2",
+             system: SystemConfig | None = None) -> dict[str, float]:
+    """Print and return each demo policy's mean average sum rate over ``episodes`` seeded episodes
+    of ``system`` (default: the paper's)."""
     check_episodes(episodes, seed)
-    cfg = SystemConfig()
-    start = get_scenario(scenario).start
-    print(f"uavris demo: scenario {scenario} {start}, {episodes} episodes, T = {cfg.horizon} slots of {cfg.slot_s} s")
+    cfg = system or SystemConfig()
+    where = get_scenario(scenario)
+    where.validate_for(cfg)
+    print(f"uavris demo: scenario {where.name} {[round(c, 2) for c in where.start]}, {episodes} episodes, "
+          f"T = {cfg.horizon} slots of {cfg.slot_s} s")
     means = {}
     for name in DEMO_POLICIES:
-        res = evaluate(reference_policy(name, cfg), cfg, scenario, episodes, seed)
+        res = evaluate(reference_policy(name, cfg), cfg, where, episodes, seed)
         s = res.summary()
         means[name] = s["mean"]
         print(f"  {REFERENCES[name].label:42s} average sum rate {s['mean']:6.2f} bps/Hz "

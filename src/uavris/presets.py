@@ -63,6 +63,16 @@ STUDY_EVAL_EPISODES = {"smoke": 8, "quick": 32, "paper": 100}
 STUDY_COMPARE_SEEDS = {"smoke": 2, "quick": 3, "paper": 5}
 STUDY_TRAJECTORIES = {"smoke": 4, "quick": 100, "paper": 500}
 
+# The deployment track (docs/model.md section 21): training and unseen layouts, expert
+# trajectories per training layout (the dataset holds as many episodes as the paper track's,
+# 8 scenarios x STUDY_TRAJECTORIES, spread over more deployments) and the smaller training
+# sets of the data curve (zero-shot score against the number of training layouts; the full
+# set is its last point).
+STUDY_TRAIN_LAYOUTS = {"smoke": 2, "quick": 32, "paper": 32}
+STUDY_UNSEEN_LAYOUTS = {"smoke": 2, "quick": 8, "paper": 16}
+STUDY_LAYOUT_TRAJECTORIES = {"smoke": 2, "quick": 25, "paper": 125}
+STUDY_SCALING: dict[str, tuple[int, ...]] = {"smoke": (1,), "quick": (8,), "paper": (4, 8, 16)}
+
 
 def check_preset(preset: str) -> None:
     from uavris.errors import ConfigError

@@ -24,7 +24,9 @@ from typing import Callable, ClassVar, Protocol, runtime_checkable
 import numpy as np
 from numpy.typing import NDArray
 
+from uavris.config import SystemConfig
 from uavris.env.simulator import BatchedSimulator
+from uavris.errors import ConfigError
 
 
 @runtime_checkable
@@ -72,3 +74,15 @@ class Constant:
     def __call__(self, obs: NDArray[np.float32]) -> NDArray[np.float32]:
         return np.broadcast_to(self.action, (obs.shape[0], self.action.size)).copy()
 
+
+
+def check_policy_fits(policy: object, system: SystemConfig, what: str = "the policy") -> None:
+    """A policy that declares the observation size it was trained on (``observation_dim``: the
+    experts and the Decision Transformer) must get that size from ``system``; another number
+    of devices, or device positions observed or not, is one :class:`ConfigError` line."""
+    want = getattr(policy, "observation_dim", None)
+    if want is not None and want != system.observation_dim:
+        seen = " with device positions" if system.observe_devices else ""
+        raise ConfigError(f"{what} reads observations of {want} entries, but this system ({system.num_users} devices"
+                          f"{seen}) gives {system.observation_dim}: it was trained for another number of devices "
+                          "or observation")

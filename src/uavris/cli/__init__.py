@@ -9,6 +9,7 @@ Commands:
   finetune-dt         fine-tune it online in a scenario (Algorithm 1, stage 2)
   reproduce           the whole study in two tracks, with figures and report
   plot                learning curves of one or more runs (PNG and PDF)
+  plan                where the UAV should go in a hall: the oracle's plan and a rate map
   demo                a few simple policies side by side
 
 Lives here: dispatch to a command and the one rule for failures: any bad input (a flag
@@ -41,6 +42,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "finetune-dt": ("training", "finetune_command"),
     "reproduce": ("training", "reproduce_command"),
     "plot": ("evaluation", "plot_command"),
+    "plan": ("evaluation", "plan_command"),
     "demo": ("evaluation", "demo_command"),
 }
 

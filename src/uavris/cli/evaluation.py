@@ -13,6 +13,7 @@ from typing import Annotated, Optional
 import tyro
 
 from uavris.cli.parsing import output_dir, parse
+from uavris.config import SystemConfig
 from uavris.presets import COLLECT_SEED, EVAL_SEED
 
 
@@ -24,7 +25,11 @@ class EvaluateArgs:
     hover (the zero action), random, hover-random-phases, hover-aligned, hover-optimizer,
     oracle, oracle-greedy (also written baseline:NAME)"""
     scenario: Optional[str] = None
-    """scenario to evaluate in (default: the run's own; required for references and pre-trained DTs)"""
+    """scenario to evaluate in (default: the run's own, or the layout's start; required for references and
+    pre-trained DTs without --layout)"""
+    layout: Optional[str] = None
+    """the hall: paper, layout-train-N / layout-unseen-N, or a YAML layout file (devices, optionally start and
+    room); default: the target's own"""
     episodes: int = 100
     """evaluation episodes (seeds SEED .. SEED+EPISODES-1)"""
     seed: int = EVAL_SEED
@@ -37,25 +42,80 @@ class EvaluateArgs:
     """torch device: cpu, cuda, or auto"""
     no_progress: bool = False
     """no progress bar"""
+    system: SystemConfig = SystemConfig()
+    """the system evaluated in: the target's own, with these fields changed"""
 
 
 def evaluate_command(args: list[str]) -> None:
     """Evaluate a trained policy or a reference deterministically on seeded episodes.
 
-    Writes OUT/SCENARIO-seedSEED-nEPISODES.csv (one row per episode: average sum rate,
-    return, length, energy) and .json (mean, 95% CI, IQM) and prints the summary.
+    The target's own system is the default of every --system.* flag; --layout puts it in
+    another hall. Writes OUT/SCENARIO-seedSEED-nEPISODES.csv (one row per episode: average
+    sum rate, return, length, energy) and .json (mean, 95% CI, IQM) and prints the summary.
     """
     from uavris.agents.torch_device import resolve_device
-    from uavris.experiments.evaluate import evaluate_target
+    from uavris.cli.options import layout_defaults
+    from uavris.experiments.evaluate import evaluate_target, target_system
 
-    a = parse(EvaluateArgs, args, "uavris evaluate", evaluate_command.__doc__ or "")
+    doc = evaluate_command.__doc__ or ""
+    # Two passes: the first finds the target, whose own system is the default the flags change.
+    first = parse(EvaluateArgs, args, "uavris evaluate", doc)
+    system, hall = layout_defaults(args, target_system(first.target))
+    a = parse(EvaluateArgs, args, "uavris evaluate", doc, default=EvaluateArgs(first.target, system=system))
     output_dir(a.out)
-    summary, path = evaluate_target(a.target, scenario=a.scenario, episodes=a.episodes, seed=a.seed, out=a.out,
-                                    phase_control=a.phase_control, device=resolve_device(a.device),
-                                    progress=not a.no_progress)
+    summary, path = evaluate_target(a.target, scenario=a.scenario or hall, episodes=a.episodes, seed=a.seed,
+                                    out=a.out, phase_control=a.phase_control, device=resolve_device(a.device),
+                                    progress=not a.no_progress, system=a.system)
     print(f"{a.target} in {summary['scenario']}: average sum rate {summary['mean']:.2f} bps/Hz "
           f"(95% CI {summary['ci_low']:.2f}-{summary['ci_high']:.2f}, IQM {summary['iqm']:.2f}, "
           f"{summary['episodes']} episodes) -> {path}")
+
+
+# -------------------------------------------------------------------------------------------- plan
+@dataclass(frozen=True)
+class PlanArgs:
+    layout: Annotated[Optional[str], tyro.conf.Positional, tyro.conf.arg(metavar="LAYOUT")] = None
+    """the hall: paper, layout-train-N / layout-unseen-N (generated), or a YAML layout file (devices, optionally
+    start and room); default: the devices of --system.users (the paper's unless given), starting above the
+    middle of the floor"""
+    out: Optional[Path] = None
+    """output file stem: writes OUT.json, OUT.png and OUT.pdf (default runs/plans/LAYOUT)"""
+    grid_step: float = 2.0
+    """spacing of the rate map's grid, m (1.0 takes about four times as long)"""
+    no_progress: bool = False
+    """no progress bar"""
+    system: SystemConfig = SystemConfig()
+    """the system (the layout sets its devices and, if it has one, its room)"""
+
+
+def plan_command(args: list[str]) -> None:
+    """Where should the UAV go in this hall? The planning oracle's plan and a map of the expected sum rate.
+
+    Prints the target pose, its expected sum rate with optimised phases and the travel time
+    from the start. Writes OUT.json (the plan) and OUT.png / OUT.pdf (the expected sum rate
+    over the hall at the target's altitude, with the devices, their safety balls, the start
+    and the target).
+    """
+    from uavris.cli.options import layout_defaults
+    from uavris.experiments.plan import plan_hall
+    from uavris.layouts import PAPER_LAYOUT, Layout, default_start, resolve_layout
+
+    a = parse(PlanArgs, args, "uavris plan", plan_command.__doc__ or "")
+    if a.layout is None:
+        layout = PAPER_LAYOUT if a.system.users == PAPER_LAYOUT.users else Layout(
+            "custom", a.system.users, default_start(a.system))
+    else:
+        layout_defaults(["--layout", a.layout, *args], a.system)  # --system.users beside a layout: one line
+        layout = resolve_layout(a.layout, a.system)
+    out = a.out or Path("runs/plans") / layout.name
+    output_dir(out.parent, "--out's folder")
+    plan, paths = plan_hall(layout, a.system, out, a.grid_step, progress=not a.no_progress)
+    t = plan["target"]
+    print(f"{layout.name}: fly from {[round(v, 2) for v in plan['layout']['start']]} to "
+          f"[{t[0]:.2f}, {t[1]:.2f}, {t[2]:.2f}] (attitude {[round(v, 1) for v in plan['attitude_deg']]} deg) in "
+          f"{plan['travel_s']:.1f} s; expected sum rate there {plan['expected_sum_rate']:.2f} bps/Hz "
+          f"(at the start {plan['start_sum_rate']:.2f}); expected episode average "
+          f"{plan['expected_episode_average']:.2f} -> {', '.join(str(p) for p in paths)}")
 
 
 # ----------------------------------------------------------------------------------------- collect
@@ -100,16 +160,21 @@ class DemoArgs:
     """episodes per policy"""
     seed: int = 0
     """seed of the first episode"""
-    scenario: str = "fig2"
-    """start position: fig2, train1..train8, unseen1, unseen2"""
+    scenario: Optional[str] = None
+    """start position: fig2, train1..train8, unseen1, unseen2 (default: fig2, or the layout's start)"""
+    layout: Optional[str] = None
+    """the hall: paper, layout-train-N / layout-unseen-N, or a YAML layout file (devices, optionally start and
+    room)"""
 
 
 def demo_command(args: list[str]) -> None:
     """Roll out the zero action, random actions and a co-phasing hover, and print their average sum rate."""
+    from uavris.cli.options import layout_defaults
     from uavris.demo import run_demo
 
     a = parse(DemoArgs, args, "uavris demo", demo_command.__doc__ or "")
-    run_demo(a.episodes, a.seed, a.scenario)
+    system, hall = layout_defaults(args, SystemConfig())
+    run_demo(a.episodes, a.seed, a.scenario or hall or "fig2", system)
 
 
 # -------------------------------------------------------------------------------------------- plot

@@ -2,7 +2,9 @@
 
 Lives here: :class:`RunOptions` (where a training run goes and whether it resumes) and
 :func:`check_run_options`, the one place that says what ``--resume`` and ``--force`` mean
-on the command line. Not here: the run directory itself (:mod:`uavris.runs`).
+on the command line; :data:`LAYOUT_HELP` and :func:`layout_defaults`, the one place that
+says what ``--layout`` does to a command's system and scenario. Not here: the run
+directory itself (:mod:`uavris.runs`), layouts (:mod:`uavris.layouts`).
 """
 
 from __future__ import annotations
@@ -12,7 +14,8 @@ from pathlib import Path
 from typing import Optional
 
 from uavris.agents.torch_device import resolve_device
-from uavris.cli.parsing import UsageError, output_dir
+from uavris.cli.parsing import UsageError, output_dir, peek
+from uavris.config import Scenario, SystemConfig
 
 
 @dataclass(frozen=True)
@@ -50,3 +53,22 @@ def check_run_options(opts: RunOptions, run_dir: Path, config_file: str) -> str:
             raise UsageError(f"--resume: {run_dir} holds no run ({config_file} is missing); drop --resume to start "
                              "a new run")
     return resolve_device(opts.device)
+
+
+LAYOUT_HELP = ("the hall: paper (the paper's devices), layout-train-N / layout-unseen-N (generated, docs/model.md "
+               "section 21) or a YAML layout file (devices, optionally start and room); it sets --system.users (and "
+               "--system.room) and the start (unless --scenario is given)")
+
+
+def layout_defaults(args: list[str], system: SystemConfig) -> tuple[SystemConfig, Scenario | None]:
+    """``system`` in the hall ``--layout`` names in ``args`` and that layout's start; unchanged
+    (and None) without ``--layout``. ``--layout`` with ``--system.users`` gives the devices
+    twice, which is one error line."""
+    from uavris.layouts import resolve_layout
+
+    ref = peek(args, "--layout")
+    if ref is None:
+        return system, None
+    if any(a == "--system.users" or a.startswith("--system.users=") for a in args):
+        raise UsageError("--layout and --system.users both give the device positions; pass one of them")
+    return resolve_layout(ref, system).resolve(system)

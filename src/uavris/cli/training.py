@@ -15,8 +15,9 @@ from typing import Annotated, Any, Callable, Optional
 
 import tyro
 
-from uavris.cli.options import RunOptions, check_run_options
+from uavris.cli.options import LAYOUT_HELP, RunOptions, check_run_options, layout_defaults
 from uavris.cli.parsing import UsageError, load_overrides, output_dir, parse, peek, peek_int
+from uavris.config import SystemConfig
 from uavris.experiments.finetune import FinetuneConfig
 from uavris.experiments.pretrain import PretrainConfig
 from uavris.experiments.reproduce import ReproduceConfig
@@ -37,6 +38,7 @@ class TrainArgs:
     options: Annotated[RunOptions, Flat] = RunOptions()
     config: Optional[Path] = None
     """YAML file of TrainConfig fields (e.g. RUN/config.yaml); the preset fills what it leaves out, flags override it"""
+    layout: Annotated[Optional[str], tyro.conf.arg(help=LAYOUT_HELP)] = None
 
 
 def _nested_update(base: dict[str, Any], changes: dict[str, Any], where: str) -> dict[str, Any]:
@@ -62,7 +64,11 @@ def train_defaults(args: list[str]) -> TrainConfig:
     if not isinstance(data.get("seed", 0), int):
         raise UsageError(f"--config {file}: seed must be an integer, got {data['seed']!r}")
     seed = peek_int(args, "--seed", data.get("seed", 0))
-    base = preset_config(pick["algo"], pick["scenario"], seed, pick["preset"])
+    system, hall = layout_defaults(args, TrainConfig().system)
+    named = hall is None or peek(args, "--scenario") is not None  # a named scenario's start, in the layout's hall
+    where = {} if hall is None else {"system": system, "start": None if named else hall.start}
+    pick["scenario"] = pick["scenario"] if named else hall.name
+    base = preset_config(pick["algo"], pick["scenario"], seed, pick["preset"], **where)
     if not data:
         return base
     merged = _nested_update(base.to_dict(), data, f"--config {file}")
@@ -93,6 +99,7 @@ def train_command(args: list[str]) -> None:
 # ------------------------------------------------------------------------------ compare-algorithms
 @dataclass(frozen=True)
 class CompareArgs:
+    layout: Annotated[Optional[str], tyro.conf.arg(help=LAYOUT_HELP)] = None
     preset: str = "quick"
     """smoke, quick or paper (hours)"""
     seeds: int = 5
@@ -113,6 +120,8 @@ class CompareArgs:
     """address of a running Ray cluster (default: start a local instance)"""
     device: str = "cpu"
     """torch device: cpu, cuda, or auto"""
+    system: SystemConfig = SystemConfig()
+    """the system trained and evaluated in"""
 
 
 def compare_command(args: list[str]) -> None:
@@ -125,11 +134,15 @@ def compare_command(args: list[str]) -> None:
     from uavris.agents.torch_device import resolve_device
     from uavris.experiments.compare import compare_algorithms
 
-    a = parse(CompareArgs, args, "uavris compare-algorithms", compare_command.__doc__ or "")
+    system, hall = layout_defaults(args, SystemConfig())
+    a = parse(CompareArgs, args, "uavris compare-algorithms", compare_command.__doc__ or "",
+              default=CompareArgs(system=system, scenario="fig2" if hall is None else hall.name))
     output_dir(a.out)
+    start = hall.start if hall is not None and a.scenario == hall.name else None
     report = compare_algorithms(preset=a.preset, seeds=a.seeds, workers=a.workers, out=a.out, algos=a.algos,
                                 scenario=a.scenario, eval_episodes=a.eval_episodes, backend=a.backend,
-                                ray_address=a.ray_address, device=resolve_device(a.device))
+                                ray_address=a.ray_address, device=resolve_device(a.device), system=a.system,
+                                start=start)
     print(f"report: {report}")
 
 
@@ -175,6 +188,7 @@ def pretrain_command(args: list[str]) -> None:
 class FinetuneArgs:
     run: Annotated[FinetuneConfig, Flat]
     options: Annotated[RunOptions, Flat] = RunOptions()
+    layout: Annotated[Optional[str], tyro.conf.arg(help=LAYOUT_HELP)] = None
 
 
 def finetune_command(args: list[str]) -> None:
@@ -187,16 +201,20 @@ def finetune_command(args: list[str]) -> None:
     finetune.csv (with the environment interactions used), TensorBoard logs, checkpoints/
     and model/.
     """
+    from uavris.experiments.dt_runs import dt_system
     from uavris.experiments.finetune import default_finetune_dir, finetune, finetune_config
     from uavris.runs import read_done
 
     placeholder = _is_help(args)
     model = peek(args, "--model", "MODEL" if placeholder else None)
-    scenario = peek(args, "--scenario", "unseen1" if placeholder else None)
-    if model is None or scenario is None:
-        raise UsageError("finetune-dt: --model DIR and --scenario NAME are required")
+    scenario = peek(args, "--scenario")
+    if model is None or (scenario is None and peek(args, "--layout") is None and not placeholder):
+        raise UsageError("finetune-dt: --model DIR and --scenario NAME (or --layout) are required")
+    system, hall = layout_defaults(args, SystemConfig() if placeholder else dt_system(model))
+    start = hall.start if hall is not None and scenario is None else None
+    scenario = scenario or (hall.name if hall is not None else "unseen1")
     default = FinetuneArgs(finetune_config(model, scenario, str(peek(args, "--preset", "quick")),
-                                           peek_int(args, "--seed", 0)))
+                                           peek_int(args, "--seed", 0), system=system, start=start))
     a = parse(FinetuneArgs, args, "uavris finetune-dt", finetune_command.__doc__ or "", default=default)
     run_dir = _run_dt(finetune, a.run, a.options, default_finetune_dir)
     done = read_done(run_dir)
@@ -210,6 +228,9 @@ def finetune_command(args: list[str]) -> None:
 @dataclass(frozen=True)
 class ReproduceArgs:
     study: Annotated[ReproduceConfig, Flat]
+    layout: Annotated[Optional[str], tyro.conf.arg(help="the hall of the paper and strong tracks (their scenarios "
+                                                   "start in it): paper, layout-train-N / layout-unseen-N, or a YAML "
+                                                   "layout file; it sets --system.users (and --system.room)")] = None
     out: Optional[Path] = None
     """output directory (default runs/PRESET); a rerun skips finished stages and resumes the rest"""
     workers: int = 2
@@ -227,19 +248,24 @@ class ReproduceArgs:
 
 
 def reproduce_command(args: list[str]) -> None:
-    """Reproduce the paper's study end to end, in two tracks, and write the report.
+    """Reproduce the paper's study end to end, in three tracks, and write the report.
 
     Paper track: compare, experts-train, experts-unseen, dataset, pretrain, finetune-unseen1/2,
     evaluate-unseen1/2 (experts: the comparison's winner). Strong track (learned motion,
-    optimised phases, experts imitating the oracle): the same stages prefixed strong-. Each
-    stage is stored under OUT/stages/NAME-KEY (KEY: a hash of its configuration and inputs);
-    independent stages run concurrently. Writes OUT/report.md and OUT/figures/.
+    optimised phases, experts imitating the oracle): the same stages prefixed strong-.
+    Deployment track (the strong recipe over generated halls, docs/model.md section 21):
+    deploy-experts-train (one per training layout), deploy-dataset, deploy-pretrain, deploy-bc
+    (behaviour cloning), deploy-pretrain-nN (the data curve), deploy-finetune-LAYOUT and
+    deploy-evaluate-LAYOUT per unseen layout. Each stage is stored under OUT/stages/NAME-KEY
+    (KEY: a hash of its configuration and inputs); independent stages run concurrently.
+    Writes OUT/report.md and OUT/figures/.
     """
     from uavris.agents.torch_device import resolve_device
     from uavris.experiments.reproduce import reproduce
 
+    system, _ = layout_defaults(args, ReproduceConfig().system)
     a = parse(ReproduceArgs, args, "uavris reproduce", reproduce_command.__doc__ or "",
-              default=ReproduceArgs(ReproduceConfig()))
+              default=ReproduceArgs(ReproduceConfig(system=system)))
     output_dir(a.out)
     report = reproduce(a.study, a.out or Path("runs") / a.study.preset, workers=a.workers, backend=a.backend,
                        ray_address=a.ray_address, force=a.force, progress=not a.no_progress,

@@ -211,7 +211,20 @@ class BatchedSimulator:
         obs[:, lay["pairing"]] = self.pairing.reshape(n, -1)
         obs[:, lay["energy_remaining"]] = np.clip(1.0 - self.energy / c.energy_budget_j, 0.0, 1.0)[:, None]
         obs[:, lay["time_fraction"]] = (self.t / c.horizon)[:, None]
+        if c.observe_devices:
+            obs[:, lay["devices"]] = device_observation(self.users, self.pos, self._half)
         return obs
+
+
+def device_observation(users: NDArray[np.float64], pos: NDArray[np.float64], half: NDArray[np.float64]
+                       ) -> NDArray[np.float64]:
+    """The devices as the UAV sees them: ``(users - pos) / half`` (the position's scale), nearest
+    first, flattened to ``(n, 3K)`` (docs/model.md, section 21). Relative, so that a hall moved
+    as a whole looks the same from the same relative pose; sorted, so that the order in which
+    a layout lists its devices does not matter."""
+    rel = (users[None] - pos[:, None]) / half  # (n, K, 3)
+    order = np.argsort(np.einsum("nkd,nkd->nk", rel, rel), axis=1, kind="stable")
+    return np.take_along_axis(rel, order[:, :, None], axis=1).reshape(len(pos), -1)
 
 
 def step_info(sim: BatchedSimulator, slot: SlotInfo | None) -> dict[str, NDArray]:
@@ -240,6 +253,8 @@ def observation_layout(config: SystemConfig) -> dict[str, slice]:
     sizes = [("position", 3), ("velocity", 3), ("attitude_sin", 3), ("attitude_cos", 3),
              ("channel_real", K * N), ("channel_imag", K * N), ("pairing", K * K),
              ("energy_remaining", 1), ("time_fraction", 1)]
+    if config.observe_devices:  # last, so every other slice keeps its place
+        sizes.append(("devices", 3 * K))
     out, start = {}, 0
     for name, size in sizes:
         out[name] = slice(start, start + size)
@@ -286,7 +301,9 @@ def channel_observation_bound(config: SystemConfig) -> float:
 
 def observation_bounds(config: SystemConfig) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
     """Box bounds of the observation: channels within +-:func:`channel_observation_bound`,
-    pairing and fractions in [0, 1], everything else in [-1, 1]."""
+    pairing and fractions in [0, 1], device positions within the room (scaled like the UAV's
+    position, so below -1 in height: devices sit under the flight region), everything else
+    in [-1, 1]."""
     lay = observation_layout(config)
     low = np.full(config.observation_dim, -1.0, dtype=np.float32)
     high = np.ones(config.observation_dim, dtype=np.float32)
@@ -295,4 +312,9 @@ def observation_bounds(config: SystemConfig) -> tuple[NDArray[np.float32], NDArr
         low[lay[name]], high[lay[name]] = -bound, bound
     for name in ("pairing", "energy_remaining", "time_fraction"):
         low[lay[name]] = 0.0
+    if config.observe_devices:
+        lo, hi = np.asarray(config.region_low), np.asarray(config.region_high)
+        half = 0.5 * (hi - lo)
+        low[lay["devices"]] = np.tile((0.0 - hi) / half, config.num_users)
+        high[lay["devices"]] = np.tile((np.asarray(config.room) - lo) / half, config.num_users)
     return low, high

@@ -27,7 +27,7 @@ from uavris.agents.dt.trajectories import Trajectory, record_episodes
 from uavris.agents.experts.sb3 import load_model
 from uavris.errors import UavrisError
 from uavris.experiments.dt_runs import progress_bar
-from uavris.experiments.jobs import configure_torch_threads
+from uavris.experiments.jobs import configure_threads
 from uavris.experiments.train_expert import final_model_path, load_run_config, run_policy
 from uavris.presets import COLLECT_SEED
 
@@ -40,7 +40,7 @@ def collect(experts: Sequence[str | Path], trajectories: int, out: str | Path, *
     for Minari's ``recover_environment``, in the first expert's scenario: a spec holds one
     scenario, each episode's own scenario is in its metadata.
     """
-    configure_torch_threads()
+    configure_threads()
     if not experts:
         raise UavrisError("give at least one expert run directory (--experts RUN_DIR ...)")
     if trajectories < 1:
@@ -57,9 +57,9 @@ def collect(experts: Sequence[str | Path], trajectories: int, out: str | Path, *
     system = runs[0][1].system
     phase_control = runs[0][1].phase_control
     for run_dir, cfg in runs[1:]:
-        if cfg.system != system:
+        if cfg.system.replace(users=system.users) != system or cfg.system.num_users != system.num_users:
             raise UavrisError(f"{run_dir} was trained with a different system configuration than {runs[0][0]}; "
-                              "a dataset holds one system")
+                              "a dataset holds one system (its experts may differ only in where the devices are)")
         if cfg.phase_control != phase_control:
             raise UavrisError(f"{run_dir} sets the phases with phase control {cfg.phase_control!r}, {runs[0][0]} "
                               f"with {phase_control!r}; a dataset holds one action layout")
@@ -71,8 +71,8 @@ def collect(experts: Sequence[str | Path], trajectories: int, out: str | Path, *
             policy = run_policy(load_model(final_model_path(run_dir), cfg.algo), cfg)
             seeds = seed + k * trajectories + np.arange(trajectories)
             for start in range(0, trajectories, 256):
-                batch = record_episodes(policy, system, cfg.scenario, seeds[start:start + 256], expert=str(run_dir),
-                                        expert_algo=cfg.algo, phase_control=phase_control)
+                batch = record_episodes(policy, cfg.system, cfg.resolved_scenario, seeds[start:start + 256],
+                                        expert=str(run_dir), expert_algo=cfg.algo, phase_control=phase_control)
                 trajs.extend(batch)
                 bar.update(len(batch))
     finally:

@@ -23,9 +23,9 @@ from uavris import runs
 from uavris.agents.evaluation import evaluate
 from uavris.agents.experts import ALGORITHMS, check_algorithm, hyperparams_for
 from uavris.agents.references import HOVER_OPTIMIZER, ORACLE, REFERENCES, ZERO_ACTION, reference_policy
-from uavris.config import get_scenario
+from uavris.config import SystemConfig, scenario_at
 from uavris.errors import UavrisError
-from uavris.experiments.jobs import Job, JobResult, JobRunner, run_jobs
+from uavris.experiments.jobs import Job, JobResult, JobRunner, configure_threads, run_jobs
 from uavris.experiments.plots import learning_curves
 from uavris.experiments.train_expert import TrainConfig, preset_config, train_job
 from uavris.io import atomic_write_text, read_csv, write_csv, write_json
@@ -77,8 +77,10 @@ def compare_algorithms(preset: str = "quick", seeds: int = 5, workers: int = 2, 
                        algos: Sequence[str] = ALGORITHMS, scenario: str = "fig2",
                        eval_episodes: int | None = None, backend: str = "local",
                        ray_address: str | None = None, progress: bool = True,
-                       runner: JobRunner | None = None, device: str = "cpu") -> Path:
-    """Train ``algos`` x ``seeds`` in ``scenario`` and write the comparison into ``out``; returns
+                       runner: JobRunner | None = None, device: str = "cpu", system: SystemConfig | None = None,
+                       start: tuple[float, float, float] | None = None) -> Path:
+    """Train ``algos`` x ``seeds`` in ``scenario`` (starting at ``start``, a layout's, when
+    given) of ``system`` (default the paper's) and write the comparison into ``out``; returns
     the report path. Jobs go to ``runner`` when given (shared with other work), else to a
     pool of ``workers`` of their own."""
     if preset not in PRESETS:
@@ -88,10 +90,13 @@ def compare_algorithms(preset: str = "quick", seeds: int = 5, workers: int = 2, 
             raise UavrisError(f"{flag} must be >= 1, got {value}")
     for a in algos:
         check_algorithm(a)
-    get_scenario(scenario)
+    system = system or SystemConfig()
+    scenario_at(scenario, start).validate_for(system)
+    configure_threads()
     out = Path(out or f"runs/compare-{preset}")
     n_eval = eval_episodes or (100 if preset == "paper" else 32)
-    cfgs = {(a, s): preset_config(a, scenario, s, preset, eval_episodes=n_eval) for a in algos for s in range(seeds)}
+    cfgs = {(a, s): preset_config(a, scenario, s, preset, eval_episodes=n_eval, system=system, start=start)
+            for a in algos for s in range(seeds)}
     jobs = [Job(f"{a}-s{s}", train_job, (cfg.to_dict(), str(out / "runs" / f"{a}-s{s}"), device),
                 out / "logs" / f"{a}-s{s}.log") for (a, s), cfg in cfgs.items()]
     t0 = time.perf_counter()
@@ -142,7 +147,8 @@ def write_comparison(out: Path, cfgs: dict[tuple[str, int], TrainConfig], scenar
         rows.append({"policy": a.upper(), "kind": "DRL", **s, "train_last10pct": float(np.mean(last)) if last else
                      float("nan"), "paper": PAPER_FIG2.get(a, float("nan"))})
     for name in COMPARISON_REFERENCES:
-        res = evaluate(reference_policy(name), any_cfg.system, scenario, n_eval, eval_seed)
+        res = evaluate(reference_policy(name, any_cfg.system), any_cfg.system, any_cfg.resolved_scenario, n_eval,
+                       eval_seed)
         s = summarize(res.avg_sum_rate)
         rows.append({"policy": name, "kind": "oracle" if name == ORACLE else "baseline", **s,
                      "train_last10pct": float("nan"), "paper": float("nan")})
@@ -158,7 +164,7 @@ def write_comparison(out: Path, cfgs: dict[tuple[str, int], TrainConfig], scenar
     if curves:
         refs = {name: (REFERENCES[name].label, by_name[name]["mean"]) for name in FIGURE_REFERENCES}
         figs = learning_curves(curves, out / "learning_curves",
-                               f"{scenario} {get_scenario(scenario).start}, mean and 95% bootstrap band over seeds",
+                               f"{scenario} {any_cfg.resolved_scenario.start}, mean and 95% bootstrap band over seeds",
                                PAPER_FIG2 if scenario == "fig2" else None, refs)
     expert = select_expert(rows) if any(r["kind"] == "DRL" for r in rows) else None
     write_json(out / "summary.json", {"rows": rows, "expert": expert, "wall_clock_s": wall_s,
@@ -178,7 +184,7 @@ def render_report(rows: list[dict[str, Any]], cfgs: dict[tuple[str, int], TrainC
     any_cfg = next(iter(cfgs.values()))
     seeds = sorted({s for _, s in cfgs})
     lines = [f"# Algorithm comparison (paper Fig. 2), preset `{any_cfg.preset}`", ""]
-    lines.append(f"Scenario `{scenario}`, UAV starting at {list(get_scenario(scenario).start)}; seeds {seeds}; "
+    lines.append(f"Scenario `{scenario}`, UAV starting at {list(any_cfg.resolved_scenario.start)}; seeds {seeds}; "
                  f"{any_cfg.total_steps:,} environment steps per run "
                  f"({any_cfg.total_steps // any_cfg.system.horizon:,} episodes of {any_cfg.system.horizon} slots); "
                  f"final evaluation: deterministic policy on {n_eval} seeded episodes "

@@ -31,14 +31,14 @@ from typing import Any
 import numpy as np
 
 from uavris import runs
-from uavris.agents.dt.checkpoint import load_dt, save_dt
+from uavris.agents.dt.checkpoint import load_dt, read_dt_metadata, save_dt
 from uavris.agents.dt.model import DecisionTransformer
 from uavris.agents.dt.policy import DTBatchPolicy, dt_policy_from_checkpoint
 from uavris.agents.dt.trainer import save_trainer_state
-from uavris.config import SystemConfig
+from uavris.config import ConfigError, Scenario, SystemConfig, scenario_at
 from uavris.env.simulator import stored_system
 from uavris.errors import CheckpointError, UavrisError
-from uavris.io import read_json, write_json
+from uavris.io import read_json, to_plain, write_json
 
 PRETRAIN_KIND = "uavris-dt-pretrain"
 FINETUNE_KIND = "uavris-dt-finetune"
@@ -54,7 +54,7 @@ def progress_bar(total: int, desc: str, unit: str, enabled: bool, initial: int =
 
 def prepare_run_dir(run_dir: Path, kind: str, cfg_dict: dict[str, Any], resume: bool, force: bool) -> bool:
     """The run-directory guard (:func:`uavris.runs.prepare`) for a DT run; True when resuming."""
-    record = {"kind": kind, **cfg_dict}
+    record = to_plain({"kind": kind, **cfg_dict})
     return runs.prepare(run_dir, "config.json", lambda p: write_json(p, record), lambda p: read_json(p) == record,
                         resume=resume, force=force, what="uavris DT run")
 
@@ -121,14 +121,29 @@ def dt_model_dir(path: str | Path) -> Path | None:
     return None
 
 
-def load_dt_policy(path: str | Path, target_return: float | None = None,
-                   device: str = "cpu") -> tuple[DTBatchPolicy, SystemConfig, str | None]:
-    """(deterministic batch policy, its system config, its own scenario or None) of a DT target."""
-    from uavris.experiments.jobs import configure_torch_threads
+def dt_system(path: str | Path) -> SystemConfig:
+    """The system of a DT target (run or model directory), read from its metadata alone."""
+    model_dir = dt_model_dir(path)
+    if model_dir is None:
+        raise UavrisError(f"{path} is not a DT model directory (no model.json)")
+    return checkpoint_system(read_dt_metadata(model_dir), model_dir)
 
-    configure_torch_threads()
+
+def load_dt_policy(path: str | Path, target_return: float | None = None,
+                   device: str = "cpu") -> tuple[DTBatchPolicy, SystemConfig, Scenario | None]:
+    """(deterministic batch policy, its system config, its own scenario or None) of a DT target:
+    a fine-tuned model's system and scenario are those it was fine-tuned in, a pre-trained
+    model has no scenario of its own."""
+    from uavris.experiments.jobs import configure_threads
+
+    configure_threads()
     model_dir = dt_model_dir(path)
     if model_dir is None:
         raise UavrisError(f"{path} is not a DT model directory (no model.json)")
     policy, meta = dt_policy_from_checkpoint(model_dir, target_return, device=device)
-    return policy, checkpoint_system(meta, model_dir), meta.get("scenario")
+    name = meta.get("scenario")
+    try:
+        scenario = None if name is None else scenario_at(str(name), meta.get("start"))
+    except ConfigError as e:
+        raise CheckpointError(f"{model_dir}: stored scenario is invalid ({e})") from None
+    return policy, checkpoint_system(meta, model_dir), scenario

@@ -11,15 +11,17 @@ from pathlib import Path
 from typing import Any
 
 from uavris.agents.evaluation import EpisodeResults, check_episodes, evaluate
+from uavris.agents.policy import check_policy_fits
 from uavris.agents.references import REFERENCE_SEED, REFERENCES, reference_policy
-from uavris.config import SystemConfig, get_scenario
+from uavris.config import Scenario, SystemConfig, get_scenario
 from uavris.env.rollout import policy_phase_control
 from uavris.env.wrappers import check_phase_control
 from uavris.errors import UavrisError
-from uavris.experiments.dt_runs import dt_model_dir, load_dt_policy
-from uavris.experiments.jobs import configure_torch_threads
-from uavris.experiments.train_expert import load_run_policy
+from uavris.experiments.dt_runs import dt_model_dir, dt_system, load_dt_policy
+from uavris.experiments.jobs import configure_threads
+from uavris.experiments.train_expert import load_run_config, load_run_policy
 from uavris.io import write_csv, write_json
+from uavris.layouts import Layout, resolve_layout
 
 BASELINE_PREFIX = "baseline:"
 
@@ -41,12 +43,28 @@ class Target:
 
     policy: Any  # batch policy
     system: SystemConfig
-    scenario: str | None  # the run's own scenario (None: a reference or a pre-trained DT)
+    scenario: Scenario | None  # the run's own (None: a reference or a pre-trained DT)
     run_dir: Path | None  # None for a reference
 
 
-def resolve_policy(target: str, device: str = "cpu") -> Target:
-    """Resolve a run directory, DT model directory or reference name.
+def target_system(target: str) -> SystemConfig:
+    """The system a target was made for, read from its configuration only (no model is loaded):
+    a run's, a DT checkpoint's, or the paper's for a reference. ``uavris evaluate`` uses it as
+    the default that ``--system.*`` and ``--layout`` change."""
+    if reference_name(target) is not None:
+        return SystemConfig()
+    path = Path(target)
+    if not path.is_dir():
+        raise UavrisError(f"{path} is not a directory (expected a run directory, a model directory or one of the "
+                          f"references {', '.join(REFERENCES)})")
+    if dt_model_dir(path) is not None:
+        return dt_system(path)
+    return load_run_config(path).system
+
+
+def resolve_policy(target: str, device: str = "cpu", system: SystemConfig | None = None) -> Target:
+    """Resolve a run directory, DT model directory or reference name (a reference for ``system``,
+    default the paper's).
 
     References use their own fixed seed (:data:`uavris.agents.references.REFERENCE_SEED`),
     so ``uavris evaluate oracle`` gives the numbers of the reports whatever episodes it is
@@ -54,18 +72,16 @@ def resolve_policy(target: str, device: str = "cpu") -> Target:
     """
     name = reference_name(target)
     if name is not None:
-        policy = reference_policy(name, SystemConfig(), REFERENCE_SEED)
-        return Target(policy, SystemConfig(), None, None)
+        system = system or SystemConfig()
+        return Target(reference_policy(name, system, REFERENCE_SEED), system, None, None)
     run_dir = Path(target)
-    if not run_dir.is_dir():
-        raise UavrisError(f"{run_dir} is not a directory (expected a run directory, a model directory or one of the "
-                          f"references {', '.join(REFERENCES)})")
+    target_system(target)  # a missing path or a foreign directory: one line before any loading
     if dt_model_dir(run_dir) is not None:  # a Decision Transformer model or DT run directory
         policy, system, scenario = load_dt_policy(run_dir, device=device)
         return Target(policy, system, scenario, run_dir)
-    configure_torch_threads()
+    configure_threads()
     cfg, policy = load_run_policy(run_dir, device)
-    return Target(policy, cfg.system, cfg.scenario, run_dir)
+    return Target(policy, cfg.system, cfg.resolved_scenario, run_dir)
 
 
 def write_results(res: EpisodeResults, summary: dict[str, Any], stem: Path) -> None:
@@ -75,37 +91,49 @@ def write_results(res: EpisodeResults, summary: dict[str, Any], stem: Path) -> N
     write_json(stem.with_suffix(".json"), summary)
 
 
-def evaluate_target(target: str, scenario: str | None, episodes: int, seed: int,
+def evaluate_target(target: str, scenario: str | Scenario | None, episodes: int, seed: int,
                     out: Path | None = None, phase_control: str | None = None, device: str = "cpu",
-                    progress: bool = False) -> tuple[dict[str, Any], Path]:
+                    progress: bool = False, system: SystemConfig | None = None,
+                    layout: str | Layout | None = None) -> tuple[dict[str, Any], Path]:
     """Evaluate ``target``; ``phase_control="optimizer"`` replaces its phases by the optimiser's.
 
-    With ``progress`` a bar counts the simulated slots (the optimiser and the oracle take
-    milliseconds per slot, so a long evaluation is visibly alive)."""
+    ``system`` replaces the target's own system (the CLI's ``--system.*``); ``layout`` (a
+    :class:`~uavris.layouts.Layout` or what :func:`~uavris.layouts.resolve_layout` reads)
+    puts it in another hall: the layout's devices, and its start unless ``scenario`` names
+    one. With ``progress`` a bar counts the simulated slots (the optimiser and the oracle
+    take milliseconds per slot, so a long evaluation is visibly alive)."""
     check_episodes(episodes, seed)
     if phase_control is not None:
         check_phase_control(phase_control)
-    resolved = resolve_policy(target, device)
-    policy, system, own_scenario, run_dir = resolved.policy, resolved.system, resolved.scenario, resolved.run_dir
+    system = system or target_system(target)
+    if layout is not None:
+        hall = resolve_layout(layout, system)
+        system, own = hall.resolve(system)
+        scenario = scenario or own
+    resolved = resolve_policy(target, device, system)
+    policy, run_dir = resolved.policy, resolved.run_dir
+    check_policy_fits(policy, system, target)
     if phase_control == "agent" and policy_phase_control(policy) == "optimizer":
         raise UavrisError(f"{target} acts on the motion only (trained with the optimiser setting the phases, the "
                           "strong track); it cannot be evaluated with --phase-control agent")
-    scenario = scenario or own_scenario
+    scenario = scenario or resolved.scenario
     if scenario is None:
-        raise UavrisError("--scenario is required for a baseline or a pre-trained DT (it has no scenario of its own)")
-    get_scenario(scenario).validate_for(system)
+        raise UavrisError("--scenario (or --layout) is required for a baseline or a pre-trained DT (it has no "
+                          "scenario of its own)")
+    where = get_scenario(scenario)
+    where.validate_for(system)
     from tqdm.auto import tqdm
 
-    with tqdm(total=episodes * system.horizon, unit="slot", desc=f"evaluate {scenario}", disable=not progress,
+    with tqdm(total=episodes * system.horizon, unit="slot", desc=f"evaluate {where.name}", disable=not progress,
               dynamic_ncols=True, leave=False) as bar:
-        res = evaluate(policy, system, scenario, episodes, seed, phase_control=phase_control,
+        res = evaluate(policy, system, where, episodes, seed, phase_control=phase_control,
                        on_slot=lambda sim, obs, executed, alive: bar.update(int(alive.sum())))
-    summary = {"target": target, "scenario": scenario, "seed": seed, "phase_control": phase_control or "as trained",
-               **res.summary()}
+    summary = {"target": target, "scenario": where.name, "start": list(where.start), "seed": seed,
+               "phase_control": phase_control or "as trained", **res.summary(), "system": system.to_dict()}
     if out is None:
         base = run_dir if run_dir is not None else Path("runs/baselines") / str(reference_name(target))
         out = base / "eval"
     suffix = "-optimizer-phases" if phase_control == "optimizer" else ""
-    stem = Path(out) / f"{scenario}-seed{seed}-n{episodes}{suffix}"
+    stem = Path(out) / f"{where.name}-seed{seed}-n{episodes}{suffix}"
     write_results(res, summary, stem)
     return summary, stem.with_suffix(".json")

@@ -48,7 +48,9 @@ from uavris.agents.dt.policy import DTBatchPolicy, dt_policy_from_checkpoint
 from uavris.agents.dt.trainer import load_trainer_state, make_optimizer, train_steps
 from uavris.agents.dt.trajectories import ELITE_RULES, TrainingWindows, record_episodes, select_elites
 from uavris.agents.evaluation import evaluate
-from uavris.config import check_non_negative, check_positive, get_scenario
+from uavris.agents.policy import check_policy_fits
+from uavris.config import SystemConfig, check_non_negative, check_positive, float_tuple, scenario_at
+from uavris.env.simulator import layout_as_lists
 from uavris.errors import ConfigError
 from uavris.experiments.dt_runs import (
     FINETUNE_KIND,
@@ -62,7 +64,7 @@ from uavris.experiments.dt_runs import (
     tb_writer,
     write_checkpoint,
 )
-from uavris.experiments.jobs import configure_torch_threads
+from uavris.experiments.jobs import configure_threads
 from uavris.io import read_rows, write_csv
 from uavris.presets import EVAL_SEED, FINETUNE, FINETUNE_SEED, check_preset
 from uavris.runs import write_done
@@ -77,6 +79,8 @@ class FinetuneConfig:
 
     model: str
     scenario: str
+    start: tuple[float, float, float] | None = None  # the UAV's start; None: the named scenario's (a layout sets it)
+    system: SystemConfig | None = None  # the hall to adapt to; None: the pre-trained model's system
     preset: str = "quick"
     seed: int = 0
     rounds: int = 3  # H
@@ -98,7 +102,13 @@ class FinetuneConfig:
 
     def __post_init__(self) -> None:
         check_preset(self.preset)
-        get_scenario(self.scenario)
+        if isinstance(self.system, dict):
+            object.__setattr__(self, "system", SystemConfig.from_stored(self.system))
+        if self.start is not None:
+            object.__setattr__(self, "start", float_tuple(self.start, "FinetuneConfig", "start", "[x, y, z] (m)"))
+        scenario = scenario_at(self.scenario, self.start)
+        if self.system is not None:
+            scenario.validate_for(self.system)
         check_positive("FinetuneConfig", self, ("rounds", "candidates", "elites", "epochs_per_round", "batch_size",
                                                  "learning_rate", "warmup_steps", "grad_clip", "eval_episodes"))
         if self.elites > self.candidates:
@@ -135,20 +145,23 @@ def finetune(cfg: FinetuneConfig, run_dir: str | Path, *, resume: bool = False, 
     model directory. ``interrupt_after_round`` is a test hook."""
     import torch
 
-    configure_torch_threads()
+    configure_threads()
     run_dir = Path(run_dir)
     model_dir = dt_model_dir(cfg.model) or Path(cfg.model)  # a run directory stands for its final model
     base, pre_meta = dt_policy_from_checkpoint(model_dir, cfg.target_return, device=device)
     model, target, phase_control = base.model, base.target_return, base.phase_control
-    system = checkpoint_system(pre_meta, model_dir)
-    get_scenario(cfg.scenario).validate_for(system)
+    system = cfg.system or checkpoint_system(pre_meta, model_dir)
+    check_policy_fits(base, system, str(model_dir))
+    scenario = scenario_at(cfg.scenario, cfg.start)
+    scenario.validate_for(system)
     resuming = prepare_run_dir(run_dir, FINETUNE_KIND, dataclasses.asdict(cfg), resume, force)
     torch.manual_seed(cfg.seed)
     rng = np.random.default_rng(cfg.seed)
     opt = make_optimizer(model, cfg.learning_rate, cfg.weight_decay)
     model_meta = {**{k: v for k, v in pre_meta.items() if k not in ("kind", "format_version", "config")},
-                  "stage": "finetune", "scenario": cfg.scenario, "pretrained_model": str(cfg.model),
-                  "target_return": float(target)}
+                  "stage": "finetune", "scenario": cfg.scenario, "start": list(scenario.start),
+                  "system": system.to_dict(), "observation_layout": layout_as_lists(system),
+                  "pretrained_model": str(cfg.model), "target_return": float(target)}
 
     def dt_policy(sigma: float = 0.0, noise_seed: int | None = None) -> DTBatchPolicy:
         return DTBatchPolicy(model, target, sigma, noise_seed, phase_control)
@@ -163,7 +176,7 @@ def finetune(cfg: FinetuneConfig, run_dir: str | Path, *, resume: bool = False, 
     writer = tb_writer(run_dir, done_round)
     model.eval()
     if not rows:  # round 0: the zero-shot policy
-        ev = evaluate(dt_policy(), system, cfg.scenario, cfg.eval_episodes, cfg.eval_seed).summary()
+        ev = evaluate(dt_policy(), system, scenario, cfg.eval_episodes, cfg.eval_seed).summary()
         rows.append([0, 0, 0, *([float("nan")] * 5), ev["mean"], ev["ci_low"], ev["ci_high"]])
         writer.add_scalar("eval/avg_sum_rate", ev["mean"], 0)
         write_csv(run_dir / "finetune.csv", ROUND_HEADER, rows)
@@ -176,7 +189,7 @@ def finetune(cfg: FinetuneConfig, run_dir: str | Path, *, resume: bool = False, 
             per_seed = cfg.rollouts_per_seed if cfg.selection == "paired" else 1
             distinct = cfg.candidates // per_seed
             seeds = np.repeat(cfg.collect_seed + (h - 1) * cfg.candidates + np.arange(distinct), per_seed)
-            cands = record_episodes(dt_policy(cfg.noise_sigma, noise_seed), system, cfg.scenario, seeds,
+            cands = record_episodes(dt_policy(cfg.noise_sigma, noise_seed), system, scenario, seeds,
                                     expert="dt-finetune", expert_algo="dt", phase_control=phase_control)
             interactions += sum(tr.length for tr in cands)
             elites = select_elites(cands, cfg.elites, cfg.selection)
@@ -185,7 +198,7 @@ def finetune(cfg: FinetuneConfig, run_dir: str | Path, *, resume: bool = False, 
             losses = train_steps(model, opt, windows, rng, steps, count, cfg.batch_size, cfg.learning_rate,
                                   cfg.warmup_steps, cfg.grad_clip)
             steps += count
-            ev = evaluate(dt_policy(), system, cfg.scenario, cfg.eval_episodes, cfg.eval_seed).summary()
+            ev = evaluate(dt_policy(), system, scenario, cfg.eval_episodes, cfg.eval_seed).summary()
             ret = [tr.episode_return for tr in cands]
             rows.append([h, interactions, steps, float(np.mean(ret)),
                          float(np.mean([tr.episode_return / tr.length for tr in cands])),

@@ -1,12 +1,13 @@
 """Run independent jobs on a local process pool or on Ray; report failures with their logs.
 
 Lives here: :class:`Job`, :class:`JobResult`, :class:`JobRunner`, :func:`run_jobs` and
-:func:`configure_torch_threads`. Not here: what the jobs do (:mod:`.train_expert`,
+:func:`configure_threads`. Not here: what the jobs do (:mod:`.train_expert`,
 :mod:`.study`) and the stages that submit them (:mod:`.stages`, :mod:`.reproduce`).
 
-Each job runs in its own process (spawned, so torch and numpy start clean) with one torch
-thread, writes its own log file, and is retried by nobody: a failed job is reported and
-the others go on. The caller decides the exit code from the returned failures.
+Each job runs in its own process (spawned, so torch and numpy start clean) with one thread
+in every thread pool (:func:`configure_threads`), writes its own log file, and is retried
+by nobody: a failed job is reported and the others go on. The caller decides the exit
+code from the returned failures.
 
 Backends: ``local`` (``concurrent.futures`` process pool, the default) and ``ray``
 (``pip install 'uavris[ray]'``): without an address a local Ray instance with ``workers``
@@ -48,14 +49,31 @@ class JobResult:
     log: Path
 
 
-def configure_torch_threads() -> None:
-    """One torch thread per worker process (the machine's cores go to parallel jobs)."""
+THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS")
+
+
+def configure_threads() -> None:
+    """One thread in every thread pool of this process: torch's, and the BLAS and OpenMP
+    libraries that numpy, scipy and torch load (threadpoolctl).
+
+    The machine's cores go to parallel jobs, not to threads within one. It also makes the
+    numbers independent of the machine: a BLAS reduction split over another number of threads
+    rounds differently, and OpenBLAS sizes its pool by the CPUs the process may use, so the
+    same job pinned to one core and free on two gave different bits (docs/model.md,
+    "Reproducibility"). The environment variables make processes started from this one
+    (the job runner's workers) start with one thread too.
+    """
     import os
 
+    for var in THREAD_VARIABLES:
+        os.environ.setdefault(var, "1")
+    import numpy  # noqa: F401  (its BLAS must be loaded for threadpoolctl to limit it)
+    import scipy.linalg  # noqa: F401  (likewise scipy's own BLAS)
     import torch
+    from threadpoolctl import threadpool_limits
 
     torch.set_num_threads(1)
-    os.environ.setdefault("OMP_NUM_THREADS", "1")
+    threadpool_limits(limits=1)
 
 
 def _run_logged(job: Job) -> JobResult:
@@ -64,9 +82,7 @@ def _run_logged(job: Job) -> JobResult:
         old_out, old_err = sys.stdout, sys.stderr
         sys.stdout = sys.stderr = log
         try:
-            import torch
-
-            torch.set_num_threads(1)
+            configure_threads()
             value = job.fn(*job.args)
             return JobResult(job.name, True, value, None, job.log)
         except BaseException as e:  # noqa: BLE001 - report every failure, keep the pool alive

@@ -19,12 +19,12 @@ import dataclasses
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Sequence
 
 import numpy as np
 
 from uavris.agents.dt.checkpoint import save_dt
-from uavris.agents.dt.dataset import load_dataset
+from uavris.agents.dt.dataset import ExpertDataset, load_dataset
 from uavris.agents.dt.model import DecisionTransformer, DTConfig
 from uavris.agents.dt.trainer import load_trainer_state, make_optimizer, train_steps
 from uavris.agents.dt.trajectories import TrainingWindows, default_target_return, normalisation_from
@@ -42,7 +42,7 @@ from uavris.experiments.dt_runs import (
     tb_writer,
     write_checkpoint,
 )
-from uavris.experiments.jobs import configure_torch_threads
+from uavris.experiments.jobs import configure_threads
 from uavris.io import read_rows, write_csv
 from uavris.presets import PRETRAIN, check_preset
 from uavris.runs import write_done
@@ -72,6 +72,8 @@ class PretrainConfig:
     heads: int = 1
     dropout: float = 0.1
     attention: str = "window"
+    condition_on_return: bool = True  # False: behaviour cloning with the same model and budget
+    scenarios: tuple[str, ...] | None = None  # train on the episodes of these scenarios (layouts) only; None: all
     target_quantile: float = TARGET_QUANTILE
 
     def __post_init__(self) -> None:
@@ -79,13 +81,18 @@ class PretrainConfig:
         check_positive("PretrainConfig", self, ("steps", "batch_size", "learning_rate", "warmup_steps", "grad_clip",
                                                  "checkpoint_every", "log_every"))
         check_non_negative("PretrainConfig", self, ("seed", "weight_decay"))
+        if self.scenarios is not None:
+            object.__setattr__(self, "scenarios", tuple(str(x) for x in self.scenarios))
+            if not self.scenarios:
+                raise ConfigError("PretrainConfig.scenarios must name at least one scenario (or be None: all)")
         if not 0 < self.target_quantile <= 1:
             raise ConfigError(f"PretrainConfig.target_quantile must be in (0, 1], got {self.target_quantile}")
         self.model_config(1, 1)  # validates the model size fields
 
     def model_config(self, state_dim: int, act_dim: int, max_timestep: int = 100) -> DTConfig:
         return DTConfig(state_dim, act_dim, context=self.context, width=self.width, depth=self.depth, heads=self.heads,
-                        dropout=self.dropout, max_timestep=max_timestep, attention=self.attention)
+                        dropout=self.dropout, max_timestep=max_timestep, attention=self.attention,
+                        condition_on_return=self.condition_on_return)
 
 
 def pretrain_config(dataset: str | Path, preset: str = "quick", seed: int = 0, **overrides: Any) -> PretrainConfig:
@@ -94,6 +101,16 @@ def pretrain_config(dataset: str | Path, preset: str = "quick", seed: int = 0, *
     base = dict(dataset=str(dataset), preset=preset, seed=seed, **PRETRAIN[preset])
     base.update({k: v for k, v in overrides.items() if v is not None})
     return PretrainConfig(**base)
+
+
+def training_subset(ds: ExpertDataset, scenarios: Sequence[str] | None) -> ExpertDataset:
+    """The episodes of ``ds`` in ``scenarios`` (all of them for None); an unknown name is one error line."""
+    if scenarios is None:
+        return ds
+    unknown = sorted(set(scenarios) - set(ds.scenarios))
+    if unknown:
+        raise ConfigError(f"PretrainConfig.scenarios: {unknown} not in the dataset {ds.path} (it holds {ds.scenarios})")
+    return dataclasses.replace(ds, trajectories=[tr for tr in ds.trajectories if tr.scenario in set(scenarios)])
 
 
 def default_pretrain_dir(cfg: PretrainConfig, root: str | Path = "runs/dt") -> Path:
@@ -110,9 +127,9 @@ def pretrain(cfg: PretrainConfig, run_dir: str | Path, *, resume: bool = False, 
     """
     import torch
 
-    configure_torch_threads()
+    configure_threads()
     run_dir = Path(run_dir)
-    ds = load_dataset(cfg.dataset)
+    ds = training_subset(load_dataset(cfg.dataset), cfg.scenarios)
     resuming = prepare_run_dir(run_dir, PRETRAIN_KIND, dataclasses.asdict(cfg), resume, force)
     system = ds.system
     torch.manual_seed(cfg.seed)

@@ -35,20 +35,23 @@ from typing import Any, Sequence
 
 from uavris import runs
 from uavris.agents.experts import ALGORITHMS
-from uavris.config import TRAINING_SCENARIOS, UNSEEN_SCENARIOS, SystemConfig
+from uavris.config import SystemConfig
 from uavris.errors import UavrisError
-from uavris.experiments.jobs import BACKENDS, Job, JobResult, JobRunner
+from uavris.experiments.jobs import BACKENDS, Job, JobResult, JobRunner, configure_threads
 from uavris.experiments.stages import Pipeline, Stage, StageRecord
 from uavris.experiments.study import (
     TRACK_SPECS,
     TRACKS,
+    Deployment,
     Track,
     dataset_job,
+    deployments,
     evaluate_job,
     finetune_job,
     nearest_training_scenarios,
     pretrain_job,
     strong_expert_config,
+    transfer_sources,
 )
 from uavris.experiments.train_expert import TrainConfig, preset_config, train_job
 from uavris.io import read_json
@@ -57,11 +60,17 @@ from uavris.presets import (
     EVAL_SEED,
     STUDY_COMPARE_SEEDS,
     STUDY_EVAL_EPISODES,
+    STUDY_LAYOUT_TRAJECTORIES,
+    STUDY_SCALING,
+    STUDY_TRAIN_LAYOUTS,
     STUDY_TRAJECTORIES,
+    STUDY_UNSEEN_LAYOUTS,
     check_preset,
 )
 
-TRACK_CHOICES = ("both",) + TRACKS
+# "all": the three tracks; "both": the paper and the strong track (the study before layouts).
+TRACK_CHOICES = ("all", "both") + TRACKS
+TRACK_SETS = {"all": TRACKS, "both": ("paper", "strong")}
 AUTO = "auto"
 # Job priorities: a free worker takes DT-chain jobs first, then experts, then the comparison's
 # runs, so the chains that follow the experts do not wait behind independent training jobs.
@@ -77,8 +86,12 @@ class ReproduceConfig:
     compare_seeds: int | None = None
     eval_episodes: int | None = None
     trajectories: int | None = None
-    track: str = "both"  # both, paper or strong
+    track: str = "all"  # all, both (paper and strong), paper, strong or deployment
     expert_algo: str = AUTO  # paper track: "auto" = the comparison's winner, or one of the four
+    train_layouts: int | None = None  # deployment track: training layouts (default: the preset's)
+    unseen_layouts: int | None = None  # deployment track: unseen layouts (default: the preset's)
+    layout_seed: int = 0  # deployment track: seed of the layout generator
+    scaling: tuple[int, ...] | None = None  # deployment track: smaller training sets of the data curve
     system: SystemConfig = dataclasses.field(default_factory=SystemConfig)
 
     def __post_init__(self) -> None:
@@ -88,12 +101,21 @@ class ReproduceConfig:
         if self.expert_algo not in (AUTO,) + ALGORITHMS:
             raise UavrisError(f"unknown expert algorithm {self.expert_algo!r}; choose {AUTO} (the comparison's "
                               f"winner) or one of {', '.join(ALGORITHMS)}")
-        for name in ("compare_seeds", "eval_episodes", "trajectories"):
+        for name in ("compare_seeds", "eval_episodes", "trajectories", "train_layouts", "unseen_layouts"):
             v = getattr(self, name)
             if v is not None and v < 1:
                 raise UavrisError(f"--{name.replace('_', '-')} must be >= 1, got {v}")
-        if self.seed < 0:
-            raise UavrisError(f"--seed must be >= 0, got {self.seed}")
+        if self.unseen_layouts is not None and self.unseen_layouts < 2:
+            raise UavrisError(f"--unseen-layouts must be >= 2 (a CI over layouts needs two), got {self.unseen_layouts}")
+        for name in ("seed", "layout_seed"):
+            if getattr(self, name) < 0:
+                raise UavrisError(f"--{name.replace('_', '-')} must be >= 0, got {getattr(self, name)}")
+        if self.scaling is not None:
+            object.__setattr__(self, "scaling", tuple(int(n) for n in self.scaling))
+        bad = [n for n in self.scaling_points if not 1 <= n < self.n_train_layouts]
+        if bad:
+            raise UavrisError(f"--scaling {list(self.scaling_points)}: each must be >= 1 and below "
+                              f"--train-layouts ({self.n_train_layouts}), got {bad}")
 
     @property
     def n_compare_seeds(self) -> int:
@@ -108,8 +130,31 @@ class ReproduceConfig:
         return self.trajectories or STUDY_TRAJECTORIES[self.preset]
 
     @property
+    def n_train_layouts(self) -> int:
+        return self.train_layouts or STUDY_TRAIN_LAYOUTS[self.preset]
+
+    @property
+    def n_unseen_layouts(self) -> int:
+        return self.unseen_layouts or STUDY_UNSEEN_LAYOUTS[self.preset]
+
+    @property
+    def scaling_points(self) -> tuple[int, ...]:
+        return self.scaling if self.scaling is not None else STUDY_SCALING[self.preset]
+
+    def trajectories_for(self, track: Track) -> int:
+        """Expert trajectories per training deployment: a layout gets as many as keep the
+        dataset the size of the paper track's (8 scenarios x the preset's), unless
+        ``--trajectories`` says otherwise."""
+        if not track.layouts:
+            return self.n_trajectories
+        return self.trajectories or STUDY_LAYOUT_TRAJECTORIES[self.preset]
+
+    @property
     def tracks(self) -> tuple[Track, ...]:
-        return tuple(TRACK_SPECS[t] for t in (TRACKS if self.track == "both" else (self.track,)))
+        return tuple(TRACK_SPECS[t] for t in TRACK_SETS.get(self.track, (self.track,)))
+
+    def deployments(self, track: Track) -> tuple[list[Deployment], list[Deployment]]:
+        return deployments(track, self.system, self.n_train_layouts, self.n_unseen_layouts, self.layout_seed)
 
 
 class _Context:
@@ -168,77 +213,121 @@ def _run_experts(stage_dir: Path, cfgs: dict[str, TrainConfig], ctx: _Context) -
 
 
 def _expert_stages(rc: ReproduceConfig, track: Track, ctx: _Context) -> list[Stage]:
-    """Experts of the training and of the unseen scenarios for ``track``."""
+    """Experts of the training (and, where the track has them, the unseen) deployments of ``track``."""
+    train, unseen = rc.deployments(track)
     stages = []
-    for name, scenarios in (("experts-train", TRAINING_SCENARIOS), ("experts-unseen", UNSEEN_SCENARIOS)):
-        if track.name == "strong":
-            cfgs = {s: strong_expert_config(s, rc.seed, rc.preset, rc.n_eval, rc.system) for s in scenarios}
+    for name, where in (("experts-train", train), ("experts-unseen", unseen if track.unseen_experts else [])):
+        if not where:
+            continue
+        if track.phase_control == "optimizer":  # the strong recipe: imitation of the planning oracle
+            cfgs = {d.name: strong_expert_config(d.name, rc.seed, rc.preset, rc.n_eval, d.system, d.start)
+                    for d in where}
             stages.append(Stage(track.stage(name), {s: c.to_dict() for s, c in cfgs.items()},
                                 lambda d, deps, cfgs=cfgs: _run_experts(d, cfgs, ctx)))
             continue
 
-        def run(d: Path, deps: dict[str, Path], scenarios: Sequence[str] = scenarios) -> dict[str, Any]:
+        def run(d: Path, deps: dict[str, Path], where: Sequence[Deployment] = where) -> dict[str, Any]:
             algo = rc.expert_algo if rc.expert_algo != AUTO else read_json(deps["compare"] / "summary.json")["expert"]
-            cfgs = {s: preset_config(algo, s, rc.seed, rc.preset, eval_episodes=rc.n_eval, system=rc.system)
-                    for s in scenarios}
+            cfgs = {w.name: preset_config(algo, w.name, rc.seed, rc.preset, eval_episodes=rc.n_eval, system=w.system)
+                    for w in where}
             return _run_experts(d, cfgs, ctx)
 
-        config = {"algo": rc.expert_algo, "scenarios": list(scenarios), "seed": rc.seed, "preset": rc.preset,
+        config = {"algo": rc.expert_algo, "scenarios": [w.name for w in where], "seed": rc.seed, "preset": rc.preset,
                   "eval_episodes": rc.n_eval, "system": rc.system.to_dict()}
         stages.append(Stage(name, config, run, ("compare",) if rc.expert_algo == AUTO else ()))
     return stages
 
 
 def _dt_stages(rc: ReproduceConfig, track: Track, ctx: _Context) -> list[Stage]:
-    """Dataset, pre-training, fine-tuning and evaluation of ``track``."""
+    """Dataset, pre-training (and behaviour cloning, and the data curve), fine-tuning and
+    evaluation of ``track``."""
     from uavris.experiments.finetune import finetune_config
     from uavris.experiments.pretrain import pretrain_config
 
     t = track.stage
+    train, unseen = rc.deployments(track)
+    trajectories = rc.trajectories_for(track)
 
     def dataset(d: Path, deps: dict[str, Path]) -> dict[str, Any]:
-        experts = [str(deps[t("experts-train")] / "runs" / s) for s in TRAINING_SCENARIOS]
-        return ctx.run_one(t("dataset"), dataset_job, (experts, rc.n_trajectories, str(d / "dataset")),
-                           d / "job.log")
+        experts = [str(deps[t("experts-train")] / "runs" / w.name) for w in train]
+        return ctx.run_one(t("dataset"), dataset_job, (experts, trajectories, str(d / "dataset")), d / "job.log")
 
-    def pretrain(d: Path, deps: dict[str, Path]) -> dict[str, Any]:
-        cfg = pretrain_config(deps[t("dataset")] / "dataset", rc.preset, rc.seed)
-        return ctx.run_one(t("pretrain"), pretrain_job, (dataclasses.asdict(cfg), str(d / "model"), ctx.device),
-                           d / "job.log")
+    # The DT, behaviour cloning with the same model and budget, and the DT on fewer training
+    # layouts (the data curve): one pre-training stage each, on the same dataset.
+    schedule = dict(track.pretrain)
+    models: dict[str, dict[str, Any]] = {"pretrain": schedule}
+    if track.behaviour_cloning:
+        models["bc"] = {**schedule, "condition_on_return": False}
+    if track.layouts:
+        models.update({f"pretrain-n{n}": {**schedule, "scenarios": tuple(w.name for w in train[:n])}
+                       for n in rc.scaling_points})
 
-    def finetune(scenario: str):
+    def pretrain(name: str, overrides: dict[str, Any]):
         def run(d: Path, deps: dict[str, Path]) -> dict[str, Any]:
-            cfg = finetune_config(deps[t("pretrain")] / "model", scenario, rc.preset, rc.seed,
-                                  eval_episodes=rc.n_eval)
-            return ctx.run_one(t(f"finetune-{scenario}"), finetune_job,
-                               (dataclasses.asdict(cfg), str(d / "model"), ctx.device),
+            cfg = pretrain_config(deps[t("dataset")] / "dataset", rc.preset, rc.seed, **overrides)
+            return ctx.run_one(t(name), pretrain_job, (dataclasses.asdict(cfg), str(d / "model"), ctx.device),
                                d / "job.log")
         return run
 
-    def evaluate(scenario: str):
+    def finetune(where: Deployment):
         def run(d: Path, deps: dict[str, Path]) -> dict[str, Any]:
-            dirs = {name: str(deps[t(name)]) for name in ("experts-train", "experts-unseen", "pretrain")}
-            dirs["finetune"] = str(deps[t(f"finetune-{scenario}")])
-            return ctx.run_one(t(f"evaluate-{scenario}"), evaluate_job,
-                               (str(d), scenario, track.name, rc.system.to_dict(), rc.n_eval, dirs), d / "job.log")
+            cfg = _finetune_config(deps[t("pretrain")] / "model", where)
+            return ctx.run_one(t(f"finetune-{where.name}"), finetune_job,
+                               (dataclasses.asdict(cfg), str(d / "model"), ctx.device), d / "job.log")
         return run
 
-    stages = [
-        Stage(t("dataset"), {"trajectories": rc.n_trajectories, "seed": COLLECT_SEED}, dataset,
-              (t("experts-train"),)),
-        Stage(t("pretrain"), dataclasses.asdict(pretrain_config("<dataset>", rc.preset, rc.seed)), pretrain,
-              (t("dataset"),)),
-    ]
-    for s in UNSEEN_SCENARIOS:
-        ft = dataclasses.asdict(finetune_config("<pretrain>", s, rc.preset, rc.seed, eval_episodes=rc.n_eval))
-        stages.append(Stage(t(f"finetune-{s}"), ft, finetune(s), (t("pretrain"),)))
-    for s in UNSEEN_SCENARIOS:
-        stages.append(Stage(t(f"evaluate-{s}"), {"episodes": rc.n_eval, "seed": EVAL_SEED, "track": track.name,
-                                                 "references": ["hover", "hover-optimizer", "oracle"],
-                                                 "transfer_from": nearest_training_scenarios(s)},
-                            evaluate(s), (t("experts-train"), t("experts-unseen"), t("pretrain"),
-                                          t(f"finetune-{s}"))))
+    def _finetune_config(model: Path | str, where: Deployment):
+        own = {} if not track.layouts else {"system": where.system, "start": where.start}
+        return finetune_config(model, where.name, rc.preset, rc.seed, eval_episodes=rc.n_eval, **own)
+
+    def evaluate(where: Deployment, sources: list[tuple[str, float]]):
+        def run(d: Path, deps: dict[str, Path]) -> dict[str, Any]:
+            policies = _evaluated_policies(track, where, sources, {k: deps[t(k)] for k in inputs})
+            return ctx.run_one(t(f"evaluate-{where.name}"), evaluate_job,
+                               (str(d), where.to_dict(), track.name, rc.n_eval, policies), d / "job.log")
+        inputs = ["experts-train", *(["experts-unseen"] if track.unseen_experts else []), *models,
+                  f"finetune-{where.name}"]
+        return run, inputs
+
+    stages = [Stage(t("dataset"), {"trajectories": trajectories, "seed": COLLECT_SEED}, dataset,
+                    (t("experts-train"),))]
+    for name, overrides in models.items():
+        cfg = pretrain_config("<dataset>", rc.preset, rc.seed, **overrides)
+        stages.append(Stage(t(name), dataclasses.asdict(cfg), pretrain(name, overrides), (t("dataset"),)))
+    for w in unseen:
+        ft = dataclasses.asdict(_finetune_config("<pretrain>", w))
+        stages.append(Stage(t(f"finetune-{w.name}"), ft, finetune(w), (t("pretrain"),)))
+    for w in unseen:
+        sources = transfer_sources(track, w, train)
+        run, inputs = evaluate(w, sources)
+        stages.append(Stage(t(f"evaluate-{w.name}"), {"episodes": rc.n_eval, "seed": EVAL_SEED, "track": track.name,
+                                                      "references": ["hover", "hover-optimizer", "oracle"],
+                                                      "transfer_from": [s for s, _ in sources]},
+                            run, tuple(t(k) for k in inputs)))
     return stages
+
+
+def _evaluated_policies(track: Track, where: Deployment, sources: list[tuple[str, float]],
+                        dirs: dict[str, Path]) -> dict[str, tuple[str, str, str]]:
+    """What a track's evaluation stage scores in ``where`` beside the references:
+    ``{key: (label, kind, path)}`` (:func:`uavris.experiments.study.evaluate_policies`)."""
+    policies: dict[str, tuple[str, str, str]] = {}
+    if track.unseen_experts:
+        policies["expert"] = ("expert trained in the scenario", "expert",
+                              str(dirs["experts-unseen"] / "runs" / where.name))
+    policies["dt-zero-shot"] = ("zero-shot DT", "dt", str(dirs["pretrain"] / "model"))
+    policies["dt-finetuned"] = ("fine-tuned DT", "dt", str(dirs[f"finetune-{where.name}"] / "model"))
+    if "bc" in dirs:
+        policies["bc"] = ("behaviour cloning (the DT without return conditioning)", "dt", str(dirs["bc"] / "model"))
+    for name in sorted((k for k in dirs if k.startswith("pretrain-n")), key=lambda k: int(k[len("pretrain-n"):])):
+        n = name[len("pretrain-n"):]
+        policies[f"dt-zero-shot-n{n}"] = (f"zero-shot DT, {n} training layout{'s' * (n != '1')}", "dt",
+                                          str(dirs[name] / "model"))
+    for rank, (src, dist) in enumerate(sources):
+        near = " (nearest)" if track.layouts and rank == 0 else ""
+        label = f"transferred from {src}{near}" + (f", {dist:.1f} m" if track.layouts else "")
+        policies[f"transfer-{src}"] = (label, "expert", str(dirs["experts-train"] / "runs" / src))
+    return policies
 
 
 def build_pipeline(rc: ReproduceConfig, out: Path, ctx: _Context) -> Pipeline:
@@ -246,7 +335,8 @@ def build_pipeline(rc: ReproduceConfig, out: Path, ctx: _Context) -> Pipeline:
         from uavris.experiments.compare import compare_algorithms
 
         compare_algorithms(preset=rc.preset, seeds=rc.n_compare_seeds, workers=ctx.workers, out=d,
-                           eval_episodes=rc.n_eval, progress=False, runner=ctx.runner, device=ctx.device)
+                           eval_episodes=rc.n_eval, progress=False, runner=ctx.runner, device=ctx.device,
+                           system=rc.system)
         summary = read_json(d / "summary.json")
         return {"rows": summary["rows"], "expert": summary["expert"]}
 
@@ -278,6 +368,7 @@ def reproduce(rc: ReproduceConfig, out: str | Path, *, workers: int = 2, backend
     out = Path(out)
     from tqdm.auto import tqdm
 
+    configure_threads()  # before any worker starts: they inherit it, and jobs run here with one worker
     ctx = _Context(workers, backend, ray_address, None, device)
     pipeline = build_pipeline(rc, out, ctx)
     unknown = [f for f in force if f not in pipeline.stages and f != "report"]

@@ -49,10 +49,10 @@ from uavris.agents.experts import (
 from uavris.agents.experts.imitation import ImitationConfig, imitate
 from uavris.agents.experts.sb3 import SB3Policy, build_model, load_model
 from uavris.agents.experts.vec_env import UavRisVecEnv
-from uavris.config import SystemConfig, get_scenario
+from uavris.config import Scenario, SystemConfig, float_tuple, scenario_at
 from uavris.env.wrappers import check_phase_control
 from uavris.errors import CheckpointError, ConfigError, UavrisError
-from uavris.experiments.jobs import configure_torch_threads
+from uavris.experiments.jobs import configure_threads
 from uavris.io import atomic_write_bytes, read_csv, read_rows, read_yaml, write_csv, write_yaml
 from uavris.presets import EVAL_SEED, PRESETS, TRAIN_CHECKPOINT, TRAIN_EVAL, TRAIN_STEPS, check_preset
 
@@ -66,6 +66,7 @@ class TrainConfig:
 
     algo: str = "ddpg"
     scenario: str = "fig2"
+    start: tuple[float, float, float] | None = None  # the UAV's start; None: the named scenario's (a layout sets it)
     seed: int = 0
     preset: str = "quick"
     total_steps: int = TRAIN_STEPS["quick"]
@@ -81,7 +82,9 @@ class TrainConfig:
     def __post_init__(self) -> None:
         check_algorithm(self.algo)
         check_phase_control(self.phase_control)
-        get_scenario(self.scenario).validate_for(self.system)
+        if self.start is not None:
+            object.__setattr__(self, "start", float_tuple(self.start, "TrainConfig", "start", "[x, y, z] (m)"))
+        self.resolved_scenario.validate_for(self.system)
         check_preset(self.preset)
         if isinstance(self.imitation, dict):
             object.__setattr__(self, "imitation", ImitationConfig(**self.imitation))
@@ -99,8 +102,14 @@ class TrainConfig:
             if getattr(self, name) < 0:
                 raise ConfigError(f"TrainConfig.{name} must be >= 0, got {getattr(self, name)}")
 
+    @property
+    def resolved_scenario(self) -> Scenario:
+        """Where the run flies: the named scenario, or ``start`` under that name (a layout's)."""
+        return scenario_at(self.scenario, self.start)
+
     def to_dict(self) -> dict[str, Any]:
         d = dataclasses.asdict(self)
+        d["start"] = None if self.start is None else list(self.start)
         d["hyperparams"]["net_arch"] = list(self.hyperparams.net_arch)
         d["system"] = self.system.to_dict()
         return d
@@ -226,7 +235,7 @@ def load_run_policy(run_dir: str | Path, device: str = "cpu") -> tuple[TrainConf
 
 def run_evaluation(model: Any, cfg: TrainConfig, episodes: int) -> EpisodeResults:
     """The run's deterministic evaluation on its own scenario and evaluation episodes."""
-    return evaluate(run_policy(model, cfg), cfg.system, cfg.scenario, episodes, cfg.eval_seed)
+    return evaluate(run_policy(model, cfg), cfg.system, cfg.resolved_scenario, episodes, cfg.eval_seed)
 
 
 def save_checkpoint(model: Any, cfg: TrainConfig, run_dir: Path, episodes: list, evals: list) -> Path:
@@ -266,12 +275,12 @@ def train(cfg: TrainConfig, run_dir: str | Path, *, resume: bool = False, force:
     unfinished run without ``resume``/``force``, a resume whose config differs, or a
     corrupt checkpoint. ``interrupt_at`` is a test hook that stops training at that step.
     """
-    configure_torch_threads()
+    configure_threads()
     run_dir = Path(run_dir)
     resuming = runs.prepare(run_dir, "config.yaml", lambda p: write_yaml(p, cfg.to_dict()),
                             lambda p: load_run_config(run_dir) == cfg, resume=resume, force=force)
     t0 = time.perf_counter()
-    env = UavRisVecEnv(cfg.hyperparams.n_envs, cfg.system, cfg.scenario, cfg.hyperparams.reward_scale,
+    env = UavRisVecEnv(cfg.hyperparams.n_envs, cfg.system, cfg.resolved_scenario, cfg.hyperparams.reward_scale,
                        cfg.phase_control)
     env.seed(cfg.seed * 10_000)
     episodes: list[list[Any]] = []
@@ -351,7 +360,7 @@ def _fresh_model(cfg: TrainConfig, env: Any, run_dir: Path, evals: list[list[Any
             bar.set_postfix(loss=f"{row['loss']:.4f}", refresh=False)
 
     try:
-        imitate(model, cfg.system, cfg.scenario, cfg.imitation, cfg.seed, on_round)
+        imitate(model, cfg.system, cfg.resolved_scenario, cfg.imitation, cfg.seed, on_round)
     finally:
         if bar is not None:
             bar.close()

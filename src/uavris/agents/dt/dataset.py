@@ -39,13 +39,13 @@ import re
 import shutil
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Sequence
+from typing import Any, Sequence
 
 import numpy as np
 from numpy.typing import NDArray
 
 from uavris.agents.dt.trajectories import Trajectory
-from uavris.config import SystemConfig, get_scenario
+from uavris.config import SCENARIOS, Scenario, SystemConfig, get_scenario, scenario_at
 from uavris.env import ENV_ID
 from uavris.env.simulator import layout_as_lists, observation_bounds, stored_system
 from uavris.env.wrappers import PHASE_CONTROLS, action_dim_for
@@ -91,22 +91,23 @@ def dataset_id_for(path: Path, namespace: str | None = None) -> str:
     return f"{namespace}/{name}"
 
 
-def env_spec_for(system: SystemConfig, scenario: str):
+def env_spec_for(system: SystemConfig, scenario: str | Scenario):
     """The registered env's spec with the kwargs that rebuild ``system`` in ``scenario``.
 
     The kwargs are JSON-native (Minari stores the spec as JSON) and survive the round trip
-    exactly; the registered entry point takes the config as a dict.
+    exactly; the registered entry point takes the config as a dict. A named scenario is
+    recorded by its name, any other (a layout's start) as ``{"name": ..., "start": [x, y, z]}``.
     """
     import gymnasium as gym
     from gymnasium.envs.registration import EnvSpec
 
-    if not isinstance(scenario, str):
-        raise DatasetError(f"the recorded scenario must be a scenario name, got {scenario!r}")
     try:
-        get_scenario(scenario).validate_for(system)
+        where = get_scenario(scenario)
+        where.validate_for(system)
     except ConfigError as e:
         raise DatasetError(f"cannot record scenario {scenario!r} for the dataset's system ({_one_line(e)})") from None
-    kwargs = {"config": system.to_dict(), "scenario": scenario}
+    named = SCENARIOS.get(where.name) == where
+    kwargs = {"config": system.to_dict(), "scenario": where.name if named else where.to_dict()}
     spec = dataclasses.replace(gym.spec(ENV_ID), kwargs=kwargs)
     if EnvSpec.from_json(spec.to_json()).kwargs != kwargs:
         raise DatasetError(f"the environment spec of {ENV_ID} does not survive JSON: {kwargs}")
@@ -152,7 +153,9 @@ def write_dataset(path: str | Path, trajectories: Sequence[Trajectory], system: 
     act_dim = action_dim_for(system, phase_control)
     for tr in trajectories:
         _check_trajectory(tr, system.observation_dim, act_dim, f"trajectory (seed {tr.seed})")
-    env_spec = env_spec_for(system, trajectories[0].scenario)
+    first = trajectories[0]
+    system = first_system(system, first)
+    env_spec = env_spec_for(system, scenario_at(first.scenario, first.start))
     tmp = path.parent / f".{path.name}.tmp"
     shutil.rmtree(tmp, ignore_errors=True)
     tmp.mkdir(parents=True)
@@ -178,8 +181,7 @@ def write_dataset(path: str | Path, trajectories: Sequence[Trajectory], system: 
                           terminations=_flag_last(tr.length, tr.terminated),
                           truncations=_flag_last(tr.length, tr.truncated))
             for i, tr in enumerate(trajectories))
-        storage.update_episode_metadata(
-            [{"scenario": tr.scenario, "expert": tr.expert, "expert_algo": tr.expert_algo} for tr in trajectories])
+        storage.update_episode_metadata([_episode_metadata(tr) for tr in trajectories])
         if path.exists():
             old = path.parent / f".{path.name}.old"
             shutil.rmtree(old, ignore_errors=True)
@@ -192,6 +194,21 @@ def write_dataset(path: str | Path, trajectories: Sequence[Trajectory], system: 
         shutil.rmtree(tmp, ignore_errors=True)
         raise
     return given
+
+
+def first_system(system: SystemConfig, trajectory: Trajectory) -> SystemConfig:
+    """``system`` with the devices of ``trajectory``'s layout (a dataset over several layouts
+    records one system; each episode its own devices)."""
+    return system if trajectory.users is None else system.replace(users=trajectory.users)
+
+
+def _episode_metadata(tr: Trajectory) -> dict[str, Any]:
+    meta: dict[str, Any] = {"scenario": tr.scenario, "expert": tr.expert, "expert_algo": tr.expert_algo}
+    if tr.start is not None:
+        meta["start"] = list(tr.start)
+    if tr.users is not None:
+        meta["users"] = [list(u) for u in tr.users]
+    return meta
 
 
 def _flag_last(length: int, flag: bool) -> NDArray[np.bool_]:
@@ -260,7 +277,8 @@ def load_dataset(path: str | Path) -> ExpertDataset:
             term, trunc = np.asarray(ep["terminations"]), np.asarray(ep["truncations"])
             tr = Trajectory(np.asarray(ep["observations"]), np.asarray(ep["actions"]), rewards,
                             bool(term[-1]) if term.size else False, bool(trunc[-1]) if trunc.size else False,
-                            str(em["scenario"]), int(em["seed"]), str(em["expert"]), str(em.get("expert_algo", "")))
+                            str(em["scenario"]), int(em["seed"]), str(em["expert"]), str(em.get("expert_algo", "")),
+                            *_episode_layout(em, system, f"{path}: episode {i}"))
             _check_trajectory(tr, obs_dim, act_dim, f"{path}: episode {i}")
             trajectories.append(tr)
     except (KeyError, ValueError, OSError, TypeError, AssertionError, IndexError) as e:
@@ -269,6 +287,24 @@ def load_dataset(path: str | Path) -> ExpertDataset:
         raise DatasetError(f"{path}: episode data is unreadable ({_one_line(e)})") from None
     return ExpertDataset(path, str(meta.get("dataset_id", "")), system, trajectories, str(meta.get("description", "")),
                          phase_control)
+
+
+def _episode_layout(meta: dict[str, Any], system: SystemConfig, where: str
+                    ) -> tuple[tuple[float, ...] | None, tuple[tuple[float, ...], ...] | None]:
+    """An episode's recorded start and devices (None where a dataset from before them has none),
+    checked: a layout the dataset's system accepts, with its number of devices."""
+    start, users = meta.get("start"), meta.get("users")
+    try:
+        if users is not None:
+            layout_system = system.replace(users=[list(u) for u in users])
+            if layout_system.num_users != system.num_users:
+                raise ConfigError(f"{layout_system.num_users} devices, the dataset's system has {system.num_users}")
+            users = layout_system.users
+        if start is not None:
+            start = scenario_at(str(meta["scenario"]), start).start
+    except (ConfigError, TypeError, ValueError) as e:
+        raise DatasetError(f"{where}: recorded layout is invalid ({_one_line(e)})") from None
+    return start, users
 
 
 def _check_env_spec(spec, system: SystemConfig, where: str) -> None:

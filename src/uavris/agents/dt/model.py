@@ -39,6 +39,11 @@ Normalisation travels with the weights: ``state_mean``, ``state_std`` and ``retu
 are buffers (saved in the safetensors file) computed from the training dataset; the model
 takes raw observations and raw returns-to-go (bps/Hz summed over slots).
 
+Behaviour cloning (``DTConfig.condition_on_return=False``): the same model with every
+R_hat replaced by 0, trained and deployed alike. It has the DT's parameters, compute and
+data, so the difference between the two is what return conditioning does (Chen et al.
+compare the DT with behaviour cloning the same way, on the same data).
+
 Lives here: the model (:class:`DecisionTransformer`), its configuration (:class:`DTConfig`),
 the attention masks (:func:`attention_mask`) and the action loss (:func:`masked_action_loss`).
 Not here: the key/value cache of the banded layout (:mod:`.cache`), the training windows
@@ -79,6 +84,7 @@ class DTConfig:
     max_timestep: int = 100  # size of the timestep embedding; later slots reuse the last entry
     mlp_ratio: int = 4
     attention: str = "window"  # "window" (DT paper) or "banded" (cached deployment); see the module docstring
+    condition_on_return: bool = True  # False: R_hat is replaced by 0, so the model is behaviour cloning
 
     def __post_init__(self) -> None:
         for name in ("state_dim", "act_dim", "context", "width", "depth", "heads", "max_timestep", "mlp_ratio"):
@@ -91,6 +97,8 @@ class DTConfig:
             raise ConfigError(f"DTConfig.dropout must be in [0, 1), got {self.dropout!r}")
         if self.attention not in ATTENTION_LAYOUTS:
             raise ConfigError(f"DTConfig.attention must be one of {ATTENTION_LAYOUTS}, got {self.attention!r}")
+        if not isinstance(self.condition_on_return, bool):
+            raise ConfigError(f"DTConfig.condition_on_return must be true or false, got {self.condition_on_return!r}")
 
     @property
     def band(self) -> int | None:
@@ -220,6 +228,10 @@ class DecisionTransformer(nn.Module):
         timestep embedding of its slot added (``action_timesteps`` for A, if given)."""
         top = self.cfg.max_timestep - 1
         time_emb = self.embed_timestep(timesteps.clamp(0, top))
+        if not self.cfg.condition_on_return:
+            # Behaviour cloning with the DT's own architecture and budget: the return token stays
+            # (same parameters, same compute) but carries no information.
+            returns_to_go = torch.zeros_like(returns_to_go)
         act_time = time_emb if action_timesteps is None else self.embed_timestep(action_timesteps.clamp(0, top))
         r = self.embed_return((returns_to_go / self.return_scale).unsqueeze(-1)) + time_emb
         s = self.embed_state((states - self.state_mean) / self.state_std) + time_emb

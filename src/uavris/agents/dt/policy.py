@@ -70,6 +70,11 @@ class DTBatchPolicy:
         self.noise_sigma = float(noise_sigma)
         self._rng = np.random.default_rng(seed)
 
+    @property
+    def observation_dim(self) -> int:
+        """Entries of the observation the model reads (:func:`uavris.agents.policy.check_policy_fits`)."""
+        return self.model.cfg.state_dim
+
     # ------------------------------------------------------------------ history
     def begin(self, n: int) -> None:
         """Allocate the history of ``n`` rows, all at the start of an episode."""

@@ -52,6 +52,8 @@ class Trajectory:
     seed: int
     expert: str = ""
     expert_algo: str = ""
+    start: tuple[float, ...] | None = None  # the UAV's start (None: datasets from before it was recorded)
+    users: tuple[tuple[float, ...], ...] | None = None  # the devices of the episode's layout (likewise)
 
     @property
     def length(self) -> int:
@@ -111,10 +113,10 @@ def record_episodes(policy: Any, config: SystemConfig, scenario: str | Scenario,
     out: list[Trajectory] = []
     for start in range(0, len(seeds), batch_size):
         b = rollout(policy, config, scenario, seeds[start:start + batch_size], phase_control=phase_control, record=True)
-        name = get_scenario(scenario).name
+        where = get_scenario(scenario)
         out.extend(Trajectory(b.observations[i, :b.lengths[i] + 1].copy(), b.actions[i, :b.lengths[i]].copy(),
                               b.rewards[i, :b.lengths[i]].copy(), bool(b.terminated[i]), not bool(b.terminated[i]),
-                              name, int(b.seeds[i]), expert, expert_algo)
+                              where.name, int(b.seeds[i]), expert, expert_algo, where.start, config.users)
                    for i in range(len(b.seeds)))
     return out
 

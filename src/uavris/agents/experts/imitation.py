@@ -34,7 +34,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from uavris.agents.policy import Privileged
-from uavris.config import ConfigError, SystemConfig
+from uavris.config import ConfigError, Scenario, SystemConfig
 from uavris.env.rollout import rollout
 from uavris.env.simulator import BatchedSimulator
 
@@ -67,7 +67,7 @@ class ImitationConfig:
                 raise ConfigError(f"ImitationConfig.{name} must be a finite number > 0, got {v!r}")
 
 
-def _rollout(config: SystemConfig, scenario: str, seeds: NDArray[np.int64], teacher: Any,
+def _rollout(config: SystemConfig, scenario: str | Scenario, seeds: NDArray[np.int64], teacher: Any,
              student: Any | None) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
     """States visited by the teacher (``student`` None) or the student, with the teacher's labels."""
     states: list[NDArray[np.float32]] = []
@@ -88,7 +88,7 @@ def _rollout(config: SystemConfig, scenario: str, seeds: NDArray[np.int64], teac
     return np.concatenate(states), np.concatenate(labels)
 
 
-def imitate(model: Any, config: SystemConfig, scenario: str, cfg: ImitationConfig, seed: int,
+def imitate(model: Any, config: SystemConfig, scenario: str | Scenario, cfg: ImitationConfig, seed: int,
             on_round: Any = None) -> list[dict[str, float]]:
     """Fit ``model`` (SB3 PPO on the motion action) to the teacher; returns one log row per round.
 

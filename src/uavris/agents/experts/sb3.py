@@ -59,6 +59,11 @@ class SB3Policy:
         self.model = model
         self.phase_control = phase_control
 
+    @property
+    def observation_dim(self) -> int:
+        """Entries of the observation the model was trained on (:func:`uavris.agents.policy.check_policy_fits`)."""
+        return int(self.model.observation_space.shape[0])
+
     def __call__(self, obs: NDArray[np.float32]) -> NDArray[np.float32]:
         action, _ = self.model.predict(obs, deterministic=True)
         return action

@@ -16,6 +16,13 @@ import yaml
 
 from uavris.agents.references import HOVER_OPTIMIZER, ORACLE, ZERO_ACTION
 from uavris.config import UNSEEN_SCENARIOS, get_scenario
+from uavris.experiments.report.deployment import (
+    NEAREST,
+    deployment_section,
+    layout_scores,
+    layouts_figure,
+    scaling_figure,
+)
 from uavris.experiments.report.figures import fig3, interactions_figure, trajectory_figure
 from uavris.experiments.stages import Pipeline, StageRecord
 from uavris.experiments.study import Track
@@ -148,6 +155,41 @@ class _Report:
                            f"{'holds' if abs(gap) <= WITHIN_EXPERT or gap > 0 else 'does not hold'} (fine-tuned "
                            f"{ft['mean']:.2f} vs expert {ex['mean']:.2f}, {gap:+.1%}).{interactions}")
 
+    # ------------------------------------------------------------------ the deployment track
+    def deployment(self, track: Track) -> None:
+        """Unseen layouts as the unit of generalisation (:mod:`.deployment`)."""
+        self.add("", f"## {track.title[0].upper() + track.title[1:]}", "")
+        _, unseen = self.rc.deployments(track)
+        results = {}
+        for w in unseen:
+            name = track.stage(f"evaluate-{w.name}")
+            if name in self.ok:
+                results[w.name] = read_json(self.pipeline.directory(name) / "stage.json")["result"]
+        missing = [w.name for w in unseen if w.name not in results]
+        if missing:
+            self.add(f"Not available for {len(missing)} of {len(unseen)} unseen layouts (their evaluation stage did "
+                     f"not finish): {', '.join(missing)}.", "")
+        if not results:
+            return
+        scores = layout_scores(results)
+        first = next(iter(results.values()))
+        labels = {k: v["label"] for k, v in first.items() if k.startswith("dt-zero-shot-n")}
+        stem = f"{track.prefix}layouts"
+        layouts_figure(scores, labels, self.figs / stem)
+        curve = {int(k.rsplit("n", 1)[1]): [scores[lay][k] / scores[lay][ORACLE] for lay in scores] for k in labels}
+        scaling = None
+        if curve:
+            curve[self.rc.n_train_layouts] = [scores[lay]["dt-zero-shot"] / scores[lay][ORACLE] for lay in scores]
+            refs = {label: [scores[lay][k] / scores[lay][ORACLE] for lay in scores]
+                    for k, label in ((HOVER_OPTIMIZER, "hover, optimiser's phases"),
+                                     (NEAREST, "nearest layout's expert")) if all(k in scores[lay] for lay in scores)}
+            scaling = f"{track.prefix}scaling"
+            scaling_figure(curve, refs, self.figs / scaling)
+        lines, claims = deployment_section(scores, labels, f"figures/{stem}.png",
+                                           f"figures/{scaling}.png" if scaling else None)
+        self.add(*lines)
+        self.claims += claims
+
     # ------------------------------------------------------------------ both tracks side by side
     def side_by_side(self, tracks: Sequence[Track], results: dict[str, dict[str, dict[str, Any]]]) -> None:
         cols = [(t, s) for t in tracks for s in UNSEEN_SCENARIOS if s in results.get(t.name, {})]
@@ -198,8 +240,12 @@ def write_report(out: Path, rc: Any, pipeline: Pipeline, records: Sequence[Stage
     rep.add("", f"Total wall clock of this invocation: {wall_s / 60:.1f} min (stages run concurrently where their "
                 "inputs allow; finished stages skipped count 0 here, their own time is in the table).")
     rep.fig2()
-    results = {t.name: rep.track(t) for t in rc.tracks}
-    rep.side_by_side(rc.tracks, results)
+    scenario_tracks = [t for t in rc.tracks if not t.layouts]
+    results = {t.name: rep.track(t) for t in scenario_tracks}
+    rep.side_by_side(scenario_tracks, results)
+    for t in rc.tracks:
+        if t.layouts:
+            rep.deployment(t)
     rep.add("", "## The paper's claims, checked", "", *(rep.claims or ["No claim could be checked: stages failed."]),
             "", "The paper's numbers come from its own, unstated parameters (noise power, slot length, energy budget, "
             "training length); ours are in `docs/model.md` and below. Where a claim does not hold here, that is the "
@@ -207,7 +253,10 @@ def write_report(out: Path, rc: Any, pipeline: Pipeline, records: Sequence[Stage
     rep.add("", "## Parameters", "", "```yaml",
             yaml.safe_dump({"preset": rc.preset, "seed": rc.seed, "tracks": [t.name for t in rc.tracks],
                             "expert_algo": rc.expert_algo, "compare_seeds": rc.n_compare_seeds,
-                            "eval_episodes": rc.n_eval, "trajectories_per_scenario": rc.n_trajectories},
+                            "eval_episodes": rc.n_eval, "trajectories_per_scenario": rc.n_trajectories,
+                            **({"train_layouts": rc.n_train_layouts, "unseen_layouts": rc.n_unseen_layouts,
+                                "layout_seed": rc.layout_seed, "scaling": list(rc.scaling_points)}
+                               if any(t.layouts for t in rc.tracks) else {})},
                            sort_keys=False).rstrip(), "```", "",
             "Stage configurations (hyperparameters, the strong track's imitation, DT and fine-tuning settings) are in "
             "each `stages/NAME-KEY/stage.json`. System configuration:", "", "```yaml",

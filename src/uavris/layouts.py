@@ -1,0 +1,252 @@
+"""Deployments (layouts): where the D2D devices are and where the UAV starts.
+
+The paper's study varies only the UAV's start, and every start of it has the same best
+pose, so nothing there needs generalising. A layout moves the devices, and with them the
+best pose: the setting in which a policy that memorised one deployment fails and one that
+generalises pays (docs/model.md, section 21).
+
+Lives here: :class:`Layout` (devices, start and optionally the room, with what it makes of
+a base system), the paper's layout (:data:`PAPER_LAYOUT`), the seeded generator
+(:class:`LayoutGenerator`: training and unseen sets disjoint by construction), the layout
+distance (:func:`layout_distance`, :func:`nearest_layout`), layout files (:func:`read_layout`,
+:func:`write_layout`) and :func:`resolve_layout`, which turns what a user types (``paper``,
+a generated name such as ``layout-unseen-3``, or a YAML file) into a layout. Not here: the
+checks every layout passes (:class:`uavris.config.SystemConfig` and
+:meth:`uavris.config.Scenario.validate_for`, the same for every source), the observation
+of the device positions (``SystemConfig.observe_devices``).
+
+A layout file (YAML)::
+
+    name: my-hall            # optional; default: the file's name without .yaml
+    room: [40, 40, 8]        # optional; default: the system's (x, y, z in m; a lower
+                             # ceiling than the system's z_max caps the flight region)
+    devices:                 # required: one [x, y, z] per D2D device, m
+      - [15, 5, 1.0]
+      - [20, 8, 1.5]
+    start: [15, 20, 4.5]     # optional; default: the room's centre at 4.5 m
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Sequence
+
+import numpy as np
+from scipy.optimize import linear_sum_assignment
+
+from uavris.config import PAPER_USERS, SCENARIOS, ConfigError, Scenario, SystemConfig, Vec3, float_tuple
+
+START_HEIGHT = 4.5  # m: the paper's starting altitude (every scenario of its Sec. V)
+SPLITS: tuple[str, ...] = ("train", "unseen")
+_GENERATED = re.compile(r"layout-(train|unseen)-(\d+)")
+_FILE_KEYS = {"name", "room", "devices", "users", "start"}
+
+
+@dataclass(frozen=True)
+class Layout:
+    """A deployment: the devices (``users``), the UAV's start and, for a hall of its own, the room."""
+
+    name: str
+    users: tuple[Vec3, ...]
+    start: Vec3
+    room: Vec3 | None = None  # None: the base system's room
+
+    def __post_init__(self) -> None:
+        # Lists from YAML or the CLI become tuples of floats, so a layout is hashable and exact.
+        object.__setattr__(self, "users", tuple(float_tuple(u, "Layout", f"users[{k}]", "a point [x, y, z] (m)")
+                                                for k, u in enumerate(self.users)))
+        object.__setattr__(self, "start", float_tuple(self.start, "Layout", "start", "a point [x, y, z] (m)"))
+        if self.room is not None:
+            object.__setattr__(self, "room", float_tuple(self.room, "Layout", "room", "three lengths [x, y, z] (m)"))
+
+    def system(self, base: SystemConfig) -> SystemConfig:
+        """``base`` with this layout's devices (and room); validated like every system."""
+        changes: dict[str, Any] = {"users": self.users}
+        if self.room is not None:  # a lower hall caps the flight region at its ceiling
+            changes.update(room=self.room, z_max=min(base.z_max, self.room[2]))
+        return base.replace(**changes)
+
+    @property
+    def scenario(self) -> Scenario:
+        return Scenario(self.name, self.start)
+
+    def resolve(self, base: SystemConfig) -> tuple[SystemConfig, Scenario]:
+        """The system and scenario of this layout on ``base``, both checked (devices inside the
+        room, below the UAV's floor and apart; the start in the flight region, outside every
+        safety ball); a bad layout raises :class:`ConfigError` naming the layout and the problem."""
+        try:
+            system = self.system(base)
+            scenario = self.scenario
+            scenario.validate_for(system)
+        except ConfigError as e:
+            raise ConfigError(f"layout {self.name!r}: {e}") from None
+        return system, scenario
+
+    def to_dict(self) -> dict[str, Any]:
+        out: dict[str, Any] = {"name": self.name, "devices": [list(u) for u in self.users], "start": list(self.start)}
+        if self.room is not None:
+            out["room"] = list(self.room)
+        return out
+
+
+PAPER_LAYOUT = Layout("paper", PAPER_USERS, SCENARIOS["fig2"].start)
+
+
+def default_start(system: SystemConfig, room: Sequence[float] | None = None) -> Vec3:
+    """Where a layout without a start begins: above the middle of the floor at :data:`START_HEIGHT`."""
+    r = room if room is not None else system.room
+    return (float(r[0]) / 2, float(r[1]) / 2, START_HEIGHT)
+
+
+@dataclass(frozen=True)
+class LayoutGenerator:
+    """Random halls of ``devices`` D2D devices (docs/model.md, section 21).
+
+    Layout ``j`` of split ``s`` ("train" or "unseen") is drawn from its own random stream,
+    keyed by ``(seed, s, j)``: the same layout from the same seed, whatever else is drawn,
+    and the two splits never share a stream, so they are disjoint by construction. Devices:
+    uniform over the floor at least ``wall_margin`` from the walls, heights uniform in
+    ``heights`` (the paper's devices stand 0.1-1.5 m high), each at least the system's
+    ``min_device_spacing`` horizontally from the others (rejection sampling). Start: uniform
+    over the middle half of the floor (the paper's starts lie in [10, 30]^2 of its 40 m hall)
+    at :data:`START_HEIGHT`, redrawn until it keeps the safety distance.
+    """
+
+    devices: int = 4
+    heights: tuple[float, float] = (0.0, 1.5)
+    wall_margin: float = 2.0
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.devices, int) or self.devices < 2:
+            raise ConfigError(f"LayoutGenerator.devices must be an integer >= 2, got {self.devices!r}")
+        lo, hi = (float(h) for h in self.heights)
+        if not (np.isfinite([lo, hi]).all() and 0 <= lo <= hi):
+            raise ConfigError(f"LayoutGenerator.heights must be 0 <= low <= high, got {self.heights!r}")
+        if not (np.isfinite(self.wall_margin) and self.wall_margin >= 0):
+            raise ConfigError(f"LayoutGenerator.wall_margin must be a finite distance >= 0, got {self.wall_margin!r}")
+        if not isinstance(self.seed, int) or self.seed < 0:
+            raise ConfigError(f"LayoutGenerator.seed must be an integer >= 0, got {self.seed!r}")
+
+    def layout(self, split: str, index: int, base: SystemConfig | None = None) -> Layout:
+        """Layout ``index`` of ``split`` in ``base``'s room (default: the paper's system)."""
+        if split not in SPLITS:
+            raise ConfigError(f"unknown layout split {split!r}; choose one of {', '.join(SPLITS)}")
+        if index < 0:
+            raise ConfigError(f"layout index must be >= 0, got {index}")
+        base = base or SystemConfig()
+        rng = np.random.default_rng([self.seed, SPLITS.index(split), index])
+        room = np.asarray(base.room)
+        lo_xy, hi_xy = np.full(2, self.wall_margin), room[:2] - self.wall_margin
+        top = min(self.heights[1], np.nextafter(base.z_min, -np.inf))  # devices stay below the UAV's floor
+        if np.any(hi_xy <= lo_xy) or top < self.heights[0]:
+            raise ConfigError(f"the room {base.room} leaves no floor for devices with wall_margin {self.wall_margin} "
+                              f"and heights {self.heights}")
+        users = self._devices(rng, lo_xy, hi_xy, top, base.min_device_spacing)
+        name = f"layout-{split}-{index}"
+        z = float(np.clip(START_HEIGHT, base.z_min, base.z_max))
+        for _ in range(1000):
+            start = (*(float(v) for v in rng.uniform(0.25 * room[:2], 0.75 * room[:2])), z)
+            if min(np.linalg.norm(np.asarray(users) - start, axis=1)) >= base.safety_distance:
+                return Layout(name, users, start)
+        raise ConfigError(f"could not place a start outside the safety balls of {name}")
+
+    def _devices(self, rng: np.random.Generator, lo_xy: np.ndarray, hi_xy: np.ndarray, top: float,
+                 spacing: float) -> tuple[Vec3, ...]:
+        for _ in range(1000):
+            placed: list[np.ndarray] = []
+            for _ in range(100 * self.devices):
+                xy = rng.uniform(lo_xy, hi_xy)
+                if all(np.linalg.norm(xy - p[:2]) >= spacing for p in placed):
+                    placed.append(np.array([*xy, rng.uniform(self.heights[0], top)]))
+                    if len(placed) == self.devices:
+                        return tuple(tuple(float(c) for c in p) for p in placed)
+        raise ConfigError(f"cannot place {self.devices} devices {spacing:g} m apart in this room")
+
+    def layouts(self, split: str, count: int, base: SystemConfig | None = None) -> list[Layout]:
+        """Layouts ``0 .. count-1`` of ``split``."""
+        return [self.layout(split, j, base) for j in range(count)]
+
+
+def layout_distance(a: Layout | Sequence[Vec3], b: Layout | Sequence[Vec3]) -> float:
+    """Mean distance (m) between the devices of two layouts, matched one to one so that it is
+    smallest (Hungarian assignment; the order of the devices means nothing to the physics,
+    the pairing being uniform over them). The start is not part of it: it changes the route,
+    not where the system is best. Layouts with different device counts are infinitely apart."""
+    ua = np.asarray(a.users if isinstance(a, Layout) else a, dtype=np.float64)
+    ub = np.asarray(b.users if isinstance(b, Layout) else b, dtype=np.float64)
+    if ua.shape != ub.shape:
+        return float("inf")
+    cost = np.linalg.norm(ua[:, None] - ub[None], axis=-1)
+    rows, cols = linear_sum_assignment(cost)
+    return float(cost[rows, cols].mean())
+
+
+def nearest_layout(target: Layout, candidates: Sequence[Layout]) -> Layout:
+    """The candidate at the smallest :func:`layout_distance` from ``target`` (ties: the first)."""
+    if not candidates:
+        raise ConfigError("no layouts to choose the nearest from")
+    return min(candidates, key=lambda c: layout_distance(target, c))
+
+
+# ------------------------------------------------------------------------------------- files
+def layout_from_dict(data: Any, where: str, base: SystemConfig | None = None) -> Layout:
+    """A layout from a mapping in the file format (module docstring), checked; ``where`` names it in errors."""
+    base = base or SystemConfig()
+    if not isinstance(data, dict):
+        raise ConfigError(f"{where}: a layout is a mapping with devices (and optionally name, room, start), "
+                          f"got {type(data).__name__}")
+    unknown = sorted(set(data) - _FILE_KEYS)
+    if unknown:
+        raise ConfigError(f"{where}: unknown layout field(s) {unknown}; known: devices, name, room, start")
+    if ("devices" in data) == ("users" in data):
+        raise ConfigError(f"{where}: give the device positions as 'devices' (a list of [x, y, z], m)")
+    devices = data.get("devices", data.get("users"))
+    if not isinstance(devices, list) or not devices:
+        raise ConfigError(f"{where}: devices must be a non-empty list of [x, y, z] positions (m), got {devices!r}")
+    name = str(data.get("name") or Path(where).stem)
+    room = data.get("room")
+    start = data.get("start")
+    if start is None:
+        start = default_start(base, room if isinstance(room, (list, tuple)) and len(room) == 3 else None)
+    try:
+        layout = Layout(name, devices, start, room)
+        layout.resolve(base)
+    except (ConfigError, TypeError) as e:
+        raise ConfigError(f"{where}: {e}") from None
+    return layout
+
+
+def read_layout(path: str | Path, base: SystemConfig | None = None) -> Layout:
+    """A layout file (module docstring); any problem is one :class:`ConfigError` line naming the file."""
+    from uavris.io import read_yaml
+
+    return layout_from_dict(read_yaml(Path(path)), str(path), base)
+
+
+def write_layout(path: str | Path, layout: Layout) -> Path:
+    """Write ``layout`` as a layout file (atomically)."""
+    from uavris.io import write_yaml
+
+    write_yaml(Path(path), layout.to_dict())
+    return Path(path)
+
+
+def resolve_layout(ref: str | Layout, base: SystemConfig | None = None,
+                   generator: LayoutGenerator | None = None) -> Layout:
+    """What a user names a layout by: ``paper``, a generated name ``layout-train-N`` /
+    ``layout-unseen-N`` (of ``generator``, default the study's), or a YAML layout file."""
+    if isinstance(ref, Layout):
+        ref.resolve(base or SystemConfig())
+        return ref
+    if ref == "paper":
+        return PAPER_LAYOUT
+    m = _GENERATED.fullmatch(ref)
+    if m:
+        return (generator or LayoutGenerator()).layout(m.group(1), int(m.group(2)), base)
+    path = Path(ref)
+    if path.suffix.lower() in (".yaml", ".yml") or path.exists():
+        return read_layout(path, base)
+    raise ConfigError(f"unknown layout {ref!r}; give paper, layout-train-N, layout-unseen-N or a YAML layout file")

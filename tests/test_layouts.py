@@ -1,0 +1,141 @@
+"""Layouts: the generator, the layout distance, layout files, and what a bad layout says."""
+
+from __future__ import annotations
+
+import itertools
+import math
+
+import numpy as np
+import pytest
+
+from uavris.config import ConfigError, SystemConfig
+from uavris.errors import UavrisError
+from uavris.layouts import (
+    PAPER_LAYOUT,
+    Layout,
+    LayoutGenerator,
+    layout_distance,
+    nearest_layout,
+    read_layout,
+    resolve_layout,
+    write_layout,
+)
+
+GEN = LayoutGenerator()
+
+
+@pytest.mark.parametrize("split", ["train", "unseen"])
+def test_generated_layouts_are_valid(split: str) -> None:
+    base = SystemConfig()
+    for layout in GEN.layouts(split, 40, base):
+        system, scenario = layout.resolve(base)  # the checks every layout passes
+        users = np.asarray(layout.users)
+        assert users.shape == (4, 3)
+        assert np.all(users[:, :2] >= GEN.wall_margin) and np.all(users[:, :2] <= 40 - GEN.wall_margin)
+        assert np.all((users[:, 2] >= 0.0) & (users[:, 2] <= 1.5))
+        for a, b in itertools.combinations(users, 2):
+            assert math.dist(a[:2], b[:2]) >= base.min_device_spacing
+        assert min(math.dist(scenario.start, u) for u in users) >= base.safety_distance
+        assert 10 <= scenario.start[0] <= 30 and 10 <= scenario.start[1] <= 30 and scenario.start[2] == 4.5
+        assert system.users == layout.users
+
+
+def test_generated_layouts_are_reproducible_and_depend_on_the_seed() -> None:
+    again = LayoutGenerator()
+    assert GEN.layouts("train", 8) == again.layouts("train", 8)
+    assert GEN.layout("unseen", 5) == again.layout("unseen", 5)  # layout j does not depend on the others drawn
+    other = LayoutGenerator(seed=1)
+    assert all(a.users != b.users for a, b in zip(GEN.layouts("train", 8), other.layouts("train", 8)))
+
+
+def test_training_and_unseen_sets_never_share_a_layout() -> None:
+    train, unseen = GEN.layouts("train", 64), GEN.layouts("unseen", 64)
+    assert {t.name for t in train}.isdisjoint(u.name for u in unseen)
+    gaps = [layout_distance(t, u) for t in train for u in unseen]
+    assert min(gaps) > 0.5  # not the same hall under another name (devices matched one to one)
+    assert len({t.users for t in train}) == 64 and len({u.users for u in unseen}) == 64
+
+
+def test_layout_distance_is_a_matching_distance() -> None:
+    a = GEN.layout("train", 0)
+    shuffled = Layout("x", tuple(reversed(a.users)), a.start)
+    assert layout_distance(a, shuffled) == 0.0  # device order means nothing
+    moved = Layout("y", tuple((x + 3.0, y, z) for x, y, z in a.users), a.start)
+    assert layout_distance(a, moved) == pytest.approx(3.0)
+    b = GEN.layout("train", 1)
+    assert layout_distance(a, b) == pytest.approx(layout_distance(b, a))
+    assert nearest_layout(moved, [b, a]) is a
+    assert layout_distance(a, Layout("k3", a.users[:3], a.start)) == math.inf
+
+
+def test_layout_files_round_trip_and_names_resolve(tmp_path) -> None:
+    layout = GEN.layout("unseen", 3)
+    path = write_layout(tmp_path / "hall.yaml", layout)
+    assert read_layout(path) == layout
+    assert resolve_layout(str(path)) == layout
+    assert resolve_layout("layout-unseen-3") == layout
+    assert resolve_layout("paper") == PAPER_LAYOUT
+    assert PAPER_LAYOUT.resolve(SystemConfig())[0] == SystemConfig()  # the paper's layout is the default system
+    (tmp_path / "bare.yaml").write_text("devices: [[5, 5, 1], [30, 30, 1]]\n")
+    bare = read_layout(tmp_path / "bare.yaml")
+    assert bare.name == "bare" and bare.start == (20.0, 20.0, 4.5) and bare.room is None
+    (tmp_path / "room.yaml").write_text("room: [20, 10, 6]\ndevices: [[3, 3, 1], [15, 7, 0.5]]\nstart: [10, 5, 3]\n")
+    system, scenario = read_layout(tmp_path / "room.yaml").resolve(SystemConfig())
+    assert system.room == (20.0, 10.0, 6.0) and system.z_max == 6.0 and scenario.start == (10.0, 5.0, 3.0)
+
+
+BAD_LAYOUTS = [
+    ("devices: [[50, 5, 1], [20, 20, 1]]", "users[0] must be a point inside the room"),
+    ("devices: [[10, 10, 1], [12, 10, 1]]", "users[1] must be at least min_device_spacing = 5 m"),
+    ("devices: [[10, 10, 6], [30, 30, 1]]", "users[0] must be below the UAV's floor z_min = 2 m"),
+    ("devices: [[20, 20, 1.5], [5, 5, 1]]\nstart: [20, 20, 4]", "start must be at least safety_distance = 3 m"),
+    ("devices: [[10, 10, .nan], [30, 30, 1]]", "users[0] must be a point inside the room"),
+    ("devices: [[10, 10, .inf], [30, 30, 1]]", "users[0] must be a point inside the room"),
+    ("devices: [[10, 10], [30, 30, 1]]", "users[0] must be a point inside the room"),
+    ("devices: [[10, 10, x], [30, 30, 1]]", "users[0] must be a point [x, y, z]"),
+    ("devices: []", "devices must be a non-empty list"),
+    ("devices: [[10, 10, 1]]", "users must be a list of at least 2 positions"),
+    ("name: no devices", "give the device positions as 'devices'"),
+    ("devices: [[10, 10, 1], [30, 30, 1]]\nstart: [10, 10]", "start must be three finite coordinates"),
+    ("devices: [[10, 10, 1], [30, 30, 1]]\ncolour: red", "unknown layout field(s) ['colour']"),
+    ("devices: [[10, 10, 1], [30, 30, 1]]\n  - oops: [", "hall.yaml"),
+    ("- just\n- a list", "a layout is a mapping"),
+]
+
+
+@pytest.mark.parametrize("text, message", BAD_LAYOUTS)
+def test_a_bad_layout_file_is_one_line_naming_the_problem(tmp_path, text: str, message: str) -> None:
+    path = tmp_path / "hall.yaml"
+    path.write_text(text)
+    with pytest.raises(UavrisError) as e:  # ConfigError, or io's error for a file that does not parse
+        read_layout(path)
+    assert message in str(e.value) and "\n" not in str(e.value)
+    assert str(path) in str(e.value)
+
+
+def test_unknown_layout_names() -> None:
+    with pytest.raises(ConfigError, match="unknown layout 'nowhere'"):
+        resolve_layout("nowhere")
+    with pytest.raises(UavrisError, match="missing.yaml does not exist"):
+        resolve_layout("missing.yaml")
+
+
+def test_the_oracle_plan_moves_with_the_layout() -> None:
+    """Two hand-made halls, one mirrored into the other's opposite corner: in each, two devices
+    stand 6 m apart and two far from them and from each other. The double path loss makes the
+    best hovering place the one close to the near pair (3 m from each: the safety distance),
+    so the plan must go there, and the two plans must be a hall apart."""
+    from uavris.agents.oracle import plan_target
+
+    near_pair = [(6.0, 8.0, 1.0), (12.0, 8.0, 1.0)]
+    far = [(34.0, 36.0, 0.5), (34.0, 20.0, 0.5)]
+    sw = Layout("sw", tuple(near_pair + far), (20.0, 20.0, 4.5))
+    ne = Layout("ne", tuple((40 - x, 40 - y, z) for x, y, z in near_pair + far), (20.0, 20.0, 4.5))
+    targets = []
+    for layout in (sw, ne):
+        system, scenario = layout.resolve(SystemConfig())
+        plan = plan_target(system, scenario.start)
+        mid = np.mean(np.asarray(layout.users[:2]), axis=0)
+        assert np.linalg.norm(plan.target[:2] - mid[:2]) < 3.0, (layout.name, plan.target)
+        targets.append(plan.target)
+    assert np.linalg.norm(targets[0] - targets[1]) > 25.0
