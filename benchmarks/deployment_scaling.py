@@ -41,7 +41,8 @@ def main() -> None:
 
     from uavris.agents.references import HOVER_OPTIMIZER, ORACLE
     from uavris.experiments.report.deployment import NEAREST, layout_scores, over_layouts
-    from uavris.experiments.reproduce import ReproduceConfig, _Context, build_pipeline, reproduce
+    from uavris.experiments.reproduce import ReproduceConfig, build_pipeline, reproduce
+    from uavris.experiments.scheduling import StudyContext
     from uavris.io import read_json
 
     points = sorted(set(args.points))
@@ -51,7 +52,7 @@ def main() -> None:
     t0 = time.perf_counter()
     reproduce(rc, out, workers=args.workers, progress=False)
     wall = time.perf_counter() - t0
-    pipeline = build_pipeline(rc, out, _Context(1, "local", None, None))
+    pipeline = build_pipeline(rc, out, StudyContext(1, "local", None))
     track = rc.tracks[0]
     _, unseen = rc.deployments(track)
     results = {w.name: read_json(pipeline.directory(track.stage(f"evaluate-{w.name}")) / "stage.json")["result"]

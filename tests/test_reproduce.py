@@ -13,13 +13,8 @@ from uavris.config import SystemConfig
 from uavris.errors import UavrisError
 from uavris.experiments import pretrain as pretrain_module
 from uavris.experiments.jobs import Job, JobRunner, run_jobs
-from uavris.experiments.reproduce import (
-    ReproduceConfig,
-    _Context,
-    build_pipeline,
-    nearest_training_scenarios,
-    reproduce,
-)
+from uavris.experiments.reproduce import ReproduceConfig, build_pipeline, nearest_training_scenarios, reproduce
+from uavris.experiments.scheduling import StudyContext
 from uavris.experiments.stages import Pipeline, Stage
 from uavris.experiments.train_expert import preset_config, train_job
 from uavris.io import read_json
@@ -100,13 +95,13 @@ def test_rerun_after_kill_skips_finished_stages(smoke_run):
     assert {"compare", "experts-train", "experts-unseen", "dataset", "strong-experts-train",
             "strong-dataset"} <= set(first_done)
     assert "pretrain" not in first_done and "strong-pretrain" not in first_done
-    pipeline = build_pipeline(RC, out, _Context(1, "local", None, None))
+    pipeline = build_pipeline(RC, out, StudyContext(1, "local", None))
     records = pipeline.run()
     assert all(r.status == "skipped" for r in records)
 
 
 def test_changed_parameter_invalidates_exactly_its_dependents(tmp_path):
-    ctx = _Context(1, "local", None, None)
+    ctx = StudyContext(1, "local", None)
     base = build_pipeline(RC, tmp_path, ctx)
 
     def changed(**kw):
@@ -185,13 +180,60 @@ def test_ray_backend_gives_the_same_numbers_as_the_process_pool(smoke_run, tmp_p
     assert res.value["final_eval"] == read_json(local_dir / "done.json")["final_eval"]
 
 
+def test_downstream_is_the_longest_chain_after_each_stage(tmp_path):
+    noop = lambda d, deps: {}  # noqa: E731
+    p = Pipeline(tmp_path, [Stage("a", {}, noop, costs=(10.0,)), Stage("b", {}, noop, ("a",), costs=(4.0, 4.0)),
+                            Stage("c", {}, noop, ("b",), costs=(3.0,)), Stage("d", {}, noop, ("a",), costs=(1.0,)),
+                            Stage("e", {}, noop, costs=(2.0,))])
+    # b's two jobs of 4 s take 4 s on two workers, 8 s on one
+    assert p.downstream(2) == {"a": 7.0, "b": 3.0, "c": 0.0, "d": 0.0, "e": 0.0}
+    assert p.downstream(1) == {"a": 11.0, "b": 3.0, "c": 0.0, "d": 0.0, "e": 0.0}
+
+
+def test_the_longest_chain_runs_first(tmp_path):
+    """One worker; a chain of three long stages and four short independent ones, all ready
+    at once except the chain's later links. The runner serves the chain first: its first
+    stage heads the longest remaining work, so it runs before every short stage; a later
+    link is queued when its input ends, by which time the freed worker may have taken one
+    short job, never more."""
+    _ORDER.clear()
+    _GATE.clear()
+    ctx = StudyContext(1, "local", None)
+    gate = threading.Thread(target=ctx.runner.run, args=([Job("gate", _record, ("gate", True), tmp_path / "g")],))
+    gate.start()  # the worker is busy until every ready stage has queued its job
+    while not ctx.runner._busy:
+        time.sleep(0.01)
+
+    def stage(name, cost, deps=()):  # a job of 0.1 s per unit of cost, long enough to queue the next link
+        return Stage(name, {}, lambda d, deps_: ctx.run_one(name, _record, (name, False, cost / 10), tmp_path / name,
+                                                            cost), deps, costs=(cost,))
+
+    pipeline = Pipeline(tmp_path, [stage("short1", 1.0), stage("long1", 10.0), stage("short2", 1.0),
+                                   stage("long2", 10.0, ("long1",)), stage("short3", 1.0),
+                                   stage("long3", 10.0, ("long2",)), stage("short4", 1.0)])
+    ctx.plan(pipeline)
+    runner = threading.Thread(target=pipeline.run)
+    runner.start()
+    while len(ctx.runner._waiting) < 5:  # long1 and the four short stages
+        time.sleep(0.01)
+    _GATE.set()
+    runner.join(30)
+    gate.join(30)
+    assert _ORDER[:2] == ["gate", "long1"] and sorted(_ORDER) == sorted(
+        ["gate", "long1", "long2", "long3", "short1", "short2", "short3", "short4"])
+    assert 1 <= _ORDER.index("long2") - _ORDER.index("long1") <= 2
+    assert 1 <= _ORDER.index("long3") - _ORDER.index("long2") <= 2
+    assert [s["worker"] for s in ctx.schedule(0.0)] == [0] * 7  # the stages' jobs (not the gate) on worker 0
+
+
 _ORDER = []
 _GATE = threading.Event()
 
 
-def _record(name, wait=False):
+def _record(name, wait=False, seconds=0.0):
     if wait:
         _GATE.wait(10)
+    time.sleep(seconds)
     _ORDER.append(name)
     return name
 

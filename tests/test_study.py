@@ -17,7 +17,7 @@ from uavris.config import ConfigError, SystemConfig
 from uavris.env.simulator import BatchedSimulator
 from uavris.env.wrappers import MOTION_DIM
 from uavris.errors import UavrisError
-from uavris.experiments.compare import select_expert
+from uavris.experiments.compare import expert_choice, select_expert
 
 
 def test_hover_is_exactly_the_zero_action():
@@ -52,18 +52,38 @@ def test_unknown_reference_is_one_line_exit_2(capsys):
     assert all(name in err for name in REFERENCES)
 
 
-def test_expert_selection_picks_the_best_iqm():
-    """Hand-made comparison: SAC has the best mean (one lucky seed) but PPO the best IQM."""
-    rows = [
-        {"policy": "DDPG", "kind": "DRL", "mean": 8.0, "iqm": 8.1},
-        {"policy": "PPO", "kind": "DRL", "mean": 10.5, "iqm": 10.9},
-        {"policy": "SAC", "kind": "DRL", "mean": 11.0, "iqm": 10.2},
-        {"policy": "TD3", "kind": "DRL", "mean": 7.0, "iqm": 7.0},
-        {"policy": "oracle", "kind": "oracle", "mean": 43.0, "iqm": 43.0},
-    ]
-    assert select_expert(rows) == "ppo"
+def _row(name, iqm, low, high, ms=None, kind="DRL"):
+    return {"policy": name, "kind": kind, "mean": iqm, "iqm": iqm, "iqm_ci_low": low, "iqm_ci_high": high,
+            "s_per_step": float("nan") if ms is None else ms / 1e3}
+
+
+def test_a_clear_winner_is_taken():
+    """PPO has the largest IQM and its CI overlaps nobody's: it is chosen although it is not the cheapest."""
+    rows = [_row("DDPG", 8.1, 7.5, 8.6, 5.2), _row("PPO", 10.9, 10.5, 11.3, 9.0), _row("SAC", 9.0, 8.7, 9.4, 0.3),
+            _row("oracle", 43.0, 42.9, 43.1, kind="oracle")]
+    choice = expert_choice(rows)
+    assert choice["expert"] == "ppo" == select_expert(rows) and choice["tied"] == ["ppo"]
+    assert "overlaps no other algorithm's" in choice["text"]
     with pytest.raises(UavrisError, match="no finished DRL run"):
         select_expert(rows[-1:])
+
+
+def test_among_tied_algorithms_the_cheapest_is_taken_and_the_report_names_both():
+    """SAC wins by IQM but PPO's CI overlaps SAC's: the comparison has not separated them, so
+    the cheaper to train (PPO) is taken; TD3 is cheaper still but clearly behind."""
+    rows = [_row("SAC", 10.84, 10.29, 11.53, 8.4), _row("PPO", 10.77, 10.31, 11.18, 0.3),
+            _row("TD3", 7.0, 6.5, 7.5, 0.2), _row("DDPG", 9.17, 8.14, 10.19, 5.2)]
+    choice = expert_choice(rows)
+    assert choice["expert"] == "ppo" and choice["winner"] == "sac" and set(choice["tied"]) == {"sac", "ppo"}
+    assert choice["text"].startswith(
+        "SAC and PPO are tied within their 95% CIs of the IQM; PPO is chosen as the cheaper")
+    assert "SAC 8.40" in choice["text"] and "PPO 0.30" in choice["text"]
+    assert expert_choice(rows, by_cost=False)["expert"] == "sac"  # the rule switched off: the winner
+    untimed = [dict(r, s_per_step=float("nan")) if r["policy"] == "PPO" else r for r in rows]
+    assert expert_choice(untimed)["expert"] == "sac"  # a tied algorithm's time unknown: the winner
+    three = rows + [_row("A2C", 10.5, 10.0, 11.0, 0.1)]
+    assert expert_choice(three)["expert"] == "a2c"
+    assert expert_choice(three)["text"].startswith("SAC, PPO and A2C are tied")
 
 
 def _traj(ret, seed):

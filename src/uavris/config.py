@@ -96,26 +96,26 @@ class SystemConfig:
     Units: metres, seconds, watts, joules, dBm for the noise power.
     """
 
-    room: Vec3 = (40.0, 40.0, 8.0)
-    users: tuple[Vec3, ...] = PAPER_USERS
-    nx: int = 4
-    ny: int = 4
-    element_spacing: float = 0.5  # d / lambda
-    rician_factor: float = 8.0  # kappa
-    pathloss_exponent: float = 2.4  # alpha
-    tx_power_w: float = 1.0  # P
-    noise_dbm: float = -80.0  # sigma^2
-    slot_s: float = 0.5  # Delta t
-    horizon: int = 100  # T
-    v_max: float = 5.0
-    a_max: float = 2.0
-    attitude_step_deg: float = 10.0  # per slot, per axis
-    z_min: float = 2.0
-    z_max: float = 8.0
+    room: Vec3 = (40.0, 40.0, 8.0)  # the hall: x, y, z extent in m (the paper's 40 x 40 x 8)
+    users: tuple[Vec3, ...] = PAPER_USERS  # the D2D devices: x y z (m) of each, in turn (the paper's four)
+    nx: int = 4  # RIS elements along x (the paper's 4 x 4 UPA)
+    ny: int = 4  # RIS elements along y
+    element_spacing: float = 0.5  # element spacing over wavelength, d / lambda
+    rician_factor: float = 8.0  # Rician factor kappa of the device-RIS channels
+    pathloss_exponent: float = 2.4  # path-loss exponent alpha
+    tx_power_w: float = 1.0  # transmit power P of each device, W
+    noise_dbm: float = -80.0  # noise power sigma^2 at each receiver, dBm
+    slot_s: float = 0.5  # slot length Delta t, s
+    horizon: int = 100  # slots per episode, T
+    v_max: float = 5.0  # the UAV's largest speed, m/s
+    a_max: float = 2.0  # the UAV's largest acceleration, m/s^2
+    attitude_step_deg: float = 10.0  # largest attitude change per slot and axis (yaw, pitch, roll), degrees
+    z_min: float = 2.0  # the UAV's lowest altitude, m (every device stands below it)
+    z_max: float = 8.0  # the UAV's highest altitude, m (at most the room's height)
     safety_distance: float = 3.0  # least UAV-device distance, m (docs/model.md, defaults table)
     min_device_spacing: float = 5.0  # least horizontal distance between two devices, m (docs/model.md, section 21)
-    energy_budget_j: float = 8000.0  # E_max
-    max_active_pairs: int | None = None  # None: floor(K/2)
+    energy_budget_j: float = 8000.0  # propulsion energy budget E_max of an episode, J
+    max_active_pairs: int | None = None  # most D2D pairs active in a slot; None: floor(K/2)
     angle_dependent_reflection: bool = True  # False: r = r_pre (ideal RIS)
     learn_amplitudes: bool = False  # True: N extra action entries set |r_pre| in [0, 1]
     channel_ref_distance: float = 10.0  # observation scale for channels, m

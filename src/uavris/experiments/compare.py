@@ -15,7 +15,7 @@ from __future__ import annotations
 import dataclasses
 import time
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any, Callable, Sequence
 
 import numpy as np
 
@@ -25,7 +25,8 @@ from uavris.agents.experts import ALGORITHMS, check_algorithm, hyperparams_for
 from uavris.agents.references import HOVER_OPTIMIZER, ORACLE, REFERENCES, ZERO_ACTION, reference_policy
 from uavris.config import SystemConfig, scenario_at
 from uavris.errors import UavrisError
-from uavris.experiments.jobs import Job, JobResult, JobRunner, configure_threads, run_jobs
+from uavris.experiments.costs import train_cost
+from uavris.experiments.jobs import Job, JobResult, configure_threads, run_jobs
 from uavris.experiments.plots import learning_curves
 from uavris.experiments.train_expert import TrainConfig, preset_config, train_job
 from uavris.io import atomic_write_text, read_csv, write_csv, write_json
@@ -39,14 +40,46 @@ COMPARISON_REFERENCES = (ZERO_ACTION, "random", "hover-random-phases", "hover-al
 FIGURE_REFERENCES = (ZERO_ACTION, HOVER_OPTIMIZER, ORACLE)
 
 
-def select_expert(rows: Sequence[dict[str, Any]]) -> str:
-    """The algorithm the paper's Sec. IV-B would pick: the DRL row with the largest IQM of the
-    final evaluations over seeds (ties: the first); lower-case name."""
+def _overlap(a: dict[str, Any], b: dict[str, Any]) -> bool:
+    return a["iqm_ci_low"] <= b["iqm_ci_high"] and b["iqm_ci_low"] <= a["iqm_ci_high"]
+
+
+def expert_choice(rows: Sequence[dict[str, Any]], by_cost: bool = True) -> dict[str, Any]:
+    """The expert algorithm, chosen as the paper's Sec. IV-B does (the DRL row with the largest
+    IQM of the final evaluations over seeds), with one rule for a comparison that has not
+    separated the algorithms (docs/model.md, departures): among those whose 95% CI of the IQM
+    overlaps the winner's, the one with the least measured training time per env step
+    (``s_per_step``). A clear winner is taken as it is; so is the winner when a tied
+    algorithm's time is unknown, or with ``by_cost`` off. Returns ``expert`` (lower-case),
+    ``winner``, ``tied`` and the sentence the report prints (``text``)."""
     drl = [r for r in rows if r["kind"] == "DRL"]
     if not drl:
         raise UavrisError("the comparison has no finished DRL run to choose an expert algorithm from")
-    best = max(drl, key=lambda r: r["iqm"])
-    return str(best["policy"]).lower()
+    winner = max(drl, key=lambda r: r["iqm"])
+    tied = [r for r in drl if r is winner or _overlap(r, winner)]
+    name = str(winner["policy"])
+    timed = all(np.isfinite(r.get("s_per_step", float("nan"))) for r in tied)
+    if len(tied) == 1:
+        text = f"{name} has the largest IQM and its 95% CI overlaps no other algorithm's: {name} is chosen."
+        chosen = winner
+    elif not by_cost or not timed:
+        others = ", ".join(str(r["policy"]) for r in tied if r is not winner)
+        why = "the cost rule is switched off" if not by_cost else "their training times were not measured"
+        text = f"{name} has the largest IQM, tied within the 95% CIs with {others}; {name} is chosen ({why})."
+        chosen = winner
+    else:
+        chosen = min(tied, key=lambda r: (r["s_per_step"], -r["iqm"]))
+        names = [str(r["policy"]) for r in sorted(tied, key=lambda r: -r["iqm"])]
+        times = ", ".join(f"{r['policy']} {r['s_per_step'] * 1e3:.2f}" for r in sorted(tied, key=lambda r: -r["iqm"]))
+        text = (f"{', '.join(names[:-1])} and {names[-1]} are tied within their 95% CIs of the IQM; "
+                f"{chosen['policy']} is chosen as the cheaper (ms per env step: {times}).")
+    return {"expert": str(chosen["policy"]).lower(), "winner": name.lower(),
+            "tied": [str(r["policy"]).lower() for r in tied], "by_cost": by_cost, "text": text}
+
+
+def select_expert(rows: Sequence[dict[str, Any]], by_cost: bool = True) -> str:
+    """The expert algorithm of :func:`expert_choice`, lower-case."""
+    return expert_choice(rows, by_cost)["expert"]
 
 
 def episode_rates(run_dir: Path) -> np.ndarray:
@@ -77,12 +110,13 @@ def compare_algorithms(preset: str = "quick", seeds: int = 5, workers: int = 2, 
                        algos: Sequence[str] = ALGORITHMS, scenario: str = "fig2",
                        eval_episodes: int | None = None, backend: str = "local",
                        ray_address: str | None = None, progress: bool = True,
-                       runner: JobRunner | None = None, device: str = "cpu", system: SystemConfig | None = None,
-                       start: tuple[float, float, float] | None = None) -> Path:
+                       device: str = "cpu", system: SystemConfig | None = None,
+                       start: tuple[float, float, float] | None = None,
+                       submit: Callable[[list[Job]], list[JobResult]] | None = None) -> Path:
     """Train ``algos`` x ``seeds`` in ``scenario`` (starting at ``start``, a layout's, when
     given) of ``system`` (default the paper's) and write the comparison into ``out``; returns
-    the report path. Jobs go to ``runner`` when given (shared with other work), else to a
-    pool of ``workers`` of their own."""
+    the report path. Jobs go to ``submit`` when given (a study's shared job runner), else to
+    a pool of ``workers`` of their own."""
     if preset not in PRESETS:
         raise UavrisError(f"unknown preset {preset!r}; choose one of {', '.join(PRESETS)}")
     for flag, value in (("--seeds", seeds), ("--workers", workers), ("--eval-episodes", eval_episodes)):
@@ -95,10 +129,9 @@ def compare_algorithms(preset: str = "quick", seeds: int = 5, workers: int = 2, 
     configure_threads()
     out = Path(out or f"runs/compare-{preset}")
     n_eval = eval_episodes or (100 if preset == "paper" else 32)
-    cfgs = {(a, s): preset_config(a, scenario, s, preset, eval_episodes=n_eval, system=system, start=start)
-            for a in algos for s in range(seeds)}
+    cfgs = comparison_configs(preset, seeds, algos, scenario, n_eval, system, start)
     jobs = [Job(f"{a}-s{s}", train_job, (cfg.to_dict(), str(out / "runs" / f"{a}-s{s}"), device),
-                out / "logs" / f"{a}-s{s}.log") for (a, s), cfg in cfgs.items()]
+                out / "logs" / f"{a}-s{s}.log", train_cost(cfg)) for (a, s), cfg in cfgs.items()]
     t0 = time.perf_counter()
     from tqdm.auto import tqdm
 
@@ -111,8 +144,8 @@ def compare_algorithms(preset: str = "quick", seeds: int = 5, workers: int = 2, 
         status = "done" if res.ok else f"FAILED ({res.error}); log: {res.log}"
         bar.write(f"  {res.name}: {status}")
 
-    if runner is not None:
-        results = runner.run(todo, done)
+    if submit is not None:
+        results = submit(todo)
     else:
         results = run_jobs(todo, workers, done, backend=backend, ray_address=ray_address)
     bar.close()
@@ -122,6 +155,14 @@ def compare_algorithms(preset: str = "quick", seeds: int = 5, workers: int = 2, 
         raise UavrisError(f"{len(failures)} of {len(jobs)} training jobs failed (see {report}); "
                           f"first: {failures[0].name}, log {failures[0].log}")
     return report
+
+
+def comparison_configs(preset: str, seeds: int, algos: Sequence[str], scenario: str, eval_episodes: int,
+                       system: SystemConfig, start: tuple[float, float, float] | None = None
+                       ) -> dict[tuple[str, int], TrainConfig]:
+    """The training run of every (algorithm, seed) of a comparison."""
+    return {(a, s): preset_config(a, scenario, s, preset, eval_episodes=eval_episodes, system=system, start=start)
+            for a in algos for s in range(seeds)}
 
 
 def write_comparison(out: Path, cfgs: dict[tuple[str, int], TrainConfig], scenario: str, n_eval: int,
@@ -138,6 +179,8 @@ def write_comparison(out: Path, cfgs: dict[tuple[str, int], TrainConfig], scenar
             continue
         scores = [runs.read_done(d)["final_eval"]["mean"] for d in finished]
         per_run += [(a, d.name, sc) for d, sc in zip(finished, scores)]
+        timings = [runs.read_timing(d) for d in finished]
+        per_step = [t["wall_clock_s"] / t["env_steps"] for t in timings if t.get("env_steps")]
         series = [episode_rates(d) for d in finished]
         summ = learning_curve_summary(series)
         if summ is not None:
@@ -145,13 +188,15 @@ def write_comparison(out: Path, cfgs: dict[tuple[str, int], TrainConfig], scenar
         last = [float(np.mean(y[-max(1, y.size // 10):])) for y in series if y.size]
         s = summarize(scores)
         rows.append({"policy": a.upper(), "kind": "DRL", **s, "train_last10pct": float(np.mean(last)) if last else
-                     float("nan"), "paper": PAPER_FIG2.get(a, float("nan"))})
+                     float("nan"), "paper": PAPER_FIG2.get(a, float("nan")),
+                     # training time per env step, mean over the seeds (the expert choice's tie-break)
+                     "s_per_step": float(np.mean(per_step)) if len(per_step) == len(finished) else float("nan")})
     for name in COMPARISON_REFERENCES:
         res = evaluate(reference_policy(name, any_cfg.system), any_cfg.system, any_cfg.resolved_scenario, n_eval,
                        eval_seed)
         s = summarize(res.avg_sum_rate)
         rows.append({"policy": name, "kind": "oracle" if name == ORACLE else "baseline", **s,
-                     "train_last10pct": float("nan"), "paper": float("nan")})
+                     "train_last10pct": float("nan"), "paper": float("nan"), "s_per_step": float("nan")})
     by_name = {r["policy"]: r for r in rows}
     oracle_mean, zero = by_name[ORACLE]["mean"], by_name[ZERO_ACTION]["mean"]
     for r in rows:
@@ -166,10 +211,11 @@ def write_comparison(out: Path, cfgs: dict[tuple[str, int], TrainConfig], scenar
         figs = learning_curves(curves, out / "learning_curves",
                                f"{scenario} {any_cfg.resolved_scenario.start}, mean and 95% bootstrap band over seeds",
                                PAPER_FIG2 if scenario == "fig2" else None, refs)
-    expert = select_expert(rows) if any(r["kind"] == "DRL" for r in rows) else None
-    write_json(out / "summary.json", {"rows": rows, "expert": expert, "wall_clock_s": wall_s,
+    choice = expert_choice(rows) if any(r["kind"] == "DRL" for r in rows) else None
+    write_json(out / "summary.json", {"rows": rows, "expert": choice and choice["expert"], "expert_choice": choice,
                                       "failures": [dataclasses.asdict(f) | {"log": str(f.log), "value": None}
                                                    for f in failures]})
+    write_json(out / runs.TIMING_FILE, {"wall_clock_s": wall_s})  # beside the results, not in them
     report = out / "report.md"
     atomic_write_text(report, render_report(rows, cfgs, scenario, n_eval, wall_s, figs, failures))
     return report

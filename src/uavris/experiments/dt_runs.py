@@ -10,13 +10,14 @@ Run directories (every file written atomically; ``--resume`` continues from the 
 checkpoint with identical results; a finished run is never redone without ``--force``)::
 
     config.json          the resolved PretrainConfig / FinetuneConfig ("kind" says which)
-    train_log.csv        pre-training: step, loss, learning rate, samples/s
+    train_log.csv        pre-training: step, loss, learning rate (throughput: TensorBoard)
     finetune.csv         fine-tuning: one row per round (round 0 = zero-shot)
     tb/                  TensorBoard logs
     checkpoints/step_N/  model.safetensors + model.json (a loadable model) and, for the
                          latest only, trainer.safetensors + trainer.json (optimizer, RNGs);
                          fine-tuning names them round_N, one per completed round
     checkpoints/latest.json
+    timing.json          wall-clock seconds over all sessions
     model.safetensors, model.json, done.json   the final model and the completion record
 
 A model directory (the run directory, or any ``checkpoints/step_N`` / ``round_N``) is what
@@ -60,13 +61,16 @@ def prepare_run_dir(run_dir: Path, kind: str, cfg_dict: dict[str, Any], resume: 
 
 
 def write_checkpoint(run_dir: Path, step: int, model: DecisionTransformer, model_meta: dict[str, Any], opt: Any,
-                     rng: np.random.Generator, extra: dict[str, Any], prefix: str = "step") -> Path:
-    """Model, trainer state, then the ``latest.json`` pointer; older trainer states are
-    removed only after the pointer has moved, so a kill at any point leaves a usable one."""
+                     rng: np.random.Generator, extra: dict[str, Any], prefix: str = "step",
+                     clock: runs.RunClock | None = None) -> Path:
+    """Model, trainer state, the run's timing, then the ``latest.json`` pointer; older trainer
+    states are removed only after the pointer has moved, so a kill at any point leaves a usable one."""
     ck_root = run_dir / "checkpoints"
     ck = ck_root / f"{prefix}_{step}"
     save_dt(model, ck, model_meta)
     save_trainer_state(ck, opt, rng, extra)
+    if clock is not None:
+        clock.save(**{"round" if prefix == "round" else "gradient_steps": step})
     runs.write_pointer(run_dir, {"step": step, "dir": ck.name})
     for old in ck_root.glob(f"{prefix}_*"):
         if old != ck:

@@ -36,7 +36,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -67,7 +66,7 @@ from uavris.experiments.dt_runs import (
 from uavris.experiments.jobs import configure_threads
 from uavris.io import read_rows, write_csv
 from uavris.presets import EVAL_SEED, FINETUNE, FINETUNE_SEED, check_preset
-from uavris.runs import write_done
+from uavris.runs import RunClock, write_done
 
 ROUND_HEADER = ("round", "env_interactions", "gradient_steps", "candidate_mean_return", "candidate_avg_sum_rate",
                 "elite_mean_return", "elite_min_return", "loss", "eval_mean", "eval_ci_low", "eval_ci_high")
@@ -181,7 +180,7 @@ def finetune(cfg: FinetuneConfig, run_dir: str | Path, *, resume: bool = False, 
         writer.add_scalar("eval/avg_sum_rate", ev["mean"], 0)
         write_csv(run_dir / "finetune.csv", ROUND_HEADER, rows)
     bar = progress_bar(cfg.rounds, f"finetune-dt {cfg.scenario}", "round", progress, done_round)
-    t0 = time.perf_counter()
+    clock = RunClock(run_dir, resuming)
     try:
         for h in range(done_round + 1, cfg.rounds + 1):
             # Noise seeded by (seed, round): a resumed run explores exactly as an uninterrupted one.
@@ -211,7 +210,8 @@ def finetune(cfg: FinetuneConfig, run_dir: str | Path, *, resume: bool = False, 
             write_csv(run_dir / "finetune.csv", ROUND_HEADER, rows)
             write_checkpoint(run_dir, h, model, {**model_meta, "env_interactions": interactions,
                                                   "finetune_rounds": h, "finetune_gradient_steps": steps}, opt, rng,
-                              {"gradient_steps": steps, "env_interactions": interactions}, prefix="round")
+                              {"gradient_steps": steps, "env_interactions": interactions}, prefix="round",
+                              clock=clock)
             bar.update(1)
             bar.set_postfix(eval=f"{ev['mean']:.2f}", refresh=False)
             if interrupt_after_round is not None and h >= interrupt_after_round:
@@ -219,6 +219,7 @@ def finetune(cfg: FinetuneConfig, run_dir: str | Path, *, resume: bool = False, 
     finally:
         writer.close()
         bar.close()
+    clock.save(round=cfg.rounds)
     save_dt(model, run_dir, {**model_meta, "env_interactions": interactions, "finetune_rounds": cfg.rounds,
                              "finetune_gradient_steps": steps})
     write_done(run_dir, {
@@ -226,5 +227,5 @@ def finetune(cfg: FinetuneConfig, run_dir: str | Path, *, resume: bool = False, 
         "zero_shot_eval": {"mean": rows[0][8], "ci_low": rows[0][9], "ci_high": rows[0][10]},
         "final_eval": {"mean": rows[-1][8], "ci_low": rows[-1][9], "ci_high": rows[-1][10],
                        "episodes": cfg.eval_episodes, "seed": cfg.eval_seed},
-        "target_return": float(target), "wall_clock_s_last_session": time.perf_counter() - t0})
+        "target_return": float(target)})
     return run_dir

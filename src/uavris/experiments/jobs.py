@@ -18,11 +18,13 @@ their own configuration, so both backends give the same results.
 
 from __future__ import annotations
 
+import dataclasses
 import heapq
 import itertools
 import multiprocessing as mp
 import sys
 import threading
+import time
 import traceback
 from concurrent.futures import Future, ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
@@ -32,12 +34,14 @@ from typing import Any, Callable
 
 @dataclass(frozen=True)
 class Job:
-    """A picklable unit of work: ``fn(*args)`` with its output going to ``log``."""
+    """A picklable unit of work: ``fn(*args)`` with its output going to ``log``; ``cost`` is
+    its expected duration on one core (s, :mod:`.costs`), which orders and weighs it."""
 
     name: str
     fn: Callable[..., Any]
     args: tuple[Any, ...]
     log: Path
+    cost: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -47,6 +51,9 @@ class JobResult:
     value: Any
     error: str | None
     log: Path
+    worker: int | None = None  # the worker slot that ran it (0 .. workers-1; None on Ray)
+    start: float = float("nan")  # time.time() when it started and ended
+    end: float = float("nan")
 
 
 THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS")
@@ -100,10 +107,13 @@ class JobRunner:
 
     :meth:`run` may be called from several threads at once (the stages of a pipeline that
     run concurrently): all their jobs share the one pool, so at most ``workers`` jobs run at
-    a time whoever submitted them, and a waiting job with a higher ``priority`` starts
-    before the others (the stages of a study's longest chain go first; the Ray backend
-    leaves the order to Ray). With one local worker the jobs run in the calling thread, one
-    at a time. Use as a context manager, or call :meth:`close`.
+    a time whoever submitted them, and the waiting job with the highest priority starts
+    first. A job's priority is what its caller passes (a study passes the expected length
+    of the chain that follows the job's stage) plus the job's own expected cost: the longest
+    remaining chain first, and within a stage the longest job first (the Ray backend leaves
+    the order to Ray). With one local worker the jobs run in the calling thread, one at a
+    time. Each result says which worker slot ran it, and when. Use as a context manager,
+    or call :meth:`close`.
     """
 
     def __init__(self, workers: int, backend: str = "local", ray_address: str | None = None) -> None:
@@ -113,9 +123,10 @@ class JobRunner:
         self._lock = threading.Condition()
         self._pool: ProcessPoolExecutor | None = None
         self._ray_started = False
-        self._waiting: list[tuple[int, int, Job, Future[JobResult] | None]] = []  # heap: (-priority, order, ...)
+        self._waiting: list[tuple[float, int, Job, Future[JobResult] | None]] = []  # heap: (-priority, order, ...)
         self._order = itertools.count()
         self._busy = 0
+        self._free = list(range(self.workers))  # worker slots, lowest first
 
     def __enter__(self) -> JobRunner:
         return self
@@ -134,7 +145,7 @@ class JobRunner:
             self._ray_started = False
 
     def run(self, jobs: list[Job], on_done: Callable[[JobResult], None] | None = None,
-            priority: int = 0) -> list[JobResult]:
+            priority: float = 0.0) -> list[JobResult]:
         """Run ``jobs``; ``on_done`` is called as each finishes. Returns results in finishing order."""
         if not jobs:
             return []
@@ -148,7 +159,7 @@ class JobRunner:
             futures: dict[Future[JobResult], Job] = {}
             for job in jobs:
                 fut: Future[JobResult] = Future()
-                heapq.heappush(self._waiting, (-priority, next(self._order), job, fut))
+                heapq.heappush(self._waiting, (-(priority + job.cost), next(self._order), job, fut))
                 futures[fut] = job
             self._dispatch()
         results = []
@@ -164,35 +175,43 @@ class JobRunner:
         while self._busy < self.workers and self._waiting:
             _, _, job, outer = heapq.heappop(self._waiting)
             self._busy += 1
+            slot = heapq.heappop(self._free)
             assert self._pool is not None and outer is not None
+            started = time.time()
             self._pool.submit(_run_logged, job).add_done_callback(
-                lambda inner, job=job, outer=outer: self._finished(inner, job, outer))
+                lambda inner, job=job, outer=outer, slot=slot, started=started:
+                self._finished(inner, job, outer, slot, started))
 
-    def _finished(self, inner: Future[JobResult], job: Job, outer: Future[JobResult]) -> None:
+    def _finished(self, inner: Future[JobResult], job: Job, outer: Future[JobResult], slot: int,
+                  started: float) -> None:
         try:
             res = inner.result()
         except BaseException as e:  # noqa: BLE001 - a worker that died (e.g. killed by the OOM killer)
             res = JobResult(job.name, False, None, f"worker died: {type(e).__name__}: {e}", job.log)
+        res = dataclasses.replace(res, worker=slot, start=started, end=time.time())
         with self._lock:
             self._busy -= 1
+            heapq.heappush(self._free, slot)
             self._dispatch()
         outer.set_result(res)
 
-    def _run_here(self, job: Job, on_done: Callable[[JobResult], None] | None, priority: int) -> JobResult:
+    def _run_here(self, job: Job, on_done: Callable[[JobResult], None] | None, priority: float) -> JobResult:
         """One job in this thread once no other is running and none of higher priority waits."""
-        entry = (-priority, next(self._order), job, None)
+        entry = (-(priority + job.cost), next(self._order), job, None)
         with self._lock:
             heapq.heappush(self._waiting, entry)
             while self._busy or self._waiting[0] is not entry:
                 self._lock.wait()
             heapq.heappop(self._waiting)
             self._busy = 1
+        started = time.time()
         try:
             res = _run_logged(job)
         finally:
             with self._lock:
                 self._busy = 0
                 self._lock.notify_all()
+        res = dataclasses.replace(res, worker=0, start=started, end=time.time())
         if on_done:
             on_done(res)
         return res

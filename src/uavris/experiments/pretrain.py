@@ -45,10 +45,10 @@ from uavris.experiments.dt_runs import (
 from uavris.experiments.jobs import configure_threads
 from uavris.io import read_rows, write_csv
 from uavris.presets import PRETRAIN, check_preset
-from uavris.runs import write_done
+from uavris.runs import RunClock, write_done
 
 TARGET_QUANTILE = 0.9
-LOG_HEADER = ("step", "loss", "learning_rate", "samples_per_s")
+LOG_HEADER = ("step", "loss", "learning_rate")  # throughput: TensorBoard (perf/samples_per_s) and timing.json
 
 
 @dataclass(frozen=True)
@@ -155,7 +155,7 @@ def pretrain(cfg: PretrainConfig, run_dir: str | Path, *, resume: bool = False, 
         log = read_rows(run_dir / "train_log.csv", LOG_HEADER, int(meta.get("log_rows", 0)), INT_COLUMNS)
     writer = tb_writer(run_dir, start)
     bar = progress_bar(cfg.steps, "pretrain-dt", "step", progress, start)
-    t0 = time.perf_counter()
+    clock = RunClock(run_dir, resuming)
     window_losses: list[float] = []
     window_t = time.perf_counter()
 
@@ -168,7 +168,7 @@ def pretrain(cfg: PretrainConfig, run_dir: str | Path, *, resume: bool = False, 
             now = time.perf_counter()
             rate = len(window_losses) * cfg.batch_size / max(now - window_t, 1e-9)
             lr = opt.param_groups[0]["lr"]
-            log.append([step, float(np.mean(window_losses)), lr, rate])
+            log.append([step, float(np.mean(window_losses)), lr])
             writer.add_scalar("train/learning_rate", lr, step)
             writer.add_scalar("perf/samples_per_s", rate, step)
             bar.set_postfix(loss=f"{np.mean(window_losses):.4f}", refresh=False)
@@ -177,7 +177,7 @@ def pretrain(cfg: PretrainConfig, run_dir: str | Path, *, resume: bool = False, 
         if step % cfg.checkpoint_every == 0 and step < cfg.steps:
             write_csv(run_dir / "train_log.csv", LOG_HEADER, log)
             write_checkpoint(run_dir, step, model, {**model_meta, "gradient_steps": step}, opt, rng,
-                              {"log_rows": len(log)})
+                              {"log_rows": len(log)}, clock=clock)
         if interrupt_at is not None and step >= interrupt_at:
             raise KeyboardInterrupt(f"interrupted at step {step} (test hook)")
 
@@ -189,10 +189,10 @@ def pretrain(cfg: PretrainConfig, run_dir: str | Path, *, resume: bool = False, 
         bar.close()
     write_csv(run_dir / "train_log.csv", LOG_HEADER, log)
     write_checkpoint(run_dir, cfg.steps, model, {**model_meta, "gradient_steps": cfg.steps}, opt, rng,
-                      {"log_rows": len(log)})
+                      {"log_rows": len(log)}, clock=clock)
     save_dt(model, run_dir, {**model_meta, "gradient_steps": cfg.steps})
     final_loss = float(np.mean(losses[-cfg.log_every:])) if losses else (log[-1][1] if log else float("nan"))
+    clock.save(gradient_steps=cfg.steps)
     write_done(run_dir, {"gradient_steps": cfg.steps, "final_loss": final_loss, "episodes": len(ds.trajectories),
-                         "slots": ds.num_slots, "target_return": model_meta["target_return"],
-                         "wall_clock_s_last_session": time.perf_counter() - t0})
+                         "slots": ds.num_slots, "target_return": model_meta["target_return"]})
     return run_dir

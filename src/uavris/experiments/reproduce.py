@@ -28,7 +28,6 @@ processes, so the two tracks interleave.
 from __future__ import annotations
 
 import dataclasses
-import threading
 import time
 from pathlib import Path
 from typing import Any, Sequence
@@ -37,8 +36,10 @@ from uavris import runs
 from uavris.agents.experts import ALGORITHMS
 from uavris.config import SystemConfig
 from uavris.errors import UavrisError
-from uavris.experiments.jobs import BACKENDS, Job, JobResult, JobRunner, configure_threads
-from uavris.experiments.stages import Pipeline, Stage, StageRecord
+from uavris.experiments.costs import dataset_cost, evaluate_cost, finetune_cost, pretrain_cost, train_cost
+from uavris.experiments.jobs import BACKENDS, Job, configure_threads
+from uavris.experiments.scheduling import StudyContext
+from uavris.experiments.stages import Pipeline, Stage
 from uavris.experiments.study import (
     TRACK_SPECS,
     TRACKS,
@@ -54,7 +55,7 @@ from uavris.experiments.study import (
     transfer_sources,
 )
 from uavris.experiments.train_expert import TrainConfig, preset_config, train_job
-from uavris.io import read_json
+from uavris.io import read_json, write_json
 from uavris.presets import (
     COLLECT_SEED,
     EVAL_SEED,
@@ -72,20 +73,17 @@ from uavris.presets import (
 TRACK_CHOICES = ("all", "both") + TRACKS
 TRACK_SETS = {"all": TRACKS, "both": ("paper", "strong")}
 AUTO = "auto"
-# Job priorities: a free worker takes DT-chain jobs first, then experts, then the comparison's
-# runs, so the chains that follow the experts do not wait behind independent training jobs.
-PRIORITY_EXPERTS, PRIORITY_DT = 1, 2
 
 
 @dataclasses.dataclass(frozen=True)
 class ReproduceConfig:
     """Everything that determines the study (dumped into the report)."""
 
-    preset: str = "quick"
-    seed: int = 0
-    compare_seeds: int | None = None
-    eval_episodes: int | None = None
-    trajectories: int | None = None
+    preset: str = "quick"  # smoke (seconds, for tests), quick (under an hour on 2 cores) or paper (days)
+    seed: int = 0  # seed of every training run (experts, DT); evaluation episodes have their own
+    compare_seeds: int | None = None  # paper track: seeds per algorithm in the comparison (default: the preset's)
+    eval_episodes: int | None = None  # evaluation episodes per policy and scenario (default: the preset's)
+    trajectories: int | None = None  # expert trajectories per training scenario or layout (default: the preset's)
     track: str = "all"  # all, both (paper and strong), paper, strong or deployment
     expert_algo: str = AUTO  # paper track: "auto" = the comparison's winner, or one of the four
     train_layouts: int | None = None  # deployment track: training layouts (default: the preset's)
@@ -157,53 +155,12 @@ class ReproduceConfig:
         return deployments(track, self.system, self.n_train_layouts, self.n_unseen_layouts, self.layout_seed)
 
 
-class _Context:
-    """The job runner and the progress bar shared by the stages (which may run concurrently)."""
-
-    def __init__(self, workers: int, backend: str, ray_address: str | None, bar: Any, device: str = "cpu") -> None:
-        self.workers, self.backend, self.ray_address, self.bar = workers, backend, ray_address, bar
-        self.device = device
-        self.runner = JobRunner(workers, backend, ray_address)
-        self.failures: list[JobResult] = []
-        self._lock = threading.Lock()
-
-    def run_jobs(self, jobs: list[Job], priority: int = 0) -> list[JobResult]:
-        with self._lock:
-            if self.bar is not None:
-                self.bar.total += len(jobs)
-                self.bar.refresh()
-
-        def done(res: JobResult) -> None:
-            with self._lock:
-                if self.bar is not None:
-                    self.bar.update(1)
-                    status = "done" if res.ok else f"FAILED ({res.error}); log: {res.log}"
-                    self.bar.write(f"  job {res.name}: {status}")
-
-        results = self.runner.run(jobs, done, priority)
-        failed = [r for r in results if not r.ok]
-        with self._lock:
-            self.failures += failed
-        return failed
-
-    def run_one(self, name: str, fn: Any, args: tuple[Any, ...], log: Path) -> Any:
-        """One job of a DT stage (the study's longest chains: they go before waiting training
-        jobs); its value, or a :class:`UavrisError` naming its log when it failed."""
-        results = self.runner.run([Job(name, fn, args, log)], priority=PRIORITY_DT)
-        res = results[0]
-        if not res.ok:
-            with self._lock:
-                self.failures.append(res)
-            raise UavrisError(f"{res.error}; log {res.log}")
-        return res.value
-
-
 # ------------------------------------------------------------------------------------------ stages
-def _run_experts(stage_dir: Path, cfgs: dict[str, TrainConfig], ctx: _Context) -> dict[str, Any]:
+def _run_experts(stage: str, stage_dir: Path, cfgs: dict[str, TrainConfig], ctx: StudyContext) -> dict[str, Any]:
     jobs = [Job(f"{cfg.algo}-{s}", train_job, (cfg.to_dict(), str(stage_dir / "runs" / s), ctx.device),
-                stage_dir / "logs" / f"{s}.log")
+                stage_dir / "logs" / f"{s}.log", train_cost(cfg))
             for s, cfg in cfgs.items() if not runs.is_finished(stage_dir / "runs" / s)]
-    failures = ctx.run_jobs(jobs, PRIORITY_EXPERTS)
+    failures = [r for r in ctx.submit(stage, jobs) if not r.ok]
     if failures:
         raise UavrisError(f"{len(failures)} expert job(s) failed: "
                           + "; ".join(f"{f.name} ({f.error}; log {f.log})" for f in failures))
@@ -212,33 +169,41 @@ def _run_experts(stage_dir: Path, cfgs: dict[str, TrainConfig], ctx: _Context) -
                                                      for s in cfgs}}
 
 
-def _expert_stages(rc: ReproduceConfig, track: Track, ctx: _Context) -> list[Stage]:
+def _expert_stages(rc: ReproduceConfig, track: Track, ctx: StudyContext) -> list[Stage]:
     """Experts of the training (and, where the track has them, the unseen) deployments of ``track``."""
     train, unseen = rc.deployments(track)
     stages = []
     for name, where in (("experts-train", train), ("experts-unseen", unseen if track.unseen_experts else [])):
         if not where:
             continue
+        stage = track.stage(name)
         if track.phase_control == "optimizer":  # the strong recipe: imitation of the planning oracle
             cfgs = {d.name: strong_expert_config(d.name, rc.seed, rc.preset, rc.n_eval, d.system, d.start)
                     for d in where}
-            stages.append(Stage(track.stage(name), {s: c.to_dict() for s, c in cfgs.items()},
-                                lambda d, deps, cfgs=cfgs: _run_experts(d, cfgs, ctx)))
+            stages.append(Stage(stage, {s: c.to_dict() for s, c in cfgs.items()},
+                                lambda d, deps, cfgs=cfgs, stage=stage: _run_experts(stage, d, cfgs, ctx),
+                                costs=tuple(train_cost(c) for c in cfgs.values())))
             continue
 
-        def run(d: Path, deps: dict[str, Path], where: Sequence[Deployment] = where) -> dict[str, Any]:
-            algo = rc.expert_algo if rc.expert_algo != AUTO else read_json(deps["compare"] / "summary.json")["expert"]
-            cfgs = {w.name: preset_config(algo, w.name, rc.seed, rc.preset, eval_episodes=rc.n_eval, system=w.system)
+        def configs(algo: str, where: Sequence[Deployment] = where) -> dict[str, TrainConfig]:
+            return {w.name: preset_config(algo, w.name, rc.seed, rc.preset, eval_episodes=rc.n_eval, system=w.system)
                     for w in where}
-            return _run_experts(d, cfgs, ctx)
 
+        def run(d: Path, deps: dict[str, Path], configs: Any = configs, stage: str = stage) -> dict[str, Any]:
+            algo = rc.expert_algo if rc.expert_algo != AUTO else read_json(deps["compare"] / "summary.json")["expert"]
+            return _run_experts(stage, d, configs(algo), ctx)
+
+        # Before the comparison has chosen, the experts' cost is the dearest algorithm's: the
+        # chain through the comparison is then sure to go first.
+        guesses = [rc.expert_algo] if rc.expert_algo != AUTO else list(ALGORITHMS)
+        costs = max((tuple(train_cost(c) for c in configs(a).values()) for a in guesses), key=sum)
         config = {"algo": rc.expert_algo, "scenarios": [w.name for w in where], "seed": rc.seed, "preset": rc.preset,
                   "eval_episodes": rc.n_eval, "system": rc.system.to_dict()}
-        stages.append(Stage(name, config, run, ("compare",) if rc.expert_algo == AUTO else ()))
+        stages.append(Stage(name, config, run, ("compare",) if rc.expert_algo == AUTO else (), costs))
     return stages
 
 
-def _dt_stages(rc: ReproduceConfig, track: Track, ctx: _Context) -> list[Stage]:
+def _dt_stages(rc: ReproduceConfig, track: Track, ctx: StudyContext) -> list[Stage]:
     """Dataset, pre-training (and behaviour cloning, and the data curve), fine-tuning and
     evaluation of ``track``."""
     from uavris.experiments.finetune import finetune_config
@@ -247,10 +212,12 @@ def _dt_stages(rc: ReproduceConfig, track: Track, ctx: _Context) -> list[Stage]:
     t = track.stage
     train, unseen = rc.deployments(track)
     trajectories = rc.trajectories_for(track)
+    horizon, control = rc.system.horizon, track.phase_control
 
     def dataset(d: Path, deps: dict[str, Path]) -> dict[str, Any]:
         experts = [str(deps[t("experts-train")] / "runs" / w.name) for w in train]
-        return ctx.run_one(t("dataset"), dataset_job, (experts, trajectories, str(d / "dataset")), d / "job.log")
+        return ctx.run_one(t("dataset"), dataset_job, (experts, trajectories, str(d / "dataset")), d / "job.log",
+                           dataset_cost(len(train) * trajectories, horizon, control))
 
     # The DT, behaviour cloning with the same model and budget, and the DT on fewer training
     # layouts (the data curve): one pre-training stage each, on the same dataset.
@@ -266,44 +233,51 @@ def _dt_stages(rc: ReproduceConfig, track: Track, ctx: _Context) -> list[Stage]:
         def run(d: Path, deps: dict[str, Path]) -> dict[str, Any]:
             cfg = pretrain_config(deps[t("dataset")] / "dataset", rc.preset, rc.seed, **overrides)
             return ctx.run_one(t(name), pretrain_job, (dataclasses.asdict(cfg), str(d / "model"), ctx.device),
-                               d / "job.log")
+                               d / "job.log", pretrain_cost(cfg))
         return run
 
     def finetune(where: Deployment):
         def run(d: Path, deps: dict[str, Path]) -> dict[str, Any]:
             cfg = _finetune_config(deps[t("pretrain")] / "model", where)
             return ctx.run_one(t(f"finetune-{where.name}"), finetune_job,
-                               (dataclasses.asdict(cfg), str(d / "model"), ctx.device), d / "job.log")
+                               (dataclasses.asdict(cfg), str(d / "model"), ctx.device), d / "job.log",
+                               finetune_cost(cfg, horizon, control))
         return run
 
     def _finetune_config(model: Path | str, where: Deployment):
         own = {} if not track.layouts else {"system": where.system, "start": where.start}
         return finetune_config(model, where.name, rc.preset, rc.seed, eval_episodes=rc.n_eval, **own)
 
+    inputs = ["experts-train", *(["experts-unseen"] if track.unseen_experts else []), *models]
+
     def evaluate(where: Deployment, sources: list[tuple[str, float]]):
+        keys = [*inputs, f"finetune-{where.name}"]
+        cost = evaluate_cost(len(_evaluated_policies(track, where, sources, {k: Path() for k in keys})), rc.n_eval,
+                             horizon, control)
+
         def run(d: Path, deps: dict[str, Path]) -> dict[str, Any]:
-            policies = _evaluated_policies(track, where, sources, {k: deps[t(k)] for k in inputs})
+            policies = _evaluated_policies(track, where, sources, {k: deps[t(k)] for k in keys})
             return ctx.run_one(t(f"evaluate-{where.name}"), evaluate_job,
-                               (str(d), where.to_dict(), track.name, rc.n_eval, policies), d / "job.log")
-        inputs = ["experts-train", *(["experts-unseen"] if track.unseen_experts else []), *models,
-                  f"finetune-{where.name}"]
-        return run, inputs
+                               (str(d), where.to_dict(), track.name, rc.n_eval, policies), d / "job.log", cost)
+        return run, keys, cost
 
     stages = [Stage(t("dataset"), {"trajectories": trajectories, "seed": COLLECT_SEED}, dataset,
-                    (t("experts-train"),))]
+                    (t("experts-train"),), (dataset_cost(len(train) * trajectories, horizon, control),))]
     for name, overrides in models.items():
         cfg = pretrain_config("<dataset>", rc.preset, rc.seed, **overrides)
-        stages.append(Stage(t(name), dataclasses.asdict(cfg), pretrain(name, overrides), (t("dataset"),)))
+        stages.append(Stage(t(name), dataclasses.asdict(cfg), pretrain(name, overrides), (t("dataset"),),
+                            (pretrain_cost(cfg),)))
     for w in unseen:
-        ft = dataclasses.asdict(_finetune_config("<pretrain>", w))
-        stages.append(Stage(t(f"finetune-{w.name}"), ft, finetune(w), (t("pretrain"),)))
+        ft = _finetune_config("<pretrain>", w)
+        stages.append(Stage(t(f"finetune-{w.name}"), dataclasses.asdict(ft), finetune(w), (t("pretrain"),),
+                            (finetune_cost(ft, horizon, control),)))
     for w in unseen:
         sources = transfer_sources(track, w, train)
-        run, inputs = evaluate(w, sources)
+        run, keys, cost = evaluate(w, sources)
         stages.append(Stage(t(f"evaluate-{w.name}"), {"episodes": rc.n_eval, "seed": EVAL_SEED, "track": track.name,
                                                       "references": ["hover", "hover-optimizer", "oracle"],
                                                       "transfer_from": [s for s, _ in sources]},
-                            run, tuple(t(k) for k in inputs)))
+                            run, tuple(t(k) for k in keys), (cost,)))
     return stages
 
 
@@ -330,21 +304,25 @@ def _evaluated_policies(track: Track, where: Deployment, sources: list[tuple[str
     return policies
 
 
-def build_pipeline(rc: ReproduceConfig, out: Path, ctx: _Context) -> Pipeline:
+def build_pipeline(rc: ReproduceConfig, out: Path, ctx: StudyContext) -> Pipeline:
     def compare(d: Path, deps: dict[str, Path]) -> dict[str, Any]:
         from uavris.experiments.compare import compare_algorithms
 
         compare_algorithms(preset=rc.preset, seeds=rc.n_compare_seeds, workers=ctx.workers, out=d,
-                           eval_episodes=rc.n_eval, progress=False, runner=ctx.runner, device=ctx.device,
-                           system=rc.system)
+                           eval_episodes=rc.n_eval, progress=False, device=ctx.device, system=rc.system,
+                           submit=lambda jobs: ctx.submit("compare", jobs))
         summary = read_json(d / "summary.json")
-        return {"rows": summary["rows"], "expert": summary["expert"]}
+        return {"rows": summary["rows"], "expert": summary["expert"], "expert_choice": summary["expert_choice"]}
 
     tracks = rc.tracks
     stages = []
     if any(t.name == "paper" for t in tracks):
+        from uavris.experiments.compare import comparison_configs
+
+        costs = tuple(train_cost(c) for c in comparison_configs(rc.preset, rc.n_compare_seeds, ALGORITHMS, "fig2",
+                                                                rc.n_eval, rc.system).values())
         stages.append(Stage("compare", {"preset": rc.preset, "seeds": rc.n_compare_seeds, "eval_episodes": rc.n_eval,
-                                        "system": rc.system.to_dict()}, compare))
+                                        "system": rc.system.to_dict()}, compare, costs=costs))
     for track in tracks:
         stages += _expert_stages(rc, track, ctx)
     for track in tracks:
@@ -369,31 +347,25 @@ def reproduce(rc: ReproduceConfig, out: str | Path, *, workers: int = 2, backend
     from tqdm.auto import tqdm
 
     configure_threads()  # before any worker starts: they inherit it, and jobs run here with one worker
-    ctx = _Context(workers, backend, ray_address, None, device)
+    # The bar counts expected seconds of work (uavris.experiments.scheduling), shown as a share.
+    bar = tqdm(total=0, desc="reproduce", dynamic_ncols=True, disable=not progress,
+               bar_format="{desc}: {percentage:3.0f}%|{bar}| [{elapsed}<{remaining}]")
+    ctx = StudyContext(workers, backend, ray_address, bar, device)
     pipeline = build_pipeline(rc, out, ctx)
     unknown = [f for f in force if f not in pipeline.stages and f != "report"]
     if unknown:
+        bar.close()
         raise UavrisError(f"--force names unknown stage(s) {unknown}; stages: {list(pipeline.stages) + ['report']}")
-    bar = tqdm(total=0, unit="step", desc="reproduce", dynamic_ncols=True, disable=not progress)
-    ctx.bar = bar
-    bar.total += len(pipeline.stages) + 1
-    bar.refresh()
-
-    def on_stage(rec: StageRecord) -> None:
-        with ctx._lock:
-            bar.update(1)
-            extra = f" ({rec.error})" if rec.error else ""
-            bar.write(f"stage {rec.name} [{rec.key}]: {rec.status} in {rec.wall_s / 60:.1f} min{extra}")
-
-    t0 = time.perf_counter()
+    ctx.plan(pipeline)
+    t0, origin = time.perf_counter(), time.time()
     try:
-        records = pipeline.run(tuple(f for f in force if f != "report"), on_stage)
+        records = pipeline.run(tuple(f for f in force if f != "report"), ctx.stage_done)
     finally:
-        ctx.runner.close()
+        ctx.close()
     from uavris.experiments.report import write_report
 
-    report = write_report(out, rc, pipeline, records, time.perf_counter() - t0)
-    bar.update(1)
+    write_json(out / "schedule.json", {"workers": workers, "origin": origin, "jobs": ctx.schedule(origin)})
+    report = write_report(out, rc, pipeline, records, time.perf_counter() - t0, origin)
     bar.close()
     failed = [r for r in records if r.status == "failed"]
     if failed or ctx.failures:

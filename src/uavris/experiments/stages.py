@@ -7,10 +7,11 @@ Not here: the study's stages (:mod:`.reproduce`), the processes their jobs run o
 A stage's key hashes its own configuration together with the keys of the stages it
 depends on, so changing a parameter invalidates exactly that stage and everything
 downstream of it, and nothing else. A stage runs in ``OUT/stages/NAME-KEY/`` and is
-finished when ``stage.json`` exists there (written last, atomically); a rerun skips
-finished stages, and an unfinished one is run again in the same folder, where the
-training code resumes from its checkpoints. Stages whose inputs are ready run
-concurrently (:meth:`Pipeline.run`).
+finished when ``stage.json`` exists there (written last, atomically; its wall clock in
+``timing.json`` beside it); a rerun skips finished stages, and an unfinished one is run
+again in the same folder, where the training code resumes from its checkpoints. Stages
+whose inputs are ready run concurrently (:meth:`Pipeline.run`), the longest remaining
+chain first (:meth:`Pipeline.downstream`).
 """
 
 from __future__ import annotations
@@ -25,17 +26,25 @@ from pathlib import Path
 from typing import Any, Callable
 
 from uavris.io import read_json, to_plain, write_json
+from uavris.runs import TIMING_FILE, read_timing
 
 
 @dataclass
 class Stage:
-    """One step of a pipeline: ``run(stage_dir, deps)`` with ``deps`` mapping names to dirs."""
+    """One step of a pipeline: ``run(stage_dir, deps)`` with ``deps`` mapping names to dirs;
+    ``costs``: the expected seconds of each of its jobs on one core (:mod:`.costs`)."""
 
     name: str
     config: dict[str, Any]
     run: Callable[[Path, dict[str, Path]], dict[str, Any] | None]
     deps: tuple[str, ...] = ()
+    costs: tuple[float, ...] = ()
     key: str = field(default="", init=False)
+
+    def duration(self, workers: int) -> float:
+        """Expected wall clock of the stage on ``workers`` free workers: its longest job, or its
+        work spread over the workers, whichever is longer."""
+        return max(max(self.costs, default=0.0), sum(self.costs) / max(1, workers))
 
 
 def stage_key(config: dict[str, Any], dep_keys: list[str]) -> str:
@@ -52,6 +61,8 @@ class StageRecord:
     wall_s: float
     result: dict[str, Any] | None
     error: str | None = None
+    start: float = float("nan")  # time.time() when it started and ended in this invocation
+    end: float = float("nan")
 
 
 class Pipeline:
@@ -66,6 +77,17 @@ class Pipeline:
                 raise ValueError(f"stage {st.name} depends on unknown or later stages {missing}")
             st.key = stage_key(st.config, [self.stages[d].key for d in st.deps])
             self.stages[st.name] = st
+
+    def downstream(self, workers: int) -> dict[str, float]:
+        """Per stage, the expected wall clock of the longest chain of stages that depend on it
+        (0 for a last stage): a job's priority is this plus its own cost, so that the longest
+        remaining chain is served first (the upward rank of list scheduling)."""
+        after: dict[str, float] = {name: 0.0 for name in self.stages}
+        for name in reversed(list(self.stages)):  # stages are in dependency order
+            st = self.stages[name]
+            for dep in st.deps:
+                after[dep] = max(after[dep], st.duration(workers) + after[name])
+        return after
 
     def directory(self, name: str) -> Path:
         st = self.stages[name]
@@ -96,6 +118,10 @@ class Pipeline:
             if on_stage:
                 on_stage(rec)
 
+        # Ready stages start longest remaining chain first, so that their jobs are queued in
+        # that order too (the job runner then keeps it by priority).
+        order = self.downstream(1)
+        pending = dict(sorted(pending.items(), key=lambda kv: -(order[kv[0]] + kv[1].duration(1))))
         with ThreadPoolExecutor(max_workers=max(1, len(self.stages) if concurrent else 1)) as threads:
             while pending or running:
                 for name, st in list(pending.items()):
@@ -120,15 +146,19 @@ class Pipeline:
             shutil.rmtree(d)
         if self.is_done(st.name):
             meta = read_json(d / "stage.json")
-            return StageRecord(st.name, st.key, d, "skipped", float(meta.get("wall_s", 0.0)), meta.get("result"))
+            timing = read_timing(d)
+            return StageRecord(st.name, st.key, d, "skipped", float(timing.get("wall_s", meta.get("wall_s", 0.0))),
+                               meta.get("result"))
         d.mkdir(parents=True, exist_ok=True)
-        t0 = time.perf_counter()
+        start = time.time()
         try:
             result = st.run(d, {dep: self.directory(dep) for dep in st.deps})
         except Exception as e:  # noqa: BLE001 - report the stage, let independent ones go on
-            return StageRecord(st.name, st.key, d, "failed", time.perf_counter() - t0, None, f"{type(e).__name__}: {e}")
-        wall = time.perf_counter() - t0
+            return StageRecord(st.name, st.key, d, "failed", time.time() - start, None, f"{type(e).__name__}: {e}",
+                               start, time.time())
+        end = time.time()
+        # The wall clock goes to timing.json, so that stage.json is the same for the same inputs.
+        write_json(d / TIMING_FILE, {"wall_s": end - start, "start": start, "end": end})
         write_json(d / "stage.json", {"name": st.name, "key": st.key, "config": st.config,
-                                      "deps": {dep: self.stages[dep].key for dep in st.deps},
-                                      "wall_s": wall, "result": result})
-        return StageRecord(st.name, st.key, d, "done", wall, result)
+                                      "deps": {dep: self.stages[dep].key for dep in st.deps}, "result": result})
+        return StageRecord(st.name, st.key, d, "done", end - start, result, None, start, end)

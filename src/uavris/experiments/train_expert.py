@@ -13,6 +13,7 @@ A run directory holds::
     evals.csv              periodic deterministic evaluations (mean and 95% CI)
     checkpoints/           step_<N>.zip models, step_<N>.state.pkl (environments and random
                            streams), replay_buffer.pkl (off-policy), latest.json
+    timing.json            wall-clock seconds over all sessions, and the env steps they reached
     tb/                    TensorBoard logs
     model.zip, done.json   the final model and the completion record
 
@@ -29,7 +30,6 @@ from __future__ import annotations
 
 import dataclasses
 import os
-import time
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -158,8 +158,8 @@ class _Recorder:
     """Collects finished episodes, evaluations and checkpoints during ``learn``."""
 
     def __init__(self, cfg: TrainConfig, run_dir: Path, start_steps: int, episodes: list[list[Any]],
-                 evals: list[list[Any]], progress: bool, interrupt_at: int | None) -> None:
-        self.cfg, self.run_dir = cfg, run_dir
+                 evals: list[list[Any]], progress: bool, interrupt_at: int | None, clock: runs.RunClock) -> None:
+        self.cfg, self.run_dir, self.clock = cfg, run_dir, clock
         self.episodes, self.evals = episodes, evals
         self.next_eval = (start_steps // cfg.eval_every + 1) * cfg.eval_every
         self.next_ckpt = (start_steps // cfg.checkpoint_every + 1) * cfg.checkpoint_every
@@ -213,7 +213,7 @@ class _Recorder:
 
     def on_rollout_start(self, model: Any) -> None:
         if self.checkpoint_due:
-            save_checkpoint(model, self.cfg, self.run_dir, self.episodes, self.evals)
+            save_checkpoint(model, self.cfg, self.run_dir, self.episodes, self.evals, self.clock)
             self.checkpoint_due = False
 
     def close(self) -> None:
@@ -238,7 +238,8 @@ def run_evaluation(model: Any, cfg: TrainConfig, episodes: int) -> EpisodeResult
     return evaluate(run_policy(model, cfg), cfg.system, cfg.resolved_scenario, episodes, cfg.eval_seed)
 
 
-def save_checkpoint(model: Any, cfg: TrainConfig, run_dir: Path, episodes: list, evals: list) -> Path:
+def save_checkpoint(model: Any, cfg: TrainConfig, run_dir: Path, episodes: list, evals: list,
+                    clock: runs.RunClock | None = None) -> Path:
     """Model, resume state (and replay buffer), then logs, then the ``latest.json`` pointer,
     each atomic. Call it only between a gradient update and the next env step.
 
@@ -259,6 +260,8 @@ def save_checkpoint(model: Any, cfg: TrainConfig, run_dir: Path, episodes: list,
         os.replace(tmp_buf, ck / "replay_buffer.pkl")
     write_csv(run_dir / "episodes.csv", EPISODE_HEADER, episodes)
     write_csv(run_dir / "evals.csv", EVAL_HEADER, evals)
+    if clock is not None:
+        clock.save(env_steps=steps)
     runs.write_pointer(run_dir, {"env_steps": steps, "model": model_path.name, "state": state_path.name,
                                  "episodes": len(episodes), "evals": len(evals)})
     return model_path
@@ -279,7 +282,7 @@ def train(cfg: TrainConfig, run_dir: str | Path, *, resume: bool = False, force:
     run_dir = Path(run_dir)
     resuming = runs.prepare(run_dir, "config.yaml", lambda p: write_yaml(p, cfg.to_dict()),
                             lambda p: load_run_config(run_dir) == cfg, resume=resume, force=force)
-    t0 = time.perf_counter()
+    clock = runs.RunClock(run_dir, resuming)
     env = UavRisVecEnv(cfg.hyperparams.n_envs, cfg.system, cfg.resolved_scenario, cfg.hyperparams.reward_scale,
                        cfg.phase_control)
     env.seed(cfg.seed * 10_000)
@@ -314,7 +317,7 @@ def train(cfg: TrainConfig, run_dir: str | Path, *, resume: bool = False, force:
     if latest is None:
         model = _fresh_model(cfg, env, run_dir, evals, progress, device)
 
-    rec = _Recorder(cfg, run_dir, start, episodes, evals, progress, interrupt_at)
+    rec = _Recorder(cfg, run_dir, start, episodes, evals, progress, interrupt_at, clock)
     try:
         remaining = cfg.total_steps - start
         if remaining > 0:
@@ -325,14 +328,15 @@ def train(cfg: TrainConfig, run_dir: str | Path, *, resume: bool = False, force:
     final = run_evaluation(model, cfg, cfg.eval_episodes).summary()
     evals.append([model.num_timesteps, final["episodes"], final["mean"], final["ci_low"], final["ci_high"],
                   final["iqm"]])
-    save_checkpoint(model, cfg, run_dir, episodes, evals)
+    save_checkpoint(model, cfg, run_dir, episodes, evals, clock)
     tmp = run_dir / ".model.tmp.zip"
     model.save(tmp)
     os.replace(tmp, run_dir / "model.zip")
     imitation = read_csv(run_dir / "imitation.csv") if (run_dir / "imitation.csv").exists() else []
+    clock.save(env_steps=int(model.num_timesteps))
     runs.write_done(run_dir, {"env_steps": int(model.num_timesteps), "episodes": len(episodes),
                               "imitation_interactions": int(imitation[-1]["samples"]) if imitation else 0,
-                              "wall_clock_s_last_session": time.perf_counter() - t0, "final_eval": final})
+                              "final_eval": final})
     return run_dir / "model.zip"
 
 

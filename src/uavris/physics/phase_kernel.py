@@ -22,9 +22,14 @@ LN2 = math.log(2.0)
 # LLVM fast-math without "no NaN/inf": reassociation and contraction let the loops over
 # elements vectorise (about 2x), while the finiteness guard of the polish stays meaningful.
 FAST = {"nsz", "arcp", "contract", "afn", "reassoc"}
+# The helpers are inlined into their caller by numba itself (inline="always"), so that the
+# caller's machine code is the same whether this process compiles it or loads it from
+# numba's cache. Left to LLVM, they were inlined (and fast-math reassociated across them)
+# only when compiling, while a cached load linked them separately: the same slot got other
+# bits in a process that had compiled the kernels (docs/model.md, "Reproducibility").
 
 
-@njit(cache=True, fastmath=FAST)
+@njit(cache=True, fastmath=FAST, inline="always")
 def _reflect(phi, cos_tx, angle_dependent, rr, ri, sl):  # pragma: no cover - compiled
     """r_n(theta_j) (real, imaginary) and g'(phi_n, c_j) into ``rr, ri, sl`` ``(L, N)``.
 
@@ -52,7 +57,7 @@ def _reflect(phi, cos_tx, angle_dependent, rr, ri, sl):  # pragma: no cover - co
                 sl[j, n] = 1.0
 
 
-@njit(cache=True, fastmath=FAST)
+@njit(cache=True, fastmath=FAST, inline="always")
 def link_rate(phi, txr, txi, rxr, rxi, cos_tx, power, noise, angle_dependent, need_grad, grad,
               rr, ri, sl, hrr, hri, cr, ci):  # pragma: no cover - compiled
     """Sum rate of the links ``l: tx l -> rx l`` at phases ``phi`` ``(N,)``; its gradient into ``grad``.
@@ -101,7 +106,7 @@ def link_rate(phi, txr, txi, rxr, rxi, cos_tx, power, noise, angle_dependent, ne
     return rate
 
 
-@njit(cache=True, fastmath=FAST)
+@njit(cache=True, fastmath=FAST, inline="always")
 def _lbfgs(phi, txr, txi, rxr, rxi, cos_tx, power, noise, angle_dependent, iterations, memory,
            initial_step, max_step, min_step, ws):  # pragma: no cover - compiled
     """Monotone L-BFGS ascent from ``phi`` (updated in place); rules of the numpy docstring."""
@@ -197,7 +202,7 @@ def _lbfgs(phi, txr, txi, rxr, rxi, cos_tx, power, noise, angle_dependent, itera
     return f
 
 
-@njit(cache=True, fastmath=FAST)
+@njit(cache=True, fastmath=FAST, inline="always")
 def _polish(phi, txr, txi, rxr, rxi, cos_tx, power, noise, angle_dependent, steps, ws):  # pragma: no cover
     """Newton-Raphson least-norm steps towards nulls of the cross links; the best iterate by the
     true rate is returned (``phi`` itself when no step raises the rate)."""

@@ -6,14 +6,17 @@ besides (its logs, checkpoints and models, each written by its own command).
 
 A run directory holds its configuration (``config.yaml`` or ``config.json``), a
 ``checkpoints/latest.json`` pointer to the newest checkpoint (moved last and atomically,
-so a kill at any moment leaves the previous checkpoint usable) and, once finished,
-``done.json``. A finished run is never redone without ``force``; an unfinished one is
-continued only with ``resume`` and the same configuration.
+so a kill at any moment leaves the previous checkpoint usable), ``timing.json`` (the
+wall-clock time it took, over every session: the one file that differs between two runs
+of the same configuration) and, once finished, ``done.json``. A finished run is never
+redone without ``force``; an unfinished one is continued only with ``resume`` and the
+same configuration.
 """
 
 from __future__ import annotations
 
 import shutil
+import time
 from pathlib import Path
 from typing import Any, Callable
 
@@ -22,6 +25,7 @@ from uavris.io import read_json, write_json
 
 DONE_FILE = "done.json"
 POINTER = Path("checkpoints") / "latest.json"
+TIMING_FILE = "timing.json"  # wall-clock measurements: kept apart so every other file is reproducible to the bit
 
 
 def is_finished(run_dir: str | Path) -> bool:
@@ -86,3 +90,29 @@ def write_done(run_dir: Path, record: dict[str, Any]) -> None:
 
 def read_done(run_dir: Path) -> dict[str, Any]:
     return read_json(Path(run_dir) / DONE_FILE)
+
+
+def read_timing(run_dir: str | Path) -> dict[str, Any]:
+    """The timing record of a run or stage directory (empty when there is none)."""
+    path = Path(run_dir) / TIMING_FILE
+    return read_json(path) if path.exists() else {}
+
+
+class RunClock:
+    """Wall-clock seconds a run has spent over all its sessions, kept in ``timing.json``.
+
+    A resumed run adds the new session to what its last save recorded; the work lost after
+    the last checkpoint of a killed session is not counted (it is redone, and counted then).
+    """
+
+    def __init__(self, run_dir: Path, resuming: bool) -> None:
+        self.run_dir = Path(run_dir)
+        self.before = float(read_timing(self.run_dir).get("wall_clock_s", 0.0)) if resuming else 0.0
+        self.t0 = time.perf_counter()
+
+    @property
+    def seconds(self) -> float:
+        return self.before + time.perf_counter() - self.t0
+
+    def save(self, **extra: Any) -> None:
+        write_json(self.run_dir / TIMING_FILE, {"wall_clock_s": self.seconds, **extra})

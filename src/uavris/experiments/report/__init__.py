@@ -24,6 +24,7 @@ from uavris.experiments.report.deployment import (
     scaling_figure,
 )
 from uavris.experiments.report.figures import fig3, interactions_figure, trajectory_figure
+from uavris.experiments.report.schedule import schedule_figure, stage_table
 from uavris.experiments.stages import Pipeline, StageRecord
 from uavris.experiments.study import Track
 from uavris.io import atomic_write_text, read_json
@@ -86,9 +87,12 @@ class _Report:
                 f"- **DDPG is the best of the four** (paper: DDPG 29.5 > PPO 25.0 > TD3 20.5 > SAC 17.0): "
                 f"**{verdict}** on our simulator; best mean is {best['policy']} ({best['mean']:.2f} bps/Hz); "
                 + ", ".join(f"{r['policy']} {r['mean']:.2f}" for r in drl) + f". Full table: `{cdir / 'report.md'}`.")
-            self.add("", f"Expert algorithm of the paper track, chosen as the paper does (largest IQM of the final "
-                         f"evaluations): **{str(summary.get('expert')).upper()}**"
-                     + (f" (overridden: {self.rc.expert_algo.upper()})" if self.rc.expert_algo != "auto" else "") + ".")
+            choice = summary.get("expert_choice") or {}
+            self.add("", f"Expert algorithm of the paper track: **{str(summary.get('expert')).upper()}**"
+                     + (f" (overridden: {self.rc.expert_algo.upper()})" if self.rc.expert_algo != "auto" else "")
+                     + ". " + choice.get("text", "The largest IQM of the final evaluations, as the paper chooses.")
+                     + " Among algorithms the comparison has not separated (95% CIs of the IQM overlapping the "
+                     "winner's), uavris takes the cheapest to train (docs/model.md, departures).")
 
     # ------------------------------------------------------------------ Fig. 3, one track
     def track(self, track: Track) -> dict[str, dict[str, Any]]:
@@ -223,7 +227,8 @@ class _Report:
                      + ("raised" if ft > zs else "did not raise") + f" it ({zs:.2f} -> {ft:.2f}).")
 
 
-def write_report(out: Path, rc: Any, pipeline: Pipeline, records: Sequence[StageRecord], wall_s: float) -> Path:
+def write_report(out: Path, rc: Any, pipeline: Pipeline, records: Sequence[StageRecord], wall_s: float,
+                 origin: float = math.nan) -> Path:
     rep = _Report(out, rc, pipeline, records)
     rep.add(f"# uavris reproduction of the paper, preset `{rc.preset}`", "",
             f"Everything below is read from the stage files under `{out / 'stages'}`; rerunning `uavris reproduce` "
@@ -234,11 +239,16 @@ def write_report(out: Path, rc: Any, pipeline: Pipeline, records: Sequence[Stage
             "level, all phases equal) and the oracle (`uavris.agents.oracle`: optimised phases every slot, motion "
             "planned over the whole room; docs/model.md section 19). 'vs zero action' says whether the policy's 95% "
             "CI lies above or below the zero action's mean ('tie': not resolved).",
-            "", "## Stages", "", "| stage | key | status | wall clock (min) |", "|---|---|---|---:|")
-    for r in records:
-        rep.add(f"| {r.name} | `{r.key}` | {r.status}{' (' + r.error + ')' if r.error else ''} | {r.wall_s / 60:.1f} |")
-    rep.add("", f"Total wall clock of this invocation: {wall_s / 60:.1f} min (stages run concurrently where their "
-                "inputs allow; finished stages skipped count 0 here, their own time is in the table).")
+            "", "## Stages", "")
+    schedule = read_json(out / "schedule.json") if (out / "schedule.json").exists() else {"jobs": [], "workers": 1}
+    if schedule_figure(schedule["jobs"], int(schedule["workers"]), rep.figs / "schedule"):
+        rep.add("![schedule](figures/schedule.png)", "")
+    rep.add(*stage_table(records, schedule["jobs"], origin))
+    rep.add("", f"Total wall clock of this invocation: {wall_s / 60:.1f} min. Stages run as soon as their inputs "
+                "are ready, and a free worker takes the job whose stage heads the longest remaining chain of work "
+                "(expected costs: `uavris.experiments.costs`); start and end are minutes after this invocation "
+                "began, workers the slots that ran the stage's jobs. A stage finished by an earlier invocation is "
+                "'skipped' here, with the wall clock it took then.")
     rep.fig2()
     scenario_tracks = [t for t in rc.tracks if not t.layouts]
     results = {t.name: rep.track(t) for t in scenario_tracks}

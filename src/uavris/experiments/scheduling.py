@@ -1,0 +1,103 @@
+"""How ``reproduce`` runs its stages' jobs: priorities, a progress bar weighed by work, the schedule.
+
+Lives here: :class:`StudyContext`, shared by the stages of one invocation (which run in
+threads of this process): the one :class:`~uavris.experiments.jobs.JobRunner`, the priority
+of each stage's jobs (the expected length of the chain after the stage, from
+:meth:`~uavris.experiments.stages.Pipeline.downstream`), the progress bar, and the record of
+which worker ran which job when (the report's schedule). Not here: the stages
+(:mod:`.reproduce`), the cost model (:mod:`.costs`), the processes (:mod:`.jobs`).
+
+The bar counts expected seconds of one core, not jobs: a job adds its expected cost when
+it finishes, a finished stage the rest of its estimate, so a seconds-long expert and a
+minutes-long SAC run weigh what they cost and the bar's rate and ETA mean something.
+"""
+
+from __future__ import annotations
+
+import threading
+from pathlib import Path
+from typing import Any, Callable
+
+from uavris.errors import UavrisError
+from uavris.experiments.jobs import Job, JobResult, JobRunner
+from uavris.experiments.stages import Pipeline, StageRecord
+
+
+class StudyContext:
+    """The job runner, priorities, progress and schedule shared by a pipeline's stages."""
+
+    def __init__(self, workers: int, backend: str, ray_address: str | None, bar: Any = None,
+                 device: str = "cpu") -> None:
+        self.workers, self.backend, self.ray_address, self.bar = workers, backend, ray_address, bar
+        self.device = device
+        self.runner = JobRunner(workers, backend, ray_address)
+        self.failures: list[JobResult] = []
+        self.jobs: list[tuple[str, JobResult]] = []  # (stage, result) of every job run, in finishing order
+        self._after: dict[str, float] = {}
+        self._expected: dict[str, float] = {}
+        self._credited: dict[str, float] = {}
+        self._job_costs: dict[tuple[str, str], float] = {}
+        self._lock = threading.Lock()
+
+    def plan(self, pipeline: Pipeline) -> None:
+        """Priorities and the progress bar's total from the pipeline's expected costs."""
+        self._after = pipeline.downstream(self.workers)
+        self._expected = {name: sum(st.costs) for name, st in pipeline.stages.items()}
+        self._credited = {name: 0.0 for name in pipeline.stages}
+        if self.bar is not None:
+            self.bar.total = sum(self._expected.values())
+            self.bar.refresh()
+
+    def priority(self, stage: str) -> float:
+        """Expected seconds of the longest chain after ``stage`` (its jobs add their own cost)."""
+        return self._after.get(stage, 0.0)
+
+    def job_done(self, stage: str) -> Callable[[JobResult], None]:
+        """The callback of ``stage``'s jobs: progress, a line, the schedule and failures."""
+        def done(res: JobResult) -> None:
+            with self._lock:
+                self.jobs.append((stage, res))
+                if not res.ok:
+                    self.failures.append(res)
+                if self.bar is not None:
+                    self._credit(stage, self._job_costs.get((stage, res.name), 0.0))
+                    status = "done" if res.ok else f"FAILED ({res.error}); log: {res.log}"
+                    self.bar.write(f"  job {res.name}: {status}")
+        return done
+
+    def submit(self, stage: str, jobs: list[Job]) -> list[JobResult]:
+        """Run ``stage``'s jobs at its priority; returns their results in finishing order."""
+        with self._lock:
+            self._job_costs.update({(stage, j.name): j.cost for j in jobs})
+        return self.runner.run(jobs, self.job_done(stage), self.priority(stage))
+
+    def run_one(self, stage: str, fn: Any, args: tuple[Any, ...], log: Path, cost: float) -> Any:
+        """One job of a DT stage; its value, or a :class:`UavrisError` naming its log when it failed."""
+        [res] = self.submit(stage, [Job(stage, fn, args, log, cost)])
+        if not res.ok:
+            raise UavrisError(f"{res.error}; log {res.log}")
+        return res.value
+
+    def stage_done(self, rec: StageRecord) -> None:
+        """A stage ended (or was skipped): the bar gets the rest of its expected cost."""
+        with self._lock:
+            if self.bar is not None:
+                self._credit(rec.name, self._expected.get(rec.name, 0.0) - self._credited.get(rec.name, 0.0))
+                extra = f" ({rec.error})" if rec.error else ""
+                self.bar.write(f"stage {rec.name} [{rec.key}]: {rec.status} in {rec.wall_s / 60:.1f} min{extra}")
+
+    def _credit(self, stage: str, amount: float) -> None:
+        """Move the bar by ``amount`` expected seconds of ``stage``, never past its estimate (lock held)."""
+        left = self._expected.get(stage, 0.0) - self._credited.get(stage, 0.0)
+        step = max(0.0, min(amount, left))
+        self._credited[stage] = self._credited.get(stage, 0.0) + step
+        self.bar.update(step)
+
+    def schedule(self, origin: float) -> list[dict[str, Any]]:
+        """Every job of this invocation: stage, job, worker slot, start and end (s after ``origin``)."""
+        with self._lock:
+            return [{"stage": s, "job": r.name, "worker": r.worker, "ok": r.ok,
+                     "start": r.start - origin, "end": r.end - origin} for s, r in self.jobs]
+
+    def close(self) -> None:
+        self.runner.close()
