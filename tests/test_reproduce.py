@@ -63,8 +63,14 @@ def test_all_artefacts_exist(smoke_run):
         for scenario in ("unseen1", "unseen2"):
             assert f"{track} track, {scenario}: **zero-shot DT above transferred experts**" in text
             assert f"{track} track, {scenario}: **fine-tuned DT within 5% of the expert**" in text
-    chosen = read_json(next((out / "stages").glob("compare-*")) / "summary.json")["expert"]
-    assert f"chosen as the paper does (largest IQM of the final evaluations): **{chosen.upper()}**" in text
+    summary = read_json(next((out / "stages").glob("compare-*")) / "summary.json")
+    chosen = summary["expert"]
+    assert f"Expert algorithm of the paper track: **{chosen.upper()}**. {summary['expert_choice']['text']}" in text
+    assert "## Stages" in text and (out / "figures" / "schedule.png").stat().st_size > 1000
+    schedule = read_json(out / "schedule.json")
+    assert {j["worker"] for j in schedule["jobs"]} <= {0, 1} and all(j["end"] >= j["start"] for j in schedule["jobs"])
+    for stage in (out / "stages").glob("*/stage.json"):  # the wall clock is beside the results, not in them
+        assert "wall_s" not in read_json(stage) and "wall_s" in read_json(stage.parent / "timing.json")
     experts = read_json(next((out / "stages").glob("experts-train-*")) / "stage.json")["result"]
     assert experts["algo"] == chosen
 
