@@ -226,7 +226,7 @@ def test_device_flag(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None
             assert "CUDA" in line
         assert not (tmp_path / "r").exists() and not (tmp_path / "s").exists()
     line = _check_one_line(capsys, main(["evaluate", "hover", "--scenario", "fig2", "--device", "tpu"]), "tpu")
-    assert "unknown device 'tpu'" in line
+    assert "invalid choice 'tpu'" in line and "'cpu', 'cuda', 'auto'" in line
 
 
 def test_evaluate_writes_what_it_prints(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

@@ -197,39 +197,29 @@ def test_downstream_is_the_longest_chain_after_each_stage(tmp_path):
 
 
 def test_the_longest_chain_runs_first(tmp_path):
-    """One worker; a chain of three long stages and four short independent ones, all ready
-    at once except the chain's later links. The runner serves the chain first: its first
-    stage heads the longest remaining work, so it runs before every short stage; a later
-    link is queued when its input ends, by which time the freed worker may have taken one
-    short job, never more."""
+    """One worker; a chain of three long stages and four short independent ones. Every stage
+    without unmet inputs starts at once and queues its job; the runner starts none until all
+    have, then the one heading the longest remaining work: the chain's first stage runs
+    before every short one. A later link is queued when its input ends, by which time the
+    freed worker may have taken one short job, never more."""
     _ORDER.clear()
-    _GATE.clear()
     ctx = StudyContext(1, "local", None)
-    gate = threading.Thread(target=ctx.runner.run, args=([Job("gate", _record, ("gate", True), tmp_path / "g")],))
-    gate.start()  # the worker is busy until every ready stage has queued its job
-    while not ctx.runner._busy:
-        time.sleep(0.01)
 
     def stage(name, cost, deps=()):  # a job of 0.1 s per unit of cost, long enough to queue the next link
         return Stage(name, {}, lambda d, deps_: ctx.run_one(name, _record, (name, False, cost / 10), tmp_path / name,
                                                             cost), deps, costs=(cost,))
 
-    pipeline = Pipeline(tmp_path, [stage("short1", 1.0), stage("long1", 10.0), stage("short2", 1.0),
+    pipeline = Pipeline(tmp_path, [stage("short1", 1.0), stage("short2", 1.0), stage("long1", 10.0),
                                    stage("long2", 10.0, ("long1",)), stage("short3", 1.0),
                                    stage("long3", 10.0, ("long2",)), stage("short4", 1.0)])
     ctx.plan(pipeline)
-    runner = threading.Thread(target=pipeline.run)
-    runner.start()
-    while len(ctx.runner._waiting) < 5:  # long1 and the four short stages
-        time.sleep(0.01)
-    _GATE.set()
-    runner.join(30)
-    gate.join(30)
-    assert _ORDER[:2] == ["gate", "long1"] and sorted(_ORDER) == sorted(
-        ["gate", "long1", "long2", "long3", "short1", "short2", "short3", "short4"])
+    pipeline.run()
+    ctx.close()
+    assert _ORDER[0] == "long1" and sorted(_ORDER) == sorted(
+        ["long1", "long2", "long3", "short1", "short2", "short3", "short4"])
     assert 1 <= _ORDER.index("long2") - _ORDER.index("long1") <= 2
     assert 1 <= _ORDER.index("long3") - _ORDER.index("long2") <= 2
-    assert [s["worker"] for s in ctx.schedule(0.0)] == [0] * 7  # the stages' jobs (not the gate) on worker 0
+    assert [s["worker"] for s in ctx.schedule(0.0)] == [0] * 7
 
 
 _ORDER = []

@@ -180,8 +180,9 @@ def test_strong_dt_rollout_in_finetuning_equals_uavris_evaluate(motion_dataset, 
 
 
 @pytest.mark.parametrize("args, message", [
-    (["reproduce", "--track", "fast"], "unknown track 'fast'"),
-    (["reproduce", "--expert-algo", "a2c"], "unknown expert algorithm 'a2c'"),
+    (["reproduce", "--track", "fast"], "invalid choice 'fast' for argument '--track'"),
+    (["reproduce", "--expert-algo", "a2c"], "invalid choice 'a2c' for argument '--expert-algo'"),
+    (["reproduce", "--preset", "huge"], "invalid choice 'huge' for argument '--preset'"),
 ])
 def test_bad_study_input_is_one_line_exit_2(args, message, capsys, tmp_path):
     assert cli_main(args + ["--out", str(tmp_path / "out")]) == 2

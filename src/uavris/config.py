@@ -16,7 +16,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass, field
-from typing import Any, Mapping, Sequence
+from typing import Any, Literal, Mapping, Sequence, get_args
 
 from uavris.errors import ConfigError
 
@@ -284,6 +284,8 @@ def _s(name: str, x: float, y: float) -> Scenario:
     return Scenario(name, (x, y, 4.5))
 
 
+ScenarioName = Literal["fig2", "train1", "train2", "train3", "train4", "train5", "train6", "train7", "train8",
+                       "unseen1", "unseen2"]  # the paper's scenarios (--scenario)
 SCENARIOS: dict[str, Scenario] = {
     s.name: s
     for s in (
@@ -300,6 +302,7 @@ SCENARIOS: dict[str, Scenario] = {
         _s("unseen2", 25, 25),
     )
 }
+assert tuple(SCENARIOS) == get_args(ScenarioName)
 TRAINING_SCENARIOS: tuple[str, ...] = tuple(f"train{i}" for i in range(1, 9))
 UNSEEN_SCENARIOS: tuple[str, ...] = ("unseen1", "unseen2")
 

@@ -12,9 +12,10 @@ table explains its values; :mod:`uavris.agents.experts.hyperparams` for the hype
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, Literal, get_args
 
-PRESETS: tuple[str, ...] = ("smoke", "quick", "paper")
+Preset = Literal["smoke", "quick", "paper"]  # what --preset accepts
+PRESETS: tuple[str, ...] = get_args(Preset)
 
 # Seed bases: episode j of a kind uses BASE + j, so the kinds never share an episode.
 EVAL_SEED = 1_000_000  # evaluation episodes: every policy of a report is scored on these

@@ -8,9 +8,12 @@ to the CPU's (different kernels), so a study that must reproduce exactly stays o
 
 from __future__ import annotations
 
+from typing import Literal, get_args
+
 from uavris.errors import ConfigError
 
-DEVICES = ("auto", "cpu", "cuda")
+Device = Literal["cpu", "cuda", "auto"]  # what --device accepts
+DEVICES: tuple[str, ...] = get_args(Device)
 
 
 def resolve_device(name: str) -> str:

@@ -12,9 +12,11 @@ from typing import Annotated, Optional
 
 import tyro
 
+from uavris.agents.torch_device import Device
 from uavris.cli.parsing import output_dir, parse
-from uavris.config import SystemConfig
-from uavris.presets import COLLECT_SEED, EVAL_SEED
+from uavris.config import ScenarioName, SystemConfig
+from uavris.env.wrappers import PhaseControl
+from uavris.presets import COLLECT_SEED, EVAL_SEED, STUDY_EVAL_EPISODES
 
 
 # ---------------------------------------------------------------------------------------- evaluate
@@ -24,22 +26,23 @@ class EvaluateArgs:
     """a run directory (train, pretrain-dt, finetune-dt), a DT model directory, or a reference:
     hover (the zero action), random, hover-random-phases, hover-aligned, hover-optimizer,
     oracle, oracle-greedy (also written baseline:NAME)"""
-    scenario: Optional[str] = None
+    scenario: Optional[ScenarioName] = None
     """scenario to evaluate in (default: the run's own, or the layout's start; required for references and
     pre-trained DTs without --layout)"""
     layout: Optional[str] = None
     """the hall: paper, layout-train-N / layout-unseen-N, or a YAML layout file (devices, optionally start and
     room); default: the target's own"""
-    episodes: int = 100
-    """evaluation episodes (seeds SEED .. SEED+EPISODES-1)"""
+    episodes: int = STUDY_EVAL_EPISODES["quick"]
+    """evaluation episodes (seeds SEED .. SEED+EPISODES-1); the default is the quick report's (the paper
+    preset's report uses 100)"""
     seed: int = EVAL_SEED
     """seed of the first evaluation episode"""
     out: Optional[Path] = None
     """output directory (default RUN/eval, or runs/baselines/NAME/eval for a reference)"""
-    phase_control: Optional[str] = None
+    phase_control: Optional[PhaseControl] = None
     """optimizer: replace the policy's RIS phases by the per-slot optimiser's (default: as trained)"""
-    device: str = "cpu"
-    """torch device: cpu, cuda, or auto"""
+    device: Device = "cpu"
+    """torch device (auto: CUDA when torch sees one)"""
     no_progress: bool = False
     """no progress bar"""
     system: SystemConfig = SystemConfig()
@@ -160,8 +163,8 @@ class DemoArgs:
     """episodes per policy"""
     seed: int = 0
     """seed of the first episode"""
-    scenario: Optional[str] = None
-    """start position: fig2, train1..train8, unseen1, unseen2 (default: fig2, or the layout's start)"""
+    scenario: Optional[ScenarioName] = None
+    """start position (default: fig2, or the layout's start)"""
     layout: Optional[str] = None
     """the hall: paper, layout-train-N / layout-unseen-N, or a YAML layout file (devices, optionally start and
     room)"""

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Optional
 
-from uavris.agents.torch_device import resolve_device
+from uavris.agents.torch_device import Device, resolve_device
 from uavris.cli.parsing import UsageError, output_dir, peek
 from uavris.config import Scenario, SystemConfig
 
@@ -28,8 +28,8 @@ class RunOptions:
     """continue the interrupted run in OUT from its last checkpoint (an error if OUT holds no run)"""
     force: bool = False
     """delete the run in OUT and start from scratch"""
-    device: str = "cpu"
-    """torch device: cpu, cuda, or auto (CUDA when torch sees one)"""
+    device: Device = "cpu"
+    """torch device (auto: CUDA when torch sees one)"""
     no_progress: bool = False
     """no progress bar"""
 

@@ -15,13 +15,17 @@ from typing import Annotated, Any, Callable, Optional
 
 import tyro
 
+from uavris.agents.experts import Algorithm
+from uavris.agents.torch_device import Device
 from uavris.cli.options import LAYOUT_HELP, RunOptions, check_run_options, layout_defaults
 from uavris.cli.parsing import UsageError, load_overrides, output_dir, parse, peek, peek_int
-from uavris.config import SystemConfig
+from uavris.config import ScenarioName, SystemConfig
 from uavris.experiments.finetune import FinetuneConfig
+from uavris.experiments.jobs import Backend
 from uavris.experiments.pretrain import PretrainConfig
 from uavris.experiments.reproduce import ReproduceConfig
 from uavris.experiments.train_expert import TrainConfig
+from uavris.presets import STUDY_COMPARE_SEEDS, Preset
 
 Flat = tyro.conf.arg(name="")  # the config's fields become the command's own flags
 HELP = ("-h", "--help")
@@ -100,26 +104,26 @@ def train_command(args: list[str]) -> None:
 @dataclass(frozen=True)
 class CompareArgs:
     layout: Annotated[Optional[str], tyro.conf.arg(help=LAYOUT_HELP)] = None
-    preset: str = "quick"
-    """smoke, quick or paper (hours)"""
-    seeds: int = 5
-    """seeds per algorithm"""
+    preset: Preset = "quick"
+    """budgets: smoke (seconds), quick (minutes per run), paper (hours per run)"""
+    seeds: Optional[int] = None
+    """seeds per algorithm (default: the preset's, as in the study: 2 smoke, 3 quick, 5 paper)"""
     workers: int = 2
     """parallel training processes"""
     out: Optional[Path] = None
     """output directory (default runs/compare-PRESET)"""
-    algos: tuple[str, ...] = ("ddpg", "ppo", "sac", "td3")
+    algos: tuple[Algorithm, ...] = ("ddpg", "ppo", "sac", "td3")
     """algorithms to compare"""
-    scenario: str = "fig2"
-    """scenario (the paper's Fig. 2 uses fig2 = [15, 20, 4.5])"""
+    scenario: ScenarioName | str = "fig2"
+    """scenario (the paper's Fig. 2: fig2, [15, 20, 4.5]; with --layout: the layout's start by default)"""
     eval_episodes: Optional[int] = None
     """final evaluation episodes per run (default: 32 smoke/quick, 100 paper)"""
-    backend: str = "local"
+    backend: Backend = "local"
     """local (process pool) or ray (pip install 'uavris[ray]')"""
     ray_address: Optional[str] = None
     """address of a running Ray cluster (default: start a local instance)"""
-    device: str = "cpu"
-    """torch device: cpu, cuda, or auto"""
+    device: Device = "cpu"
+    """torch device (auto: CUDA when torch sees one)"""
     system: SystemConfig = SystemConfig()
     """the system trained and evaluated in"""
 
@@ -139,7 +143,8 @@ def compare_command(args: list[str]) -> None:
               default=CompareArgs(system=system, scenario="fig2" if hall is None else hall.name))
     output_dir(a.out)
     start = hall.start if hall is not None and a.scenario == hall.name else None
-    report = compare_algorithms(preset=a.preset, seeds=a.seeds, workers=a.workers, out=a.out, algos=a.algos,
+    seeds = STUDY_COMPARE_SEEDS[a.preset] if a.seeds is None else a.seeds
+    report = compare_algorithms(preset=a.preset, seeds=seeds, workers=a.workers, out=a.out, algos=a.algos,
                                 scenario=a.scenario, eval_episodes=a.eval_episodes, backend=a.backend,
                                 ray_address=a.ray_address, device=resolve_device(a.device), system=a.system,
                                 start=start)
@@ -235,14 +240,14 @@ class ReproduceArgs:
     """output directory (default runs/PRESET); a rerun skips finished stages and resumes the rest"""
     workers: int = 2
     """parallel job processes (local backend) or CPUs of a local Ray instance"""
-    backend: str = "local"
+    backend: Backend = "local"
     """local (process pool) or ray (pip install 'uavris[ray]')"""
     ray_address: Optional[str] = None
     """address of a running Ray cluster (default: start a local instance)"""
     force: tuple[str, ...] = ()
     """stage(s) to rerun even if finished, e.g. --force pretrain"""
-    device: str = "cpu"
-    """torch device: cpu, cuda, or auto"""
+    device: Device = "cpu"
+    """torch device (auto: CUDA when torch sees one)"""
     no_progress: bool = False
     """no progress bar"""
 

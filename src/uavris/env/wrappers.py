@@ -11,6 +11,8 @@ loop (:mod:`uavris.env.rollout`) apply it. Not here: the optimiser's numerics.
 
 from __future__ import annotations
 
+from typing import Literal, get_args
+
 import numpy as np
 from numpy.typing import NDArray
 
@@ -19,7 +21,8 @@ from uavris.env.simulator import BatchedSimulator, phases_to_action
 from uavris.errors import ConfigError
 from uavris.physics.phase_opt import optimize_slot_phases
 
-PHASE_CONTROLS: tuple[str, ...] = ("agent", "optimizer")
+PhaseControl = Literal["agent", "optimizer"]  # who sets the RIS phases (--phase-control)
+PHASE_CONTROLS: tuple[str, ...] = get_args(PhaseControl)
 MOTION_DIM = 6
 
 

@@ -45,10 +45,10 @@ import numpy as np
 from uavris.agents.dt.checkpoint import save_dt
 from uavris.agents.dt.policy import DTBatchPolicy, dt_policy_from_checkpoint
 from uavris.agents.dt.trainer import load_trainer_state, make_optimizer, train_steps
-from uavris.agents.dt.trajectories import ELITE_RULES, TrainingWindows, record_episodes, select_elites
+from uavris.agents.dt.trajectories import ELITE_RULES, EliteRule, TrainingWindows, record_episodes, select_elites
 from uavris.agents.evaluation import evaluate
 from uavris.agents.policy import check_policy_fits
-from uavris.config import SystemConfig, check_non_negative, check_positive, float_tuple, scenario_at
+from uavris.config import ScenarioName, SystemConfig, check_non_negative, check_positive, float_tuple, scenario_at
 from uavris.env.simulator import layout_as_lists
 from uavris.errors import ConfigError
 from uavris.experiments.dt_runs import (
@@ -65,7 +65,7 @@ from uavris.experiments.dt_runs import (
 )
 from uavris.experiments.jobs import configure_threads
 from uavris.io import read_rows, write_csv
-from uavris.presets import EVAL_SEED, FINETUNE, FINETUNE_SEED, check_preset
+from uavris.presets import EVAL_SEED, FINETUNE, FINETUNE_SEED, Preset, check_preset
 from uavris.runs import RunClock, write_done
 
 ROUND_HEADER = ("round", "env_interactions", "gradient_steps", "candidate_mean_return", "candidate_avg_sum_rate",
@@ -76,28 +76,28 @@ ROUND_HEADER = ("round", "env_interactions", "gradient_steps", "candidate_mean_r
 class FinetuneConfig:
     """Everything that determines a fine-tuning run (dumped as config.json)."""
 
-    model: str
-    scenario: str
+    model: str  # a pre-trained DT: a `uavris pretrain-dt` run or model directory
+    scenario: ScenarioName | str  # where it adapts (or a layout's name, with start)
     start: tuple[float, float, float] | None = None  # the UAV's start; None: the named scenario's (a layout sets it)
     system: SystemConfig | None = None  # the hall to adapt to; None: the pre-trained model's system
-    preset: str = "quick"
-    seed: int = 0
-    rounds: int = 3  # H
-    candidates: int = 80  # N
-    elites: int = 50  # K
-    noise_sigma: float = 0.1  # sigma
-    selection: str = "paired"  # "return": eq. (18); "paired": within-seed ranking (docs/model.md)
+    preset: Preset = "quick"  # the schedule's defaults: smoke (seconds), quick (minutes), paper
+    seed: int = 0  # seed of the exploration noise and of the sampled windows
+    rounds: int = 3  # rounds H of collection and training
+    candidates: int = 80  # noisy trajectories N per round
+    elites: int = 50  # trajectories K kept per round
+    noise_sigma: float = 0.1  # standard deviation sigma of the exploration noise on the actions
+    selection: EliteRule = "paired"  # "return": eq. (18); "paired": within-seed ranking (docs/model.md)
     rollouts_per_seed: int = 5  # paired: candidates = seeds x rollouts_per_seed
-    epochs_per_round: int = 2
-    batch_size: int = 64
-    learning_rate: float = 5e-5
-    weight_decay: float = 1e-4
-    warmup_steps: int = 100
-    grad_clip: float = 0.25
+    epochs_per_round: int = 2  # passes over the elites per round
+    batch_size: int = 64  # windows per gradient step
+    learning_rate: float = 5e-5  # AdamW's rate after the warm-up
+    weight_decay: float = 1e-4  # AdamW's decoupled weight decay
+    warmup_steps: int = 100  # linear warm-up of the learning rate
+    grad_clip: float = 0.25  # gradient-norm clipping
     target_return: float | None = None  # None: the pre-trained model's default
-    eval_episodes: int = 16
-    eval_seed: int = EVAL_SEED
-    collect_seed: int = FINETUNE_SEED
+    eval_episodes: int = 16  # evaluation episodes after each round (the zero-shot model first)
+    eval_seed: int = EVAL_SEED  # seed of the first evaluation episode
+    collect_seed: int = FINETUNE_SEED  # seed of the first candidate episode
 
     def __post_init__(self) -> None:
         check_preset(self.preset)

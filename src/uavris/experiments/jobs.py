@@ -29,7 +29,7 @@ import traceback
 from concurrent.futures import Future, ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any, Callable, Literal, get_args
 
 
 @dataclass(frozen=True)
@@ -99,7 +99,8 @@ def _run_logged(job: Job) -> JobResult:
             sys.stdout, sys.stderr = old_out, old_err
 
 
-BACKENDS = ("local", "ray")
+Backend = Literal["local", "ray"]  # where jobs run (--backend)
+BACKENDS: tuple[str, ...] = get_args(Backend)
 
 
 class JobRunner:
@@ -127,6 +128,22 @@ class JobRunner:
         self._order = itertools.count()
         self._busy = 0
         self._free = list(range(self.workers))  # worker slots, lowest first
+        self._held = False
+        self.active: dict[int, tuple[Job, float]] = {}  # running jobs by id: (job, time.time() it started)
+
+    def hold(self) -> None:
+        """Queue jobs without starting any until :meth:`release`: the callers about to submit
+        all get their jobs in line, and the first to start is the one of highest priority."""
+        with self._lock:
+            self._held = True
+
+    def release(self) -> None:
+        with self._lock:
+            if self._held:
+                self._held = False
+                if self._pool is not None:
+                    self._dispatch()
+                self._lock.notify_all()
 
     def __enter__(self) -> JobRunner:
         return self
@@ -145,14 +162,20 @@ class JobRunner:
             self._ray_started = False
 
     def run(self, jobs: list[Job], on_done: Callable[[JobResult], None] | None = None,
-            priority: float = 0.0) -> list[JobResult]:
-        """Run ``jobs``; ``on_done`` is called as each finishes. Returns results in finishing order."""
+            priority: float = 0.0, on_queued: Callable[[], None] | None = None) -> list[JobResult]:
+        """Run ``jobs``; ``on_queued`` is called once they wait in line (with one worker: the
+        first of them), ``on_done`` as each finishes. Returns results in finishing order."""
         if not jobs:
+            if on_queued:
+                on_queued()
             return []
         if self.backend == "ray":
+            if on_queued:
+                on_queued()
             return self._run_ray(jobs, on_done)
         if self.workers <= 1:
-            return [self._run_here(job, on_done, priority) for job in jobs]
+            return [self._run_here(job, on_done, priority, on_queued if i == 0 else None)
+                    for i, job in enumerate(jobs)]
         with self._lock:
             if self._pool is None:
                 self._pool = ProcessPoolExecutor(max_workers=self.workers, mp_context=mp.get_context("spawn"))
@@ -162,6 +185,8 @@ class JobRunner:
                 heapq.heappush(self._waiting, (-(priority + job.cost), next(self._order), job, fut))
                 futures[fut] = job
             self._dispatch()
+        if on_queued:
+            on_queued()
         results = []
         for fut in as_completed(futures):
             res = fut.result()
@@ -172,12 +197,13 @@ class JobRunner:
 
     def _dispatch(self) -> None:
         """Start waiting jobs, highest priority first, while workers are free (lock held)."""
-        while self._busy < self.workers and self._waiting:
+        while self._busy < self.workers and self._waiting and not self._held:
             _, _, job, outer = heapq.heappop(self._waiting)
             self._busy += 1
             slot = heapq.heappop(self._free)
             assert self._pool is not None and outer is not None
             started = time.time()
+            self.active[id(job)] = (job, started)
             self._pool.submit(_run_logged, job).add_done_callback(
                 lambda inner, job=job, outer=outer, slot=slot, started=started:
                 self._finished(inner, job, outer, slot, started))
@@ -190,25 +216,32 @@ class JobRunner:
             res = JobResult(job.name, False, None, f"worker died: {type(e).__name__}: {e}", job.log)
         res = dataclasses.replace(res, worker=slot, start=started, end=time.time())
         with self._lock:
+            self.active.pop(id(job), None)
             self._busy -= 1
             heapq.heappush(self._free, slot)
             self._dispatch()
         outer.set_result(res)
 
-    def _run_here(self, job: Job, on_done: Callable[[JobResult], None] | None, priority: float) -> JobResult:
+    def _run_here(self, job: Job, on_done: Callable[[JobResult], None] | None, priority: float,
+                  on_queued: Callable[[], None] | None = None) -> JobResult:
         """One job in this thread once no other is running and none of higher priority waits."""
         entry = (-(priority + job.cost), next(self._order), job, None)
         with self._lock:
             heapq.heappush(self._waiting, entry)
-            while self._busy or self._waiting[0] is not entry:
+        if on_queued:
+            on_queued()
+        with self._lock:
+            while self._busy or self._held or self._waiting[0] is not entry:
                 self._lock.wait()
             heapq.heappop(self._waiting)
             self._busy = 1
-        started = time.time()
+            started = time.time()
+            self.active[id(job)] = (job, started)
         try:
             res = _run_logged(job)
         finally:
             with self._lock:
+                self.active.pop(id(job), None)
                 self._busy = 0
                 self._lock.notify_all()
         res = dataclasses.replace(res, worker=0, start=started, end=time.time())

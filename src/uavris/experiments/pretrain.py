@@ -25,7 +25,7 @@ import numpy as np
 
 from uavris.agents.dt.checkpoint import save_dt
 from uavris.agents.dt.dataset import ExpertDataset, load_dataset
-from uavris.agents.dt.model import DecisionTransformer, DTConfig
+from uavris.agents.dt.model import Attention, DecisionTransformer, DTConfig
 from uavris.agents.dt.trainer import load_trainer_state, make_optimizer, train_steps
 from uavris.agents.dt.trajectories import TrainingWindows, default_target_return, normalisation_from
 from uavris.config import check_non_negative, check_positive
@@ -44,7 +44,7 @@ from uavris.experiments.dt_runs import (
 )
 from uavris.experiments.jobs import configure_threads
 from uavris.io import read_rows, write_csv
-from uavris.presets import PRETRAIN, check_preset
+from uavris.presets import PRETRAIN, Preset, check_preset
 from uavris.runs import RunClock, write_done
 
 TARGET_QUANTILE = 0.9
@@ -55,26 +55,26 @@ LOG_HEADER = ("step", "loss", "learning_rate")  # throughput: TensorBoard (perf/
 class PretrainConfig:
     """Everything that determines a pre-training run (dumped as config.json)."""
 
-    dataset: str
-    preset: str = "quick"
-    seed: int = 0
-    steps: int = 1500
-    batch_size: int = 64
-    learning_rate: float = 1e-4
-    weight_decay: float = 1e-4
-    warmup_steps: int = 150
-    grad_clip: float = 0.25
-    checkpoint_every: int = 500
-    log_every: int = 50
-    context: int = 20
-    width: int = 128
-    depth: int = 3
-    heads: int = 1
-    dropout: float = 0.1
-    attention: str = "window"
+    dataset: str  # a dataset directory written by `uavris collect`
+    preset: Preset = "quick"  # the schedule's defaults: smoke (seconds), quick (minutes), paper (the DT paper's)
+    seed: int = 0  # seed of the weights and of the sampled windows
+    steps: int = 1500  # gradient steps
+    batch_size: int = 64  # windows (banded attention: episodes) per step
+    learning_rate: float = 1e-4  # AdamW's rate after the warm-up
+    weight_decay: float = 1e-4  # AdamW's decoupled weight decay (weight matrices only)
+    warmup_steps: int = 150  # linear warm-up of the learning rate
+    grad_clip: float = 0.25  # gradient-norm clipping
+    checkpoint_every: int = 500  # steps between checkpoints
+    log_every: int = 50  # steps between train_log.csv rows
+    context: int = 20  # slots the model reads (3 tokens each)
+    width: int = 128  # embedding width
+    depth: int = 3  # transformer blocks
+    heads: int = 1  # attention heads
+    dropout: float = 0.1  # dropout rate in training
+    attention: Attention = "window"  # window (the DT paper's) or banded (cached deployment)
     condition_on_return: bool = True  # False: behaviour cloning with the same model and budget
     scenarios: tuple[str, ...] | None = None  # train on the episodes of these scenarios (layouts) only; None: all
-    target_quantile: float = TARGET_QUANTILE
+    target_quantile: float = TARGET_QUANTILE  # the default target return: this quantile of the dataset's returns
 
     def __post_init__(self) -> None:
         check_preset(self.preset)

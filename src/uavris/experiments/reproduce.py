@@ -30,7 +30,7 @@ from __future__ import annotations
 import dataclasses
 import time
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any, Literal, Sequence, get_args
 
 from uavris import runs
 from uavris.agents.experts import ALGORITHMS
@@ -66,12 +66,16 @@ from uavris.presets import (
     STUDY_TRAIN_LAYOUTS,
     STUDY_TRAJECTORIES,
     STUDY_UNSEEN_LAYOUTS,
+    Preset,
     check_preset,
 )
 
 # "all": the three tracks; "both": the paper and the strong track (the study before layouts).
-TRACK_CHOICES = ("all", "both") + TRACKS
+TrackChoice = Literal["all", "both", "paper", "strong", "deployment"]
+TRACK_CHOICES: tuple[str, ...] = get_args(TrackChoice)
+ExpertAlgo = Literal["auto", "ddpg", "ppo", "sac", "td3"]
 TRACK_SETS = {"all": TRACKS, "both": ("paper", "strong")}
+assert set(TRACK_CHOICES) == set(TRACK_SETS) | set(TRACKS) and set(get_args(ExpertAlgo)) == {"auto", *ALGORITHMS}
 AUTO = "auto"
 
 
@@ -79,13 +83,13 @@ AUTO = "auto"
 class ReproduceConfig:
     """Everything that determines the study (dumped into the report)."""
 
-    preset: str = "quick"  # smoke (seconds, for tests), quick (under an hour on 2 cores) or paper (days)
+    preset: Preset = "quick"  # smoke (seconds, for tests), quick (under an hour on 2 cores) or paper (days)
     seed: int = 0  # seed of every training run (experts, DT); evaluation episodes have their own
     compare_seeds: int | None = None  # paper track: seeds per algorithm in the comparison (default: the preset's)
     eval_episodes: int | None = None  # evaluation episodes per policy and scenario (default: the preset's)
     trajectories: int | None = None  # expert trajectories per training scenario or layout (default: the preset's)
-    track: str = "all"  # all, both (paper and strong), paper, strong or deployment
-    expert_algo: str = AUTO  # paper track: "auto" = the comparison's winner, or one of the four
+    track: TrackChoice = "all"  # all, both (paper and strong), paper, strong or deployment
+    expert_algo: ExpertAlgo = AUTO  # paper track: auto (the comparison's choice) or one of the four
     train_layouts: int | None = None  # deployment track: training layouts (default: the preset's)
     unseen_layouts: int | None = None  # deployment track: unseen layouts (default: the preset's)
     layout_seed: int = 0  # deployment track: seed of the layout generator

@@ -15,12 +15,16 @@ minutes-long SAC run weigh what they cost and the bar's rate and ETA mean someth
 from __future__ import annotations
 
 import threading
+import time
 from pathlib import Path
 from typing import Any, Callable
 
 from uavris.errors import UavrisError
 from uavris.experiments.jobs import Job, JobResult, JobRunner
 from uavris.experiments.stages import Pipeline, StageRecord
+
+HOLD_LIMIT_S = 30.0  # the longest the runner waits for the first stages to queue their jobs
+TICK_S = 2.0  # how often the bar counts the running jobs' progress
 
 
 class StudyContext:
@@ -37,16 +41,41 @@ class StudyContext:
         self._expected: dict[str, float] = {}
         self._credited: dict[str, float] = {}
         self._job_costs: dict[tuple[str, str], float] = {}
+        self._first: set[str] = set()
+        self._closed = threading.Event()
         self._lock = threading.Lock()
 
     def plan(self, pipeline: Pipeline) -> None:
-        """Priorities and the progress bar's total from the pipeline's expected costs."""
+        """Priorities and the progress bar's total from the pipeline's expected costs. The runner
+        starts nothing until every stage ready at the start has queued its first jobs (or ended),
+        so that the first job to run is the one that heads the longest chain, not the first queued."""
         self._after = pipeline.downstream(self.workers)
         self._expected = {name: sum(st.costs) for name, st in pipeline.stages.items()}
         self._credited = {name: 0.0 for name in pipeline.stages}
+        self._first = {name for name, st in pipeline.stages.items() if not st.deps}
+        if self._first:
+            self.runner.hold()
+            threading.Timer(HOLD_LIMIT_S, self.runner.release).start()  # never more than this
         if self.bar is not None:
             self.bar.total = sum(self._expected.values())
             self.bar.refresh()
+            threading.Thread(target=self._tick, daemon=True).start()
+
+    def _arrived(self, stage: str) -> None:
+        """``stage`` queued its jobs or ended: release the runner once every first stage has (lock held)."""
+        self._first.discard(stage)
+        if not self._first:
+            self.runner.release()
+
+    def _tick(self) -> None:
+        """Every few seconds, count the running jobs' elapsed time (up to their expected cost) as
+        done work, so that a long job moves the bar while it runs and the rate is the workers'."""
+        while not self._closed.wait(TICK_S):
+            with self._lock:
+                now = time.time()
+                partial = sum(min(now - start, job.cost) for job, start in list(self.runner.active.values()))
+                self.bar.n = min(self.bar.total, sum(self._credited.values()) + partial)
+                self.bar.refresh()
 
     def priority(self, stage: str) -> float:
         """Expected seconds of the longest chain after ``stage`` (its jobs add their own cost)."""
@@ -69,7 +98,11 @@ class StudyContext:
         """Run ``stage``'s jobs at its priority; returns their results in finishing order."""
         with self._lock:
             self._job_costs.update({(stage, j.name): j.cost for j in jobs})
-        return self.runner.run(jobs, self.job_done(stage), self.priority(stage))
+        return self.runner.run(jobs, self.job_done(stage), self.priority(stage), lambda: self._queued(stage))
+
+    def _queued(self, stage: str) -> None:
+        with self._lock:
+            self._arrived(stage)
 
     def run_one(self, stage: str, fn: Any, args: tuple[Any, ...], log: Path, cost: float) -> Any:
         """One job of a DT stage; its value, or a :class:`UavrisError` naming its log when it failed."""
@@ -81,6 +114,7 @@ class StudyContext:
     def stage_done(self, rec: StageRecord) -> None:
         """A stage ended (or was skipped): the bar gets the rest of its expected cost."""
         with self._lock:
+            self._arrived(rec.name)
             if self.bar is not None:
                 self._credit(rec.name, self._expected.get(rec.name, 0.0) - self._credited.get(rec.name, 0.0))
                 extra = f" ({rec.error})" if rec.error else ""
@@ -100,4 +134,6 @@ class StudyContext:
                      "start": r.start - origin, "end": r.end - origin} for s, r in self.jobs]
 
     def close(self) -> None:
+        self._closed.set()
+        self.runner.release()
         self.runner.close()

@@ -41,6 +41,7 @@ from uavris.agents.evaluation import EpisodeResults, evaluate
 from uavris.agents.experts import (
     ALGORITHMS,
     OFF_POLICY,
+    Algorithm,
     Hyperparams,
     check_algorithm,
     default_hyperparams,
@@ -49,12 +50,12 @@ from uavris.agents.experts import (
 from uavris.agents.experts.imitation import ImitationConfig, imitate
 from uavris.agents.experts.sb3 import SB3Policy, build_model, load_model
 from uavris.agents.experts.vec_env import UavRisVecEnv
-from uavris.config import Scenario, SystemConfig, float_tuple, scenario_at
-from uavris.env.wrappers import check_phase_control
+from uavris.config import Scenario, ScenarioName, SystemConfig, float_tuple, scenario_at
+from uavris.env.wrappers import PhaseControl, check_phase_control
 from uavris.errors import CheckpointError, ConfigError, UavrisError
 from uavris.experiments.jobs import configure_threads
 from uavris.io import atomic_write_bytes, read_csv, read_rows, read_yaml, write_csv, write_yaml
-from uavris.presets import EVAL_SEED, PRESETS, TRAIN_CHECKPOINT, TRAIN_EVAL, TRAIN_STEPS, check_preset
+from uavris.presets import EVAL_SEED, PRESETS, TRAIN_CHECKPOINT, TRAIN_EVAL, TRAIN_STEPS, Preset, check_preset
 
 EPISODE_HEADER = ("episode", "env_steps", "avg_sum_rate", "return", "length")
 EVAL_HEADER = ("env_steps", "episodes", "mean", "ci_low", "ci_high", "iqm")
@@ -64,17 +65,17 @@ EVAL_HEADER = ("env_steps", "episodes", "mean", "ci_low", "ci_high", "iqm")
 class TrainConfig:
     """Everything that determines a training run (dumped as config.yaml)."""
 
-    algo: str = "ddpg"
-    scenario: str = "fig2"
+    algo: Algorithm = "ddpg"  # the DRL algorithm (Stable-Baselines3)
+    scenario: ScenarioName | str = "fig2"  # where it trains (or a layout's name, with start)
     start: tuple[float, float, float] | None = None  # the UAV's start; None: the named scenario's (a layout sets it)
-    seed: int = 0
-    preset: str = "quick"
-    total_steps: int = TRAIN_STEPS["quick"]
-    eval_every: int = TRAIN_EVAL["quick"][0]
-    eval_episodes: int = TRAIN_EVAL["quick"][1]
+    seed: int = 0  # seed of the model, the exploration and the training episodes
+    preset: Preset = "quick"  # budgets and hyperparameters: smoke (seconds), quick (minutes), paper (hours)
+    total_steps: int = TRAIN_STEPS["quick"]  # environment steps of RL (after imitation, if any)
+    eval_every: int = TRAIN_EVAL["quick"][0]  # environment steps between periodic evaluations
+    eval_episodes: int = TRAIN_EVAL["quick"][1]  # episodes of each evaluation
     eval_seed: int = EVAL_SEED  # evaluation episodes never share seeds with training
-    checkpoint_every: int = TRAIN_CHECKPOINT["quick"]
-    phase_control: str = "agent"  # "optimizer": hybrid controller (uavris.env.wrappers)
+    checkpoint_every: int = TRAIN_CHECKPOINT["quick"]  # environment steps between checkpoints
+    phase_control: PhaseControl = "agent"  # "optimizer": hybrid controller (uavris.env.wrappers)
     imitation: ImitationConfig | None = None  # start from the oracle's demonstrations (uavris.agents.experts.imitation)
     hyperparams: Hyperparams = field(default_factory=Hyperparams)
     system: SystemConfig = field(default_factory=SystemConfig)

@@ -56,7 +56,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Literal, get_args
 
 import numpy as np
 import torch
@@ -66,7 +66,8 @@ from torch import nn
 from uavris.agents.dt.cache import KVCache
 from uavris.errors import ConfigError
 
-ATTENTION_LAYOUTS = ("window", "banded")
+Attention = Literal["window", "banded"]  # the DT's attention layout (--attention)
+ATTENTION_LAYOUTS: tuple[str, ...] = get_args(Attention)
 
 
 @dataclass(frozen=True)
@@ -83,7 +84,7 @@ class DTConfig:
     dropout: float = 0.1
     max_timestep: int = 100  # size of the timestep embedding; later slots reuse the last entry
     mlp_ratio: int = 4
-    attention: str = "window"  # "window" (DT paper) or "banded" (cached deployment); see the module docstring
+    attention: Attention = "window"  # "window" (DT paper) or "banded" (cached deployment); see the module docstring
     condition_on_return: bool = True  # False: R_hat is replaced by 0, so the model is behaviour cloning
 
     def __post_init__(self) -> None:

@@ -23,7 +23,7 @@ scale = the largest episode return, so that R_hat / scale lies in [0, 1] on the 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, Sequence
+from typing import TYPE_CHECKING, Any, Literal, Sequence, get_args
 
 import numpy as np
 import torch
@@ -71,7 +71,8 @@ def returns_to_go(rewards: NDArray[np.floating]) -> NDArray[np.float64]:
     return np.cumsum(r[::-1])[::-1].copy()
 
 
-ELITE_RULES: tuple[str, ...] = ("return", "paired")
+EliteRule = Literal["return", "paired"]  # fine-tuning's elite selection (--selection)
+ELITE_RULES: tuple[str, ...] = get_args(EliteRule)
 
 
 def select_elites(trajectories: Sequence[Trajectory], k: int, rule: str = "return") -> list[Trajectory]:

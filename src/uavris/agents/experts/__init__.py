@@ -14,10 +14,12 @@ and the per-preset hyperparameter values (:mod:`uavris.presets`).
 from uavris.agents.experts.hyperparams import (
     ALGORITHMS,
     OFF_POLICY,
+    Algorithm,
     Hyperparams,
     check_algorithm,
     default_hyperparams,
     hyperparams_for,
 )
 
-__all__ = ["ALGORITHMS", "OFF_POLICY", "Hyperparams", "check_algorithm", "default_hyperparams", "hyperparams_for"]
+__all__ = ["ALGORITHMS", "OFF_POLICY", "Algorithm", "Hyperparams", "check_algorithm", "default_hyperparams",
+           "hyperparams_for"]

@@ -32,12 +32,13 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Literal, get_args
 
 from uavris.errors import ConfigError
 from uavris.presets import ALGO_HYPERPARAMS, HYPERPARAMS, check_preset
 
-ALGORITHMS: tuple[str, ...] = ("ddpg", "ppo", "sac", "td3")
+Algorithm = Literal["ddpg", "ppo", "sac", "td3"]  # what --algo accepts (tyro lists and checks them)
+ALGORITHMS: tuple[str, ...] = get_args(Algorithm)
 OFF_POLICY: tuple[str, ...] = ("ddpg", "sac", "td3")
 
 
