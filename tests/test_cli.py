@@ -8,6 +8,8 @@ wrong for it, plus wrong paths, and checks the contract of :mod:`uavris.cli`.
 from __future__ import annotations
 
 import dataclasses
+import json
+import re
 import typing
 from pathlib import Path
 
@@ -175,6 +177,41 @@ def test_every_command_has_help(capsys: pytest.CaptureFixture[str]) -> None:
     assert all(name in out for name in COMMANDS)
 
 
+_SCENARIOS = ("fig2", "train1", "train2", "train3", "train4", "train5", "train6", "train7", "train8", "unseen1",
+              "unseen2")
+_PRESETS, _DEVICES, _PHASES = ("smoke", "quick", "paper"), ("cpu", "cuda", "auto"), ("agent", "optimizer")
+FIXED_SET_OPTIONS = {
+    "train": {"--algo": ("ddpg", "ppo", "sac", "td3"), "--scenario": _SCENARIOS, "--preset": _PRESETS,
+              "--phase-control": _PHASES, "--device": _DEVICES},
+    "evaluate": {"--scenario": _SCENARIOS, "--phase-control": _PHASES, "--device": _DEVICES},
+    "benchmark": {"--preset": _PRESETS, "--cells": ("all", "scenarios", "layouts"), "--phase-control": _PHASES,
+                  "--device": _DEVICES},
+    "compare-algorithms": {"--algos": ("ddpg", "ppo", "sac", "td3"), "--preset": _PRESETS, "--scenario": _SCENARIOS,
+                           "--backend": ("local", "ray"), "--device": _DEVICES},
+    "pretrain-dt": {"--preset": _PRESETS, "--attention": ("window", "banded"), "--device": _DEVICES},
+    "finetune-dt": {"--scenario": _SCENARIOS, "--preset": _PRESETS, "--selection": ("return", "paired"),
+                    "--device": _DEVICES},
+    "reproduce": {"--preset": _PRESETS, "--track": ("all", "both", "paper", "strong", "deployment"),
+                  "--expert-algo": ("auto", "ddpg", "ppo", "sac", "td3"), "--backend": ("local", "ray"),
+                  "--device": _DEVICES},
+    "demo": {"--scenario": _SCENARIOS},
+}
+
+
+@pytest.mark.parametrize("name", sorted(FIXED_SET_OPTIONS))
+def test_help_lists_the_choices_of_fixed_set_options(name: str, capsys: pytest.CaptureFixture[str]) -> None:
+    """tyro shows (and checks) the values of every option typed as a fixed set; no option
+    reads `(default: NAME)` for a required value."""
+    assert main([name, "--help"]) == 0
+    text = capsys.readouterr().out.replace("\u2502", " ")
+    for option, choices in FIXED_SET_OPTIONS[name].items():
+        m = re.search(rf"{re.escape(option)} \[?\{{([^}}]*)\}}", text)
+        assert m, f"uavris {name} --help does not list the choices of {option}"
+        got = tuple(re.sub(r"\s+", "", m.group(1)).split(","))
+        assert got in (choices, ("None", *choices)), (name, option, got)
+    assert not re.search(r"\(default: [A-Z]+\)", " ".join(text.split())), name
+
+
 def test_resume_and_force_say_what_they_do(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     missing = tmp_path / "never-trained"
     line = _check_one_line(capsys, main(["train", "--preset", "smoke", "--out", str(missing), "--resume"]), "resume")
@@ -288,3 +325,18 @@ def test_plot_overlays_runs_of_every_kind(tmp_path: Path, capsys: pytest.Capture
     assert stem.with_suffix(".pdf").read_bytes().startswith(b"%PDF")
     line = _check_one_line(capsys, main(["plot", str(runs[0]), "--labels", "one", "two"]), "labels")
     assert "--labels" in line
+
+
+def test_resume_uses_the_runs_own_configuration(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """`train --out RUN --resume` continues a run made with non-default flags from its config.yaml
+    (the preset's defaults would differ from it and be refused)."""
+    run = tmp_path / "r"
+    assert main(["train", "--preset", "smoke", "--algo", "td3", "--scenario", "train2", "--out", str(run),
+                 "--no-progress"]) == 0
+    done = (run / "done.json").read_text()
+    (run / "done.json").unlink()  # as if killed after its last checkpoint
+    (run / "model.zip").unlink()
+    assert main(["train", "--out", str(run), "--resume", "--no-progress"]) == 0
+    assert json.loads((run / "done.json").read_text())["final_eval"] == json.loads(done)["final_eval"]
+    line = _check_one_line(capsys, main(["train", "--out", str(run), "--resume", "--algo", "ddpg"]), "differs")
+    assert "ddpg" in line or "config" in line

@@ -6,6 +6,7 @@ import re
 import shutil
 import threading
 import time
+from pathlib import Path
 
 import pytest
 
@@ -264,3 +265,34 @@ def test_job_runner_pool_returns_every_result(tmp_path):
     with JobRunner(2) as runner:
         res = runner.run([Job(f"j{i}", _record, (f"j{i}",), tmp_path / f"{i}.log") for i in range(4)])
     assert sorted(r.value for r in res) == ["j0", "j1", "j2", "j3"] and all(r.ok for r in res)
+
+
+def test_expected_schedule_replays_the_longest_chain_first(tmp_path: Path) -> None:
+    """The estimate of `reproduce --estimate`: a chain A -> B of 10 s jobs and three 3 s stages
+    on two workers end at 20 s (the chain on one worker, the rest beside it); on one worker
+    the work adds up; on many the chain bounds it."""
+    from uavris.experiments.scheduling import expected_schedule
+    from uavris.experiments.stages import Pipeline, Stage
+
+    def noop(d: Path, deps: dict[str, Path]) -> None:
+        return None
+
+    stages = [Stage("a", {}, noop, costs=(10.0,)), Stage("b", {}, noop, ("a",), (10.0,)),
+              *(Stage(n, {}, noop, costs=(3.0,)) for n in ("c", "d", "e"))]
+    pipeline = Pipeline(tmp_path, stages)
+    wall, spans = expected_schedule(pipeline, 2)
+    assert wall == 20.0 and spans["a"] == (0.0, 10.0) and spans["b"] == (10.0, 20.0)
+    assert max(spans[n][1] for n in "cde") == 9.0
+    assert expected_schedule(pipeline, 1)[0] == 29.0
+    assert expected_schedule(pipeline, 8)[0] == 20.0
+
+
+def test_reproduce_estimate_runs_nothing(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                         monkeypatch: pytest.MonkeyPatch) -> None:
+    from uavris.cli import main
+
+    monkeypatch.chdir(tmp_path)
+    assert main(["reproduce", "--preset", "quick", "--estimate", "--expert-algo", "ppo"]) == 0
+    out = capsys.readouterr().out
+    assert "expected wall clock" in out and "| deploy-pretrain |" in out and "| compare | 12 |" in out
+    assert list(tmp_path.iterdir()) == []

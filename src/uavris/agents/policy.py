@@ -4,17 +4,35 @@ that see more than the observation.
 Lives here: the protocols every policy of uavris follows, as the rollout loop
 (:func:`uavris.env.rollout.rollout`) uses them, and :class:`Privileged`, the marker of a
 reference that reads the simulator's state. Not here: any policy (baselines, experts,
-the Decision Transformer and the oracle each live with their family).
+the Decision Transformer and the oracle each live with their family) and loading a user's
+policy by name (:mod:`uavris.experiments.user_policy`).
 
-- :class:`Policy`: ``policy(obs) -> actions`` on a batch, ``obs`` ``(n, obs_dim)`` float32,
-  actions ``(n, act_dim)`` in [-1, 1]. ``act_dim`` is the environment's action size, or
-  the 6 motion entries for a policy whose ``phase_control`` is ``"optimizer"`` (the
-  per-slot optimiser then sets the phases).
+The contract (README, "Your own controller"):
+
+- Batched. ``policy(obs) -> actions``: ``obs`` is ``(n, obs_dim)`` float32, one row per
+  running episode (``n`` can be 1 or hundreds; every row is its own episode), and the answer
+  is ``(n, act_dim)`` finite numbers; values outside [-1, 1] are clipped.
+- Observation: ``obs_dim`` is 158 at the defaults; its named slices are
+  :func:`uavris.env.observation_layout` (``position``, ``velocity``, ``attitude_sin``,
+  ``attitude_cos``, ``channel_real``, ``channel_imag``, ``pairing``, ``energy_remaining``,
+  ``time_fraction``, and ``devices`` with ``SystemConfig(observe_devices=True)``); scaling:
+  docs/model.md, section 15.
+- Two action layouts. ``act_dim`` 22 (``phase_control="agent"``, the default): acceleration
+  (3, times ``a_max``), the 16 RIS phases (-1..1 maps to 0..2 pi), yaw/pitch/roll increments
+  (3, times ``attitude_step_deg``). ``act_dim`` 6 (a ``phase_control = "optimizer"``
+  attribute on the policy, or ``--phase-control optimizer``): acceleration and attitude
+  only; the per-slot optimiser sets the phases every slot (a 22-entry answer then has its
+  phases replaced).
+- :class:`Policy`: ``policy(obs) -> actions`` and nothing else (a function or an object).
 - :class:`EpisodicPolicy`: a policy with a memory of its episodes (the Decision
-  Transformer): told when a batch of episodes starts and given the rewards of each slot.
+  Transformer): ``begin(n)`` when a batch of ``n`` episodes starts (slot 0 for every row),
+  ``record(actions, rewards)`` after every step (the actions as executed, clipped; the
+  slot's sum rates).
 - :class:`PrivilegedPolicy`: a reference that reads the simulator's state (this slot's
   channels, incidence and pairing, the pose, the scenario), e.g. the oracle; it is called
   ``policy(obs, sim)``. Everything a learned policy may use is in ``obs``.
+- ``observation_dim`` (optional attribute): the observation size the policy was made for;
+  evaluating it in a system that gives another size is one :class:`ConfigError` line.
 """
 
 from __future__ import annotations

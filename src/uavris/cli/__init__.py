@@ -2,12 +2,13 @@
 
 Commands:
   train               train a DRL expert (DDPG, PPO, SAC, TD3) in one scenario
-  evaluate            evaluate a run, a DT model or a reference on seeded episodes
+  evaluate            evaluate a run, a DT model, a reference or your own policy on seeded episodes
+  benchmark           score any of those on the study's protocol, beside the zero action and the oracle
   compare-algorithms  the paper's Fig. 2: several algorithms over several seeds
   collect             roll experts out into a Minari dataset
   pretrain-dt         pre-train the Decision Transformer offline (Algorithm 1, stage 1)
   finetune-dt         fine-tune it online in a scenario (Algorithm 1, stage 2)
-  reproduce           the whole study in two tracks, with figures and report
+  reproduce           the whole study in three tracks, with figures and report
   plot                learning curves of one or more runs (PNG and PDF)
   plan                where the UAV should go in a hall: the oracle's plan and a rate map
   demo                a few simple policies side by side
@@ -36,6 +37,7 @@ PROG = "uavris"
 COMMANDS: dict[str, tuple[str, str]] = {
     "train": ("training", "train_command"),
     "evaluate": ("evaluation", "evaluate_command"),
+    "benchmark": ("evaluation", "benchmark_command"),
     "compare-algorithms": ("training", "compare_command"),
     "collect": ("evaluation", "collect_command"),
     "pretrain-dt": ("training", "pretrain_command"),

@@ -16,19 +16,22 @@ from uavris.agents.torch_device import Device
 from uavris.cli.parsing import output_dir, parse
 from uavris.config import ScenarioName, SystemConfig
 from uavris.env.wrappers import PhaseControl
-from uavris.presets import COLLECT_SEED, EVAL_SEED, STUDY_EVAL_EPISODES
+from uavris.experiments.benchmark import Cells
+from uavris.presets import COLLECT_SEED, EVAL_SEED, STUDY_EVAL_EPISODES, Preset
 
 
 # ---------------------------------------------------------------------------------------- evaluate
 @dataclass(frozen=True)
 class EvaluateArgs:
-    target: Annotated[str, tyro.conf.Positional, tyro.conf.arg(metavar="RUN|MODEL|REFERENCE")]
-    """a run directory (train, pretrain-dt, finetune-dt), a DT model directory, or a reference:
+    target: Annotated[str, tyro.conf.Positional, tyro.conf.arg(metavar="RUN|MODEL|REFERENCE|MODULE:NAME")]
+    """a run directory (train, pretrain-dt, finetune-dt), a DT model directory, a reference:
     hover (the zero action), random, hover-random-phases, hover-aligned, hover-optimizer,
-    oracle, oracle-greedy (also written baseline:NAME)"""
+    oracle, oracle-greedy (also written baseline:NAME), or your own policy: pkg.module:NAME or
+    path/to/file.py:NAME (a policy obs -> actions, or a factory that returns one; README "Your own
+    controller")"""
     scenario: Optional[ScenarioName] = None
-    """scenario to evaluate in (default: the run's own, or the layout's start; required for references and
-    pre-trained DTs without --layout)"""
+    """scenario to evaluate in (default: the run's own, or the layout's start; required for references, user
+    policies and pre-trained DTs without --layout)"""
     layout: Optional[str] = None
     """the hall: paper, layout-train-N / layout-unseen-N, or a YAML layout file (devices, optionally start and
     room); default: the target's own"""
@@ -50,11 +53,14 @@ class EvaluateArgs:
 
 
 def evaluate_command(args: list[str]) -> None:
-    """Evaluate a trained policy or a reference deterministically on seeded episodes.
+    """Evaluate a trained policy, a reference or your own policy deterministically on seeded episodes.
 
     The target's own system is the default of every --system.* flag; --layout puts it in
     another hall. Writes OUT/SCENARIO-seedSEED-nEPISODES.csv (one row per episode: average
     sum rate, return, length, energy) and .json (mean, 95% CI, IQM) and prints the summary.
+    Your own policy (MODULE:NAME or FILE.py:NAME) is scored with the zero action and the
+    oracle beside it on the same episodes (in the JSON under "references"; default OUT
+    runs/policies/TARGET/eval). For the study's whole protocol use `uavris benchmark`.
     """
     from uavris.agents.torch_device import resolve_device
     from uavris.cli.options import layout_defaults
@@ -72,6 +78,57 @@ def evaluate_command(args: list[str]) -> None:
     print(f"{a.target} in {summary['scenario']}: average sum rate {summary['mean']:.2f} bps/Hz "
           f"(95% CI {summary['ci_low']:.2f}-{summary['ci_high']:.2f}, IQM {summary['iqm']:.2f}, "
           f"{summary['episodes']} episodes) -> {path}")
+    for name, ref in summary.get("references", {}).items():
+        print(f"  beside it on the same episodes: {name} {ref['mean']:.2f} bps/Hz "
+              f"(95% CI {ref['ci_low']:.2f}-{ref['ci_high']:.2f})")
+    if summary.get("fraction_of_oracle") is not None:
+        print(f"  {a.target} reaches {100 * summary['fraction_of_oracle']:.1f}% of the oracle")
+
+
+# --------------------------------------------------------------------------------------- benchmark
+@dataclass(frozen=True)
+class BenchmarkArgs:
+    target: Annotated[str, tyro.conf.Positional, tyro.conf.arg(metavar="RUN|MODEL|REFERENCE|MODULE:NAME")]
+    """what `uavris evaluate` takes: a run or DT model directory, a reference, or your own policy"""
+    preset: Preset = "quick"
+    """whose protocol: its report's evaluation episodes and number of unseen layouts (quick: 32 episodes, 8
+    layouts)"""
+    cells: Cells = "all"
+    """scenarios: the paper's unseen scenarios; layouts: the deployment track's unseen layouts; all: both"""
+    out: Optional[Path] = None
+    """output directory (default runs/benchmarks/TARGET)"""
+    phase_control: Optional[PhaseControl] = None
+    """optimizer: the target's motion with the per-slot optimiser's phases (default: as trained)"""
+    device: Device = "cpu"
+    """torch device (auto: CUDA when torch sees one)"""
+    no_progress: bool = False
+    """no progress bar"""
+    system: SystemConfig = SystemConfig()
+    """the system: the target's own, with these fields changed"""
+
+
+def benchmark_command(args: list[str]) -> None:
+    """Score a target on the study's protocol: the paper's unseen scenarios and the unseen layouts.
+
+    The episodes and seeds are the report's (--preset), so each row compares with the same row
+    of runs/PRESET/report.md. In every cell the zero action and the oracle are evaluated on the
+    same episodes. Writes OUT/benchmark.md (the table: fraction of the oracle, difference to the
+    zero action with its paired 95% CI, means over cells), benchmark.csv, benchmark.json and
+    each cell's per-episode CSVs.
+    """
+    from uavris.agents.torch_device import resolve_device
+    from uavris.experiments.benchmark import benchmark
+    from uavris.experiments.evaluate import target_system
+
+    doc = benchmark_command.__doc__ or ""
+    first = parse(BenchmarkArgs, args, "uavris benchmark", doc)
+    default = BenchmarkArgs(first.target, system=target_system(first.target))
+    a = parse(BenchmarkArgs, args, "uavris benchmark", doc, default=default)
+    output_dir(a.out)
+    _, md = benchmark(a.target, a.preset, a.cells, a.out, resolve_device(a.device), progress=not a.no_progress,
+                      system=a.system, phase_control=a.phase_control)
+    print(md.read_text(), end="")
+    print(f"-> {md}")
 
 
 # -------------------------------------------------------------------------------------------- plan

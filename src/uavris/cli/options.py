@@ -25,7 +25,8 @@ class RunOptions:
     out: Optional[Path] = None
     """run directory (default: under runs/, named after the configuration)"""
     resume: bool = False
-    """continue the interrupted run in OUT from its last checkpoint (an error if OUT holds no run)"""
+    """continue the interrupted run in OUT from its last checkpoint, with its stored configuration (train: OUT/
+    config.yaml; flags given beside must agree with it); an error if OUT holds no run"""
     force: bool = False
     """delete the run in OUT and start from scratch"""
     device: Device = "cpu"

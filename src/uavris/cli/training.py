@@ -35,6 +35,13 @@ def _is_help(args: list[str]) -> bool:
     return any(a in HELP for a in args)
 
 
+def _required_in_help(config: Any, field: str) -> Any:
+    """``config`` with ``field`` shown as "(required)" by --help: the placeholder the
+    defaults were computed from is not a default a user can rely on."""
+    object.__setattr__(config, field, tyro.MISSING)  # only ever for --help, which exits
+    return config
+
+
 # ------------------------------------------------------------------------------------------ train
 @dataclass(frozen=True)
 class TrainArgs:
@@ -58,10 +65,14 @@ def _nested_update(base: dict[str, Any], changes: dict[str, Any], where: str) ->
 
 
 def train_defaults(args: list[str]) -> TrainConfig:
-    """The preset chosen on the command line (or in ``--config``), with the file's fields on top."""
+    """The preset chosen on the command line (or in ``--config``), with the file's fields on top.
+    ``--resume`` without ``--config`` continues with the run's own ``OUT/config.yaml``."""
     from uavris.experiments.train_expert import preset_config
 
     file = peek(args, "--config")
+    out = peek(args, "--out")
+    if file is None and "--resume" in args and out is not None and (Path(out) / "config.yaml").is_file():
+        file = str(Path(out) / "config.yaml")  # the resumed run's configuration, not the preset's defaults
     data = load_overrides(Path(file), "TrainConfig") if file else {}
     pick = {k: peek(args, f"--{k}", data.get(k, d)) for k, d in (("algo", "ddpg"), ("scenario", "fig2"),
                                                                   ("preset", "quick"))}
@@ -179,8 +190,8 @@ def pretrain_command(args: list[str]) -> None:
     dataset = peek(args, "--dataset", "DATASET" if _is_help(args) else None)
     if dataset is None:
         raise UsageError("pretrain-dt: --dataset DIR is required (a dataset written by `uavris collect`)")
-    default = PretrainArgs(pretrain_config(dataset, str(peek(args, "--preset", "quick")),
-                                           peek_int(args, "--seed", 0)))
+    cfg = pretrain_config(dataset, str(peek(args, "--preset", "quick")), peek_int(args, "--seed", 0))
+    default = PretrainArgs(_required_in_help(cfg, "dataset") if _is_help(args) else cfg)
     a = parse(PretrainArgs, args, "uavris pretrain-dt", pretrain_command.__doc__ or "", default=default)
     run_dir = _run_dt(pretrain, a.run, a.options, default_pretrain_dir)
     done = read_done(run_dir)
@@ -218,8 +229,9 @@ def finetune_command(args: list[str]) -> None:
     system, hall = layout_defaults(args, SystemConfig() if placeholder else dt_system(model))
     start = hall.start if hall is not None and scenario is None else None
     scenario = scenario or (hall.name if hall is not None else "unseen1")
-    default = FinetuneArgs(finetune_config(model, scenario, str(peek(args, "--preset", "quick")),
-                                           peek_int(args, "--seed", 0), system=system, start=start))
+    cfg = finetune_config(model, scenario, str(peek(args, "--preset", "quick")), peek_int(args, "--seed", 0),
+                          system=system, start=start)
+    default = FinetuneArgs(_required_in_help(cfg, "model") if placeholder else cfg)
     a = parse(FinetuneArgs, args, "uavris finetune-dt", finetune_command.__doc__ or "", default=default)
     run_dir = _run_dt(finetune, a.run, a.options, default_finetune_dir)
     done = read_done(run_dir)
@@ -250,6 +262,9 @@ class ReproduceArgs:
     """torch device (auto: CUDA when torch sees one)"""
     no_progress: bool = False
     """no progress bar"""
+    estimate: bool = False
+    """print each stage's expected core-minutes and the expected wall clock on --workers, and exit (nothing run
+    or written; the cost model of uavris.experiments.costs, measured on a 2-core AMD EPYC)"""
 
 
 def reproduce_command(args: list[str]) -> None:
@@ -266,11 +281,14 @@ def reproduce_command(args: list[str]) -> None:
     Writes OUT/report.md and OUT/figures/.
     """
     from uavris.agents.torch_device import resolve_device
-    from uavris.experiments.reproduce import reproduce
+    from uavris.experiments.reproduce import estimate, reproduce
 
     system, _ = layout_defaults(args, ReproduceConfig().system)
     a = parse(ReproduceArgs, args, "uavris reproduce", reproduce_command.__doc__ or "",
               default=ReproduceArgs(ReproduceConfig(system=system)))
+    if a.estimate:
+        print(estimate(a.study, a.workers), end="")
+        return
     output_dir(a.out)
     report = reproduce(a.study, a.out or Path("runs") / a.study.preset, workers=a.workers, backend=a.backend,
                        ray_address=a.ray_address, force=a.force, progress=not a.no_progress,

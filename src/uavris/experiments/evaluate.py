@@ -1,18 +1,22 @@
-"""``uavris evaluate``: a run, a DT model or a reference on seeded episodes, written as CSV and JSON.
+"""``uavris evaluate``: a run, a DT model, a reference or a user's policy on seeded episodes,
+written as CSV and JSON.
 
 Lives here: resolving what a target names (:func:`resolve_policy`) and writing its
-per-episode results. Not here: the evaluation itself (:func:`uavris.agents.evaluation.evaluate`).
+per-episode results; a user's policy (``MODULE:NAME`` or ``FILE.py:NAME``,
+:mod:`uavris.experiments.user_policy`) is scored with the zero action and the oracle beside
+it on the same episodes. Not here: the evaluation itself (:func:`uavris.agents.evaluation.evaluate`).
 """
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from uavris.agents.evaluation import EpisodeResults, check_episodes, evaluate
 from uavris.agents.policy import check_policy_fits
-from uavris.agents.references import REFERENCE_SEED, REFERENCES, reference_policy
+from uavris.agents.references import ORACLE, REFERENCE_SEED, REFERENCES, ZERO_ACTION, reference_policy
 from uavris.config import Scenario, SystemConfig, get_scenario
 from uavris.env.rollout import policy_phase_control
 from uavris.env.wrappers import check_phase_control
@@ -20,6 +24,7 @@ from uavris.errors import UavrisError
 from uavris.experiments.dt_runs import dt_model_dir, dt_system, load_dt_policy
 from uavris.experiments.jobs import configure_threads
 from uavris.experiments.train_expert import load_run_config, load_run_policy
+from uavris.experiments.user_policy import is_user_target, load_user_policy
 from uavris.io import write_csv, write_json
 from uavris.layouts import Layout, resolve_layout
 
@@ -51,7 +56,7 @@ def target_system(target: str) -> SystemConfig:
     """The system a target was made for, read from its configuration only (no model is loaded):
     a run's, a DT checkpoint's, or the paper's for a reference. ``uavris evaluate`` uses it as
     the default that ``--system.*`` and ``--layout`` change."""
-    if reference_name(target) is not None:
+    if is_user_target(target) or reference_name(target) is not None:
         return SystemConfig()
     path = Path(target)
     if not path.is_dir():
@@ -70,6 +75,9 @@ def resolve_policy(target: str, device: str = "cpu", system: SystemConfig | None
     so ``uavris evaluate oracle`` gives the numbers of the reports whatever episodes it is
     evaluated on.
     """
+    if is_user_target(target):
+        system = system or SystemConfig()
+        return Target(load_user_policy(target, system), system, None, None)
     name = reference_name(target)
     if name is not None:
         system = system or SystemConfig()
@@ -94,14 +102,15 @@ def write_results(res: EpisodeResults, summary: dict[str, Any], stem: Path) -> N
 def evaluate_target(target: str, scenario: str | Scenario | None, episodes: int, seed: int,
                     out: Path | None = None, phase_control: str | None = None, device: str = "cpu",
                     progress: bool = False, system: SystemConfig | None = None,
-                    layout: str | Layout | None = None) -> tuple[dict[str, Any], Path]:
+                    layout: str | Layout | None = None, references: bool = True) -> tuple[dict[str, Any], Path]:
     """Evaluate ``target``; ``phase_control="optimizer"`` replaces its phases by the optimiser's.
 
     ``system`` replaces the target's own system (the CLI's ``--system.*``); ``layout`` (a
     :class:`~uavris.layouts.Layout` or what :func:`~uavris.layouts.resolve_layout` reads)
     puts it in another hall: the layout's devices, and its start unless ``scenario`` names
     one. With ``progress`` a bar counts the simulated slots (the optimiser and the oracle
-    take milliseconds per slot, so a long evaluation is visibly alive)."""
+    take milliseconds per slot, so a long evaluation is visibly alive). A user's policy gets the
+    zero action and the oracle beside it (``references=False``: not)."""
     check_episodes(episodes, seed)
     if phase_control is not None:
         check_phase_control(phase_control)
@@ -122,16 +131,30 @@ def evaluate_target(target: str, scenario: str | Scenario | None, episodes: int,
                           "scenario of its own)")
     where = get_scenario(scenario)
     where.validate_for(system)
+    user = is_user_target(target)
+    beside = [ZERO_ACTION, ORACLE] if user and references else []
     from tqdm.auto import tqdm
 
-    with tqdm(total=episodes * system.horizon, unit="slot", desc=f"evaluate {where.name}", disable=not progress,
-              dynamic_ncols=True, leave=False) as bar:
-        res = evaluate(policy, system, where, episodes, seed, phase_control=phase_control,
-                       on_slot=lambda sim, obs, executed, alive: bar.update(int(alive.sum())))
+    with tqdm(total=(1 + len(beside)) * episodes * system.horizon, unit="slot", desc=f"evaluate {where.name}",
+              disable=not progress, dynamic_ncols=True, leave=False) as bar:
+        def run(policy: Any, mode: str | None) -> EpisodeResults:
+            return evaluate(policy, system, where, episodes, seed, phase_control=mode,
+                            on_slot=lambda sim, obs, executed, alive: bar.update(int(alive.sum())))
+
+        res = run(policy, phase_control)
+        # A user's policy: the references on the same episodes, so its number reads at once.
+        references = {name: run(reference_policy(name, system, REFERENCE_SEED), None) for name in beside}
     summary = {"target": target, "scenario": where.name, "start": list(where.start), "seed": seed,
                "phase_control": phase_control or "as trained", **res.summary(), "system": system.to_dict()}
+    if references:
+        summary["references"] = {name: r.summary() for name, r in references.items()}
+        oracle = summary["references"][ORACLE]["mean"]
+        summary["fraction_of_oracle"] = summary["mean"] / oracle if oracle > 0 else None
     if out is None:
-        base = run_dir if run_dir is not None else Path("runs/baselines") / str(reference_name(target))
+        if user:
+            base = Path("runs/policies") / re.sub(r"[^\w.-]+", "_", target)
+        else:
+            base = run_dir if run_dir is not None else Path("runs/baselines") / str(reference_name(target))
         out = base / "eval"
     suffix = "-optimizer-phases" if phase_control == "optimizer" else ""
     stem = Path(out) / f"{where.name}-seed{seed}-n{episodes}{suffix}"

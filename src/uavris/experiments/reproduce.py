@@ -38,7 +38,7 @@ from uavris.config import SystemConfig
 from uavris.errors import UavrisError
 from uavris.experiments.costs import dataset_cost, evaluate_cost, finetune_cost, pretrain_cost, train_cost
 from uavris.experiments.jobs import BACKENDS, Job, configure_threads
-from uavris.experiments.scheduling import StudyContext
+from uavris.experiments.scheduling import StudyContext, expected_schedule
 from uavris.experiments.stages import Pipeline, Stage
 from uavris.experiments.study import (
     TRACK_SPECS,
@@ -226,6 +226,8 @@ def _dt_stages(rc: ReproduceConfig, track: Track, ctx: StudyContext) -> list[Sta
     # The DT, behaviour cloning with the same model and budget, and the DT on fewer training
     # layouts (the data curve): one pre-training stage each, on the same dataset.
     schedule = dict(track.pretrain)
+    if "context" in schedule:  # a track's shorter context never lengthens a preset's (smoke reads 4 slots)
+        schedule["context"] = min(schedule["context"], pretrain_config("<dataset>", rc.preset, rc.seed).context)
     models: dict[str, dict[str, Any]] = {"pretrain": schedule}
     if track.behaviour_cloning:
         models["bc"] = {**schedule, "condition_on_return": False}
@@ -245,8 +247,10 @@ def _dt_stages(rc: ReproduceConfig, track: Track, ctx: StudyContext) -> list[Sta
             cfg = _finetune_config(deps[t("pretrain")] / "model", where)
             return ctx.run_one(t(f"finetune-{where.name}"), finetune_job,
                                (dataclasses.asdict(cfg), str(d / "model"), ctx.device), d / "job.log",
-                               finetune_cost(cfg, horizon, control))
+                               finetune_cost(cfg, horizon, control, context))
         return run
+
+    context = pretrain_config("<dataset>", rc.preset, rc.seed, **schedule).context  # what the fine-tuned model reads
 
     def _finetune_config(model: Path | str, where: Deployment):
         own = {} if not track.layouts else {"system": where.system, "start": where.start}
@@ -274,7 +278,7 @@ def _dt_stages(rc: ReproduceConfig, track: Track, ctx: StudyContext) -> list[Sta
     for w in unseen:
         ft = _finetune_config("<pretrain>", w)
         stages.append(Stage(t(f"finetune-{w.name}"), dataclasses.asdict(ft), finetune(w), (t("pretrain"),),
-                            (finetune_cost(ft, horizon, control),)))
+                            (finetune_cost(ft, horizon, control, context),)))
     for w in unseen:
         sources = transfer_sources(track, w, train)
         run, keys, cost = evaluate(w, sources)
@@ -335,6 +339,27 @@ def build_pipeline(rc: ReproduceConfig, out: Path, ctx: StudyContext) -> Pipelin
 
 
 # ------------------------------------------------------------------------------------------ entry point
+def estimate(rc: ReproduceConfig, workers: int) -> str:
+    """The study's stages with their expected core-minutes and expected start and end on
+    ``workers`` workers, and the expected wall clock (:func:`~.scheduling.expected_schedule`),
+    as markdown. Nothing is run or written."""
+    if workers < 1:
+        raise UavrisError(f"--workers must be >= 1, got {workers}")
+    pipeline = build_pipeline(rc, Path("<estimate>"), StudyContext(workers, "local", None))
+    wall, spans = expected_schedule(pipeline, workers)
+    algo = rc.expert_algo if rc.expert_algo != AUTO else "the dearest algorithm (SAC) until the comparison chooses"
+    lines = [f"expected wall clock of `uavris reproduce --preset {rc.preset} --track {rc.track}` on {workers} "
+             f"worker(s): {wall / 3600:.1f} h ({wall / 60:.0f} min); paper-track experts: {algo}", "",
+             "| stage | jobs | core-min | expected start (min) | expected end (min) |", "|---|---:|---:|---:|---:|"]
+    for name, st in pipeline.stages.items():
+        start, end = spans[name]
+        lines.append(f"| {name} | {len(st.costs)} | {sum(st.costs) / 60:.1f} | {start / 60:.1f} | {end / 60:.1f} |")
+    total = sum(sum(st.costs) for st in pipeline.stages.values())
+    lines += ["", f"total work {total / 3600:.1f} core-hours; unit costs measured on a 2-core AMD EPYC, one job per "
+              "core (uavris.experiments.costs); an estimate, not a promise", ""]
+    return "\n".join(lines)
+
+
 def reproduce(rc: ReproduceConfig, out: str | Path, *, workers: int = 2, backend: str = "local",
               ray_address: str | None = None, force: Sequence[str] = (), progress: bool = True,
               device: str = "cpu") -> Path:

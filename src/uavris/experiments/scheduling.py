@@ -14,6 +14,7 @@ minutes-long SAC run weigh what they cost and the bar's rate and ETA mean someth
 
 from __future__ import annotations
 
+import math
 import threading
 import time
 from pathlib import Path
@@ -137,3 +138,39 @@ class StudyContext:
         self._closed.set()
         self.runner.release()
         self.runner.close()
+
+
+def expected_schedule(pipeline: Pipeline, workers: int) -> tuple[float, dict[str, tuple[float, float]]]:
+    """The study's expected wall clock on ``workers`` workers, from the cost model (:mod:`.costs`):
+    an event-driven replay of the job runner. A stage's jobs are queued when its inputs are
+    done; a free worker takes the queued job of the longest remaining chain (as
+    :class:`StudyContext` orders them). Returns the expected seconds and, per stage, its
+    expected (start, end). An estimate: the unit costs were measured on one machine."""
+    import heapq
+
+    after = pipeline.downstream(workers)
+    left = {name: max(1, len(st.costs)) for name, st in pipeline.stages.items()}
+    spans: dict[str, list[float]] = {}
+    done: set[str] = set()
+    queued: list[tuple[float, int, str, float]] = []
+    running: list[tuple[float, str]] = []
+    t, free, seq = 0.0, max(1, workers), 0
+    while len(done) < len(pipeline.stages):
+        for name, st in pipeline.stages.items():
+            if name not in spans and all(d in done for d in st.deps):
+                spans[name] = [math.inf, t]
+                for cost in st.costs or (0.0,):
+                    heapq.heappush(queued, (-(after[name] + cost), seq, name, cost))
+                    seq += 1
+        while free and queued:
+            _, _, name, cost = heapq.heappop(queued)
+            spans[name][0] = min(spans[name][0], t)
+            heapq.heappush(running, (t + cost, name))
+            free -= 1
+        t, name = heapq.heappop(running)
+        free += 1
+        left[name] -= 1
+        if not left[name]:
+            done.add(name)
+            spans[name][1] = t
+    return t, {name: (a, b) for name, (a, b) in spans.items()}

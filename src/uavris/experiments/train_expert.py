@@ -104,6 +104,14 @@ class TrainConfig:
                 raise ConfigError(f"TrainConfig.{name} must be >= 0, got {getattr(self, name)}")
 
     @property
+    def expert_kind(self) -> str:
+        """What the run's policy is, for labels: the algorithm, or an imitation of the oracle
+        (a PPO network with no RL after the DAgger rounds, the strong tracks' experts)."""
+        if self.imitation is not None:
+            return "oracle imitation" if self.total_steps == 0 else "oracle imitation + PPO"
+        return self.algo.upper()
+
+    @property
     def resolved_scenario(self) -> Scenario:
         """Where the run flies: the named scenario, or ``start`` under that name (a layout's)."""
         return scenario_at(self.scenario, self.start)

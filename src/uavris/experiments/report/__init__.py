@@ -221,10 +221,24 @@ class _Report:
             res = results[t.name][s]
             zero = res[ZERO_ACTION]["mean"]
             parts = [f"{res[k]['label']} {versus(res[k]['ci_low'], res[k]['ci_high'], zero)}" for k in learned]
-            ft, zs = res["dt-finetuned"]["mean"], res["dt-zero-shot"]["mean"]
+            zs = res["dt-zero-shot"]["mean"]
             self.add(f"- {t.name}, {s}: vs zero action ({zero:.2f}): " + "; ".join(parts)
-                     + f". Zero-shot DT at {_frac(zs, res[ORACLE]['mean'])} of the oracle; fine-tuning "
-                     + ("raised" if ft > zs else "did not raise") + f" it ({zs:.2f} -> {ft:.2f}).")
+                     + f". Zero-shot DT at {_frac(zs, res[ORACLE]['mean'])} of the oracle; "
+                     + finetuning_effect(res["dt-zero-shot"], res["dt-finetuned"]) + ".")
+
+
+def finetuning_effect(zero_shot: dict[str, float], finetuned: dict[str, float]) -> str:
+    """What fine-tuning did, in words that do not overstate it: "raised" or "lowered" only when
+    the two 95% CIs over episodes do not overlap, "unchanged" when the means agree to the
+    printed digits; otherwise the change is within the CIs."""
+    zs, ft = zero_shot["mean"], finetuned["mean"]
+    if f"{zs:.2f}" == f"{ft:.2f}":
+        return f"fine-tuning left it unchanged ({zs:.2f} -> {ft:.2f})"
+    if finetuned["ci_low"] > zero_shot["ci_high"]:
+        return f"fine-tuning raised it ({zs:.2f} -> {ft:.2f}, 95% CIs apart)"
+    if finetuned["ci_high"] < zero_shot["ci_low"]:
+        return f"fine-tuning lowered it ({zs:.2f} -> {ft:.2f}, 95% CIs apart)"
+    return f"fine-tuning moved it within the 95% CIs ({zs:.2f} -> {ft:.2f}); one fine-tuning run, one seed"
 
 
 def write_report(out: Path, rc: Any, pipeline: Pipeline, records: Sequence[StageRecord], wall_s: float,
