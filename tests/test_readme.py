@@ -45,3 +45,25 @@ def test_preset_numbers_are_the_codes() -> None:
         steps = float(m.group(1).replace(",", "")) * (1_000_000 if m.group(2) else 1)
         assert steps == TRAIN_STEPS[preset], preset
         assert int(m.group(3)) == TRAIN_EVAL[preset][1], preset
+
+
+QUICK_REPORT = README.parent / "docs" / "results" / "quick-report.md"
+
+
+def _section(text: str, title: str) -> str:
+    start = text.index(title)
+    end = text.find("\n## ", start + len(title))
+    return text[start:end if end >= 0 else len(text)]
+
+
+def test_readme_results_are_the_reports() -> None:
+    """Every score and fraction the README quotes from a quick run (2-decimal numbers, 1-decimal
+    percentages) is one the committed report of that run states: the README copies, never
+    retypes. The report is `runs/quick/report.md` of the run the section names."""
+    report = QUICK_REPORT.read_text(encoding="utf-8")
+    section = _section(README.read_text(encoding="utf-8"), "## Results of a quick run")
+    quoted = set(re.findall(r"(?<![\d.])[+-]?\d+\.\d\d(?![\d])", section))
+    quoted |= set(re.findall(r"(?<![\d.])\d+\.\d%", section))
+    assert len(quoted) > 40, "the results section quotes the report's numbers"
+    missing = sorted(q for q in quoted if q not in report and q.lstrip("+") not in report)
+    assert not missing, f"README numbers not in {QUICK_REPORT.name}: {missing}"

@@ -210,9 +210,10 @@ def test_the_longest_chain_runs_first(tmp_path):
         return Stage(name, {}, lambda d, deps_: ctx.run_one(name, _record, (name, False, cost / 10), tmp_path / name,
                                                             cost), deps, costs=(cost,))
 
-    pipeline = Pipeline(tmp_path, [stage("short1", 1.0), stage("short2", 1.0), stage("long1", 10.0),
-                                   stage("long2", 10.0, ("long1",)), stage("short3", 1.0),
-                                   stage("long3", 10.0, ("long2",)), stage("short4", 1.0)])
+    # short jobs of 0.4 s: a loaded machine still queues the next link within one of them
+    pipeline = Pipeline(tmp_path, [stage("short1", 4.0), stage("short2", 4.0), stage("long1", 10.0),
+                                   stage("long2", 10.0, ("long1",)), stage("short3", 4.0),
+                                   stage("long3", 10.0, ("long2",)), stage("short4", 4.0)])
     ctx.plan(pipeline)
     pipeline.run()
     ctx.close()

@@ -23,6 +23,7 @@ traceback means a bug. Not here: the flags of each command (:mod:`.training`,
 from __future__ import annotations
 
 import importlib
+import os
 import sys
 from typing import Callable
 
@@ -86,6 +87,9 @@ def main(argv: list[str] | None = None) -> int:
         return 130
     except SystemExit as e:  # --help
         return int(e.code or 0) if not isinstance(e.code, str) else EXIT_BAD_INPUT
+    except BrokenPipeError:  # `uavris ... --help | head`: the reader left, which is not an error
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # no second error at exit
+        return 0
     return 0
 
 

@@ -197,13 +197,15 @@ def _expert_stages(rc: ReproduceConfig, track: Track, ctx: StudyContext) -> list
             algo = rc.expert_algo if rc.expert_algo != AUTO else read_json(deps["compare"] / "summary.json")["expert"]
             return _run_experts(stage, d, configs(algo), ctx)
 
-        # Before the comparison has chosen, the experts' cost is the dearest algorithm's: the
-        # chain through the comparison is then sure to go first.
+        # Before the comparison has chosen, the experts' cost is the dearest algorithm's for the
+        # order (the chain through the comparison is then sure to go first) and the mean over
+        # the algorithms for the progress bar, which takes the chosen one's when its jobs come.
         guesses = [rc.expert_algo] if rc.expert_algo != AUTO else list(ALGORITHMS)
-        costs = max((tuple(train_cost(c) for c in configs(a).values()) for a in guesses), key=sum)
+        by_algo = [tuple(train_cost(c) for c in configs(a).values()) for a in guesses]
         config = {"algo": rc.expert_algo, "scenarios": [w.name for w in where], "seed": rc.seed, "preset": rc.preset,
                   "eval_episodes": rc.n_eval, "system": rc.system.to_dict()}
-        stages.append(Stage(name, config, run, ("compare",) if rc.expert_algo == AUTO else (), costs))
+        stages.append(Stage(name, config, run, ("compare",) if rc.expert_algo == AUTO else (), max(by_algo, key=sum),
+                            sum(map(sum, by_algo)) / len(by_algo)))
     return stages
 
 

@@ -51,7 +51,8 @@ class StudyContext:
         starts nothing until every stage ready at the start has queued its first jobs (or ended),
         so that the first job to run is the one that heads the longest chain, not the first queued."""
         self._after = pipeline.downstream(self.workers)
-        self._expected = {name: sum(st.costs) for name, st in pipeline.stages.items()}
+        self._expected = {name: sum(st.costs) if st.progress_s is None else st.progress_s
+                          for name, st in pipeline.stages.items()}
         self._credited = {name: 0.0 for name in pipeline.stages}
         self._first = {name for name, st in pipeline.stages.items() if not st.deps}
         if self._first:
@@ -99,6 +100,10 @@ class StudyContext:
         """Run ``stage``'s jobs at its priority; returns their results in finishing order."""
         with self._lock:
             self._job_costs.update({(stage, j.name): j.cost for j in jobs})
+            if self.bar is not None and jobs:  # every stage submits its jobs at once: now its work is known
+                known = sum(j.cost for j in jobs) + self._credited.get(stage, 0.0)
+                self.bar.total += known - self._expected.get(stage, 0.0)
+                self._expected[stage] = known
         return self.runner.run(jobs, self.job_done(stage), self.priority(stage), lambda: self._queued(stage))
 
     def _queued(self, stage: str) -> None:

@@ -32,13 +32,16 @@ from uavris.runs import TIMING_FILE, read_timing
 @dataclass
 class Stage:
     """One step of a pipeline: ``run(stage_dir, deps)`` with ``deps`` mapping names to dirs;
-    ``costs``: the expected seconds of each of its jobs on one core (:mod:`.costs`)."""
+    ``costs``: the expected seconds of each of its jobs on one core (:mod:`.costs`), which
+    order the jobs; ``progress_s``: the work the progress bar expects of it, when that is
+    not their sum (a stage whose jobs are not known yet)."""
 
     name: str
     config: dict[str, Any]
     run: Callable[[Path, dict[str, Path]], dict[str, Any] | None]
     deps: tuple[str, ...] = ()
     costs: tuple[float, ...] = ()
+    progress_s: float | None = None
     key: str = field(default="", init=False)
 
     def duration(self, workers: int) -> float:
