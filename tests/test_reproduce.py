@@ -297,3 +297,28 @@ def test_reproduce_estimate_runs_nothing(tmp_path: Path, capsys: pytest.CaptureF
     out = capsys.readouterr().out
     assert "expected wall clock" in out and "| deploy-pretrain |" in out and "| compare | 12 |" in out
     assert list(tmp_path.iterdir()) == []
+
+
+def test_the_progress_bar_counts_this_invocations_work(tmp_path: Path) -> None:
+    """A stage finished earlier leaves the bar's total (a resumed study does not look nearly
+    done at once); a stage that runs moves the bar by its expected cost; a stage's known
+    jobs replace its estimate when they are submitted."""
+    import io
+
+    from tqdm import tqdm
+
+    from uavris.experiments.stages import StageRecord
+
+    bar = tqdm(total=0, file=io.StringIO())
+    ctx = StudyContext(1, "local", None, bar)
+    pipeline = Pipeline(tmp_path, [Stage("old", {}, lambda d, deps: None, costs=(10.0,)),
+                                   Stage("new", {}, lambda d, deps: None, costs=(30.0,), progress_s=50.0)])
+    ctx.plan(pipeline)
+    assert bar.total == 60.0
+    ctx.stage_done(StageRecord("old", "k", tmp_path, "skipped", 1.0, None))
+    assert (bar.total, bar.n) == (50.0, 0)
+    ctx.submit("new", [Job("j", _record, ("j",), tmp_path / "log", 30.0)])
+    assert bar.total == 30.0 and bar.n == 30.0
+    ctx.stage_done(StageRecord("new", "k", tmp_path, "done", 1.0, None))
+    ctx.close()
+    assert (bar.total, bar.n) == (30.0, 30.0)

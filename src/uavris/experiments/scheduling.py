@@ -118,11 +118,19 @@ class StudyContext:
         return res.value
 
     def stage_done(self, rec: StageRecord) -> None:
-        """A stage ended (or was skipped): the bar gets the rest of its expected cost."""
+        """A stage ended: the bar gets the rest of its expected cost. A stage finished by an
+        earlier invocation leaves the bar's total instead: the bar and its ETA count this
+        invocation's work (crediting it would make a resumed run look nearly done at once)."""
         with self._lock:
             self._arrived(rec.name)
             if self.bar is not None:
-                self._credit(rec.name, self._expected.get(rec.name, 0.0) - self._credited.get(rec.name, 0.0))
+                left = self._expected.get(rec.name, 0.0) - self._credited.get(rec.name, 0.0)
+                if rec.status == "skipped":
+                    self.bar.total = max(self.bar.n, self.bar.total - left)
+                    self._expected[rec.name] = self._credited.get(rec.name, 0.0)
+                    self.bar.refresh()
+                else:
+                    self._credit(rec.name, left)
                 extra = f" ({rec.error})" if rec.error else ""
                 self.bar.write(f"stage {rec.name} [{rec.key}]: {rec.status} in {rec.wall_s / 60:.1f} min{extra}")
 
