@@ -228,8 +228,10 @@ def _dt_stages(rc: ReproduceConfig, track: Track, ctx: StudyContext) -> list[Sta
     # The DT, behaviour cloning with the same model and budget, and the DT on fewer training
     # layouts (the data curve): one pre-training stage each, on the same dataset.
     schedule = dict(track.pretrain)
+    preset_context = pretrain_config("<dataset>", rc.preset, rc.seed).context
     if "context" in schedule:  # a track's shorter context never lengthens a preset's (smoke reads 4 slots)
-        schedule["context"] = min(schedule["context"], pretrain_config("<dataset>", rc.preset, rc.seed).context)
+        schedule["context"] = min(schedule["context"], preset_context)
+    context = schedule.get("context", preset_context)  # what the pre-trained and fine-tuned models read
     models: dict[str, dict[str, Any]] = {"pretrain": schedule}
     if track.behaviour_cloning:
         models["bc"] = {**schedule, "condition_on_return": False}
@@ -251,8 +253,6 @@ def _dt_stages(rc: ReproduceConfig, track: Track, ctx: StudyContext) -> list[Sta
                                (dataclasses.asdict(cfg), str(d / "model"), ctx.device), d / "job.log",
                                finetune_cost(cfg, horizon, control, context))
         return run
-
-    context = pretrain_config("<dataset>", rc.preset, rc.seed, **schedule).context  # what the fine-tuned model reads
 
     def _finetune_config(model: Path | str, where: Deployment):
         own = {} if not track.layouts else {"system": where.system, "start": where.start}
