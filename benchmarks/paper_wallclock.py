@@ -82,7 +82,7 @@ def seconds_per_pretrain_step(steps: int) -> float:
                         rng.uniform(-1, 1, (system.horizon, system.action_dim)).astype(np.float32),
                         rng.uniform(0, 30, system.horizon), False, True, "fig2", i) for i in range(32)]
     windows = TrainingWindows(trajs, cfg.context)
-    model = DecisionTransformer(cfg.model_config(system.observation_dim, system.action_dim))
+    model = DecisionTransformer(cfg.model_config(system, system.action_dim))
     opt = make_optimizer(model, cfg.learning_rate, cfg.weight_decay)
 
     def train(first: int, count: int) -> None:

@@ -19,15 +19,14 @@ SEEN = SystemConfig(observe_devices=True, horizon=40)
 HALL, WHERE = LayoutGenerator().layout("unseen", 1).resolve(SEEN)
 
 
-def test_the_device_slice_is_the_devices_seen_from_the_uav_nearest_first():
+def test_the_device_slice_is_each_device_seen_from_the_uav_in_the_layouts_order():
     env = UavRisD2DEnv(HALL, WHERE)
     obs, info = env.reset(seed=3)
     lay = observation_layout(HALL)
     assert list(lay)[-1] == "devices" and lay["devices"].stop == HALL.observation_dim == 158 + 12
-    half = 0.5 * (np.asarray(HALL.region_high) - np.asarray(HALL.region_low))
     for _ in range(3):
-        rel = (np.asarray(HALL.users) - info["position"]) / half
-        want = rel[np.argsort(np.linalg.norm(rel, axis=1))]
+        # one length for the three axes: 20 m, half the 40 m floor (the flight region's largest half-extent)
+        want = (np.asarray(HALL.users) - info["position"]) / 20.0
         np.testing.assert_allclose(obs[lay["devices"]].reshape(4, 3), want, rtol=1e-6, atol=1e-6)
         obs, _, _, _, info = env.step(np.full(22, 0.8, dtype=np.float32))
     # everything before the slice is the observation without it
@@ -35,13 +34,30 @@ def test_the_device_slice_is_the_devices_seen_from_the_uav_nearest_first():
     np.testing.assert_array_equal(plain.reset(seed=3)[0], env.reset(seed=3)[0][:158])
 
 
-def test_the_order_in_which_a_layout_lists_its_devices_does_not_change_the_device_slice():
+def test_device_rows_are_in_metres_a_far_low_device_is_farther_than_a_near_high_one():
+    # From [20, 20, 4.5]: a far, low device (10.4 m away, 3 m below) and a near one 4.9 m away
+    # whose 4.5 m drop dominated the norm when each axis was scaled by its own half-extent
+    # (20 m across the floor, 3 m in height): the far one then looked nearer.
+    far, near = (30.0, 20.0, 1.5), (20.0, 22.0, 0.0)
+    hall, where = Layout("case", (far, near, (5.0, 5.0, 1.0), (35.0, 35.0, 1.0)), (20.0, 20.0, 4.5)).resolve(SEEN)
+    obs, _ = UavRisD2DEnv(hall, where).reset(seed=0)
+    rows = obs[observation_layout(hall)["devices"]].reshape(4, 3)
+    metres = np.linalg.norm(np.asarray(hall.users) - (20.0, 20.0, 4.5), axis=1)
+    assert metres[0] == pytest.approx(np.hypot(10.0, 3.0)) and metres[1] == pytest.approx(np.hypot(2.0, 4.5))
+    norms = np.linalg.norm(rows, axis=1)
+    assert norms[1] < norms[0]  # the near device is nearer in the observation too
+    np.testing.assert_allclose(norms / norms[0], metres / metres[0], rtol=1e-6)  # proportional to metres
+
+
+def test_the_device_slice_keeps_the_layouts_order_with_channels_and_pairing():
+    # Device k of the devices slice is device k of the channels: listing the devices in another
+    # order permutes the slice the same way (order-free reading is the encoder's job).
     lay = observation_layout(HALL)
-    shuffled = Layout("shuffled", HALL.users[::-1], WHERE.start).system(HALL)
+    perm = [3, 1, 0, 2]
+    shuffled = Layout("shuffled", [HALL.users[i] for i in perm], WHERE.start).system(HALL)
     a, _ = UavRisD2DEnv(HALL, WHERE).reset(seed=1)
     b, _ = UavRisD2DEnv(shuffled, WHERE).reset(seed=1)
-    np.testing.assert_array_equal(a[lay["devices"]], b[lay["devices"]])
-    assert not np.array_equal(a[lay["channel_real"]], b[lay["channel_real"]])  # channels keep the listed order
+    np.testing.assert_array_equal(a[lay["devices"]].reshape(4, 3)[perm], b[lay["devices"]].reshape(4, 3))
 
 
 def test_single_equals_batched_with_device_positions():

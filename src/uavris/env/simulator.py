@@ -2,9 +2,10 @@
 
 Lives here: :class:`BatchedSimulator` and :class:`SlotInfo`, the action map
 (:func:`decode_action`, :func:`phases_to_action`), the observation (:func:`observation_layout`,
-:func:`observation_bounds`) and the ``info`` dict (:func:`step_info`). Not here: the physics
-it composes (:mod:`uavris.physics`), the Gymnasium interfaces (:mod:`.single`, :mod:`.vector`,
-registered in :mod:`uavris.env`) and the optimised-phase control (:mod:`.wrappers`).
+:func:`observation_bounds`, the devices' slice :func:`device_observation`) and the ``info``
+dict (:func:`step_info`). Not here: the physics it composes (:mod:`uavris.physics`), the
+Gymnasium interfaces (:mod:`.single`, :mod:`.vector`, registered in :mod:`uavris.env`) and
+the optimised-phase control (:mod:`.wrappers`).
 
 State lives in arrays with a leading environment axis; every quantity is computed with
 one numpy call per step for the whole batch. The single environment is this simulator
@@ -91,6 +92,7 @@ class BatchedSimulator:
         self.high = np.asarray(c.region_high)
         self._center = 0.5 * (self.low + self.high)
         self._half = 0.5 * (self.high - self.low)
+        self._device_scale = device_scale(c)
         self._power = {k: float(v) for k, v in vars(c.propulsion).items()}
         self._chan_scale = c.channel_ref_distance ** (0.5 * c.pathloss_exponent)
         K, N = c.num_users, c.num_elements
@@ -212,19 +214,25 @@ class BatchedSimulator:
         obs[:, lay["energy_remaining"]] = np.clip(1.0 - self.energy / c.energy_budget_j, 0.0, 1.0)[:, None]
         obs[:, lay["time_fraction"]] = (self.t / c.horizon)[:, None]
         if c.observe_devices:
-            obs[:, lay["devices"]] = device_observation(self.users, self.pos, self._half)
+            obs[:, lay["devices"]] = device_observation(self.users, self.pos, self._device_scale)
         return obs
 
 
-def device_observation(users: NDArray[np.float64], pos: NDArray[np.float64], half: NDArray[np.float64]
-                       ) -> NDArray[np.float64]:
-    """The devices as the UAV sees them: ``(users - pos) / half`` (the position's scale), nearest
-    first, flattened to ``(n, 3K)`` (docs/model.md, section 21). Relative, so that a hall moved
-    as a whole looks the same from the same relative pose; sorted, so that the order in which
-    a layout lists its devices does not matter."""
-    rel = (users[None] - pos[:, None]) / half  # (n, K, 3)
-    order = np.argsort(np.einsum("nkd,nkd->nk", rel, rel), axis=1, kind="stable")
-    return np.take_along_axis(rel, order[:, :, None], axis=1).reshape(len(pos), -1)
+def device_scale(config: SystemConfig) -> float:
+    """The one length (m) that scales the devices' offsets in the observation: the flight
+    region's largest half-extent (20 m in the paper's hall). One length for the three axes,
+    so that a device's norm in the observation orders devices as metres do."""
+    return float(0.5 * np.max(np.asarray(config.region_high) - np.asarray(config.region_low)))
+
+
+def device_observation(users: NDArray[np.float64], pos: NDArray[np.float64], scale: float) -> NDArray[np.float64]:
+    """The devices as the UAV sees them: ``(q_k - q_U) / scale`` in the layout's order,
+    flattened to ``(n, 3K)`` (docs/model.md, section 21). Relative, so that a hall moved as a
+    whole looks the same from the same relative pose; in the layout's order, so that device
+    ``k`` of this slice is device ``k`` of the channels and the pairing (an order-free policy
+    reads the three together per device: :class:`uavris.agents.dt.model.DeviceSetEncoder`)."""
+    rel = (users[None] - pos[:, None]) / scale  # (n, K, 3)
+    return rel.reshape(len(pos), -1)
 
 
 def step_info(sim: BatchedSimulator, slot: SlotInfo | None) -> dict[str, NDArray]:
@@ -249,11 +257,17 @@ def step_info(sim: BatchedSimulator, slot: SlotInfo | None) -> dict[str, NDArray
 
 def observation_layout(config: SystemConfig) -> dict[str, slice]:
     """Named slices of the observation vector."""
-    K, N = config.num_users, config.num_elements
+    return observation_slices(config.num_users, config.num_elements, config.observe_devices)
+
+
+def observation_slices(num_users: int, num_elements: int, observe_devices: bool) -> dict[str, slice]:
+    """Named slices of the observation of a system of ``num_users`` devices and ``num_elements``
+    RIS elements (what :func:`observation_layout` reads off a configuration)."""
+    K, N = num_users, num_elements
     sizes = [("position", 3), ("velocity", 3), ("attitude_sin", 3), ("attitude_cos", 3),
              ("channel_real", K * N), ("channel_imag", K * N), ("pairing", K * K),
              ("energy_remaining", 1), ("time_fraction", 1)]
-    if config.observe_devices:  # last, so every other slice keeps its place
+    if observe_devices:  # last, so every other slice keeps its place
         sizes.append(("devices", 3 * K))
     out, start = {}, 0
     for name, size in sizes:
@@ -301,9 +315,8 @@ def channel_observation_bound(config: SystemConfig) -> float:
 
 def observation_bounds(config: SystemConfig) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
     """Box bounds of the observation: channels within +-:func:`channel_observation_bound`,
-    pairing and fractions in [0, 1], device positions within the room (scaled like the UAV's
-    position, so below -1 in height: devices sit under the flight region), everything else
-    in [-1, 1]."""
+    pairing and fractions in [0, 1], device offsets within the room seen from the flight
+    region (scaled by :func:`device_scale`), everything else in [-1, 1]."""
     lay = observation_layout(config)
     low = np.full(config.observation_dim, -1.0, dtype=np.float32)
     high = np.ones(config.observation_dim, dtype=np.float32)
@@ -312,9 +325,8 @@ def observation_bounds(config: SystemConfig) -> tuple[NDArray[np.float32], NDArr
         low[lay[name]], high[lay[name]] = -bound, bound
     for name in ("pairing", "energy_remaining", "time_fraction"):
         low[lay[name]] = 0.0
-    if config.observe_devices:
-        lo, hi = np.asarray(config.region_low), np.asarray(config.region_high)
-        half = 0.5 * (hi - lo)
-        low[lay["devices"]] = np.tile((0.0 - hi) / half, config.num_users)
-        high[lay["devices"]] = np.tile((np.asarray(config.room) - lo) / half, config.num_users)
+    if config.observe_devices:  # any point of the room seen from any point of the flight region
+        lo, hi, scale = np.asarray(config.region_low), np.asarray(config.region_high), device_scale(config)
+        low[lay["devices"]] = np.tile((0.0 - hi) / scale, config.num_users)
+        high[lay["devices"]] = np.tile((np.asarray(config.room) - lo) / scale, config.num_users)
     return low, high

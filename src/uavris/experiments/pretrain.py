@@ -25,10 +25,11 @@ import numpy as np
 
 from uavris.agents.dt.checkpoint import save_dt
 from uavris.agents.dt.dataset import ExpertDataset, load_dataset
+from uavris.agents.dt.encoders import STATE_ENCODERS, StateEncoder, pooled_over_devices
 from uavris.agents.dt.model import Attention, DecisionTransformer, DTConfig
 from uavris.agents.dt.trainer import load_trainer_state, make_optimizer, train_steps
 from uavris.agents.dt.trajectories import TrainingWindows, default_target_return, normalisation_from
-from uavris.config import check_non_negative, check_positive
+from uavris.config import SystemConfig, check_non_negative, check_positive
 from uavris.env.simulator import layout_as_lists
 from uavris.env.wrappers import action_dim_for
 from uavris.errors import ConfigError
@@ -73,6 +74,7 @@ class PretrainConfig:
     dropout: float = 0.1  # dropout rate in training
     attention: Attention = "window"  # window (the DT paper's) or banded (cached deployment)
     condition_on_return: bool = True  # False: behaviour cloning with the same model and budget
+    state_encoder: StateEncoder = "flat"  # flat (the DT paper's) or devices (a hall as a set; needs observed devices)
     scenarios: tuple[str, ...] | None = None  # train on the episodes of these scenarios (layouts) only; None: all
     target_quantile: float = TARGET_QUANTILE  # the default target return: this quantile of the dataset's returns
 
@@ -87,12 +89,21 @@ class PretrainConfig:
                 raise ConfigError("PretrainConfig.scenarios must name at least one scenario (or be None: all)")
         if not 0 < self.target_quantile <= 1:
             raise ConfigError(f"PretrainConfig.target_quantile must be in (0, 1], got {self.target_quantile}")
-        self.model_config(1, 1)  # validates the model size fields
+        if self.state_encoder not in STATE_ENCODERS:
+            raise ConfigError(f"PretrainConfig.state_encoder must be one of {', '.join(STATE_ENCODERS)}, "
+                              f"got {self.state_encoder!r}")
+        DTConfig(1, 1, context=self.context, width=self.width, depth=self.depth, heads=self.heads, dropout=self.dropout,
+                 attention=self.attention, condition_on_return=self.condition_on_return)  # validates the model size
 
-    def model_config(self, state_dim: int, act_dim: int, max_timestep: int = 100) -> DTConfig:
-        return DTConfig(state_dim, act_dim, context=self.context, width=self.width, depth=self.depth, heads=self.heads,
-                        dropout=self.dropout, max_timestep=max_timestep, attention=self.attention,
-                        condition_on_return=self.condition_on_return)
+    def model_config(self, system: SystemConfig, act_dim: int) -> DTConfig:
+        """The model of this run for a dataset of ``system``; the device encoder needs its devices observed."""
+        if self.state_encoder == "devices" and not system.observe_devices:
+            raise ConfigError("PretrainConfig.state_encoder 'devices' needs a dataset whose observations hold the "
+                              "devices (SystemConfig.observe_devices, the deployment track's)")
+        sized = dict(devices=system.num_users, elements=system.num_elements) if self.state_encoder == "devices" else {}
+        return DTConfig(system.observation_dim, act_dim, context=self.context, width=self.width, depth=self.depth,
+                        heads=self.heads, dropout=self.dropout, max_timestep=system.horizon, attention=self.attention,
+                        condition_on_return=self.condition_on_return, state_encoder=self.state_encoder, **sized)
 
 
 def pretrain_config(dataset: str | Path, preset: str = "quick", seed: int = 0, **overrides: Any) -> PretrainConfig:
@@ -134,10 +145,12 @@ def pretrain(cfg: PretrainConfig, run_dir: str | Path, *, resume: bool = False, 
     system = ds.system
     torch.manual_seed(cfg.seed)
     rng = np.random.default_rng(cfg.seed)
+    model_cfg = cfg.model_config(system, action_dim_for(system, ds.phase_control))
     norm = normalisation_from(ds.trajectories)
-    model = DecisionTransformer(cfg.model_config(system.observation_dim, action_dim_for(system, ds.phase_control),
-                                                 system.horizon),
-                                norm.state_mean, norm.state_std, norm.return_scale).to(device)
+    mean, std = norm.state_mean, norm.state_std
+    if model_cfg.state_encoder == "devices":  # statistics that do not depend on a device's index (.encoders)
+        mean, std = pooled_over_devices(mean, std, model_cfg.devices, model_cfg.elements)
+    model = DecisionTransformer(model_cfg, mean, std, norm.return_scale).to(device)
     opt = make_optimizer(model, cfg.learning_rate, cfg.weight_decay)
     windows = TrainingWindows.for_model(ds.trajectories, model.cfg)
     model_meta = {

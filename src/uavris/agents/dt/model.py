@@ -2,7 +2,8 @@
 
 A trajectory (paper eq. 14) is read as a sequence of tokens, three per slot t:
 return-to-go R_hat_t (eq. 15), state S_t (the environment's observation vector) and
-action A_t, in that order. Each kind has its own linear embedding; a learned timestep
+action A_t, in that order. Each kind has its own embedding (the state's: :mod:`.encoders`,
+one linear map as in the DT paper, or a set encoder over the devices); a learned timestep
 embedding (the slot index t within the episode) is added to all three, as in the DT
 paper. A causal pre-LayerNorm transformer (PyTorch's ``scaled_dot_product_attention``)
 reads them, and a tanh head predicts A_t from the output at the state token S_t, which
@@ -64,6 +65,7 @@ import torch.nn.functional as F
 from torch import nn
 
 from uavris.agents.dt.cache import KVCache
+from uavris.agents.dt.encoders import STATE_ENCODERS, StateEncoder, device_layout, make_state_encoder
 from uavris.errors import ConfigError
 
 Attention = Literal["window", "banded"]  # the DT's attention layout (--attention)
@@ -86,6 +88,9 @@ class DTConfig:
     mlp_ratio: int = 4
     attention: Attention = "window"  # "window" (DT paper) or "banded" (cached deployment); see the module docstring
     condition_on_return: bool = True  # False: R_hat is replaced by 0, so the model is behaviour cloning
+    state_encoder: StateEncoder = "flat"  # "flat" (DT paper) or "devices" (a hall as a set of devices, .encoders)
+    devices: int = 0  # the system's devices K (the device encoder's; 0 for flat)
+    elements: int = 0  # the system's RIS elements N (the device encoder's; 0 for flat)
 
     def __post_init__(self) -> None:
         for name in ("state_dim", "act_dim", "context", "width", "depth", "heads", "max_timestep", "mlp_ratio"):
@@ -100,6 +105,10 @@ class DTConfig:
             raise ConfigError(f"DTConfig.attention must be one of {ATTENTION_LAYOUTS}, got {self.attention!r}")
         if not isinstance(self.condition_on_return, bool):
             raise ConfigError(f"DTConfig.condition_on_return must be true or false, got {self.condition_on_return!r}")
+        if self.state_encoder not in STATE_ENCODERS:
+            raise ConfigError(f"DTConfig.state_encoder must be one of {STATE_ENCODERS}, got {self.state_encoder!r}")
+        if self.state_encoder == "devices":
+            device_layout(self.state_dim, self.devices, self.elements)
 
     @property
     def band(self) -> int | None:
@@ -174,7 +183,7 @@ class DecisionTransformer(nn.Module):
         self.cfg = cfg
         w = cfg.width
         self.embed_return = nn.Linear(1, w)
-        self.embed_state = nn.Linear(cfg.state_dim, w)
+        self.embed_state = make_state_encoder(cfg.state_encoder, cfg.state_dim, w, cfg.devices, cfg.elements)
         self.embed_action = nn.Linear(cfg.act_dim, w)
         self.embed_timestep = nn.Embedding(cfg.max_timestep, w)
         self.embed_norm = nn.LayerNorm(w)
@@ -235,7 +244,7 @@ class DecisionTransformer(nn.Module):
             returns_to_go = torch.zeros_like(returns_to_go)
         act_time = time_emb if action_timesteps is None else self.embed_timestep(action_timesteps.clamp(0, top))
         r = self.embed_return((returns_to_go / self.return_scale).unsqueeze(-1)) + time_emb
-        s = self.embed_state((states - self.state_mean) / self.state_std) + time_emb
+        s = self.embed_state(states, (states - self.state_mean) / self.state_std) + time_emb
         return r, s, self.embed_action(actions) + act_time
 
     def new_cache(self, batch: int) -> KVCache:

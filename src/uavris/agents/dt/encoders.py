@@ -1,0 +1,139 @@
+"""How the Decision Transformer turns an observation into its state token.
+
+Lives here: the two state encoders (:class:`FlatEncoder`, :class:`DeviceSetEncoder`), the
+choice between them (:data:`StateEncoder`, :func:`make_state_encoder`) and the state
+normalisation the device encoder needs (:func:`pooled_over_devices`). Not here: the model
+that reads the tokens (:mod:`.model`), the observation itself
+(:mod:`uavris.env.simulator`, docs/model.md sections 15 and 21).
+
+- ``"flat"`` (the DT paper's): one linear map of the whole normalised observation. It has
+  no notion that a hall is a set of devices: list a layout's devices in another order and
+  the same hall gives another state, and other actions.
+- ``"devices"`` (deployments, ``SystemConfig.observe_devices``): a hall is a set of devices.
+  Each device ``k`` gets one feature vector from what the observation holds about it (its
+  offset from the UAV, its channel row ``h_k`` of eq. (1), its role in the slot's pairing
+  P(t) and its partner's offset and channel), one network shared by every device maps it,
+  and a symmetric pooling (the element-wise maximum and mean over the devices) reads the
+  set; the UAV's own features (position, velocity, attitude, energy, time) join after the
+  pooling. Listing the devices in another order changes no bit of the token: the features
+  are per device, the partner's are selected by the 0/1 pairing matrix (a sum of one value
+  and exact zeros), and the mean is taken over values sorted per feature, so that the
+  order of the additions does not depend on the order of the devices. (Permutation-
+  invariant set encoders after Zaheer et al., "Deep Sets", NeurIPS 2017; graph networks
+  for radio resource management read a wireless layout the same way.)
+
+Normalisation: the flat encoder standardises every entry by its own mean and std over the
+dataset. For the device encoder these statistics must not depend on the device's index,
+or the order would come back through them: :func:`pooled_over_devices` replaces them by
+statistics pooled over the devices (per RIS element, per axis, over the whole pairing).
+"""
+
+from __future__ import annotations
+
+from typing import Literal, get_args
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+from numpy.typing import NDArray
+from torch import nn
+
+from uavris.env.simulator import observation_slices
+from uavris.errors import ConfigError
+
+StateEncoder = Literal["flat", "devices"]  # the DT's state encoder (--state-encoder)
+STATE_ENCODERS: tuple[str, ...] = get_args(StateEncoder)
+UAV_SLICES = ("position", "velocity", "attitude_sin", "attitude_cos", "energy_remaining", "time_fraction")
+PER_DEVICE_SLICES = ("channel_real", "channel_imag", "devices")
+
+
+def device_layout(state_dim: int, devices: int, elements: int) -> dict[str, slice]:
+    """The observation slices of a deployment observation with ``devices`` devices and
+    ``elements`` RIS elements, checked against ``state_dim``."""
+    if devices < 2 or elements < 1:
+        raise ConfigError(f"the device encoder needs the system's devices (>= 2) and RIS elements (>= 1), "
+                          f"got {devices} and {elements}")
+    lay = observation_slices(devices, elements, True)
+    if lay["devices"].stop != state_dim:
+        raise ConfigError(f"the device encoder reads observations with the devices' positions "
+                          f"(SystemConfig.observe_devices): {lay['devices'].stop} entries for {devices} devices, "
+                          f"got state_dim {state_dim}")
+    return lay
+
+
+class FlatEncoder(nn.Linear):
+    """One linear map of the whole normalised observation (the DT paper's state embedding; a
+    ``Linear`` itself, so that checkpoints of earlier versions keep their weights' names)."""
+
+    def forward(self, raw: torch.Tensor, normalised: torch.Tensor) -> torch.Tensor:  # type: ignore[override]
+        return F.linear(normalised, self.weight, self.bias)
+
+
+class DeviceSetEncoder(nn.Module):
+    """The permutation-invariant state encoder (module docstring).
+
+    Per-device features (``3 + 2 N + 2 + 3 + 2 N``): the device's normalised offset, its
+    normalised channel (real and imaginary parts), whether it transmits and whether it
+    receives in this slot (from the raw pairing, exact 0/1), and its partner's normalised
+    offset and channel (zeros when it is idle).
+    """
+
+    def __init__(self, state_dim: int, width: int, devices: int, elements: int) -> None:
+        super().__init__()
+        self.k, self.n = devices, elements
+        self.layout = device_layout(state_dim, devices, elements)
+        self.uav_index = torch.cat([torch.arange(self.layout[s].start, self.layout[s].stop) for s in UAV_SLICES])
+        per_device = 3 + 2 * elements + 2 + 3 + 2 * elements
+        self.device_net = nn.Sequential(nn.Linear(per_device, width), nn.ReLU(), nn.Linear(width, width), nn.ReLU())
+        self.combine = nn.Linear(2 * width + len(self.uav_index), width)
+
+    def device_features(self, raw: torch.Tensor, normalised: torch.Tensor) -> torch.Tensor:
+        """``(..., K, F)``: each device's features, in the layout's order."""
+        lay, k, n = self.layout, self.k, self.n
+        lead = raw.shape[:-1]
+        offset = normalised[..., lay["devices"]].reshape(*lead, k, 3)
+        channel = torch.cat([normalised[..., lay["channel_real"]].reshape(*lead, k, n),
+                             normalised[..., lay["channel_imag"]].reshape(*lead, k, n)], dim=-1)
+        pairing = raw[..., lay["pairing"]].reshape(*lead, k, k)  # P[tx, rx]
+        partner = pairing + pairing.transpose(-1, -2)  # a device has at most one partner: one 1 per row
+        own = torch.cat([offset, channel], dim=-1)
+        role = torch.stack([pairing.sum(-1), pairing.sum(-2)], dim=-1)
+        return torch.cat([offset, channel, role, partner @ own], dim=-1)
+
+    def forward(self, raw: torch.Tensor, normalised: torch.Tensor) -> torch.Tensor:
+        per_device = self.device_net(self.device_features(raw, normalised))  # (..., K, W)
+        pooled_max = per_device.max(dim=-2).values
+        # The mean over values sorted per feature: the same additions whatever the devices' order.
+        pooled_mean = per_device.sort(dim=-2).values.sum(dim=-2) / self.k
+        uav = normalised[..., self.uav_index.to(normalised.device)]
+        return self.combine(torch.cat([pooled_max, pooled_mean, uav], dim=-1))
+
+
+def make_state_encoder(kind: str, state_dim: int, width: int, devices: int = 0, elements: int = 0) -> nn.Module:
+    """The state encoder named ``kind`` (:data:`STATE_ENCODERS`)."""
+    if kind == "flat":
+        return FlatEncoder(state_dim, width)
+    if kind == "devices":
+        return DeviceSetEncoder(state_dim, width, devices, elements)
+    raise ConfigError(f"unknown state encoder {kind!r}; choose one of {', '.join(STATE_ENCODERS)}")
+
+
+def pooled_over_devices(mean: NDArray[np.float64], std: NDArray[np.float64], devices: int, elements: int
+                        ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """State statistics with every per-device entry replaced by its pool over the devices:
+    channel entries per RIS element, offsets per axis, the pairing over all its entries (the
+    pooled variance of equally many samples: the mean of the variances plus the variance of
+    the means). The UAV's own entries are unchanged."""
+    lay = observation_slices(devices, elements, True)
+    mean, std = np.array(mean, dtype=np.float64), np.array(std, dtype=np.float64)
+    groups = [(s, (devices, -1)) for s in PER_DEVICE_SLICES] + [("pairing", (1, -1))]
+    for name, shape in groups:
+        sl = lay[name]
+        m, s = mean[sl].reshape(shape), std[sl].reshape(shape)
+        if name == "pairing":
+            m, s = m.reshape(-1, 1), s.reshape(-1, 1)
+        pooled_m = m.mean(axis=0)
+        pooled_v = (s**2 + m**2).mean(axis=0) - pooled_m**2
+        mean[sl] = np.broadcast_to(pooled_m, m.shape).reshape(-1)
+        std[sl] = np.broadcast_to(np.sqrt(np.maximum(pooled_v, 0.0)), m.shape).reshape(-1)
+    return mean, std

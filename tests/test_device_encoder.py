@@ -1,0 +1,132 @@
+"""The DT's state encoders: the device-set encoder reads a hall as a set of devices (the order
+in which a layout lists them changes no bit of an action), the flat one does not."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+from uavris.agents.dt.checkpoint import load_dt, save_dt
+from uavris.agents.dt.encoders import pooled_over_devices
+from uavris.agents.dt.model import DecisionTransformer, DTConfig
+from uavris.agents.references import reference_policy
+from uavris.config import SystemConfig
+from uavris.env import observation_layout
+from uavris.env.rollout import rollout
+from uavris.errors import ConfigError
+from uavris.layouts import LayoutGenerator
+
+torch.set_num_threads(1)
+SEEN = SystemConfig(observe_devices=True, horizon=12)
+HALL, WHERE = LayoutGenerator().layout("train", 5).resolve(SEEN)
+K, N = SEEN.num_users, SEEN.num_elements
+PERMUTATIONS = [(1, 0, 2, 3), (3, 2, 1, 0), (2, 0, 3, 1)]
+
+
+def hall_states(episodes: int = 4) -> np.ndarray:
+    """Observations ``(episodes, T + 1, S)`` of a moving UAV in a generated hall (several pairings)."""
+    b = rollout(reference_policy("hover-random-phases", HALL), HALL, WHERE, np.arange(episodes) + 40, record=True)
+    rng = np.random.default_rng(0)
+    obs = b.observations.copy()
+    # move the UAV's view of the devices too, so the windows are not one pose repeated
+    obs[..., observation_layout(HALL)["devices"]] += rng.normal(0, 0.1, obs[..., -3 * K:].shape).astype(np.float32)
+    return obs
+
+
+def permute_devices(states: np.ndarray, perm: tuple[int, ...]) -> np.ndarray:
+    """The same observations with the devices listed in the order ``perm`` (an independent
+    rearrangement: each per-device slice by rows, the pairing by rows and columns)."""
+    lay = observation_layout(HALL)
+    out = states.copy()
+    lead = states.shape[:-1]
+    p = list(perm)
+    for name, width in (("channel_real", N), ("channel_imag", N), ("devices", 3)):
+        out[..., lay[name]] = states[..., lay[name]].reshape(*lead, K, width)[..., p, :].reshape(*lead, -1)
+    pairing = states[..., lay["pairing"]].reshape(*lead, K, K)
+    out[..., lay["pairing"]] = pairing[..., p, :][..., :, p].reshape(*lead, -1)
+    return out
+
+
+def model(encoder: str, seed: int = 0, attention: str = "window") -> DecisionTransformer:
+    torch.manual_seed(seed)
+    sized = dict(devices=K, elements=N) if encoder == "devices" else {}
+    cfg = DTConfig(SEEN.observation_dim, 6, context=4, width=32, depth=2, heads=2, dropout=0.0,
+                   max_timestep=SEEN.horizon, attention=attention, state_encoder=encoder, **sized)
+    rng = np.random.default_rng(seed)  # normalisation that differs per entry, pooled for the device encoder
+    mean, std = rng.normal(0, 0.1, SEEN.observation_dim), rng.uniform(0.5, 2.0, SEEN.observation_dim)
+    if encoder == "devices":
+        mean, std = pooled_over_devices(mean, std, K, N)
+    return DecisionTransformer(cfg, mean, std, return_scale=40.0).eval()
+
+
+def actions(m: DecisionTransformer, states: np.ndarray) -> torch.Tensor:
+    b, length = states.shape[:2]
+    g = torch.Generator().manual_seed(3)
+    with torch.no_grad():
+        return m(torch.rand(b, length, generator=g) * 100, torch.from_numpy(states),
+                 torch.rand(b, length, 6, generator=g) * 2 - 1, torch.arange(length).repeat(b, 1))
+
+
+@pytest.mark.parametrize("perm", PERMUTATIONS)
+def test_permuting_a_halls_devices_leaves_the_device_encoders_actions_bit_identical(perm):
+    states = hall_states()[:, :4]  # 4 episodes, windows of 4 slots
+    m = model("devices")
+    a, b = actions(m, states), actions(m, permute_devices(states, perm))
+    assert torch.equal(a, b)
+    assert a.abs().max() > 1e-3  # and the actions are not trivially zero
+
+
+def test_the_flat_encoder_is_not_order_free():
+    states = hall_states()[:, :4]
+    m = model("flat")
+    diff = (actions(m, states) - actions(m, permute_devices(states, PERMUTATIONS[0]))).abs().max()
+    assert diff > 1e-4  # the flat model's action depends on the order the layout lists its devices in
+
+
+def test_the_device_encoder_reads_the_devices_a_changed_device_changes_the_action():
+    states = hall_states()[:, :4]
+    m = model("devices")
+    moved = states.copy()
+    moved[..., observation_layout(HALL)["devices"].start] += 0.5  # device 0 moves 10 m along x
+    assert (actions(m, states) - actions(m, moved)).abs().max() > 1e-5
+
+
+def test_the_banded_cached_deployment_is_order_free_too():
+    states = hall_states(2)[:, :6]
+    m = model("devices", attention="banded")
+    assert torch.equal(actions(m, states), actions(m, permute_devices(states, PERMUTATIONS[2])))
+
+
+def test_pooled_statistics_equal_those_of_the_devices_pooled_data():
+    # Independent calculation: stack every device's entries as extra samples and take numpy's
+    # mean and std of the stacked column.
+    rng = np.random.default_rng(1)
+    lay = observation_layout(HALL)
+    x = rng.normal(rng.normal(0, 1, SEEN.observation_dim), rng.uniform(0.1, 3, SEEN.observation_dim),
+                   (500, SEEN.observation_dim))
+    mean, std = pooled_over_devices(x.mean(0), x.std(0), K, N)
+    for name, width in (("channel_real", N), ("channel_imag", N), ("devices", 3)):
+        block = x[:, lay[name]].reshape(-1, K, width).reshape(-1, width)  # (samples * K, width)
+        np.testing.assert_allclose(mean[lay[name]], np.tile(block.mean(0), K), rtol=1e-12, atol=1e-12)
+        np.testing.assert_allclose(std[lay[name]], np.tile(block.std(0), K), rtol=1e-10)
+    whole = x[:, lay["pairing"]].ravel()
+    np.testing.assert_allclose(mean[lay["pairing"]], whole.mean(), rtol=1e-12)
+    np.testing.assert_allclose(std[lay["pairing"]], whole.std(), rtol=1e-10)
+    uav = lay["position"]
+    np.testing.assert_array_equal(mean[uav], x.mean(0)[uav])  # the UAV's own entries keep theirs
+
+
+def test_a_device_encoder_needs_the_devices_in_the_observation():
+    with pytest.raises(ConfigError, match="observe_devices"):
+        DTConfig(SystemConfig().observation_dim, 6, state_encoder="devices", devices=K, elements=N)
+    with pytest.raises(ConfigError, match="state_encoder"):
+        DTConfig(SEEN.observation_dim, 6, state_encoder="graph")
+
+
+def test_a_device_encoder_checkpoint_round_trips(tmp_path):
+    m = model("devices", seed=4)
+    save_dt(m, tmp_path, {"target_return": 1.0})
+    back, _ = load_dt(tmp_path)
+    states = hall_states(2)[:, :4]
+    assert back.cfg == m.cfg and torch.equal(actions(back.eval(), states), actions(m, states))
