@@ -1,6 +1,7 @@
 """The oracle reference policies: the planning oracle and the greedy oracle it replaced.
 
-Lives here: the two batch policies and the per-slot approach controller. Not here: the
+Lives here: the two batch policies, the per-slot approach controller (:func:`fly_to`) and a
+fixed plan flown anywhere (:class:`PlannedFlight`). Not here: the
 plan (:mod:`.planner`) and the local lookahead (:mod:`.lookahead`).
 
 Both are references for the learned policies, not deployable controllers. They read the
@@ -122,6 +123,49 @@ def greedy_oracle_policy(*, restarts: int = DEFAULT_RESTARTS, iterations: int = 
     return Privileged(act)
 
 
+def fly_to(sim: BatchedSimulator, plan: Plan, final_radius: float = FINAL_RADIUS
+           ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """The move towards ``plan``'s pose from the simulator's current state: acceleration command
+    ``(n, 3)`` (m/s^2) and attitude increments ``(n, 3)`` (rad); the planning oracle's motion
+    (module docstring), for any plan, also one made for another hall."""
+    c = sim.config
+    accel = approach_command(c, sim.pos, sim.vel, plan.target)
+    # Level on the way, the planned attitude on arrival: a tilt that helps at the target
+    # blocks distant devices (puts them behind the RIS) elsewhere. The turn starts when
+    # the remaining distance is what v_max covers in the slots the turn takes.
+    turn_slots = np.ceil(np.max(np.abs(np.mod(plan.attitude + np.pi, 2 * np.pi) - np.pi)) /
+                         max(c.attitude_step_rad, 1e-12))
+    arriving = np.linalg.norm(sim.pos - plan.target, axis=1) <= (turn_slots + 1) * c.v_max * c.slot_s
+    datt = turn_towards(c, sim.att, np.where(arriving[:, None], plan.attitude, 0.0))
+    near = (np.linalg.norm(sim.pos - plan.target, axis=1) < final_radius) & (
+        np.linalg.norm(sim.vel, axis=1) <= c.a_max * c.slot_s)
+    if near.any():
+        local, _, _ = choose_moves(c, sim.pos[near], sim.vel[near], sim.att[near], turn=False)
+        accel[near] = local
+    return accel, datt
+
+
+def motion_entries(config: SystemConfig, accel: NDArray, datt: NDArray) -> NDArray[np.float32]:
+    """A move as the 6 motion entries of an action in [-1, 1] (acceleration, attitude)."""
+    return motion_of(_action(config, accel, datt, np.zeros((len(accel), config.num_elements))))
+
+
+class PlannedFlight:
+    """Flies to a fixed plan's pose (:func:`fly_to`) with the optimiser's phases: the motion of
+    the planning oracle of the hall the plan was made for, carried to another hall (the
+    deployment track's "nearest training hall" reference and a demonstration of mixed quality).
+    Privileged like the oracle: it reads the simulator's pose and velocity."""
+
+    privileged: ClassVar[bool] = True
+    phase_control: ClassVar[str] = "optimizer"
+
+    def __init__(self, plan: Plan) -> None:
+        self.plan = plan
+
+    def __call__(self, obs: NDArray[np.float32], sim: BatchedSimulator) -> NDArray[np.float32]:
+        return motion_entries(sim.config, *fly_to(sim, self.plan))
+
+
 class PlanningOracle:
     """The planning oracle as a privileged batch policy ``policy(obs, sim) -> actions`` (module docstring).
 
@@ -151,27 +195,11 @@ class PlanningOracle:
         """The oracle's move for the simulator's current state: acceleration command ``(n, 3)``
         (m/s^2) and attitude increments ``(n, 3)`` (rad). A function of the pose and velocity
         alone, given the plan of the scenario's start."""
-        c = sim.config
-        plan = self.plan(c, sim.scenario.start)
-        accel = approach_command(c, sim.pos, sim.vel, plan.target)
-        # Level on the way, the planned attitude on arrival: a tilt that helps at the target
-        # blocks distant devices (puts them behind the RIS) elsewhere. The turn starts when
-        # the remaining distance is what v_max covers in the slots the turn takes.
-        turn_slots = np.ceil(np.max(np.abs(np.mod(plan.attitude + np.pi, 2 * np.pi) - np.pi)) /
-                             max(c.attitude_step_rad, 1e-12))
-        arriving = np.linalg.norm(sim.pos - plan.target, axis=1) <= (turn_slots + 1) * c.v_max * c.slot_s
-        datt = turn_towards(c, sim.att, np.where(arriving[:, None], plan.attitude, 0.0))
-        near = (np.linalg.norm(sim.pos - plan.target, axis=1) < self.final_radius) & (
-            np.linalg.norm(sim.vel, axis=1) <= c.a_max * c.slot_s)
-        if near.any():
-            local, _, _ = choose_moves(c, sim.pos[near], sim.vel[near], sim.att[near], turn=False)
-            accel[near] = local
-        return accel, datt
+        return fly_to(sim, self.plan(sim.config, sim.scenario.start), self.final_radius)
 
     def motion_action(self, sim: BatchedSimulator) -> NDArray[np.float32]:
         """:meth:`motion` as the 6 motion entries of an action in [-1, 1] (acceleration, attitude)."""
-        accel, datt = self.motion(sim)
-        return motion_of(_action(sim.config, accel, datt, np.zeros((sim.num_envs, sim.config.num_elements))))
+        return motion_entries(sim.config, *self.motion(sim))
 
     def __call__(self, obs: NDArray[np.float32], sim: BatchedSimulator) -> NDArray[np.float32]:
         accel, datt = self.motion(sim)
