@@ -339,3 +339,23 @@ def _check_trajectory(tr: Trajectory, obs_dim: int, act_dim: int, where: str) ->
 def _one_line(e: BaseException) -> str:
     text = str(e).strip().splitlines()
     return f"{type(e).__name__}: {text[0]}" if text else type(e).__name__
+
+
+def episode_environment(dataset: Any, episode: int, eval_env: bool = False) -> Any:
+    """The environment of one episode of a Minari dataset (``minari.MinariDataset``): Minari's
+    ``recover_environment`` (the dataset's system and first scenario) with the episode's own
+    hall and start from its metadata, so that a dataset over many halls rebuilds each of them.
+    Reset it with the episode's seed to replay the episode."""
+    import gymnasium as gym
+
+    base = dataset.recover_environment(eval_env=eval_env)
+    kwargs = dict(base.spec.kwargs)
+    base.close()
+    meta = dict(next(iter(dataset.storage.get_episode_metadata([episode]))))
+    system = SystemConfig.from_stored(kwargs["config"])
+    start, users = _episode_layout(meta, system, f"episode {episode}")
+    if users is not None:
+        kwargs["config"] = system.replace(users=users).to_dict()
+    if start is not None:
+        kwargs["scenario"] = scenario_at(str(meta["scenario"]), start).to_dict()
+    return gym.make(ENV_ID, **kwargs)
