@@ -71,7 +71,8 @@ class DemonstrationConfig:
             if not isinstance(v, int) or isinstance(v, bool) or not 1 <= v <= top:
                 raise ConfigError(f"DemonstrationConfig.{name} must be an integer in [1, {top}], got {v!r}")
         if self.quality not in QUALITIES:
-            raise ConfigError(f"DemonstrationConfig.quality must be one of {', '.join(QUALITIES)}, got {self.quality!r}")
+            raise ConfigError(f"DemonstrationConfig.quality must be one of {', '.join(QUALITIES)}, "
+                              f"got {self.quality!r}")
         if not (np.isfinite(self.noise) and self.noise >= 0):
             raise ConfigError(f"DemonstrationConfig.noise must be a finite number >= 0, got {self.noise!r}")
         for name in ("layout_seed", "seed"):
@@ -109,7 +110,7 @@ def demonstrate(cfg: DemonstrationConfig, first: int = 0, count: int | None = No
     oracle = PlanningOracle()
     resolved = [layout.resolve(cfg.system) for layout in layouts]
     out: list[Trajectory] = []
-    for i, (layout, (system, where)) in enumerate(zip(layouts, resolved)):
+    for i, (system, where) in enumerate(resolved):
         j = first + i
         seeds = cfg.seed + j * cfg.episodes + np.arange(cfg.episodes)
         for behaviour in cfg.behaviours:
