@@ -117,18 +117,24 @@ def test_changed_parameter_invalidates_exactly_its_dependents(tmp_path):
 
     dt = {"dataset", "pretrain", "finetune-unseen1", "finetune-unseen2", "evaluate-unseen1", "evaluate-unseen2"}
     deploy = {n for n in base.stages if n.startswith("deploy-")}
-    assert deploy == {"deploy-experts-train", "deploy-dataset", "deploy-pretrain", "deploy-bc", "deploy-pretrain-n1",
-                      "deploy-finetune-layout-unseen-0", "deploy-finetune-layout-unseen-1",
-                      "deploy-evaluate-layout-unseen-0", "deploy-evaluate-layout-unseen-1"}
-    assert changed(trajectories=3) == dt | {f"strong-{n}" for n in dt} | deploy - {"deploy-experts-train"}
+    models = {"pretrain", "bc", "pretrain-n1", "flat", "mixed-dt", "mixed-bc"}  # each for 2 seeds at smoke
+    assert deploy == {"deploy-dataset", "deploy-dataset-mixed", "deploy-finetune-layout-unseen-0",
+                      "deploy-finetune-layout-unseen-1", "deploy-evaluate-layout-unseen-0",
+                      "deploy-evaluate-layout-unseen-1"} | {f"deploy-{m}{s}" for m in models for s in ("", "-s1")}
+    assert changed(trajectories=3) == dt | {f"strong-{n}" for n in dt} | deploy
     # the paper track's experts follow the comparison (they are its winner's)
     assert changed(compare_seeds=2) == {"compare", "experts-train", "experts-unseen"} | dt
     assert changed(expert_algo="ppo") == {"experts-train", "experts-unseen"} | dt
     assert changed(system=SystemConfig(noise_dbm=-90.0)) == set(base.stages)
     # other layouts: only the deployment track's stages
     assert changed(layout_seed=1) == deploy
-    assert changed(scaling=()) == {"deploy-pretrain-n1", "deploy-evaluate-layout-unseen-0",
+    assert changed(scaling=()) == {"deploy-pretrain-n1", "deploy-pretrain-n1-s1", "deploy-evaluate-layout-unseen-0",
                                    "deploy-evaluate-layout-unseen-1"}
+    assert changed(dt_seeds=1) == {n for n in deploy if n.endswith("-s1")} | {
+        "deploy-evaluate-layout-unseen-0", "deploy-evaluate-layout-unseen-1"}
+    assert changed(mixed_layouts=1) == {"deploy-dataset-mixed", "deploy-mixed-dt", "deploy-mixed-dt-s1",
+                                        "deploy-mixed-bc", "deploy-mixed-bc-s1", "deploy-evaluate-layout-unseen-0",
+                                        "deploy-evaluate-layout-unseen-1"}
     assert set(build_pipeline(dataclasses.replace(RC, track="strong"), tmp_path, ctx).stages) == {
         n for n in base.stages if n.startswith("strong-")}
     assert set(build_pipeline(dataclasses.replace(RC, track="deployment"), tmp_path, ctx).stages) == deploy

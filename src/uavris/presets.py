@@ -64,15 +64,21 @@ STUDY_EVAL_EPISODES = {"smoke": 8, "quick": 32, "paper": 100}
 STUDY_COMPARE_SEEDS = {"smoke": 2, "quick": 3, "paper": 5}
 STUDY_TRAJECTORIES = {"smoke": 4, "quick": 100, "paper": 500}
 
-# The deployment track (docs/model.md section 21): training and unseen layouts, expert
-# trajectories per training layout (the dataset holds as many episodes as the paper track's,
-# 8 scenarios x STUDY_TRAJECTORIES, spread over more deployments) and the smaller training
-# sets of the data curve (zero-shot score against the number of training layouts; the full
-# set is its last point).
-STUDY_TRAIN_LAYOUTS = {"smoke": 2, "quick": 32, "paper": 32}
-STUDY_UNSEEN_LAYOUTS = {"smoke": 2, "quick": 8, "paper": 16}
-STUDY_LAYOUT_TRAJECTORIES = {"smoke": 2, "quick": 25, "paper": 125}
-STUDY_SCALING: dict[str, tuple[int, ...]] = {"smoke": (1,), "quick": (8,), "paper": (4, 8, 16)}
+# The deployment track (docs/model.md section 21): generated training halls with the planning
+# oracle's demonstrations (episodes per hall), unseen halls, the smaller training sets of the
+# data curve (zero-shot score against the number of training halls; the full set is its last
+# point), pre-training seeds of every learned row, and the halls of the mixed-quality dataset
+# (the oracle, another hall's plan, hovering, a noisy oracle: where return conditioning can
+# matter). quick: 512 halls x 2 episodes, about as many episodes as the paper track's dataset
+# (8 scenarios x 100), spread over many halls (docs/model.md section 21 measures the split).
+STUDY_TRAIN_LAYOUTS = {"smoke": 3, "quick": 512, "paper": 4096}
+STUDY_UNSEEN_LAYOUTS = {"smoke": 2, "quick": 16, "paper": 32}
+STUDY_LAYOUT_TRAJECTORIES = {"smoke": 2, "quick": 2, "paper": 2}
+STUDY_SCALING: dict[str, tuple[int, ...]] = {"smoke": (1,), "quick": (8, 32, 128), "paper": (8, 32, 128, 512, 1024,
+                                                                                            2048)}
+STUDY_DT_SEEDS = {"smoke": 2, "quick": 3, "paper": 3}
+STUDY_MIXED_LAYOUTS = {"smoke": 2, "quick": 128, "paper": 1024}
+DEMONSTRATION_CHUNK = 64  # halls per demonstration job (a job writes its part of the dataset)
 
 
 def check_preset(preset: str) -> None:

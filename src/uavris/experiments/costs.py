@@ -2,7 +2,7 @@
 
 Lives here: the measured cost per unit of each kind of work (:data:`SB3_STEP_S`, ...) and the
 expected cost of each kind of job (:func:`train_cost`, :func:`dataset_cost`,
-:func:`pretrain_cost`, :func:`finetune_cost`, :func:`evaluate_cost`). Not here: what uses
+:func:`demonstration_cost`, :func:`pretrain_cost`, :func:`finetune_cost`, :func:`evaluate_cost`). Not here: what uses
 them, the order in which the job runner starts jobs (:mod:`.jobs`, :mod:`.stages`: the
 longest chain first) and the progress bar of ``reproduce`` (each job weighs its cost).
 
@@ -55,6 +55,12 @@ def train_cost(cfg: Any) -> float:
 def dataset_cost(episodes: int, horizon: int, phase_control: str) -> float:
     """Collecting ``episodes`` expert episodes."""
     return episodes * horizon * SLOT_S[phase_control]
+
+
+def demonstration_cost(halls: int, episodes_per_hall: int, horizon: int) -> float:
+    """The planning oracle's demonstrations in ``halls`` halls: a plan each, and the episodes
+    (all behaviours of a hall) with the optimiser's phases."""
+    return halls * (PLAN_S + episodes_per_hall * horizon * SLOT_S["optimizer"])
 
 
 def pretrain_cost(cfg: Any) -> float:

@@ -32,12 +32,13 @@ import time
 from pathlib import Path
 from typing import Any, Literal, Sequence, get_args
 
-from uavris import runs
 from uavris.agents.experts import ALGORITHMS
 from uavris.config import SystemConfig
 from uavris.errors import UavrisError
-from uavris.experiments.costs import dataset_cost, evaluate_cost, finetune_cost, pretrain_cost, train_cost
-from uavris.experiments.jobs import BACKENDS, Job, configure_threads
+from uavris.experiments.costs import (
+    train_cost,
+)
+from uavris.experiments.jobs import BACKENDS, configure_threads
 from uavris.experiments.scheduling import StudyContext, expected_schedule
 from uavris.experiments.stages import Pipeline, Stage
 from uavris.experiments.study import (
@@ -45,23 +46,17 @@ from uavris.experiments.study import (
     TRACKS,
     Deployment,
     Track,
-    dataset_job,
     deployments,
-    evaluate_job,
-    finetune_job,
     nearest_training_scenarios,
-    pretrain_job,
-    strong_expert_config,
-    transfer_sources,
 )
-from uavris.experiments.train_expert import TrainConfig, preset_config, train_job
+from uavris.experiments.track_stages import AUTO, dt_stages, expert_stages
 from uavris.io import read_json, write_json
 from uavris.presets import (
-    COLLECT_SEED,
-    EVAL_SEED,
     STUDY_COMPARE_SEEDS,
+    STUDY_DT_SEEDS,
     STUDY_EVAL_EPISODES,
     STUDY_LAYOUT_TRAJECTORIES,
+    STUDY_MIXED_LAYOUTS,
     STUDY_SCALING,
     STUDY_TRAIN_LAYOUTS,
     STUDY_TRAJECTORIES,
@@ -76,7 +71,6 @@ TRACK_CHOICES: tuple[str, ...] = get_args(TrackChoice)
 ExpertAlgo = Literal["auto", "ddpg", "ppo", "sac", "td3"]
 TRACK_SETS = {"all": TRACKS, "both": ("paper", "strong")}
 assert set(TRACK_CHOICES) == set(TRACK_SETS) | set(TRACKS) and set(get_args(ExpertAlgo)) == {"auto", *ALGORITHMS}
-AUTO = "auto"
 
 
 @dataclasses.dataclass(frozen=True)
@@ -94,6 +88,8 @@ class ReproduceConfig:
     unseen_layouts: int | None = None  # deployment track: unseen layouts (default: the preset's)
     layout_seed: int = 0  # deployment track: seed of the layout generator
     scaling: tuple[int, ...] | None = None  # deployment track: smaller training sets of the data curve
+    dt_seeds: int | None = None  # deployment track: pre-training seeds of every learned row (default: the preset's)
+    mixed_layouts: int | None = None  # deployment track: halls of the mixed-quality dataset (default: the preset's)
     system: SystemConfig = dataclasses.field(default_factory=SystemConfig)
 
     def __post_init__(self) -> None:
@@ -103,7 +99,8 @@ class ReproduceConfig:
         if self.expert_algo not in (AUTO,) + ALGORITHMS:
             raise UavrisError(f"unknown expert algorithm {self.expert_algo!r}; choose {AUTO} (the comparison's "
                               f"winner) or one of {', '.join(ALGORITHMS)}")
-        for name in ("compare_seeds", "eval_episodes", "trajectories", "train_layouts", "unseen_layouts"):
+        for name in ("compare_seeds", "eval_episodes", "trajectories", "train_layouts", "unseen_layouts", "dt_seeds",
+                     "mixed_layouts"):
             v = getattr(self, name)
             if v is not None and v < 1:
                 raise UavrisError(f"--{name.replace('_', '-')} must be >= 1, got {v}")
@@ -140,13 +137,21 @@ class ReproduceConfig:
         return self.unseen_layouts or STUDY_UNSEEN_LAYOUTS[self.preset]
 
     @property
+    def n_dt_seeds(self) -> int:
+        return self.dt_seeds or STUDY_DT_SEEDS[self.preset]
+
+    @property
+    def n_mixed_layouts(self) -> int:
+        return self.mixed_layouts or STUDY_MIXED_LAYOUTS[self.preset]
+
+    @property
     def scaling_points(self) -> tuple[int, ...]:
         return self.scaling if self.scaling is not None else STUDY_SCALING[self.preset]
 
     def trajectories_for(self, track: Track) -> int:
-        """Expert trajectories per training deployment: a layout gets as many as keep the
-        dataset the size of the paper track's (8 scenarios x the preset's), unless
-        ``--trajectories`` says otherwise."""
+        """Expert trajectories (or demonstrations) per training deployment: a generated hall
+        gets the preset's few (many halls, few episodes each: docs/model.md section 21),
+        unless ``--trajectories`` says otherwise."""
         if not track.layouts:
             return self.n_trajectories
         return self.trajectories or STUDY_LAYOUT_TRAJECTORIES[self.preset]
@@ -157,161 +162,6 @@ class ReproduceConfig:
 
     def deployments(self, track: Track) -> tuple[list[Deployment], list[Deployment]]:
         return deployments(track, self.system, self.n_train_layouts, self.n_unseen_layouts, self.layout_seed)
-
-
-# ------------------------------------------------------------------------------------------ stages
-def _run_experts(stage: str, stage_dir: Path, cfgs: dict[str, TrainConfig], ctx: StudyContext) -> dict[str, Any]:
-    jobs = [Job(f"{cfg.algo}-{s}", train_job, (cfg.to_dict(), str(stage_dir / "runs" / s), ctx.device),
-                stage_dir / "logs" / f"{s}.log", train_cost(cfg))
-            for s, cfg in cfgs.items() if not runs.is_finished(stage_dir / "runs" / s)]
-    failures = [r for r in ctx.submit(stage, jobs) if not r.ok]
-    if failures:
-        raise UavrisError(f"{len(failures)} expert job(s) failed: "
-                          + "; ".join(f"{f.name} ({f.error}; log {f.log})" for f in failures))
-    algos = sorted({cfg.algo for cfg in cfgs.values()})
-    return {"algo": "+".join(algos), "final_evals": {s: runs.read_done(stage_dir / "runs" / s)["final_eval"]
-                                                     for s in cfgs}}
-
-
-def _expert_stages(rc: ReproduceConfig, track: Track, ctx: StudyContext) -> list[Stage]:
-    """Experts of the training (and, where the track has them, the unseen) deployments of ``track``."""
-    train, unseen = rc.deployments(track)
-    stages = []
-    for name, where in (("experts-train", train), ("experts-unseen", unseen if track.unseen_experts else [])):
-        if not where:
-            continue
-        stage = track.stage(name)
-        if track.phase_control == "optimizer":  # the strong recipe: imitation of the planning oracle
-            cfgs = {d.name: strong_expert_config(d.name, rc.seed, rc.preset, rc.n_eval, d.system, d.start)
-                    for d in where}
-            stages.append(Stage(stage, {s: c.to_dict() for s, c in cfgs.items()},
-                                lambda d, deps, cfgs=cfgs, stage=stage: _run_experts(stage, d, cfgs, ctx),
-                                costs=tuple(train_cost(c) for c in cfgs.values())))
-            continue
-
-        def configs(algo: str, where: Sequence[Deployment] = where) -> dict[str, TrainConfig]:
-            return {w.name: preset_config(algo, w.name, rc.seed, rc.preset, eval_episodes=rc.n_eval, system=w.system)
-                    for w in where}
-
-        def run(d: Path, deps: dict[str, Path], configs: Any = configs, stage: str = stage) -> dict[str, Any]:
-            algo = rc.expert_algo if rc.expert_algo != AUTO else read_json(deps["compare"] / "summary.json")["expert"]
-            return _run_experts(stage, d, configs(algo), ctx)
-
-        # Before the comparison has chosen, the experts' cost is the dearest algorithm's for the
-        # order (the chain through the comparison is then sure to go first) and the mean over
-        # the algorithms for the progress bar, which takes the chosen one's when its jobs come.
-        guesses = [rc.expert_algo] if rc.expert_algo != AUTO else list(ALGORITHMS)
-        by_algo = [tuple(train_cost(c) for c in configs(a).values()) for a in guesses]
-        config = {"algo": rc.expert_algo, "scenarios": [w.name for w in where], "seed": rc.seed, "preset": rc.preset,
-                  "eval_episodes": rc.n_eval, "system": rc.system.to_dict()}
-        stages.append(Stage(name, config, run, ("compare",) if rc.expert_algo == AUTO else (), max(by_algo, key=sum),
-                            sum(map(sum, by_algo)) / len(by_algo)))
-    return stages
-
-
-def _dt_stages(rc: ReproduceConfig, track: Track, ctx: StudyContext) -> list[Stage]:
-    """Dataset, pre-training (and behaviour cloning, and the data curve), fine-tuning and
-    evaluation of ``track``."""
-    from uavris.experiments.finetune import finetune_config
-    from uavris.experiments.pretrain import pretrain_config
-
-    t = track.stage
-    train, unseen = rc.deployments(track)
-    trajectories = rc.trajectories_for(track)
-    horizon, control = rc.system.horizon, track.phase_control
-
-    def dataset(d: Path, deps: dict[str, Path]) -> dict[str, Any]:
-        experts = [str(deps[t("experts-train")] / "runs" / w.name) for w in train]
-        return ctx.run_one(t("dataset"), dataset_job, (experts, trajectories, str(d / "dataset")), d / "job.log",
-                           dataset_cost(len(train) * trajectories, horizon, control))
-
-    # The DT, behaviour cloning with the same model and budget, and the DT on fewer training
-    # layouts (the data curve): one pre-training stage each, on the same dataset.
-    schedule = dict(track.pretrain)
-    preset_context = pretrain_config("<dataset>", rc.preset, rc.seed).context
-    if "context" in schedule:  # a track's shorter context never lengthens a preset's (smoke reads 4 slots)
-        schedule["context"] = min(schedule["context"], preset_context)
-    context = schedule.get("context", preset_context)  # what the pre-trained and fine-tuned models read
-    models: dict[str, dict[str, Any]] = {"pretrain": schedule}
-    if track.behaviour_cloning:
-        models["bc"] = {**schedule, "condition_on_return": False}
-    if track.layouts:
-        models.update({f"pretrain-n{n}": {**schedule, "scenarios": tuple(w.name for w in train[:n])}
-                       for n in rc.scaling_points})
-
-    def pretrain(name: str, overrides: dict[str, Any]):
-        def run(d: Path, deps: dict[str, Path]) -> dict[str, Any]:
-            cfg = pretrain_config(deps[t("dataset")] / "dataset", rc.preset, rc.seed, **overrides)
-            return ctx.run_one(t(name), pretrain_job, (dataclasses.asdict(cfg), str(d / "model"), ctx.device),
-                               d / "job.log", pretrain_cost(cfg))
-        return run
-
-    def finetune(where: Deployment):
-        def run(d: Path, deps: dict[str, Path]) -> dict[str, Any]:
-            cfg = _finetune_config(deps[t("pretrain")] / "model", where)
-            return ctx.run_one(t(f"finetune-{where.name}"), finetune_job,
-                               (dataclasses.asdict(cfg), str(d / "model"), ctx.device), d / "job.log",
-                               finetune_cost(cfg, horizon, control, context))
-        return run
-
-    def _finetune_config(model: Path | str, where: Deployment):
-        own = {} if not track.layouts else {"system": where.system, "start": where.start}
-        return finetune_config(model, where.name, rc.preset, rc.seed, eval_episodes=rc.n_eval, **own)
-
-    inputs = ["experts-train", *(["experts-unseen"] if track.unseen_experts else []), *models]
-
-    def evaluate(where: Deployment, sources: list[tuple[str, float]]):
-        keys = [*inputs, f"finetune-{where.name}"]
-        cost = evaluate_cost(len(_evaluated_policies(track, where, sources, {k: Path() for k in keys})), rc.n_eval,
-                             horizon, control)
-
-        def run(d: Path, deps: dict[str, Path]) -> dict[str, Any]:
-            policies = _evaluated_policies(track, where, sources, {k: deps[t(k)] for k in keys})
-            return ctx.run_one(t(f"evaluate-{where.name}"), evaluate_job,
-                               (str(d), where.to_dict(), track.name, rc.n_eval, policies), d / "job.log", cost)
-        return run, keys, cost
-
-    stages = [Stage(t("dataset"), {"trajectories": trajectories, "seed": COLLECT_SEED}, dataset,
-                    (t("experts-train"),), (dataset_cost(len(train) * trajectories, horizon, control),))]
-    for name, overrides in models.items():
-        cfg = pretrain_config("<dataset>", rc.preset, rc.seed, **overrides)
-        stages.append(Stage(t(name), dataclasses.asdict(cfg), pretrain(name, overrides), (t("dataset"),),
-                            (pretrain_cost(cfg),)))
-    for w in unseen:
-        ft = _finetune_config("<pretrain>", w)
-        stages.append(Stage(t(f"finetune-{w.name}"), dataclasses.asdict(ft), finetune(w), (t("pretrain"),),
-                            (finetune_cost(ft, horizon, control, context),)))
-    for w in unseen:
-        sources = transfer_sources(track, w, train)
-        run, keys, cost = evaluate(w, sources)
-        stages.append(Stage(t(f"evaluate-{w.name}"), {"episodes": rc.n_eval, "seed": EVAL_SEED, "track": track.name,
-                                                      "references": ["hover", "hover-optimizer", "oracle"],
-                                                      "transfer_from": [s for s, _ in sources]},
-                            run, tuple(t(k) for k in keys), (cost,)))
-    return stages
-
-
-def _evaluated_policies(track: Track, where: Deployment, sources: list[tuple[str, float]],
-                        dirs: dict[str, Path]) -> dict[str, tuple[str, str, str]]:
-    """What a track's evaluation stage scores in ``where`` beside the references:
-    ``{key: (label, kind, path)}`` (:func:`uavris.experiments.study.evaluate_policies`)."""
-    policies: dict[str, tuple[str, str, str]] = {}
-    if track.unseen_experts:
-        policies["expert"] = ("expert trained in the scenario", "expert",
-                              str(dirs["experts-unseen"] / "runs" / where.name))
-    policies["dt-zero-shot"] = ("zero-shot DT", "dt", str(dirs["pretrain"] / "model"))
-    policies["dt-finetuned"] = ("fine-tuned DT", "dt", str(dirs[f"finetune-{where.name}"] / "model"))
-    if "bc" in dirs:
-        policies["bc"] = ("behaviour cloning (the DT without return conditioning)", "dt", str(dirs["bc"] / "model"))
-    for name in sorted((k for k in dirs if k.startswith("pretrain-n")), key=lambda k: int(k[len("pretrain-n"):])):
-        n = name[len("pretrain-n"):]
-        policies[f"dt-zero-shot-n{n}"] = (f"zero-shot DT, {n} training layout{'s' * (n != '1')}", "dt",
-                                          str(dirs[name] / "model"))
-    for rank, (src, dist) in enumerate(sources):
-        near = " (nearest)" if track.layouts and rank == 0 else ""
-        label = f"transferred from {src}{near}" + (f", {dist:.1f} m" if track.layouts else "")
-        policies[f"transfer-{src}"] = (label, "expert", str(dirs["experts-train"] / "runs" / src))
-    return policies
 
 
 def build_pipeline(rc: ReproduceConfig, out: Path, ctx: StudyContext) -> Pipeline:
@@ -334,9 +184,9 @@ def build_pipeline(rc: ReproduceConfig, out: Path, ctx: StudyContext) -> Pipelin
         stages.append(Stage("compare", {"preset": rc.preset, "seeds": rc.n_compare_seeds, "eval_episodes": rc.n_eval,
                                         "system": rc.system.to_dict()}, compare, costs=costs))
     for track in tracks:
-        stages += _expert_stages(rc, track, ctx)
+        stages += expert_stages(rc, track, ctx)
     for track in tracks:
-        stages += _dt_stages(rc, track, ctx)
+        stages += dt_stages(rc, track, ctx)
     return Pipeline(out, stages)
 
 

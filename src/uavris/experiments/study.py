@@ -30,6 +30,7 @@ deployment. Not here: the pipeline and its stages (:mod:`.reproduce`), the repor
 
 from __future__ import annotations
 
+import json
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Sequence
@@ -59,6 +60,8 @@ class Track:
     unseen_experts: bool = True  # an expert trained in each unseen deployment, beside the DT
     behaviour_cloning: bool = False  # BC on the same dataset with the DT's model and budget, beside the DT
     pretrain: tuple[tuple[str, Any], ...] = ()  # PretrainConfig fields this track sets otherwise than the preset
+    demonstrations: bool = False  # the dataset: the planning oracle in generated halls, not trained experts
+    ablation: bool = False  # several pre-training seeds per learned row, the flat encoder, a mixed-quality dataset
 
     def stage(self, name: str) -> str:
         return self.prefix + name
@@ -73,12 +76,14 @@ TRACK_SPECS: dict[str, Track] = {
                     "strong track (learned motion, optimised phases; experts initialised from the oracle)",
                     pretrain=(("context", 10),)),
     "deployment": Track("deployment", "deploy-", "optimizer",
-                        "deployment track (the strong recipe over generated halls; unseen layouts)",
-                        layouts=True, unseen_experts=False, behaviour_cloning=True,
+                        "deployment track (the oracle's demonstrations in many generated halls; unseen halls)",
+                        layouts=True, unseen_experts=False, behaviour_cloning=True, demonstrations=True,
+                        ablation=True,
                         # 3e-4 instead of the DT paper's 1e-4: at the quick budget (1,500 steps) the DT
                         # fitted its 32 training layouts to 91% of the oracle with 1e-4 and to 98% with
-                        # 3e-4 (docs/model.md, section 21).
-                        pretrain=(("learning_rate", 3e-4), ("context", 10))),
+                        # 3e-4 (docs/model.md, section 21). The device-set encoder reads a hall as a set
+                        # of devices (uavris.agents.dt.encoders; the ablation sets the flat one beside it).
+                        pretrain=(("learning_rate", 3e-4), ("context", 10), ("state_encoder", "devices"))),
 }
 
 
@@ -141,14 +146,96 @@ def nearest_training_scenarios(scenario: str, k: int = TRANSFER_NEIGHBOURS) -> l
 
 def transfer_sources(track: Track, unseen: Deployment, train: Sequence[Deployment]) -> list[tuple[str, float]]:
     """The training deployments whose experts are transferred to ``unseen``, nearest first, with
-    their distance: the two nearest starts (paper and strong tracks, as the paper's Fig. 3), or
-    every training layout by :func:`uavris.layouts.layout_distance` (deployment track)."""
+    their distance: the two nearest starts (paper and strong tracks, as the paper's Fig. 3),
+    every training layout by :func:`uavris.layouts.layout_distance`, or, for demonstrations from
+    many halls, the nearest training hall only (its oracle plan flown in ``unseen``)."""
     if not track.layouts:
         start = np.asarray(unseen.scenario.start)
         return [(s, float(np.linalg.norm(np.asarray(SCENARIOS[s].start) - start)))
                 for s in nearest_training_scenarios(unseen.name)]
-    dist = [(d.name, layout_distance(unseen.system.users, d.system.users)) for d in train]
-    return sorted(dist, key=lambda x: (round(x[1], 9), x[0]))
+    dist = sorted(((d.name, layout_distance(unseen.system.users, d.system.users)) for d in train),
+                  key=lambda x: (round(x[1], 9), x[0]))
+    return dist[:1] if track.demonstrations else dist
+
+
+def evaluated_policies(track: Track, where: Deployment, sources: list[tuple[str, float]], dirs: dict[str, Path],
+                       train: Sequence[Deployment] = ()) -> dict[str, tuple[str, str, str]]:
+    """What a track's evaluation stage scores in ``where`` beside the references:
+    ``{key: (label, kind, path)}`` (:func:`evaluate_policies`); ``dirs`` holds the directories
+    of the stages it reads (experts, pre-training stages by name, ``finetune-<where>``)."""
+    policies: dict[str, tuple[str, str, str]] = {}
+    if track.unseen_experts:
+        policies["expert"] = ("expert trained in the scenario", "expert",
+                              str(dirs["experts-unseen"] / "runs" / where.name))
+    policies["dt-finetuned"] = ("fine-tuned DT", "dt", str(dirs[f"finetune-{where.name}"] / "model"))
+    for name, stage_dir in dirs.items():
+        made = stage_policy(name)
+        if made is not None:
+            policies[made[0]] = (made[1], "dt", str(stage_dir / "model"))
+    halls = {d.name: d for d in train}
+    for rank, (src, dist) in enumerate(sources):
+        near = " (nearest)" if track.layouts and rank == 0 else ""
+        if track.demonstrations:
+            policies[f"transfer-{src}"] = (f"oracle plan of {src}{near}, {dist:.1f} m", "plan",
+                                           json.dumps(halls[src].to_dict()))
+            continue
+        label = f"transferred from {src}{near}" + (f", {dist:.1f} m" if track.layouts else "")
+        policies[f"transfer-{src}"] = (label, "expert", str(dirs["experts-train"] / "runs" / src))
+    return policies
+
+
+def pretraining_stages(track: Track, schedule: dict[str, Any], train: Sequence[str], scaling: Sequence[int],
+                       seeds: int) -> dict[str, tuple[str, dict[str, Any]]]:
+    """The pre-training stages of ``track``: ``{stage: (dataset stage, PretrainConfig overrides)}``.
+
+    Every track: the DT (``pretrain``). With behaviour cloning: ``bc``, the same model without
+    return conditioning. Over layouts: the DT on the first ``n`` training halls for each ``n``
+    of ``scaling`` (``pretrain-nN``, the data curve). With the ablation: every row above for
+    ``seeds`` pre-training seeds (``-sK``, K >= 1, beside seed 0's unsuffixed stage), the flat
+    encoder on the same data (``flat``), and the DT and BC on the mixed-quality dataset
+    (``mixed-dt``, ``mixed-bc``). ``schedule`` is the track's PretrainConfig overrides; ``seed``
+    in the overrides is added to the study's seed.
+    """
+    base = dict(schedule)
+    rows: dict[str, tuple[str, dict[str, Any]]] = {"pretrain": ("dataset", base)}
+    if track.behaviour_cloning:
+        rows["bc"] = ("dataset", {**base, "condition_on_return": False})
+    if track.layouts:
+        rows.update({f"pretrain-n{n}": ("dataset", {**base, "scenarios": tuple(train[:n])}) for n in scaling})
+    if not track.ablation:
+        return rows
+    rows["flat"] = ("dataset", {**base, "state_encoder": "flat"})
+    rows["mixed-dt"] = ("dataset-mixed", base)
+    rows["mixed-bc"] = ("dataset-mixed", {**base, "condition_on_return": False})
+    out: dict[str, tuple[str, dict[str, Any]]] = {}
+    for name, (data, overrides) in rows.items():
+        out.update({name if k == 0 else f"{name}-s{k}": (data, {**overrides, "seed": k}) for k in range(seeds)})
+    return out
+
+
+POLICY_OF_STAGE = {"pretrain": ("dt-zero-shot", "zero-shot DT"),
+                   "bc": ("bc", "behaviour cloning (the DT without return conditioning)"),
+                   "flat": ("dt-flat", "zero-shot DT, flat encoder"),
+                   "mixed-dt": ("dt-mixed", "zero-shot DT, mixed-quality data"),
+                   "mixed-bc": ("bc-mixed", "behaviour cloning, mixed-quality data")}
+
+
+def stage_policy(stage: str) -> tuple[str, str] | None:
+    """The evaluation key and label of the model a pre-training stage makes (None for any other
+    stage): ``pretrain`` is ``dt-zero-shot``, ``pretrain-n8`` ``dt-zero-shot-n8``, a seed's copy
+    ``-sK`` gets ``@sK`` (the report averages a row over its seeds)."""
+    name, seed = stage, ""
+    if "-s" in stage and stage.rsplit("-s", 1)[1].isdigit():
+        name, k = stage.rsplit("-s", 1)
+        seed = f"@s{k}"
+    if name.startswith("pretrain-n") and name[len("pretrain-n"):].isdigit():
+        n = name[len("pretrain-n"):]
+        key, label = f"dt-zero-shot-n{n}", f"zero-shot DT, {n} training layout{'s' * (n != '1')}"
+    elif name in POLICY_OF_STAGE:
+        key, label = POLICY_OF_STAGE[name]
+    else:
+        return None
+    return key + seed, label + (f", seed {seed[2:]}" if seed else "")
 
 
 # ------------------------------------------------------------------------------ jobs (worker entry points)
@@ -157,6 +244,34 @@ def dataset_job(expert_dirs: list[str], trajectories: int, out: str) -> dict[str
     from uavris.experiments.collect import collect, dataset_summary
 
     return dataset_summary(collect(expert_dirs, trajectories, out, force=True, progress=False))
+
+
+def demonstrations_job(cfg_dict: dict[str, Any], first: int, count: int, out: str) -> dict[str, Any]:
+    """Demonstrations of halls ``first .. first + count - 1`` as a dataset of their own at ``out``."""
+    from uavris.experiments.demonstrations import DemonstrationConfig, collect_demonstrations, demonstrate
+    from uavris.experiments.jobs import configure_threads
+
+    configure_threads()
+    cfg = DemonstrationConfig(**{**cfg_dict, "system": SystemConfig.from_stored(cfg_dict["system"])})
+    trajectories = demonstrate(cfg, first, count)
+    collect_demonstrations(cfg, out, force=True, progress=False, trajectories=trajectories)
+    return {"halls": count, "episodes": len(trajectories)}
+
+
+def merge_demonstrations(cfg_dict: dict[str, Any], parts: Sequence[str], out: str) -> dict[str, Any]:
+    """The parts' demonstrations, in hall order, as one dataset at ``out``; returns its summary."""
+    from uavris.agents.dt.dataset import load_dataset
+    from uavris.experiments.collect import dataset_summary
+    from uavris.experiments.demonstrations import DemonstrationConfig, collect_demonstrations
+
+    cfg = DemonstrationConfig(**{**cfg_dict, "system": SystemConfig.from_stored(cfg_dict["system"])})
+    trajectories = [tr for part in parts for tr in load_dataset(part).trajectories]
+    summary = dataset_summary(collect_demonstrations(cfg, out, force=True, progress=False, trajectories=trajectories))
+    by = {}  # the dataset's quality per behaviour (the per-hall table would list thousands of halls)
+    for tr in trajectories:
+        by.setdefault(tr.expert, []).append(tr.episode_return / tr.length)
+    return {k: v for k, v in summary.items() if k != "scenarios"} | {
+        "halls": len(summary["scenarios"]), "behaviours": {b: float(np.mean(v)) for b, v in by.items()}}
 
 
 def pretrain_job(cfg_dict: dict[str, Any], out: str, device: str = "cpu") -> dict[str, Any]:
@@ -190,7 +305,9 @@ def evaluate_policies(out: Path, where: Deployment, track: Track, episodes: int,
     phases, oracle), all in ``where`` on episodes ``EVAL_SEED ..``; per-episode CSVs in ``out``.
 
     ``policies[key] = (label, kind, path)``: ``kind`` "expert" (a training run directory,
-    whose label gets what the expert is prefixed: its algorithm, or "oracle imitation") or "dt" (a DT model directory).
+    whose label gets what the expert is prefixed: its algorithm, or "oracle imitation"), "dt" (a
+    DT model directory) or "plan" (``path``: a training hall's :class:`Deployment` as JSON, whose
+    oracle plan is flown here: :class:`uavris.agents.oracle.policy.PlannedFlight`).
     """
     from uavris.agents.evaluation import evaluate
     from uavris.agents.references import HOVER_OPTIMIZER, ORACLE, REFERENCES, ZERO_ACTION, reference_policy
@@ -205,6 +322,12 @@ def evaluate_policies(out: Path, where: Deployment, track: Track, episodes: int,
     def load(label: str, kind: str, path: str) -> tuple[str, Any]:
         if kind == "dt":
             return label, load_dt_policy(path)[0]
+        if kind == "plan":  # another hall's oracle plan flown here (path: that hall's Deployment as JSON)
+            from uavris.agents.oracle import PlanningOracle
+            from uavris.agents.oracle.policy import PlannedFlight
+
+            there = Deployment.from_dict(json.loads(path))
+            return label, PlannedFlight(PlanningOracle().plan(there.system, there.scenario.start))
         cfg, policy = load_run_policy(path)
         return f"{cfg.expert_kind} {label}", policy
 

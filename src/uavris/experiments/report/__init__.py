@@ -18,6 +18,7 @@ from uavris.agents.references import HOVER_OPTIMIZER, ORACLE, ZERO_ACTION
 from uavris.config import UNSEEN_SCENARIOS, get_scenario
 from uavris.experiments.report.deployment import (
     NEAREST,
+    SEED_MARK,
     deployment_section,
     layout_scores,
     layouts_figure,
@@ -177,16 +178,21 @@ class _Report:
             return
         scores = layout_scores(results)
         first = next(iter(results.values()))
-        labels = {k: v["label"] for k, v in first.items() if k.startswith("dt-zero-shot-n")}
+        curve_keys = [k for k in first if k.startswith("dt-zero-shot-n") and SEED_MARK not in k]
+        labels = {k: first[k]["label"] for k in curve_keys}
+        if any(v["label"].startswith("oracle plan of") for k, v in first.items() if k.startswith("transfer-")):
+            labels[NEAREST] = "oracle plan of the nearest training layout, flown here"
         stem = f"{track.prefix}layouts"
         layouts_figure(scores, labels, self.figs / stem)
-        curve = {int(k.rsplit("n", 1)[1]): [scores[lay][k] / scores[lay][ORACLE] for lay in scores] for k in labels}
+        curve = {int(k.rsplit("n", 1)[1]): [scores[lay][k] / scores[lay][ORACLE] for lay in scores]
+                 for k in curve_keys}
         scaling = None
         if curve:
             curve[self.rc.n_train_layouts] = [scores[lay]["dt-zero-shot"] / scores[lay][ORACLE] for lay in scores]
             refs = {label: [scores[lay][k] / scores[lay][ORACLE] for lay in scores]
                     for k, label in ((HOVER_OPTIMIZER, "hover, optimiser's phases"),
-                                     (NEAREST, "nearest layout's expert")) if all(k in scores[lay] for lay in scores)}
+                                     (NEAREST, labels.get(NEAREST, "nearest layout's expert")))
+                    if all(k in scores[lay] for lay in scores)}
             scaling = f"{track.prefix}scaling"
             scaling_figure(curve, refs, self.figs / scaling)
         lines, claims = deployment_section(scores, labels, f"figures/{stem}.png",
