@@ -69,13 +69,23 @@ class FlatEncoder(nn.Linear):
         return F.linear(normalised, self.weight, self.bias)
 
 
+def _pool(x: torch.Tensor, k: int) -> torch.Tensor:
+    """Maximum and mean over axis -2 (the devices), concatenated; the mean adds values sorted
+    per feature, so the result does not depend on the order of the devices to the last bit."""
+    return torch.cat([x.max(dim=-2).values, x.sort(dim=-2).values.sum(dim=-2) / k], dim=-1)
+
+
 class DeviceSetEncoder(nn.Module):
     """The permutation-invariant state encoder (module docstring).
 
     Per-device features (``3 + 2 N + 2 + 3 + 2 N``): the device's normalised offset, its
     normalised channel (real and imaginary parts), whether it transmits and whether it
     receives in this slot (from the raw pairing, exact 0/1), and its partner's normalised
-    offset and channel (zeros when it is idle).
+    offset and channel (zeros when it is idle). Relations: where the system is best depends
+    on the devices jointly (a pose serves pairs of devices), which a sum of per-device terms
+    represents poorly, so every ordered pair ``(k, j)`` of devices is read by a shared pair
+    network and pooled over ``j`` into device ``k``'s relations (a second-order set encoder)
+    before the devices are pooled.
     """
 
     def __init__(self, state_dim: int, width: int, devices: int, elements: int) -> None:
@@ -84,7 +94,9 @@ class DeviceSetEncoder(nn.Module):
         self.layout = device_layout(state_dim, devices, elements)
         self.uav_index = torch.cat([torch.arange(self.layout[s].start, self.layout[s].stop) for s in UAV_SLICES])
         per_device = 3 + 2 * elements + 2 + 3 + 2 * elements
-        self.device_net = nn.Sequential(nn.Linear(per_device, width), nn.ReLU(), nn.Linear(width, width), nn.ReLU())
+        self.pair_net = nn.Sequential(nn.Linear(2 * per_device, width), nn.ReLU(), nn.Linear(width, width), nn.ReLU())
+        self.device_net = nn.Sequential(nn.Linear(per_device + 2 * width, width), nn.ReLU(), nn.Linear(width, width),
+                                        nn.ReLU())
         self.combine = nn.Linear(2 * width + len(self.uav_index), width)
 
     def device_features(self, raw: torch.Tensor, normalised: torch.Tensor) -> torch.Tensor:
@@ -101,12 +113,14 @@ class DeviceSetEncoder(nn.Module):
         return torch.cat([offset, channel, role, partner @ own], dim=-1)
 
     def forward(self, raw: torch.Tensor, normalised: torch.Tensor) -> torch.Tensor:
-        per_device = self.device_net(self.device_features(raw, normalised))  # (..., K, W)
-        pooled_max = per_device.max(dim=-2).values
-        # The mean over values sorted per feature: the same additions whatever the devices' order.
-        pooled_mean = per_device.sort(dim=-2).values.sum(dim=-2) / self.k
+        f = self.device_features(raw, normalised)  # (..., K, F)
+        k = self.k
+        pairs = torch.cat([f.unsqueeze(-2).expand(*f.shape[:-2], k, k, f.shape[-1]),
+                           f.unsqueeze(-3).expand(*f.shape[:-2], k, k, f.shape[-1])], dim=-1)  # [f_k, f_j]
+        relations = _pool(self.pair_net(pairs), k)  # (..., K, 2W): device k's view of every j
+        per_device = self.device_net(torch.cat([f, relations], dim=-1))
         uav = normalised[..., self.uav_index.to(normalised.device)]
-        return self.combine(torch.cat([pooled_max, pooled_mean, uav], dim=-1))
+        return self.combine(torch.cat([_pool(per_device, k), uav], dim=-1))
 
 
 def make_state_encoder(kind: str, state_dim: int, width: int, devices: int = 0, elements: int = 0) -> nn.Module:
