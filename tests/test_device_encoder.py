@@ -130,3 +130,26 @@ def test_a_device_encoder_checkpoint_round_trips(tmp_path):
     back, _ = load_dt(tmp_path)
     states = hall_states(2)[:, :4]
     assert back.cfg == m.cfg and torch.equal(actions(back.eval(), states), actions(m, states))
+
+
+def test_an_ensemble_acts_with_the_mean_of_its_models_actions():
+    from uavris.agents.dt.policy import DTBatchPolicy, DTEnsemble
+
+    members = [DTBatchPolicy(model("devices", seed=s), 50.0, phase_control="optimizer") for s in (1, 2, 3)]
+    alone = [DTBatchPolicy(model("devices", seed=s), 50.0, phase_control="optimizer") for s in (1, 2, 3)]
+    ensemble = DTEnsemble(members)
+    states = hall_states(3)
+    ensemble.begin(3)
+    for m in alone:
+        m.begin(3)
+    for t in range(4):
+        got = ensemble(states[:, t])
+        own = [m(states[:, t]) for m in alone]
+        np.testing.assert_allclose(got, np.mean(own, axis=0), rtol=1e-6, atol=1e-7)
+        assert np.ptp(np.stack(own), axis=0).max() > 1e-4  # the members disagree: the mean is not trivial
+        rewards = np.full(3, 30.0)
+        ensemble.record(got, rewards)
+        for m in alone:  # each member's history holds the executed (mean) action
+            m.record(got, rewards)
+    with pytest.raises(ValueError, match="at least one"):
+        DTEnsemble([])

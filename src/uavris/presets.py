@@ -74,10 +74,9 @@ STUDY_TRAJECTORIES = {"smoke": 4, "quick": 100, "paper": 500}
 STUDY_TRAIN_LAYOUTS = {"smoke": 3, "quick": 512, "paper": 4096}
 STUDY_UNSEEN_LAYOUTS = {"smoke": 2, "quick": 16, "paper": 32}
 STUDY_LAYOUT_TRAJECTORIES = {"smoke": 2, "quick": 2, "paper": 2}
-STUDY_SCALING: dict[str, tuple[int, ...]] = {"smoke": (1,), "quick": (8, 32, 128), "paper": (8, 32, 128, 512, 1024,
-                                                                                            2048)}
+STUDY_SCALING: dict[str, tuple[int, ...]] = {"smoke": (1,), "quick": (32, 128), "paper": (32, 128, 512, 1024, 2048)}
 STUDY_DT_SEEDS = {"smoke": 2, "quick": 3, "paper": 3}
-STUDY_MIXED_LAYOUTS = {"smoke": 2, "quick": 128, "paper": 1024}
+STUDY_MIXED_LAYOUTS = {"smoke": 2, "quick": 64, "paper": 1024}
 DEMONSTRATION_CHUNK = 64  # halls per demonstration job (a job writes its part of the dataset)
 
 

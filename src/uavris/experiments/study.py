@@ -81,9 +81,12 @@ TRACK_SPECS: dict[str, Track] = {
                         ablation=True,
                         # 3e-4 instead of the DT paper's 1e-4: at the quick budget (1,500 steps) the DT
                         # fitted its 32 training layouts to 91% of the oracle with 1e-4 and to 98% with
-                        # 3e-4 (docs/model.md, section 21). The device-set encoder reads a hall as a set
-                        # of devices (uavris.agents.dt.encoders; the ablation sets the flat one beside it).
-                        pretrain=(("learning_rate", 3e-4), ("context", 10), ("state_encoder", "devices"))),
+                        # 3e-4. Width 64 and 2 blocks instead of 128 and 3: zero-shot within a point of
+                        # the larger model on 512 halls, 3.3x cheaper to train (docs/model.md, section 21).
+                        # The device-set encoder reads a hall as a set of devices (the ablation sets the
+                        # flat one beside it).
+                        pretrain=(("learning_rate", 3e-4), ("context", 10), ("width", 64), ("depth", 2),
+                                  ("state_encoder", "devices"))),
 }
 
 
@@ -172,6 +175,11 @@ def evaluated_policies(track: Track, where: Deployment, sources: list[tuple[str,
         made = stage_policy(name)
         if made is not None:
             policies[made[0]] = (made[1], "dt", str(stage_dir / "model"))
+    seeds = [str(dirs[k] / "model") for k in dirs
+             if k == "pretrain" or (k.startswith("pretrain-s") and k[len("pretrain-s"):].isdigit())]
+    if len(seeds) > 1:
+        policies["dt-ensemble"] = (f"zero-shot DT, ensemble of the {len(seeds)} seeds' models (mean action)",
+                                   "dt-ensemble", json.dumps(seeds))
     halls = {d.name: d for d in train}
     for rank, (src, dist) in enumerate(sources):
         near = " (nearest)" if track.layouts and rank == 0 else ""
@@ -306,8 +314,10 @@ def evaluate_policies(out: Path, where: Deployment, track: Track, episodes: int,
 
     ``policies[key] = (label, kind, path)``: ``kind`` "expert" (a training run directory,
     whose label gets what the expert is prefixed: its algorithm, or "oracle imitation"), "dt" (a
-    DT model directory) or "plan" (``path``: a training hall's :class:`Deployment` as JSON, whose
-    oracle plan is flown here: :class:`uavris.agents.oracle.policy.PlannedFlight`).
+    DT model directory), "dt-ensemble" (``path``: DT model directories as a JSON list, acting as
+    one: :class:`uavris.agents.dt.policy.DTEnsemble`) or "plan" (``path``: a training hall's
+    :class:`Deployment` as JSON, whose oracle plan is flown here:
+    :class:`uavris.agents.oracle.policy.PlannedFlight`).
     """
     from uavris.agents.evaluation import evaluate
     from uavris.agents.references import HOVER_OPTIMIZER, ORACLE, REFERENCES, ZERO_ACTION, reference_policy
@@ -322,6 +332,10 @@ def evaluate_policies(out: Path, where: Deployment, track: Track, episodes: int,
     def load(label: str, kind: str, path: str) -> tuple[str, Any]:
         if kind == "dt":
             return label, load_dt_policy(path)[0]
+        if kind == "dt-ensemble":  # path: the models' directories as a JSON list
+            from uavris.agents.dt.policy import DTEnsemble
+
+            return label, DTEnsemble([load_dt_policy(p)[0] for p in json.loads(path)])
         if kind == "plan":  # another hall's oracle plan flown here (path: that hall's Deployment as JSON)
             from uavris.agents.oracle import PlanningOracle
             from uavris.agents.oracle.policy import PlannedFlight

@@ -157,10 +157,11 @@ def dt_stages(rc: ReproduceConfig, track: Track, ctx: StudyContext) -> list[Stag
     horizon, control = rc.system.horizon, track.phase_control
 
     schedule = dict(track.pretrain)
-    preset_context = pretrain_config("<dataset>", rc.preset, rc.seed).context
-    if "context" in schedule:  # a track's shorter context never lengthens a preset's (smoke reads 4 slots)
-        schedule["context"] = min(schedule["context"], preset_context)
-    context = schedule.get("context", preset_context)  # what the pre-trained and fine-tuned models read
+    preset_cfg = pretrain_config("<dataset>", rc.preset, rc.seed)
+    for size in ("context", "width", "depth"):  # a track's smaller model never grows a preset's (smoke's is tiny)
+        if size in schedule:
+            schedule[size] = min(schedule[size], getattr(preset_cfg, size))
+    context = schedule.get("context", preset_cfg.context)  # what the pre-trained and fine-tuned models read
     models = pretraining_stages(track, schedule, [w.name for w in train], rc.scaling_points,
                                 rc.n_dt_seeds if track.ablation else 1)
 

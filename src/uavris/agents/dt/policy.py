@@ -1,6 +1,7 @@
 """Deploying a Decision Transformer: a stateful batch policy conditioned on a target return.
 
-Lives here: :class:`DTBatchPolicy` and :func:`dt_policy_from_checkpoint`. Not here: the
+Lives here: :class:`DTBatchPolicy`, :class:`DTEnsemble` (several DTs, one mean action) and
+:func:`dt_policy_from_checkpoint`. Not here: the
 model (:mod:`.model`) and the rollout loop that drives it (:func:`uavris.env.rollout.rollout`).
 
 Zero-shot deployment (paper Sec. IV-D): the first action of an episode is predicted from
@@ -99,6 +100,43 @@ class DTBatchPolicy:
         """Store the executed A_t and update R_hat_{t+1} = R_hat_t - r(t)."""
         self._history.record(actions)
         self.remaining = self.remaining - rewards
+
+
+class DTEnsemble:
+    """Several pre-trained DTs acting as one: the mean of their actions (each model's history
+    holds the executed mean action and the same returns). Models of several pre-training seeds
+    fail in different halls (docs/model.md section 21); their mean action is one controller
+    whose failures do not move with the seed. An episodic batch policy like :class:`DTBatchPolicy`."""
+
+    def __init__(self, members: list[DTBatchPolicy]) -> None:
+        if not members:
+            raise ValueError("an ensemble needs at least one DT")
+        controls = {m.phase_control for m in members}
+        dims = {(m.model.cfg.state_dim, m.model.cfg.act_dim) for m in members}
+        if len(controls) != 1 or len(dims) != 1:
+            raise ValueError("the DTs of an ensemble must read the same observation and set the same actions")
+        self.members = members
+        self.phase_control = members[0].phase_control
+
+    @property
+    def observation_dim(self) -> int:
+        return self.members[0].observation_dim
+
+    def begin(self, n: int) -> None:
+        for m in self.members:
+            m.begin(n)
+
+    def __call__(self, obs: NDArray[np.float32]) -> NDArray[np.float32]:
+        # Summed in a fixed order, so the same models give the same action whatever else runs.
+        total = self.members[0](obs).astype(np.float64)
+        for m in self.members[1:]:
+            total += m(obs)
+        return (total / len(self.members)).astype(np.float32)
+
+    def record(self, actions: NDArray[np.float32], rewards: NDArray[np.float64]) -> None:
+        for m in self.members:
+            m.record(actions, rewards)
+
 
 def _tensor(x: np.ndarray, model: DecisionTransformer) -> torch.Tensor:
     # On the CPU .to() returns the same tensor: no copy, and the numbers stay bit-identical.
