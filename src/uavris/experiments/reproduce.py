@@ -1,4 +1,4 @@
-"""``uavris reproduce``: the paper's whole study in two tracks, resumable, on a process pool or Ray.
+"""``uavris reproduce``: the paper's whole study in three tracks, resumable, on a process pool or Ray.
 
 Lives here: :class:`ReproduceConfig`, :func:`build_pipeline` (the stages below, their
 configurations and dependencies) and :func:`reproduce`. Not here: the work of each stage and
@@ -19,10 +19,15 @@ Stages (each in ``OUT/stages/NAME-KEY``, keyed by its configuration and its inpu
    the optimiser's phases, oracle), all on the same seeded evaluation episodes (Fig. 3).
 8. ``report``: figures and ``OUT/report.md`` with every number read from the stage files.
 
-Stages 2-7 exist once per track (:mod:`.study`): the paper track as above, and the strong
-track (learned motion, optimised phases) with the same names prefixed ``strong-``. Stages
-whose inputs are ready run at the same time, and all their jobs share ``workers``
-processes, so the two tracks interleave.
+Stages 2-7 exist once per track (:mod:`.study`, built by :mod:`.track_stages`): the paper
+track as above, and the strong track (learned motion, optimised phases) with the same names
+prefixed ``strong-``. The deployment track (``deploy-``) is the same pipeline with other
+parameters (:class:`~uavris.experiments.study.Track`): its dataset is the planning oracle's
+demonstrations in many generated halls (``deploy-dataset``, and ``deploy-dataset-mixed`` of
+mixed quality), its pre-training stages are the ablation's rows over several seeds
+(``deploy-pretrain``, ``-bc``, ``-flat``, ``-pretrain-nN``, ``-mixed-dt``, ``-mixed-bc``, each
+with ``-sK`` copies), and it deploys to unseen halls. Stages whose inputs are ready run at
+the same time, and all their jobs share ``workers`` processes, so the tracks interleave.
 """
 
 from __future__ import annotations
