@@ -250,6 +250,9 @@ def reproduce(rc: ReproduceConfig, out: str | Path, *, workers: int = 2, backend
         ctx.close()
     from uavris.experiments.report import write_report
 
+    if progress and records and all(r.status == "skipped" for r in records):
+        bar.write("every stage was done earlier: only the report and its figures are drawn again")
+
     write_json(out / "schedule.json", {"workers": workers, "origin": origin, "jobs": ctx.schedule(origin)})
     report = write_report(out, rc, pipeline, records, time.perf_counter() - t0, origin)
     bar.close()

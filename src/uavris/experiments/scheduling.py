@@ -28,6 +28,15 @@ HOLD_LIMIT_S = 30.0  # the longest the runner waits for the first stages to queu
 TICK_S = 2.0  # how often the bar counts the running jobs' progress
 
 
+def stage_line(rec: StageRecord) -> str:
+    """What the progress bar prints when a stage ends: a stage finished by an earlier invocation
+    is "done earlier" with the wall clock it took then (not a time this invocation spent)."""
+    if rec.status == "skipped":
+        return f"stage {rec.name} [{rec.key}]: done earlier ({rec.wall_s / 60:.1f} min then), skipped"
+    extra = f" ({rec.error})" if rec.error else ""
+    return f"stage {rec.name} [{rec.key}]: {rec.status} in {rec.wall_s / 60:.1f} min{extra}"
+
+
 class StudyContext:
     """The job runner, priorities, progress and schedule shared by a pipeline's stages."""
 
@@ -131,8 +140,7 @@ class StudyContext:
                     self.bar.refresh()
                 else:
                     self._credit(rec.name, left)
-                extra = f" ({rec.error})" if rec.error else ""
-                self.bar.write(f"stage {rec.name} [{rec.key}]: {rec.status} in {rec.wall_s / 60:.1f} min{extra}")
+                self.bar.write(stage_line(rec))
 
     def _credit(self, stage: str, amount: float) -> None:
         """Move the bar by ``amount`` expected seconds of ``stage``, never past its estimate (lock held)."""
