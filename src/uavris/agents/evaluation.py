@@ -42,14 +42,18 @@ class EpisodeResults:
                 "mean_energy_j": float(np.mean(self.energy_used))}
 
 
+MAX_EPISODES = 100_000  # a typo's bound (a recorded batch of 10^9 episodes would not fit memory)
+
+
 def check_episodes(episodes: int, seed: int) -> None:
-    """Episodes ``seed .. seed + episodes - 1`` must be at least one, with non-negative seeds.
+    """Episodes ``seed .. seed + episodes - 1`` must be at least one and at most
+    :data:`MAX_EPISODES`, with non-negative seeds.
 
     Callers that do work before :func:`evaluate` (load a model, open a progress bar, print a
     header) call it first, so bad input fails before anything is shown or loaded.
     """
-    if episodes < 1:
-        raise ConfigError(f"--episodes must be >= 1, got {episodes}")
+    if not 1 <= episodes <= MAX_EPISODES:
+        raise ConfigError(f"--episodes must be in [1, {MAX_EPISODES:,}], got {episodes}")
     if seed < 0:
         raise ConfigError(f"--seed must be >= 0, got {seed}")
 

@@ -157,7 +157,7 @@ def plan_command(args: list[str]) -> None:
     and the target).
     """
     from uavris.cli.options import layout_defaults
-    from uavris.experiments.plan import plan_hall
+    from uavris.experiments.plan import check_grid, plan_hall
     from uavris.layouts import PAPER_LAYOUT, Layout, default_start, resolve_layout
 
     a = parse(PlanArgs, args, "uavris plan", plan_command.__doc__ or "")
@@ -167,6 +167,7 @@ def plan_command(args: list[str]) -> None:
     else:
         layout_defaults(["--layout", a.layout, *args], a.system)  # --system.users beside a layout: one line
         layout = resolve_layout(a.layout, a.system)
+    check_grid(layout.system(a.system), a.grid_step)  # before anything is written
     out = a.out or Path("runs/plans") / layout.name
     output_dir(out.parent, "--out's folder")
     plan, paths = plan_hall(layout, a.system, out, a.grid_step, progress=not a.no_progress)

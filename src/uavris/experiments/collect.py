@@ -24,6 +24,7 @@ import numpy as np
 
 from uavris.agents.dt.dataset import DATASET_NAMESPACE, check_dataset_target, load_dataset, write_dataset
 from uavris.agents.dt.trajectories import Trajectory, record_episodes
+from uavris.agents.evaluation import MAX_EPISODES
 from uavris.agents.experts.sb3 import load_model
 from uavris.errors import UavrisError
 from uavris.experiments.dt_runs import progress_bar
@@ -43,8 +44,8 @@ def collect(experts: Sequence[str | Path], trajectories: int, out: str | Path, *
     configure_threads()
     if not experts:
         raise UavrisError("give at least one expert run directory (--experts RUN_DIR ...)")
-    if trajectories < 1:
-        raise UavrisError(f"--trajectories must be >= 1, got {trajectories}")
+    if not 1 <= trajectories <= MAX_EPISODES:
+        raise UavrisError(f"--trajectories must be in [1, {MAX_EPISODES:,}], got {trajectories}")
     if seed < 0:
         raise UavrisError(f"--seed must be >= 0, got {seed}")
     out = Path(out)

@@ -45,12 +45,33 @@ def plan_layout(layout: Layout, system: SystemConfig, settings: PlanSettings | N
             "poses_valued": plan.poses_valued}
 
 
+MAX_MAP_POSES = 10_000  # about 3 min of one core (~19 ms a pose): a 0.4 m grid over the 40 m hall
+
+
+def check_grid(system: SystemConfig, step: float) -> int:
+    """The number of poses of the rate map's grid of spacing ``step`` (m); a step that is not a
+    positive distance, or that makes more than :data:`MAX_MAP_POSES` poses (a mistyped 0.01
+    would run for days and exhaust memory), is one :class:`ConfigError` line."""
+    if not (np.isfinite(step) and step > 0):
+        raise ConfigError(f"--grid-step must be a distance > 0 (m), got {step!r}")
+    nx, ny = (max(2, int(round(system.room[i] / step)) + 1) for i in range(2))
+    if nx * ny > MAX_MAP_POSES:
+        raise ConfigError(f"--grid-step {step:g} m makes a {nx} x {ny} grid ({nx * ny:,} poses) over the "
+                          f"{system.room[0]:g} x {system.room[1]:g} m floor; at most {MAX_MAP_POSES:,} "
+                          f"(a step of at least {_min_step(system):.2f} m)")
+    return nx * ny
+
+
+def _min_step(system: SystemConfig) -> float:
+    area = (system.room[0] + 1.0) * (system.room[1] + 1.0)
+    return float(np.sqrt(area / MAX_MAP_POSES))
+
+
 def rate_map(system: SystemConfig, altitude: float, step: float, progress: bool = False
              ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
     """``(x, y, R)``: the expected sum rate (level RIS, optimised phases) on a grid of spacing
     ``step`` over the floor plan at ``altitude``; NaN where the UAV may not be (a safety ball)."""
-    if not (np.isfinite(step) and step > 0):
-        raise ConfigError(f"--grid-step must be a distance > 0 (m), got {step!r}")
+    check_grid(system, step)
     xs = np.linspace(0.0, system.room[0], max(2, int(round(system.room[0] / step)) + 1))
     ys = np.linspace(0.0, system.room[1], max(2, int(round(system.room[1] / step)) + 1))
     grid = np.stack(np.meshgrid(xs, ys, indexing="ij"), axis=-1).reshape(-1, 2)
@@ -104,8 +125,7 @@ def plan_hall(layout: Layout, system: SystemConfig, out: Path, grid_step: float,
                      progress: bool = True) -> tuple[dict[str, Any], list[Path]]:
     """Plan, map and draw ``layout``: writes ``out.json``, ``out.png`` and ``out.pdf``."""
     hall, _ = layout.resolve(system)
-    if not (np.isfinite(grid_step) and grid_step > 0):
-        raise ConfigError(f"--grid-step must be a distance > 0 (m), got {grid_step!r}")
+    check_grid(hall, grid_step)
     plan = plan_layout(layout, system)
     xs, ys, rates = rate_map(hall, plan["target"][2], grid_step, progress)
     paths = plan_figure(hall, plan, xs, ys, rates, out)

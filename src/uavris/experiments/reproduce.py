@@ -75,6 +75,8 @@ TrackChoice = Literal["all", "both", "paper", "strong", "deployment"]
 TRACK_CHOICES: tuple[str, ...] = get_args(TrackChoice)
 ExpertAlgo = Literal["auto", "ddpg", "ppo", "sac", "td3"]
 TRACK_SETS = {"all": TRACKS, "both": ("paper", "strong")}
+SIZE_BOUNDS = {"compare_seeds": 100, "eval_episodes": 100_000, "trajectories": 100_000, "train_layouts": 100_000,
+               "unseen_layouts": 10_000, "dt_seeds": 100, "mixed_layouts": 100_000}
 assert set(TRACK_CHOICES) == set(TRACK_SETS) | set(TRACKS) and set(get_args(ExpertAlgo)) == {"auto", *ALGORITHMS}
 
 
@@ -104,11 +106,10 @@ class ReproduceConfig:
         if self.expert_algo not in (AUTO,) + ALGORITHMS:
             raise UavrisError(f"unknown expert algorithm {self.expert_algo!r}; choose {AUTO} (the comparison's "
                               f"winner) or one of {', '.join(ALGORITHMS)}")
-        for name in ("compare_seeds", "eval_episodes", "trajectories", "train_layouts", "unseen_layouts", "dt_seeds",
-                     "mixed_layouts"):
+        for name, top in SIZE_BOUNDS.items():  # a typo's bound: beyond it a run exhausts memory or days
             v = getattr(self, name)
-            if v is not None and v < 1:
-                raise UavrisError(f"--{name.replace('_', '-')} must be >= 1, got {v}")
+            if v is not None and not 1 <= v <= top:
+                raise UavrisError(f"--{name.replace('_', '-')} must be in [1, {top:,}], got {v}")
         if self.unseen_layouts is not None and self.unseen_layouts < 2:
             raise UavrisError(f"--unseen-layouts must be >= 2 (a CI over layouts needs two), got {self.unseen_layouts}")
         for name in ("seed", "layout_seed"):
