@@ -62,8 +62,19 @@ def test_readme_results_are_the_reports() -> None:
     retypes. The report is `runs/quick/report.md` of the run the section names."""
     report = QUICK_REPORT.read_text(encoding="utf-8")
     section = _section(README.read_text(encoding="utf-8"), "## Results of a quick run")
-    quoted = set(re.findall(r"(?<![\d.])[+-]?\d+\.\d\d(?![\d])", section))
+    quoted = set(re.findall(r"(?<![\d.])[+-]?\d+\.\d\d(?!\d|\.\d)", section))  # not a version's "3.11" of 3.11.7
     quoted |= set(re.findall(r"(?<![\d.])\d+\.\d%", section))
     assert len(quoted) > 40, "the results section quotes the report's numbers"
-    missing = sorted(q for q in quoted if q not in report and q.lstrip("+") not in report)
+    missing = sorted(q for q in quoted if not _whole(q, report) and not _whole(q.lstrip("+"), report))
     assert not missing, f"README numbers not in {QUICK_REPORT.name}: {missing}"
+
+
+def _whole(number: str, text: str) -> bool:
+    """``number`` occurs in ``text`` as a whole number: "0.93" is not found inside "40.93" or "0.931"."""
+    return re.search(rf"(?<![\d.]){re.escape(number)}(?!\d|\.\d)", text) is not None
+
+
+def test_numbers_are_matched_whole():
+    assert _whole("0.93", "DT 0.93 bps/Hz") and _whole("+1.20", "diff +1.20 [") and _whole("59.1%", "(59.1%)")
+    assert not _whole("0.93", "DT 40.93 bps/Hz") and not _whole("0.93", "0.931") and not _whole("9.1%", "59.1%")
+    assert not _whole("3.11", "Python 3.11.7")
