@@ -57,24 +57,114 @@ def _section(text: str, title: str) -> str:
 
 
 def test_readme_results_are_the_reports() -> None:
-    """Every score and fraction the README quotes from a quick run (2-decimal numbers, 1-decimal
-    percentages) is one the committed report of that run states: the README copies, never
-    retypes. The report is `runs/quick/report.md` of the run the section names."""
+    """Every score and fraction the README quotes from a quick run is one the committed report
+    of that run states, in its row: the README copies, never retypes. The report is
+    `runs/quick/report.md` of the run the section names."""
     report = QUICK_REPORT.read_text(encoding="utf-8")
     section = _section(README.read_text(encoding="utf-8"), "## Results of a quick run")
-    quoted = set(re.findall(r"(?<![\d.])[+-]?\d+\.\d\d(?!\d|\.\d)", section))  # not a version's "3.11" of 3.11.7
-    quoted |= set(re.findall(r"(?<![\d.])\d+\.\d%", section))
-    assert len(quoted) > 40, "the results section quotes the report's numbers"
-    missing = sorted(q for q in quoted if not _whole(q, report) and not _whole(q.lstrip("+"), report))
-    assert not missing, f"README numbers not in {QUICK_REPORT.name}: {missing}"
+    assert len(_tables(section)) >= 4 and len(re.findall(r"\d+\.\d\d", section)) > 100, "it quotes the report"
+    assert not _misplaced(section, report)
+
+
+def _numbers(line: str) -> list[str]:
+    """The whole numbers of a line, in order, signs and percent signs kept ("unseen1" has none)."""
+    return re.findall(r"(?<![\w.+-])[+-]?\d[\d,]*(?:\.\d+)?%?(?!\.?\d)", line)
+
+
+def _tables(text: str) -> dict[str, list[str]]:
+    """Every table's body rows, under its header line (tables with the same header pooled)."""
+    out: dict[str, list[str]] = {}
+    lines = text.splitlines()
+    for i, line in enumerate(lines[:-1]):
+        if line.startswith("|") and lines[i + 1].startswith("|---") and not (i and lines[i - 1].startswith("|")):
+            body = out.setdefault(line, [])
+            for row in lines[i + 2:]:
+                if not row.startswith("|"):
+                    break
+                body.append(row)
+    return out
+
+
+def _label(row: str) -> str:
+    return row.strip("|").split("|")[0].strip()
+
+
+def _misplaced(section: str, report: str) -> list[str]:
+    """What ``section`` quotes that ``report`` does not state in the same place: a table row's
+    numbers must be those of the report's row of the same label in a table of the same header;
+    a bullet that copies one of the report's (the same start, up to its bold claim or its first
+    colon) must have that bullet's numbers; any other score (prose: 2-decimal numbers, 1-decimal
+    percentages) must be in the report as a whole number (not "0.93" inside "40.93", nor "3.11"
+    of "Python 3.11.7", nor "7.06" for "-7.06")."""
+    bad = []
+    ours, theirs = _tables(section), _tables(report)
+    in_tables = set()
+    for header, rows in ours.items():
+        if header not in theirs:
+            bad.append(f"a table the report does not have: {header}")
+            continue
+        for row in rows:
+            in_tables.add(row)
+            same = [r for r in theirs[header] if _label(r) == _label(row)]
+            if not any(_numbers(r) == _numbers(row) for r in same):
+                bad.append(row)
+    report_lines = report.splitlines()
+    for line in section.splitlines():
+        if line in in_tables or line.startswith("|") or not _numbers(line):
+            continue
+        if line.startswith("- "):
+            bold = re.match(r"- [^*]*\*\*[^*]+\*\*", line)
+            key = bold.group(0) if bold else line.split(": ")[0] + ": "
+            copies = [r for r in report_lines if r.startswith(key)]
+            if copies:
+                if not any(_numbers(r) == _numbers(line) for r in copies):
+                    bad.append(line)
+                continue
+        scores = [q for q in _numbers(line) if re.fullmatch(r"[+-]?\d+\.\d\d|\d+\.\d%", q)]  # not "47.2 min"
+        bad += [f"{q} ({line})" for q in scores if not _whole(q, report) and not _whole(q.lstrip("+"), report)]
+    return bad
 
 
 def _whole(number: str, text: str) -> bool:
-    """``number`` occurs in ``text`` as a whole number: "0.93" is not found inside "40.93" or "0.931"."""
-    return re.search(rf"(?<![\d.]){re.escape(number)}(?!\d|\.\d)", text) is not None
+    """``number`` occurs in ``text`` as a whole number: "0.93" is not found inside "40.93" or
+    "0.931", nor an unsigned "7.06" in "-7.06" (an unsigned number may drop a "+", not a "-")."""
+    return re.search(rf"(?<![\d.{'' if number[0] in '+-' else '-'}]){re.escape(number)}(?!\d|\.\d)",
+                     text) is not None
 
 
 def test_numbers_are_matched_whole():
     assert _whole("0.93", "DT 0.93 bps/Hz") and _whole("+1.20", "diff +1.20 [") and _whole("59.1%", "(59.1%)")
     assert not _whole("0.93", "DT 40.93 bps/Hz") and not _whole("0.93", "0.931") and not _whole("9.1%", "59.1%")
-    assert not _whole("3.11", "Python 3.11.7")
+    assert not _whole("3.11", "Python 3.11.7") and not _whole("7.06", "-7.06 [") and _whole("-7.06", "x -7.06 [")
+    assert _numbers("| layout-unseen-0 | -21.21 | 40.93 (96%) | 23,639 | train3 | [8.14, 10.19] |") == [
+        "-21.21", "40.93", "96%", "23,639", "8.14", "10.19"]
+
+
+REPORT = """| policy | mean | fraction |
+|---|---:|---:|
+| DDPG | 9.17 | 21% |
+| oracle | 40.93 | 100% |
+
+| policy | paper, unseen1 |
+|---|---:|
+| oracle | 43.13 (100%) |
+
+- paper track, unseen1: **fine-tuned DT within 5% of the expert**: holds (fine-tuned 10.92 vs expert 11.10, -1.6%).
+- deployment track: **DT minus BC**: -7.06 [-13.65, -0.48] bps/Hz, below zero.
+Prose: the oracle reaches 42.96 in Fig. 2."""
+
+
+@pytest.mark.parametrize("readme, ok", [
+    ("| policy | mean | fraction |\n|---|---:|---:|\n| oracle | 40.93 | 100% |", True),
+    ("| policy | mean | fraction |\n|---|---:|---:|\n| oracle | 0.93 | 100% |", False),  # inside 40.93
+    ("| policy | mean | fraction |\n|---|---:|---:|\n| oracle | 9.17 | 21% |", False),  # DDPG's row
+    ("| policy | paper, unseen1 |\n|---|---:|\n| oracle | 40.93 (100%) |", False),  # another table's
+    ("- paper track, unseen1: **fine-tuned DT within 5% of the expert**: holds (fine-tuned 10.92 vs expert 11.10, "
+     "-1.6%).", True),
+    ("- paper track, unseen1: **fine-tuned DT within 5% of the expert**: holds (fine-tuned 0.92 vs expert 11.10, "
+     "-1.6%).", False),
+    ("- deployment track: **DT minus BC**: +7.06 [-13.65, -0.48] bps/Hz, below zero.", False),  # the sign
+    ("The oracle: 42.96 and 9.17; DT minus BC -7.06.", True), ("The oracle: 2.96.", False),
+    ("DT minus BC 7.06.", False), ("Python 3.11.7: 0.93.", False)])
+def test_readme_numbers_are_found_in_their_row(readme: str, ok: bool) -> None:
+    assert (not _misplaced(readme, REPORT)) == ok, _misplaced(readme, REPORT)
