@@ -1,4 +1,5 @@
 import numpy as np
+import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
@@ -54,11 +55,21 @@ def test_unit_fast_path_matches_general_form(rng):
 
 @given(phases, st.floats(0.01, 1.0, allow_subnormal=False))
 def test_preset_for_target_inverts(phi, c):
+    # Defined for every unit target but exactly -1, which no float phase gives (sin(pi) != 0 in
+    # floats): no guard, so an implementation returning NaN or inf fails here.
     target = np.exp(1j * phi)
     r_pre = ph.preset_for_target(target, c)
-    if np.isfinite(r_pre):
-        assert abs(abs(r_pre) - 1.0) < 1e-9
-        assert abs(ph.reflection_coefficient(r_pre, c) - target) < 1e-9
+    assert np.isfinite(r_pre)
+    assert abs(abs(r_pre) - 1.0) < 1e-9
+    assert abs(ph.reflection_coefficient(r_pre, c) - target) < 1e-9
+
+
+def test_preset_for_target_worked_by_hand():
+    # target j at cos(theta) = 0.5: (1 - j)/(1 + j) = -j, a = -0.5j, r_pre = (1 + 0.5j)/(1 - 0.5j) = 0.6 + 0.8j;
+    # back through eq. (5): (0.5 (1.6 + 0.8j) - (0.4 - 0.8j)) / (0.5 (1.6 + 0.8j) + (0.4 - 0.8j)) = j
+    assert ph.preset_for_target(1j, 0.5) == pytest.approx(0.6 + 0.8j, abs=1e-15)
+    assert ph.reflection_coefficient(0.6 + 0.8j, 0.5) == pytest.approx(1j, abs=1e-15)
+    assert ph.preset_for_target(1j, 1.0) == pytest.approx(1j, abs=1e-15)  # normal incidence: the target itself
 
 
 def test_angle_dependence_is_real():
