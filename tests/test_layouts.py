@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import math
 
@@ -48,12 +49,56 @@ def test_generated_layouts_are_reproducible_and_depend_on_the_seed() -> None:
     assert all(a.users != b.users for a, b in zip(GEN.layouts("train", 8), other.layouts("train", 8)))
 
 
+def _matched_distance(a: Layout, b: Layout) -> float:
+    """Mean device distance under the best one-to-one matching, by trying every matching
+    (4! = 24; independent of layout_distance's Hungarian assignment)."""
+    ua, ub = np.asarray(a.users), np.asarray(b.users)
+    return min(float(np.mean(np.linalg.norm(ua - ub[list(p)], axis=1)))
+               for p in itertools.permutations(range(len(ub))))
+
+
 def test_training_and_unseen_sets_never_share_a_layout() -> None:
+    """By the layouts' contents, not their names: no unseen hall has a training hall's devices
+    (in any order, nor within half a metre of them on average) or start."""
     train, unseen = GEN.layouts("train", 64), GEN.layouts("unseen", 64)
-    assert {t.name for t in train}.isdisjoint(u.name for u in unseen)
-    gaps = [layout_distance(t, u) for t in train for u in unseen]
-    assert min(gaps) > 0.5  # not the same hall under another name (devices matched one to one)
-    assert len({t.users for t in train}) == 64 and len({u.users for u in unseen}) == 64
+    halls = {frozenset(t.users) for t in train}
+    assert len(halls) == 64 and len({frozenset(u.users) for u in unseen}) == 64
+    assert halls.isdisjoint(frozenset(u.users) for u in unseen)
+    assert {t.start for t in train}.isdisjoint(u.start for u in unseen)
+    assert min(_matched_distance(t, u) for t in train for u in unseen) > 0.5
+
+
+def test_the_nearest_training_hall_worked_by_hand() -> None:
+    """Which training hall's plan is flown in an unseen hall: the one whose devices are nearest
+    once matched one to one (the order a hall lists its devices in means nothing; the start
+    is not part of it). Unseen: devices at the corners of a 10 m square. Hall C: the same
+    devices listed backwards, each 1 m along y (1.0 m); hall A: in order, each 2 m along x
+    (2.0 m); hall B: three in place, the fourth 14 m along x and y (14 sqrt(2) / 4 = 4.95 m),
+    starting where the unseen hall starts. Pairing devices by index would rank A first,
+    the starts B."""
+    base = SystemConfig(observe_devices=True)
+    square = ((10.0, 10.0, 1.0), (20.0, 10.0, 1.0), (10.0, 20.0, 1.0), (20.0, 20.0, 1.0))
+    unseen = Layout("hall-u", square, (15.0, 15.0, 4.5))
+    halls = [Layout("hall-a", tuple((x + 2, y, z) for x, y, z in square), (30.0, 30.0, 4.5)),
+             Layout("hall-b", (*square[:3], (34.0, 34.0, 1.0)), (15.0, 15.0, 4.5)),
+             Layout("hall-c", tuple((x, y + 1, z) for x, y, z in reversed(square)), (25.0, 15.0, 4.5))]
+    want = [("hall-c", 1.0), ("hall-a", 2.0), ("hall-b", 14 * math.sqrt(2) / 4)]
+    assert nearest_layout(unseen, halls) is halls[2]
+    assert [layout_distance(unseen, h) for h in halls] == pytest.approx([2.0, 14 * math.sqrt(2) / 4, 1.0])
+
+    from uavris.experiments.study import TRACK_SPECS, Deployment, transfer_sources
+
+    def deployment(layout: Layout) -> Deployment:
+        system, where = layout.resolve(base)
+        return Deployment(layout.name, system, where.start)
+
+    track = TRACK_SPECS["deployment"]  # demonstrations: the nearest training hall's plan only
+    train = [deployment(h) for h in halls]
+    [(name, dist)] = transfer_sources(track, deployment(unseen), train)
+    assert (name, dist) == (want[0][0], pytest.approx(want[0][1]))
+    every = transfer_sources(dataclasses.replace(track, demonstrations=False), deployment(unseen), train)
+    assert [n for n, _ in every] == [n for n, _ in want]  # experts per layout: all of them, nearest first
+    assert [d for _, d in every] == pytest.approx([d for _, d in want])
 
 
 def test_layout_distance_is_a_matching_distance() -> None:
