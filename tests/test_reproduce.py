@@ -8,7 +8,9 @@ import threading
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
+from scipy import stats as sps
 
 from uavris.config import SystemConfig
 from uavris.errors import UavrisError
@@ -80,7 +82,9 @@ def test_all_artefacts_exist(smoke_run):
 def test_report_numbers_come_from_evaluation_files(smoke_run):
     out, report, _ = smoke_run
     text = report.read_text()
-    for stage in sorted((out / "stages").glob("*evaluate-unseen*")):
+    stages = sorted((out / "stages").glob("*evaluate-unseen*"))
+    assert len(stages) == 4  # evaluate-unseen1/2, strong-evaluate-unseen1/2
+    for stage in stages:
         scenario = stage.name.split("-")[-2]
         result = read_json(stage / "stage.json")["result"]
         assert set(result) == {"expert", "dt-zero-shot", "dt-finetuned", "hover", "hover-optimizer", "oracle"} | {
@@ -90,9 +94,182 @@ def test_report_numbers_come_from_evaluation_files(smoke_run):
                                                        .read_text(), re.M)]
             assert len(per_episode) == 4
             assert abs(sum(per_episode) / 4 - summary["mean"]) < 1e-9
+            # the CI over episodes (what "95% CIs overlap" and "vs zero action" read) is Student's t
+            assert (summary["ci_low"], summary["ci_high"]) == pytest.approx(_mean_ci(per_episode)[1:], rel=1e-9)
             assert f"| {summary['label']} | {summary['mean']:.2f} |" in text
         oracle = result["oracle"]["mean"]
         assert f"| {result['expert']['mean'] / oracle:.0%} |" in text
+
+
+@pytest.mark.slow
+def test_deployment_numbers_and_verdicts_come_from_evaluation_files(smoke_run):
+    # The deployment track's stages are deploy-evaluate-layout-unseen-J (the glob above misses them).
+    out, report, _ = smoke_run
+    stages = sorted((out / "stages").glob("deploy-evaluate-layout-unseen-*"))
+    assert len(stages) == 2
+    for stage in stages:
+        result = read_json(stage / "stage.json")["result"]
+        for key in ("dt-zero-shot", "bc", "dt-flat", "dt-mixed", "bc-mixed"):  # every learned row over 2 seeds
+            assert {key, f"{key}@s1"} <= set(result)
+        for summary in result.values():
+            per_episode = [float(x) for x in re.findall(r"^\d+,([^,]+),", (stage / f"{summary['policy']}.csv")
+                                                       .read_text(), re.M)]
+            assert len(per_episode) == 4 and abs(sum(per_episode) / 4 - summary["mean"]) < 1e-9
+    check_deployment_report({s.name[len("deploy-evaluate-"):].rsplit("-", 1)[0]:
+                             read_json(s / "stage.json")["result"] for s in stages}, report.read_text())
+
+
+@pytest.mark.slow
+def test_paper_and_strong_verdicts_come_from_evaluation_files(smoke_run):
+    out, report, _ = smoke_run
+    stages = sorted((out / "stages").glob("*evaluate-unseen*"))
+    results = {("strong" if s.name.startswith("strong-") else "paper", s.name.split("-")[-2]):
+               read_json(s / "stage.json")["result"] for s in stages}
+    compare = read_json(next((out / "stages").glob("compare-*")) / "summary.json")
+    check_track_claims(results, compare["rows"], report.read_text())
+
+
+# ---------------------------------------------------------------------- the report against its stage files
+# Recomputed here from the stages' results with SciPy, by the rules the report states, not by the
+# report's own functions.
+def _mean_ci(x) -> tuple[float, float, float]:
+    """Mean and Student-t 95% interval of a sample (a sample without spread: a point)."""
+    x = np.asarray(x, dtype=float)
+    if sps.sem(x) == 0:
+        return x.mean(), x.mean(), x.mean()
+    lo, hi = sps.t.interval(0.95, len(x) - 1, loc=x.mean(), scale=sps.sem(x))
+    return x.mean(), lo, hi
+
+
+def _zero(lo: float, hi: float) -> str:
+    return "above zero" if lo > 0 else "below zero" if hi < 0 else "includes zero"
+
+
+def _pct3(m: tuple[float, float, float]) -> str:
+    return f"{m[0]:.1%} [{m[1]:.1%}, {m[2]:.1%}]"
+
+
+def _num3(m: tuple[float, float, float]) -> str:
+    return f"{m[0]:+.2f} [{m[1]:+.2f}, {m[2]:+.2f}]"
+
+
+def _table(text: str, header: str) -> list[list[str]]:
+    """The body rows of the table whose header line starts with ``header``, as cells."""
+    lines = text.splitlines()
+    i = next(i for i, line in enumerate(lines) if line.startswith(header))
+    rows = []
+    for line in lines[i + 2:]:
+        if not line.startswith("|"):
+            break
+        rows.append([c.strip() for c in line.strip().strip("|").split("|")])
+    return rows
+
+
+# DT minus another policy, per layout (the report's paired differences)
+DEPLOYMENT_PAIRS = (("dt-zero-shot", "hover-optimizer"), ("dt-zero-shot", "nearest"),
+                    ("dt-ensemble", "hover-optimizer"), ("dt-ensemble", "nearest"), ("dt-zero-shot", "transfers"),
+                    ("dt-zero-shot", "bc"), ("dt-zero-shot", "dt-flat"), ("dt-mixed", "bc-mixed"),
+                    ("dt-finetuned", "dt-zero-shot"))
+
+
+def check_deployment_report(results: dict[str, dict], text: str) -> None:
+    """The deployment track's tables and claims in ``text`` against ``{layout: stage result}``."""
+    scores = {}
+    for layout, result in results.items():
+        seeds: dict[str, list[float]] = {}
+        for key, s in result.items():
+            if not key.startswith("transfer-"):
+                seeds.setdefault(key.split("@s")[0], []).append(s["mean"])
+        row = {k: sum(v) / len(v) for k, v in seeds.items()}  # a learned row: the mean over its seeds
+        [row["nearest"]] = [s["mean"] for k, s in result.items() if k.startswith("transfer-")
+                            and "(nearest)" in s["label"]]
+        transfers = [s["mean"] for k, s in result.items() if k.startswith("transfer-")]
+        if len(transfers) > 1:
+            row["transfers"], row["best-transfer"] = sum(transfers) / len(transfers), max(transfers)
+        scores[layout] = row
+    layouts = list(scores)
+    keys = [k for k in scores[layouts[0]] if all(k in scores[lay] for lay in layouts)]
+    frac = {k: [scores[lay][k] / scores[lay]["oracle"] for lay in layouts] for k in keys}
+    stat = {k: _mean_ci(frac[k]) for k in keys}
+
+    # per layout: every policy's score and fraction of the oracle (cells compared as a multiset)
+    per_layout = {r[0]: r[1:] for r in _table(text, "| layout |")}
+    assert set(per_layout) == set(layouts)
+    for lay in layouts:
+        want = [f"{scores[lay][k]:.2f} ({scores[lay][k] / scores[lay]['oracle']:.0%})" for k in keys]
+        assert sorted(per_layout[lay]) == sorted(want), lay
+    # over layouts: fraction of the oracle, mean [t CI], mean score, worst layout
+    summary = _table(text, "| policy | fraction of oracle")
+    want = [[_pct3(stat[k]), f"{np.mean([scores[lay][k] for lay in layouts]):.2f}", f"{min(frac[k]):.1%}"]
+            for k in keys]
+    assert sorted(r[1:] for r in summary) == sorted(want)
+    # paired differences per layout, their mean [t CI] and what the CI says about zero
+    diffs = {}
+    for a, b in DEPLOYMENT_PAIRS:
+        if a in keys and b in keys:
+            d = [scores[lay][a] - scores[lay][b] for lay in layouts]
+            diffs[(a, b)] = _mean_ci(d)
+            diffs[(a, b)] = (*diffs[(a, b)], _zero(*diffs[(a, b)][1:]), [f"{x:+.2f}" for x in d])
+    table = _table(text, "| difference |")
+    assert sorted(r[1:] for r in table) == sorted([*v[4], _num3(v[:3]), v[3]] for v in diffs.values())
+
+    claims = [line for line in text.splitlines() if line.startswith("- deployment track: **")]
+    expected = 0
+    for key, what in (("dt-zero-shot", "zero-shot DT"), ("dt-ensemble", "zero-shot DT ensemble (one controller)")):
+        if key not in keys:
+            continue
+        expected += 1
+        [claim] = [c for c in claims if c.startswith(f"- deployment track: **{what} >= ")]
+        target = int(re.search(r">= (\d+)% of the oracle", claim).group(1)) / 100
+        hover, near = diffs[(key, "hover-optimizer")], diffs[(key, "nearest")]
+        holds = stat[key][0] >= target and hover[1] > 0 and near[1] > 0
+        assert f"**: {'holds' if holds else 'does not hold'} (" in claim, claim
+        assert (f"({_pct3(stat[key])} of the oracle; minus hovering {_num3(hover[:3])} bps/Hz, {hover[3]}; minus "
+                f"nearest {_num3(near[:3])} bps/Hz, {near[3]})." in claim), claim
+    if "dt-finetuned" in keys:
+        expected += 1
+        [claim] = [c for c in claims if c.startswith("- deployment track: **fine-tuned DT >= ")]
+        target = int(re.search(r">= (\d+)% of the oracle", claim).group(1)) / 100
+        holds = stat["dt-finetuned"][0] >= target and stat["dt-finetuned"][0] >= stat["dt-zero-shot"][0]
+        gain = diffs[("dt-finetuned", "dt-zero-shot")]
+        assert f"**: {'holds' if holds else 'does not hold'} (" in claim, claim
+        assert (f"(fine-tuned {_pct3(stat['dt-finetuned'])}; fine-tuned minus zero-shot {_num3(gain[:3])} bps/Hz)."
+                in claim), claim
+    for pair, what in ((("dt-zero-shot", "bc"), "**return conditioning on demonstrations of one quality"),
+                       (("dt-mixed", "bc-mixed"), "**return conditioning on mixed-quality data"),
+                       (("dt-zero-shot", "dt-flat"), "**the device-set encoder")):
+        if pair in diffs:
+            expected += 1
+            [claim] = [c for c in claims if c.startswith(f"- deployment track: {what}")]
+            assert claim.endswith(f"**: {_num3(diffs[pair][:3])} bps/Hz per layout, {diffs[pair][3]}."), claim
+    assert len(claims) == expected >= 5
+
+
+def check_track_claims(results: dict[tuple[str, str], dict], compare_rows: list[dict], text: str) -> None:
+    """The paper and strong tracks' claims in ``text`` against their evaluation stages' results
+    (``{(track, scenario): result}``) and the comparison's rows."""
+    assert len(results) == 4
+    drl = [r for r in compare_rows if r["kind"] == "DRL"]
+    best = max(drl, key=lambda r: r["mean"])
+    [claim] = [c for c in text.splitlines() if c.startswith("- **DDPG is the best of the four**")]
+    assert f": **{'holds' if best['policy'] == 'DDPG' else 'does not hold'}** on our simulator; best mean is " \
+           f"{best['policy']} ({best['mean']:.2f} bps/Hz)" in claim
+    for (track, scenario), res in results.items():
+        zs, ft, ex = res["dt-zero-shot"], res["dt-finetuned"], res["expert"]
+        transfers = [s for k, s in res.items() if k.startswith("transfer-")]
+        top = max(transfers, key=lambda s: s["mean"])
+        apart = zs["ci_low"] > top["ci_high"] or top["ci_low"] > zs["ci_high"]
+        [claim] = [c for c in text.splitlines()
+                   if c.startswith(f"- {track} track, {scenario}: **zero-shot DT above transferred experts**")]
+        assert claim.endswith(f"**: {'holds' if zs['mean'] > top['mean'] else 'does not hold'} (zero-shot "
+                              f"{zs['mean']:.2f} vs best transferred {top['mean']:.2f}, {top['label']}; 95% CIs "
+                              f"{'do not overlap' if apart else 'overlap'})."), claim
+        gap = (ft["mean"] - ex["mean"]) / ex["mean"]
+        [claim] = [c for c in text.splitlines()
+                   if c.startswith(f"- {track} track, {scenario}: **fine-tuned DT within 5% of the expert**")]
+        holds = gap > 0 or abs(gap) <= 0.05  # "nearly the same" as the expert, or better
+        assert (f"**: {'holds' if holds else 'does not hold'} (fine-tuned {ft['mean']:.2f} vs expert "
+                f"{ex['mean']:.2f}, {gap:+.1%})." in claim), claim
 
 
 @pytest.mark.slow
