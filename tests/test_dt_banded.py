@@ -5,6 +5,7 @@ import json
 import numpy as np
 import pytest
 import torch
+from scipy import stats
 
 from tests.conftest import SHORT
 from tests.test_dt import random_inputs, tiny_model
@@ -135,8 +136,18 @@ def test_banded_pipeline_pretrains_finetunes_and_round_trips(dataset_dir, tmp_pa
     tuned, tuned_meta = load_dt(ft)
     assert tuned.cfg.attention == "banded"
     assert not all(torch.equal(p, q) for p, q in zip(model.parameters(), tuned.parameters()))
-    res = evaluate(DTBatchPolicy(tuned, meta["target_return"]), SHORT, "unseen1", 2, 0).summary()
-    assert np.isfinite(res["mean"]) and res["ci_low"] <= res["mean"] <= res["ci_high"]
+    # the evaluation's numbers from the episodes themselves: each episode's average sum rate
+    # is its rewards' mean (recorded one episode at a time, away from the batch of 3), and
+    # the summary is their mean with SciPy's Student-t interval
+    results = evaluate(DTBatchPolicy(tuned, meta["target_return"]), SHORT, "unseen1", 3, 0)
+    one_by_one = [record_episodes(DTBatchPolicy(tuned, meta["target_return"]), SHORT, "unseen1", [s])[0].rewards
+                  for s in range(3)]
+    np.testing.assert_allclose(results.avg_sum_rate, [r.mean() for r in one_by_one], rtol=1e-6)
+    res = results.summary()
+    x = results.avg_sum_rate
+    assert res["episodes"] == 3 and res["mean"] == pytest.approx(np.mean(x), rel=1e-12)
+    want = stats.t.interval(0.95, 2, loc=np.mean(x), scale=stats.sem(x))
+    assert (res["ci_low"], res["ci_high"]) == pytest.approx(want, rel=1e-12) and want[1] - want[0] > 0
     # the saved banded model is the one fine-tuning evaluated last: same score on the same episodes
     final = json.loads((ft / "done.json").read_text())["final_eval"]
     again = evaluate(DTBatchPolicy(tuned, tuned_meta["target_return"]), SHORT, "unseen1", cfg.eval_episodes,
