@@ -2,6 +2,7 @@
 
 import json
 import sys
+from collections import Counter
 from pathlib import Path
 
 import numpy as np
@@ -103,16 +104,46 @@ def test_paired_elite_selection_hand_checked():
         select_elites(trajs, 3, "luck")
 
 
-def test_paired_finetune_counts_candidates_and_elites(dataset_dir, tmp_path):
-    """N = candidates episodes per round (seeds x rollouts per seed), K elites kept."""
+def test_paired_finetune_counts_candidates_and_elites(dataset_dir, tmp_path, monkeypatch):
+    """N = candidates episodes per round (seeds x rollouts per seed), K elites kept: the K
+    largest returns relative to their seed's mean, and the round trains on those K."""
+    import csv
+    import math
+
+    from uavris.experiments import finetune as finetune_module
     from uavris.experiments.finetune import finetune, finetune_config
     from uavris.experiments.pretrain import pretrain, pretrain_config
 
+    rounds = []  # (candidates, elites) of every round, as fine-tuning saw them
+    real = finetune_module.select_elites
+
+    def seen(cands, k, rule):
+        elites = real(cands, k, rule)
+        rounds.append((list(cands), elites))
+        return elites
+
+    monkeypatch.setattr(finetune_module, "select_elites", seen)
     model = pretrain(pretrain_config(dataset_dir, "smoke", 0), tmp_path / "pre", progress=False)
     cfg = finetune_config(model, "unseen1", "smoke", 0, candidates=6, elites=4, rollouts_per_seed=3)
     run = finetune(cfg, tmp_path / "ft", progress=False)
     done = json.loads((run / "done.json").read_text())
     assert done["env_interactions"] == 6 * SHORT.horizon
+    with open(run / "finetune.csv") as f:
+        table = list(csv.DictReader(f))
+    assert len(rounds) == cfg.rounds == len(table) - 1  # row 0: the zero-shot evaluation
+    steps = 0
+    for (cands, elites), row in zip(rounds, table[1:]):
+        assert len(cands) == 6 and sorted(Counter(c.seed for c in cands).values()) == [3, 3]
+        assert len(elites) == 4
+        # the paired rule by hand: each return minus the mean return of its seed's 3 rollouts
+        adv = [c.episode_return - np.mean([d.episode_return for d in cands if d.seed == c.seed]) for c in cands]
+        want = [cands[i] for i in sorted(range(6), key=lambda i: -adv[i])[:4]]
+        assert [id(e) for e in elites] == [id(w) for w in want]
+        assert float(row["elite_mean_return"]) == pytest.approx(np.mean([e.episode_return for e in elites]))
+        assert float(row["elite_min_return"]) == pytest.approx(min(e.episode_return for e in elites))
+        # an epoch is one window per elite slot: the round's gradient steps count the K elites' slots
+        steps += cfg.epochs_per_round * math.ceil(sum(e.length for e in elites) / cfg.batch_size)
+        assert int(row["gradient_steps"]) == steps
     with pytest.raises(ConfigError, match="rollouts_per_seed"):
         finetune_config(model, "unseen1", "smoke", 0, candidates=6, rollouts_per_seed=4)
 
