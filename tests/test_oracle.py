@@ -251,14 +251,31 @@ def test_oracle_evaluation_reproducible_and_beats_hover_aligned(config):
 
 @pytest.mark.slow
 def test_config_variants_run(config):
-    """Ideal RIS and amplitude-learning actions are handled (smoke, one step)."""
+    """Ideal RIS and amplitude-learning actions: the oracle's phases are the optimiser's for
+    the variant's own reflection model, the amplitudes (when learned) are full, and the reward
+    of the step is the sum rate the optimiser computed."""
+    angle_dependent = None
     for cfg in (config.replace(angle_dependent_reflection=False), config.replace(learn_amplitudes=True)):
         sim = BatchedSimulator(cfg, "fig2", 2)
         sim.seed(np.arange(2))
         sim.reset()
-        action = oracle_policy()(sim.observe(), sim)
+        action = oracle_policy(seed=3)(sim.observe(), sim)
         assert action.shape == (2, cfg.action_dim)
-        sim.step(action)
+        _, phase, amp, _ = decode_action(action, cfg)
+        sol = po.optimize_phases(sim.channels, sim.cos_theta, sim.pairing, cfg.tx_power_w, cfg.noise_w,
+                                 angle_dependent=cfg.angle_dependent_reflection, seed=3)
+        assert np.max(np.abs(np.angle(np.exp(1j * (phase.astype(np.float64) - sol.phases))))) < 1e-6
+        if cfg.learn_amplitudes:
+            np.testing.assert_array_equal(amp, 1.0)
+        else:
+            assert amp is None
+            angle_dependent = po.optimize_phases(sim.channels, sim.cos_theta, sim.pairing, cfg.tx_power_w,
+                                                 cfg.noise_w, seed=3)
+            gap = np.angle(np.exp(1j * (angle_dependent.phases - sol.phases)))
+            assert np.max(np.abs(gap)) > 1e-3  # the ideal RIS's optimum is its own
+        reward, *_ = sim.step(action)
+        np.testing.assert_allclose(reward, sol.sum_rate, rtol=1e-5)
+    assert angle_dependent is not None
 
 
 def test_rejects_bad_settings():
