@@ -12,12 +12,13 @@ import pytest
 
 import uavris.experiments.collect as collect_mod
 from tests.conftest import SHORT
-from uavris.agents.dt.dataset import dataset_id_for, load_dataset
+from uavris.agents.dt.dataset import dataset_id_for, episode_environment, load_dataset, write_dataset
 from uavris.agents.dt.trajectories import record_episodes
 from uavris.agents.references import reference_policy
 from uavris.env import ENV_ID
 from uavris.errors import DatasetError
 from uavris.experiments.train_expert import preset_config
+from uavris.layouts import LayoutGenerator
 
 # The first expert's scenario is deliberately not the alphabetically first one.
 EXPERTS = {"expert-a": ("train2", "hover-aligned"), "expert-b": ("train1", "hover-random-phases")}
@@ -74,11 +75,56 @@ def test_recovered_environment_is_the_registered_env_with_the_datasets_system(co
     assert env.unwrapped.scenario.name == "train2"  # the first expert's
     assert env.observation_space == native.observation_space and env.action_space == native.action_space
     first = next(native.iterate_episodes())
-    obs, _ = env.reset(seed=SEED)  # the first episode's seed: the same start
-    np.testing.assert_array_equal(obs, first.observations[0])
-    obs, reward, *_ = env.step(first.actions[0])
-    np.testing.assert_array_equal(obs, first.observations[1])
-    assert reward == first.rewards[0]
+    _replay(env, first, SEED)  # the first episode's seed: the same start
+
+
+def _replay(env, episode, seed):
+    """Every step of a Minari episode in ``env``, from ``reset(seed)``: the same observations,
+    rewards and end."""
+    obs, _ = env.reset(seed=seed)
+    np.testing.assert_array_equal(obs, episode.observations[0])
+    assert len(episode.actions) > 1
+    for t, action in enumerate(episode.actions):
+        obs, reward, term, trunc, _ = env.step(action)
+        np.testing.assert_array_equal(obs, episode.observations[t + 1])
+        assert reward == episode.rewards[t], t
+        assert (term, trunc) == (bool(episode.terminations[t]), bool(episode.truncations[t])), t
+
+
+DEVICES = SHORT.replace(observe_devices=True)
+
+
+@pytest.fixture(scope="module")
+def devices_dataset(tmp_path_factory):
+    """Two episodes of random actions in each of two generated halls, the devices observed."""
+    root = tmp_path_factory.mktemp("minari-devices")
+    trajs, systems = [], []
+    for j in range(2):
+        system, where = LayoutGenerator().layout("train", j).resolve(DEVICES)
+        systems.append(system)
+        trajs += record_episodes(reference_policy("random", system), system, where, [30 + 2 * j, 31 + 2 * j],
+                                 expert=where.name, expert_algo="ref")
+    write_dataset(root / "uavris" / "devices-v0", trajs, systems[0], namespace="uavris")
+    return root, trajs
+
+
+def test_minari_round_trip_with_devices_replays_every_episode(devices_dataset, monkeypatch):
+    """Through Minari's own loader: the observation space holds the devices, every episode
+    is the one recorded, and its hall rebuilt from its metadata replays it step by step."""
+    root, trajs = devices_dataset
+    monkeypatch.setenv("MINARI_DATASETS_PATH", str(root))
+    native = minari.load_dataset("uavris/devices-v0")
+    assert native.total_episodes == len(trajs) == 4
+    assert native.observation_space.shape == (DEVICES.observation_dim,) != (SHORT.observation_dim,)
+    assert trajs[0].users != trajs[2].users  # two halls
+    for i, (episode, recorded) in enumerate(zip(native.iterate_episodes(), trajs, strict=True)):
+        np.testing.assert_array_equal(episode.observations, recorded.observations)
+        np.testing.assert_array_equal(episode.actions, recorded.actions)
+        np.testing.assert_array_equal(episode.rewards, recorded.rewards)
+        env = episode_environment(native, i)
+        assert env.observation_space == native.observation_space
+        assert env.unwrapped.config.users == recorded.users and env.unwrapped.scenario.start == recorded.start
+        _replay(env, episode, recorded.seed)
 
 
 def test_env_spec_kwargs_survive_json_and_make_accepts_them(collected):
