@@ -84,7 +84,7 @@ def _ci(s: dict[str, float], fmt: Any = _pct) -> str:
 
 
 def _num(x: float) -> str:
-    return f"{x:+.2f}"
+    return "n/a" if math.isnan(x) else f"{x:+.2f}"
 
 
 def _excludes_zero(s: dict[str, float]) -> str:
