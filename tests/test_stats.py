@@ -13,6 +13,7 @@ from uavris.experiments.report.deployment import (
     HOVER_OPTIMIZER,
     NEAREST,
     ORACLE,
+    ROWS,
     _excludes_zero,
     deployment_section,
     layout_scores,
@@ -155,3 +156,167 @@ def test_the_return_conditioning_verdict_is_the_paired_ci():
     d = np.array([1.0, 1.5, 1.0, 1.5])
     lo, hi = sps.t.interval(0.95, 3, loc=d.mean(), scale=sps.sem(d))
     assert f"{d.mean():+.2f} [{lo:+.2f}, {hi:+.2f}] bps/Hz per layout, above zero" in claim
+
+
+# ------------------------------------------------------------------------------ more of uavris.stats
+def test_summarize_is_scipys_bootstrap_of_the_mean_and_the_iqm():
+    x = np.random.default_rng(8).gamma(2.0, 3.0, 12)
+
+    def percentile(statistic):
+        res = sps.bootstrap((x,), statistic, confidence_level=0.95, n_resamples=2000, method="percentile",
+                            rng=np.random.default_rng(4))
+        return res.confidence_interval.low, res.confidence_interval.high
+
+    s = summarize(x, seed=4)
+    assert s["n"] == 12 and s["mean"] == pytest.approx(x.sum() / 12, rel=1e-12)
+    assert s["std"] == pytest.approx(math.sqrt(((x - x.mean()) ** 2).sum() / 11), rel=1e-12)
+    middle = np.sort(x)[3:9]  # 12 values: the IQM is the mean of the middle 6
+    assert s["iqm"] == pytest.approx(middle.mean(), rel=1e-12)
+    assert (s["mean_ci_low"], s["mean_ci_high"]) == pytest.approx(percentile(np.mean), rel=1e-12)
+    assert (s["iqm_ci_low"], s["iqm_ci_high"]) == pytest.approx(
+        percentile(lambda v, axis: sps.trim_mean(v, 0.25, axis=axis)), rel=1e-12)
+
+
+def test_bootstrap_band_of_two_seeds_is_their_range():
+    # Resampling 2 seeds gives seed 0 twice (1/4), both (1/2) or seed 1 twice (1/4): of 1,000
+    # resamples about 250 are each seed alone, so the 2.5% and 97.5% quantiles are the two seeds.
+    curves = np.array([[1.0, 5.0, 2.0, 7.0], [3.0, 4.0, 6.0, 7.0]])
+    mean, low, high = bootstrap_band(curves)
+    np.testing.assert_array_equal(mean, [2.0, 4.5, 4.0, 7.0])
+    np.testing.assert_array_equal(low, [1.0, 4.0, 2.0, 7.0])
+    np.testing.assert_array_equal(high, [3.0, 5.0, 6.0, 7.0])
+    one = bootstrap_band(curves[:1])  # one seed: no band
+    for part in one:
+        np.testing.assert_array_equal(part, curves[0])
+
+
+# ------------------------------------------------------------------------------ the whole deployment section
+def _t95(x):
+    x = np.asarray(x, dtype=float)
+    if np.all(x == x[0]):
+        return x[0], x[0], x[0]
+    lo, hi = sps.t.interval(0.95, len(x) - 1, loc=x.mean(), scale=sps.sem(x))
+    return x.mean(), lo, hi
+
+
+def _rows(lines, header):
+    i = next(i for i, line in enumerate(lines) if line.startswith(header))
+    out = []
+    for line in lines[i + 2:]:
+        if not line.startswith("|"):
+            break
+        out.append([c.strip() for c in line.strip("|").split("|")])
+    return out
+
+
+# three unseen halls; each learned row with 2 pre-training seeds; two transferred plans
+ORACLES = [40.0, 50.0, 20.0]
+HALLS = {
+    "dt-zero-shot": ([38.0, 47.0, 19.5], [39.0, 48.0, 19.0]),
+    "dt-ensemble": ([39.2, 49.0, 19.8],), "dt-finetuned": ([39.6, 49.5, 19.9],),
+    "bc": ([37.0, 46.0, 19.0], [37.5, 46.5, 18.0]), "dt-flat": ([30.0, 40.0, 15.0], [31.0, 41.0, 16.0]),
+    "dt-mixed": ([35.0, 44.0, 17.0], [36.0, 45.0, 18.0]), "bc-mixed": ([34.0, 44.5, 16.0], [35.0, 44.0, 17.0]),
+    "hover": ([12.0, 13.0, 6.0],), "hover-optimizer": ([34.0, 43.0, 17.0],), "oracle": (ORACLES,)}
+TRANSFERS = {"transfer-a": [33.0, 20.0, 18.0], "transfer-b": [36.0, 45.0, 10.0]}  # a is the nearest
+
+
+def _results():
+    out = {}
+    for j in range(3):
+        res = {}
+        for key, seeds in HALLS.items():
+            for i, values in enumerate(seeds):
+                res[key if i == 0 else f"{key}@s{i}"] = {"mean": values[j], "label": key}
+        res["transfer-a"] = {"mean": TRANSFERS["transfer-a"][j], "label": "oracle plan of a (nearest), 2.0 m"}
+        res["transfer-b"] = {"mean": TRANSFERS["transfer-b"][j], "label": "oracle plan of b"}
+        out[f"hall-{j}"] = res
+    return out
+
+
+def _by_hand():
+    """Every row's per-hall score, worked here: learned rows the mean of their seeds."""
+    rows = {k: np.mean(np.array(seeds), axis=0) for k, seeds in HALLS.items()}
+    t = np.array(list(TRANSFERS.values()))
+    rows[NEAREST], rows["transfer-mean"], rows["transfer-best"] = t[0], t.mean(axis=0), t.max(axis=0)
+    return rows
+
+
+def test_the_deployment_section_against_numbers_worked_here():
+    lines, claims = deployment_section(layout_scores(_results()), {}, None, None)
+    rows, labels = _by_hand(), dict(ROWS)
+    oracle = np.array(ORACLES)
+    assert rows["dt-zero-shot"].tolist() == [38.5, 47.5, 19.25]
+    # over halls: fraction of the oracle, mean [t CI], mean score, worst hall
+    table = {r[0]: r[1:] for r in _rows(lines, "| policy | fraction of oracle")}
+    assert set(table) == {labels[k] for k in rows}
+    for key, values in rows.items():
+        f = values / oracle
+        m, lo, hi = _t95(f)
+        assert table[labels[key]] == [f"{m:.1%} [{lo:.1%}, {hi:.1%}]", f"{values.mean():.2f}", f"{f.min():.1%}"], key
+    # per hall
+    per_hall = {r[0]: r[1:] for r in _rows(lines, "| layout |")}
+    for j in range(3):
+        want = sorted(f"{v[j]:.2f} ({v[j] / oracle[j]:.0%})" for v in rows.values())
+        assert sorted(per_hall[f"hall-{j}"]) == want
+    # each seed's own model: its fraction of the oracle over halls
+    seeds = {r[0]: r[1:] for r in _rows(lines, "| policy | seed 0 | seed 1 |")}
+    for key in ("dt-zero-shot", "bc", "dt-flat", "dt-mixed", "bc-mixed"):
+        want = []
+        for values in HALLS[key]:
+            m, lo, hi = _t95(np.array(values) / oracle)
+            want.append(f"{m:.1%} [{lo:.1%}, {hi:.1%}]")
+        assert seeds[labels[key]] == want, key
+    # paired differences: per hall, then their mean and t CI, and what the CI says about zero
+    pairs = {r[0]: r[1:] for r in _rows(lines, "| difference |")}
+    assert len(pairs) == 9
+    for a, b in [("dt-zero-shot", "hover-optimizer"), ("dt-zero-shot", NEAREST), ("dt-ensemble", "hover-optimizer"),
+                 ("dt-ensemble", NEAREST), ("dt-zero-shot", "transfer-mean"), ("dt-zero-shot", "bc"),
+                 ("dt-zero-shot", "dt-flat"), ("dt-mixed", "bc-mixed"), ("dt-finetuned", "dt-zero-shot")]:
+        d = rows[a] - rows[b]
+        m, lo, hi = _t95(d)
+        word = "above zero" if lo > 0 else "below zero" if hi < 0 else "includes zero"
+        assert pairs[f"{labels[a]} - {labels[b]}"] == [*(f"{x:+.2f}" for x in d), f"{m:+.2f} [{lo:+.2f}, {hi:+.2f}]",
+                                                       word], (a, b)
+    # the claims, by their stated rules
+    frac = {k: (v / oracle).mean() for k, v in rows.items()}
+    for key, head in (("dt-zero-shot", "**zero-shot DT >= 95%"), ("dt-ensemble", "**zero-shot DT ensemble")):
+        [claim] = [c for c in claims if head in c]
+        hover, near = _t95(rows[key] - rows["hover-optimizer"]), _t95(rows[key] - rows[NEAREST])
+        holds = frac[key] >= 0.95 and hover[1] > 0 and near[1] > 0
+        assert f"**: {'holds' if holds else 'does not hold'} (" in claim, claim
+    # by hand: the zero-shot DT at 95.0% [..] of the oracle (0.9625, 0.95, 0.9625), above hovering in every
+    # hall (+4.5, +4.5, +2.25) but not clearly above the nearest plan (+5.5, +27.5, +1.25: the CI includes zero)
+    assert frac["dt-zero-shot"] == pytest.approx(0.9583333333333334)
+    claim = next(c for c in claims if "**zero-shot DT >= 95%" in c)
+    assert "**: does not hold (95.8% [" in claim and "bps/Hz, above zero; minus nearest +11.42 [" in claim
+    assert claim.endswith("bps/Hz, includes zero).")
+    [claim] = [c for c in claims if "**fine-tuned DT >= 98%" in c]
+    assert frac["dt-finetuned"] >= 0.98 and frac["dt-finetuned"] >= frac["dt-zero-shot"]
+    assert "**: holds (" in claim
+    assert len(claims) == 6
+
+
+@pytest.mark.parametrize("finetuned, zero_shot, holds", [
+    (0.98, 0.90, True),  # exactly the target: ">= 98%"
+    (0.97, 0.90, False),  # below the target
+    (0.99, 0.995, False),  # above the target but below zero-shot
+    (0.99, 0.99, True)])  # not below zero-shot
+def test_the_finetuned_claim_states_its_rule(finetuned, zero_shot, holds):
+    oracle = [50.0, 100.0]  # 49 / 50 and 98 / 100 are both the double nearest 0.98
+    scores = {f"h{i}": {"dt-zero-shot": zero_shot * o, "dt-finetuned": finetuned * o, HOVER_OPTIMIZER: 0.5 * o,
+                        NEAREST: 0.5 * o, ORACLE: o} for i, o in enumerate(oracle)}
+    _, claims = deployment_section(scores, {}, None, None)
+    [claim] = [c for c in claims if "**fine-tuned DT >= 98% of the oracle and not below zero-shot**" in c]
+    assert f"**: {'holds' if holds else 'does not hold'} (fine-tuned {finetuned:.1%} [" in claim
+
+
+def test_one_layout_resolves_nothing():
+    scores = {"h0": {"dt-zero-shot": 48.0, HOVER_OPTIMIZER: 40.0, NEAREST: 30.0, "bc": 20.0, ORACLE: 50.0}}
+    _, claims = deployment_section(scores, {}, None, None)
+    zero_shot = next(c for c in claims if "**zero-shot DT >= 95%" in c)
+    # 96% of the oracle, 8 and 18 bps/Hz above the others, but one hall gives no interval: not shown
+    assert ": does not hold (96.0% [n/a, n/a] of the oracle" in zero_shot
+    assert zero_shot.count("not resolved (one layout)") == 2
+    bc = next(c for c in claims if "return conditioning on demonstrations" in c)
+    assert bc.endswith("+28.00 [n/a, n/a] bps/Hz per layout, not resolved (one layout).")  # as the percentages
+    assert "minus hovering +8.00 [n/a, n/a] bps/Hz, not resolved (one layout)" in zero_shot
