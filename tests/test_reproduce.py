@@ -72,6 +72,8 @@ def test_all_artefacts_exist(smoke_run):
     assert "## Stages" in text and (out / "figures" / "schedule.png").stat().st_size > 1000
     schedule = read_json(out / "schedule.json")
     assert {j["worker"] for j in schedule["jobs"]} <= {0, 1} and all(j["end"] >= j["start"] for j in schedule["jobs"])
+    # the bar's ETA was recorded (the first sample at the first tick), never below zero
+    assert schedule["eta"] and all(s["eta"] >= 0 and s["t"] >= 0 for s in schedule["eta"])
     for stage in (out / "stages").glob("*/stage.json"):  # the wall clock is beside the results, not in them
         assert "wall_s" not in read_json(stage) and "wall_s" in read_json(stage.parent / "timing.json")
     experts = read_json(next((out / "stages").glob("experts-train-*")) / "stage.json")["result"]
@@ -455,7 +457,7 @@ def test_expected_schedule_replays_the_longest_chain_first(tmp_path: Path) -> No
     """The estimate of `reproduce --estimate`: a chain A -> B of 10 s jobs and three 3 s stages
     on two workers end at 20 s (the chain on one worker, the rest beside it); on one worker
     the work adds up; on many the chain bounds it."""
-    from uavris.experiments.scheduling import expected_schedule
+    from uavris.experiments.forecast import expected_schedule
     from uavris.experiments.stages import Pipeline, Stage
 
     def noop(d: Path, deps: dict[str, Path]) -> None:

@@ -43,8 +43,9 @@ from uavris.errors import UavrisError
 from uavris.experiments.costs import (
     train_cost,
 )
+from uavris.experiments.forecast import expected_schedule
 from uavris.experiments.jobs import BACKENDS, configure_threads
-from uavris.experiments.scheduling import StudyContext, expected_schedule
+from uavris.experiments.scheduling import StudyContext
 from uavris.experiments.stages import Pipeline, Stage
 from uavris.experiments.study import (
     TRACK_SPECS,
@@ -199,7 +200,7 @@ def build_pipeline(rc: ReproduceConfig, out: Path, ctx: StudyContext) -> Pipelin
 # ------------------------------------------------------------------------------------------ entry point
 def estimate(rc: ReproduceConfig, workers: int) -> str:
     """The study's stages with their expected core-minutes and expected start and end on
-    ``workers`` workers, and the expected wall clock (:func:`~.scheduling.expected_schedule`),
+    ``workers`` workers, and the expected wall clock (:func:`~.forecast.expected_schedule`),
     as markdown. Nothing is run or written."""
     if workers < 1:
         raise UavrisError(f"--workers must be >= 1, got {workers}")
@@ -236,7 +237,7 @@ def reproduce(rc: ReproduceConfig, out: str | Path, *, workers: int = 2, backend
     configure_threads()  # before any worker starts: they inherit it, and jobs run here with one worker
     # The bar counts expected seconds of work (uavris.experiments.scheduling), shown as a share.
     bar = tqdm(total=0, desc="reproduce", dynamic_ncols=True, disable=not progress,
-               bar_format="{desc}: {percentage:3.0f}%|{bar}| [{elapsed}<{remaining}]")
+               bar_format="{desc}: {percentage:3.0f}%|{bar}| [{elapsed}{postfix}]")
     ctx = StudyContext(workers, backend, ray_address, bar, device)
     pipeline = build_pipeline(rc, out, ctx)
     unknown = [f for f in force if f not in pipeline.stages and f != "report"]
@@ -254,7 +255,8 @@ def reproduce(rc: ReproduceConfig, out: str | Path, *, workers: int = 2, backend
     if progress and records and all(r.status == "skipped" for r in records):
         bar.write("every stage was done earlier: only the report and its figures are drawn again")
 
-    write_json(out / "schedule.json", {"workers": workers, "origin": origin, "jobs": ctx.schedule(origin)})
+    write_json(out / "schedule.json", {"workers": workers, "origin": origin, "jobs": ctx.schedule(origin),
+                                       "eta": ctx.etas(origin)})
     report = write_report(out, rc, pipeline, records, time.perf_counter() - t0, origin)
     bar.close()
     failed = [r for r in records if r.status == "failed"]

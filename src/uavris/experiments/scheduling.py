@@ -9,23 +9,26 @@ which worker ran which job when (the report's schedule). Not here: the stages
 
 The bar counts expected seconds of one core, not jobs: a job adds its expected cost when
 it finishes, a finished stage the rest of its estimate, so a seconds-long expert and a
-minutes-long SAC run weigh what they cost and the bar's rate and ETA mean something.
+minutes-long SAC run weigh what they cost. Its ETA is not the bar's rate but a replay of
+what is left (:func:`~uavris.experiments.forecast.eta_seconds`), recorded once a minute in
+``schedule.json`` beside tqdm's rate-based one so a run can be checked against its end.
 """
 
 from __future__ import annotations
 
-import math
 import threading
 import time
 from pathlib import Path
 from typing import Any, Callable
 
 from uavris.errors import UavrisError
+from uavris.experiments.forecast import Speeds, eta_seconds
 from uavris.experiments.jobs import Job, JobResult, JobRunner
 from uavris.experiments.stages import Pipeline, StageRecord
 
 HOLD_LIMIT_S = 30.0  # the longest the runner waits for the first stages to queue their jobs
-TICK_S = 2.0  # how often the bar counts the running jobs' progress
+TICK_S = 2.0  # how often the bar counts the running jobs' progress and redraws its ETA
+ETA_LOG_S = 60.0  # how often the ETA is recorded for schedule.json
 
 
 def stage_line(rec: StageRecord) -> str:
@@ -52,6 +55,12 @@ class StudyContext:
         self._credited: dict[str, float] = {}
         self._job_costs: dict[tuple[str, str], float] = {}
         self._first: set[str] = set()
+        self._stages: dict[str, tuple[tuple[str, ...], tuple[float, ...]]] = {}
+        self._ended: set[str] = set()
+        self._open: dict[str, dict[str, Job]] = {}  # per stage, its submitted jobs not finished yet
+        self._stage_of: dict[int, str] = {}  # id(job) -> stage
+        self._speeds = Speeds()  # how long this run's finished jobs took against their expected cost
+        self.eta_log: list[tuple[float, float, float]] = []  # (time.time(), our ETA, tqdm's rate ETA) in s
         self._closed = threading.Event()
         self._lock = threading.Lock()
 
@@ -63,6 +72,10 @@ class StudyContext:
         self._expected = {name: sum(st.costs) if st.progress_s is None else st.progress_s
                           for name, st in pipeline.stages.items()}
         self._credited = {name: 0.0 for name in pipeline.stages}
+        # the ETA's jobs: a stage whose jobs are not known yet weighs its progress estimate
+        self._stages = {name: (st.deps, st.costs if st.progress_s is None or not sum(st.costs) else
+                               tuple(c * st.progress_s / sum(st.costs) for c in st.costs))
+                        for name, st in pipeline.stages.items()}
         self._first = {name for name, st in pipeline.stages.items() if not st.deps}
         if self._first:
             self.runner.hold()
@@ -80,13 +93,46 @@ class StudyContext:
 
     def _tick(self) -> None:
         """Every few seconds, count the running jobs' elapsed time (up to their expected cost) as
-        done work, so that a long job moves the bar while it runs and the rate is the workers'."""
+        done work, so that a long job moves the bar while it runs, and redraw the ETA."""
+        logged = 0.0
         while not self._closed.wait(TICK_S):
             with self._lock:
                 now = time.time()
-                partial = sum(min(now - start, job.cost) for job, start in list(self.runner.active.values()))
-                self.bar.n = min(self.bar.total, sum(self._credited.values()) + partial)
-                self.bar.refresh()
+                self._draw(now)
+                if now - logged >= ETA_LOG_S:
+                    logged = now
+                    self.eta_log.append((now, self.eta(now), self._rate_eta()))
+
+    def eta(self, now: float) -> float:
+        """Seconds until the study ends, from what is left of it (lock held):
+        :func:`~uavris.experiments.forecast.eta_seconds` with this run's measured speed."""
+        active = list(self.runner.active.values())
+        running_ids = {id(job) for job, _ in active}
+        running = [(self._stage_of[id(job)], job.cost, now - start) for job, start in active
+                   if self._stage_of.get(id(job)) not in (None, *self._ended)]
+        stages = {}
+        for name, (deps, costs) in self._stages.items():
+            if name in self._ended:
+                continue
+            if name in self._open:
+                costs = tuple(j.cost for j in self._open[name].values() if id(j) not in running_ids)
+            stages[name] = (deps, costs)
+        return eta_seconds(stages, self._after, self.workers, self._ended, running, self._speeds)
+
+    def _rate_eta(self) -> float:
+        """tqdm's own ETA for comparison: the work left over the rate of the work so far (lock held)."""
+        elapsed = self.bar.format_dict.get("elapsed", 0.0) if hasattr(self.bar, "format_dict") else 0.0
+        if not self.bar.n or not elapsed:
+            return float("nan")
+        return (self.bar.total - self.bar.n) / (self.bar.n / elapsed)
+
+    def _draw(self, now: float) -> None:
+        """The bar's count (credited work plus the running jobs' elapsed time up to their cost,
+        never past the total, which tqdm would print as 0%) and its ETA (lock held)."""
+        partial = sum(min(now - start, job.cost) for job, start in list(self.runner.active.values()))
+        self.bar.n = min(self.bar.total, sum(self._credited.values()) + partial)
+        self.bar.postfix = f"ETA {_clock(self.eta(now))}" if self._stages else ""
+        self.bar.refresh()
 
     def priority(self, stage: str) -> float:
         """Expected seconds of the longest chain after ``stage`` (its jobs add their own cost)."""
@@ -99,6 +145,8 @@ class StudyContext:
                 self.jobs.append((stage, res))
                 if not res.ok:
                     self.failures.append(res)
+                self._open.get(stage, {}).pop(res.name, None)
+                self._speeds.add(stage, self._job_costs.get((stage, res.name), 0.0), res.end - res.start)
                 if self.bar is not None:
                     self._credit(stage, self._job_costs.get((stage, res.name), 0.0))
                     status = "done" if res.ok else f"FAILED ({res.error}); log: {res.log}"
@@ -109,6 +157,8 @@ class StudyContext:
         """Run ``stage``'s jobs at its priority; returns their results in finishing order."""
         with self._lock:
             self._job_costs.update({(stage, j.name): j.cost for j in jobs})
+            self._open.setdefault(stage, {}).update({j.name: j for j in jobs})
+            self._stage_of.update({id(j): stage for j in jobs})
             if self.bar is not None and jobs:  # every stage submits its jobs at once: now its work is known
                 known = sum(j.cost for j in jobs) + self._credited.get(stage, 0.0)
                 self.bar.total += known - self._expected.get(stage, 0.0)
@@ -132,12 +182,13 @@ class StudyContext:
         invocation's work (crediting it would make a resumed run look nearly done at once)."""
         with self._lock:
             self._arrived(rec.name)
+            self._ended.add(rec.name)
             if self.bar is not None:
                 left = self._expected.get(rec.name, 0.0) - self._credited.get(rec.name, 0.0)
                 if rec.status == "skipped":
                     self.bar.total = max(self.bar.n, self.bar.total - left)
                     self._expected[rec.name] = self._credited.get(rec.name, 0.0)
-                    self.bar.refresh()
+                    self._draw(time.time())
                 else:
                     self._credit(rec.name, left)
                 self.bar.write(stage_line(rec))
@@ -147,51 +198,38 @@ class StudyContext:
         left = self._expected.get(stage, 0.0) - self._credited.get(stage, 0.0)
         step = max(0.0, min(amount, left))
         self._credited[stage] = self._credited.get(stage, 0.0) + step
-        self.bar.update(step)
+        self._draw(time.time())
 
     def schedule(self, origin: float) -> list[dict[str, Any]]:
-        """Every job of this invocation: stage, job, worker slot, start and end (s after ``origin``)."""
+        """Every job of this invocation: stage, job, worker slot, its expected cost, start and end
+        (s after ``origin``)."""
         with self._lock:
             return [{"stage": s, "job": r.name, "worker": r.worker, "ok": r.ok,
+                     "cost": self._job_costs.get((s, r.name), 0.0),
                      "start": r.start - origin, "end": r.end - origin} for s, r in self.jobs]
 
+    def etas(self, origin: float) -> list[dict[str, float | None]]:
+        """The ETA the bar showed, once a minute: when (s after ``origin``), ours and tqdm's
+        rate-based one (s; None before the rate is known)."""
+        with self._lock:
+            return [{"t": t - origin, "eta": ours, "rate_eta": None if rate != rate else rate}
+                    for t, ours, rate in self.eta_log]
+
     def close(self) -> None:
+        """Stop the runner; a study whose every stage ended leaves its bar at 100%."""
         self._closed.set()
         self.runner.release()
         self.runner.close()
+        if self.bar is not None:
+            with self._lock:
+                if self._stages and self._ended >= set(self._stages):
+                    self.bar.n, self.bar.postfix = self.bar.total, ""
+                    self.bar.refresh()
 
 
-def expected_schedule(pipeline: Pipeline, workers: int) -> tuple[float, dict[str, tuple[float, float]]]:
-    """The study's expected wall clock on ``workers`` workers, from the cost model (:mod:`.costs`):
-    an event-driven replay of the job runner. A stage's jobs are queued when its inputs are
-    done; a free worker takes the queued job of the longest remaining chain (as
-    :class:`StudyContext` orders them). Returns the expected seconds and, per stage, its
-    expected (start, end). An estimate: the unit costs were measured on one machine."""
-    import heapq
+def _clock(seconds: float) -> str:
+    minutes, secs = divmod(int(round(max(0.0, seconds))), 60)
+    return f"{minutes // 60}:{minutes % 60:02d}:{secs:02d}" if minutes >= 60 else f"{minutes:02d}:{secs:02d}"
 
-    after = pipeline.downstream(workers)
-    left = {name: max(1, len(st.costs)) for name, st in pipeline.stages.items()}
-    spans: dict[str, list[float]] = {}
-    done: set[str] = set()
-    queued: list[tuple[float, int, str, float]] = []
-    running: list[tuple[float, str]] = []
-    t, free, seq = 0.0, max(1, workers), 0
-    while len(done) < len(pipeline.stages):
-        for name, st in pipeline.stages.items():
-            if name not in spans and all(d in done for d in st.deps):
-                spans[name] = [math.inf, t]
-                for cost in st.costs or (0.0,):
-                    heapq.heappush(queued, (-(after[name] + cost), seq, name, cost))
-                    seq += 1
-        while free and queued:
-            _, _, name, cost = heapq.heappop(queued)
-            spans[name][0] = min(spans[name][0], t)
-            heapq.heappush(running, (t + cost, name))
-            free -= 1
-        t, name = heapq.heappop(running)
-        free += 1
-        left[name] -= 1
-        if not left[name]:
-            done.add(name)
-            spans[name][1] = t
-    return t, {name: (a, b) for name, (a, b) in spans.items()}
+
+__all__ = ["StudyContext", "stage_line"]
