@@ -372,6 +372,24 @@ def test_ray_backend_gives_the_same_numbers_as_the_process_pool(smoke_run, tmp_p
     assert res.value["final_eval"] == read_json(local_dir / "done.json")["final_eval"]
 
 
+@pytest.mark.slow
+def test_reproduce_on_ray_gives_the_process_pools_numbers(smoke_run, tmp_path):
+    """``reproduce --backend ray`` on a local Ray instance with two workers: a whole track
+    (experts in parallel, the DT chain, evaluations), every stage's result the same as the
+    local pool's in the smoke run (stages are keyed by their configuration: same keys)."""
+    pytest.importorskip("ray")
+    out, _, _ = smoke_run
+    ray_out = tmp_path / "ray"
+    reproduce(dataclasses.replace(RC, track="strong"), ray_out, workers=2, backend="ray", progress=False)
+    ray_stages = sorted(p.parent.name for p in (ray_out / "stages").glob("*/stage.json"))
+    assert len(ray_stages) >= 8 and all(name.startswith("strong-") for name in ray_stages)
+    for name in ray_stages:
+        assert (read_json(ray_out / "stages" / name / "stage.json")["result"]
+                == read_json(out / "stages" / name / "stage.json")["result"]), name
+    schedule = read_json(ray_out / "schedule.json")
+    assert len(schedule["jobs"]) > len(ray_stages)  # more than one job a stage went through Ray
+
+
 def test_downstream_is_the_longest_chain_after_each_stage(tmp_path):
     noop = lambda d, deps: {}  # noqa: E731
     p = Pipeline(tmp_path, [Stage("a", {}, noop, costs=(10.0,)), Stage("b", {}, noop, ("a",), costs=(4.0, 4.0)),

@@ -4,10 +4,12 @@ Lives here: :class:`Job`, :class:`JobResult`, :class:`JobRunner`, :func:`run_job
 :func:`configure_threads`. Not here: what the jobs do (:mod:`.train_expert`,
 :mod:`.study`) and the stages that submit them (:mod:`.stages`, :mod:`.reproduce`).
 
-Each job runs in its own process (spawned, so torch and numpy start clean) with one thread
-in every thread pool (:func:`configure_threads`), writes its own log file, and is retried
-by nobody: a failed job is reported and the others go on. The caller decides the exit
-code from the returned failures.
+Each job runs in a worker process (spawned, so torch and numpy start clean) with one thread
+in every thread pool (:func:`configure_threads`) and writes its own log file. A job that
+raises is reported and the others go on; the caller decides the exit code from the
+returned failures. A worker process that dies (killed by the OOM killer, say) breaks the
+local pool and every job running in it: those jobs run once more, each in a process of its
+own, and only a job whose process dies again is reported failed ("worker died").
 
 Backends: ``local`` (``concurrent.futures`` process pool, the default) and ``ray``
 (``pip install 'uavris[ray]'``): without an address a local Ray instance with ``workers``
@@ -27,6 +29,7 @@ import threading
 import time
 import traceback
 from concurrent.futures import Future, ProcessPoolExecutor, as_completed
+from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Literal, get_args
@@ -204,16 +207,45 @@ class JobRunner:
             assert self._pool is not None and outer is not None
             started = time.time()
             self.active[id(job)] = (job, started)
-            self._pool.submit(_run_logged, job).add_done_callback(
-                lambda inner, job=job, outer=outer, slot=slot, started=started:
-                self._finished(inner, job, outer, slot, started))
+            self._submit(job, outer, slot, started, self._pool, alone=False)
+
+    def _submit(self, job: Job, outer: Future[JobResult], slot: int, started: float, pool: ProcessPoolExecutor,
+                alone: bool) -> None:
+        """``job`` on ``pool`` (lock held); a pool broken meanwhile is replaced first."""
+        try:
+            inner = pool.submit(_run_logged, job)
+        except BrokenProcessPool:
+            pool = self._replace_pool(pool)
+            inner = pool.submit(_run_logged, job)
+        inner.add_done_callback(lambda inner: self._finished(inner, job, outer, slot, started, pool, alone))
+
+    def _replace_pool(self, broken: ProcessPoolExecutor) -> ProcessPoolExecutor:
+        """A fresh shared pool in place of ``broken`` (lock held; a no-op if already replaced)."""
+        if broken is self._pool:
+            broken.shutdown(wait=False)
+            self._pool = ProcessPoolExecutor(max_workers=self.workers, mp_context=mp.get_context("spawn"))
+        assert self._pool is not None
+        return self._pool
 
     def _finished(self, inner: Future[JobResult], job: Job, outer: Future[JobResult], slot: int,
-                  started: float) -> None:
+                  started: float, pool: ProcessPoolExecutor, alone: bool) -> None:
         try:
             res = inner.result()
-        except BaseException as e:  # noqa: BLE001 - a worker that died (e.g. killed by the OOM killer)
+        except BrokenProcessPool as e:  # a worker died (the OOM killer, a crash in native code)
+            with self._lock:
+                if not alone:
+                    # The pool fails every job it was running, and cannot say whose worker died: run
+                    # this one again in a pool of its own, where it can neither take a neighbour
+                    # down nor be taken down by one. Dying there too, it failed.
+                    self._replace_pool(pool)
+                    solo = ProcessPoolExecutor(max_workers=1, mp_context=mp.get_context("spawn"))
+                    self._submit(job, outer, slot, started, solo, alone=True)
+                    return
             res = JobResult(job.name, False, None, f"worker died: {type(e).__name__}: {e}", job.log)
+        except BaseException as e:  # noqa: BLE001 - whatever else went wrong with the process
+            res = JobResult(job.name, False, None, f"worker died: {type(e).__name__}: {e}", job.log)
+        if alone:
+            pool.shutdown(wait=False)
         res = dataclasses.replace(res, worker=slot, start=started, end=time.time())
         with self._lock:
             self.active.pop(id(job), None)

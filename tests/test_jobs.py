@@ -1,0 +1,55 @@
+"""The job runner when a worker process dies (issue 24, item 8): the job that killed its
+worker is reported failed with its log, the jobs beside it finish with their own results,
+and the runner goes on. Jobs are standard-library functions, which every worker (a spawned
+process, a Ray worker) can import."""
+
+from __future__ import annotations
+
+import math
+import os
+import threading
+import time
+from pathlib import Path
+
+import pytest
+
+from uavris.experiments.jobs import Job, JobRunner
+
+HANG_S = 120.0  # the six jobs take seconds (worker start-up included)
+
+
+def _jobs(tmp_path: Path) -> list[Job]:
+    return [Job("nap", time.sleep, (2.0,), tmp_path / "nap.log", 5.0),
+            Job("dies", os._exit, (3,), tmp_path / "dies.log", 4.0),
+            *(Job(f"factorial-{n}", math.factorial, (n,), tmp_path / f"f{n}.log", 1.0) for n in range(3, 7))]
+
+
+def _check(results, tmp_path: Path) -> None:
+    by_name = {r.name: r for r in results}
+    assert set(by_name) == {"nap", "dies", "factorial-3", "factorial-4", "factorial-5", "factorial-6"}
+    dead = by_name.pop("dies")
+    assert not dead.ok and "died" in dead.error and dead.log == tmp_path / "dies.log"
+    assert all(r.ok for r in by_name.values()), [(r.name, r.error) for r in by_name.values()]
+    assert by_name["nap"].value is None
+    assert [by_name[f"factorial-{n}"].value for n in range(3, 7)] == [6, 24, 120, 720]
+
+
+def test_a_dying_worker_fails_its_own_job_and_no_other(tmp_path: Path):
+    """On the local pool a dying worker breaks the pool for every job running in it; before the
+    fix the runner then hung for ever (its callback raised, no result ever came)."""
+    runner, box = JobRunner(2, "local"), {}
+    caller = threading.Thread(target=lambda: box.update(results=runner.run(_jobs(tmp_path))), daemon=True)
+    caller.start()
+    caller.join(HANG_S)
+    assert not caller.is_alive(), f"the runner hung: no result after {HANG_S:.0f} s"
+    with runner:
+        _check(box["results"], tmp_path)
+        [again] = runner.run([Job("after", math.factorial, (5,), tmp_path / "after.log", 1.0)])
+        assert again.ok and again.value == 120  # the runner is still usable
+
+
+@pytest.mark.slow
+def test_a_dying_ray_worker_fails_its_own_job_and_no_other(tmp_path: Path):
+    pytest.importorskip("ray")
+    with JobRunner(2, "ray") as runner:
+        _check(runner.run(_jobs(tmp_path)), tmp_path)
