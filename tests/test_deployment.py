@@ -66,6 +66,17 @@ def test_minari_recovers_the_first_layout(layouts_dataset, monkeypatch):
     first = next(native.iterate_episodes())
     obs, _ = env.reset(seed=trajs[0].seed)
     np.testing.assert_array_equal(obs, first.observations[0])
+    # the whole episode replays in the recovered hall: every observation, reward and end (the
+    # dataset's actions are the 6 motion entries; the environment takes full actions, the
+    # phases being the optimiser's, as the dataset's docstring says)
+    from uavris.env.wrappers import optimised_action
+
+    for t, motion in enumerate(first.actions):
+        action = optimised_action(env.unwrapped.sim, motion[None])[0] if motion.size == 6 else motion
+        obs, reward, terminated, truncated, _ = env.step(action)
+        np.testing.assert_array_equal(obs, first.observations[t + 1])
+        assert reward == first.rewards[t] and terminated == first.terminations[t] and truncated == first.truncations[t]
+    assert terminated or truncated
 
 
 def test_checkpoint_round_trip_keeps_the_observation(layouts_dataset, tmp_path):
