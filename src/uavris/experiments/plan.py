@@ -54,12 +54,17 @@ def check_grid(system: SystemConfig, step: float) -> int:
     would run for days and exhaust memory), is one :class:`ConfigError` line."""
     if not (np.isfinite(step) and step > 0):
         raise ConfigError(f"--grid-step must be a distance > 0 (m), got {step!r}")
-    nx, ny = (max(2, int(round(system.room[i] / step)) + 1) for i in range(2))
+    nx, ny = _grid_points(system, step)
     if nx * ny > MAX_MAP_POSES:
         raise ConfigError(f"--grid-step {step:g} m makes a {nx} x {ny} grid ({nx * ny:,} poses) over the "
                           f"{system.room[0]:g} x {system.room[1]:g} m floor; at most {MAX_MAP_POSES:,} "
                           f"(a step of at least {_min_step(system):.2f} m)")
     return nx * ny
+
+
+def _grid_points(system: SystemConfig, step: float) -> tuple[int, int]:
+    """Points of the rate map's grid along x and y: the floor's ends included, at least two."""
+    return max(2, int(round(system.room[0] / step)) + 1), max(2, int(round(system.room[1] / step)) + 1)
 
 
 def _min_step(system: SystemConfig) -> float:
@@ -72,8 +77,8 @@ def rate_map(system: SystemConfig, altitude: float, step: float, progress: bool 
     """``(x, y, R)``: the expected sum rate (level RIS, optimised phases) on a grid of spacing
     ``step`` over the floor plan at ``altitude``; NaN where the UAV may not be (a safety ball)."""
     check_grid(system, step)
-    xs = np.linspace(0.0, system.room[0], max(2, int(round(system.room[0] / step)) + 1))
-    ys = np.linspace(0.0, system.room[1], max(2, int(round(system.room[1] / step)) + 1))
+    nx, ny = _grid_points(system, step)
+    xs, ys = np.linspace(0.0, system.room[0], nx), np.linspace(0.0, system.room[1], ny)
     grid = np.stack(np.meshgrid(xs, ys, indexing="ij"), axis=-1).reshape(-1, 2)
     poses = np.column_stack([grid, np.full(len(grid), altitude)])
     ok = np.flatnonzero(feasible(system, poses))

@@ -58,7 +58,6 @@ class StudyContext:
         self._stages: dict[str, tuple[tuple[str, ...], tuple[float, ...]]] = {}
         self._ended: set[str] = set()
         self._open: dict[str, dict[str, Job]] = {}  # per stage, its submitted jobs not finished yet
-        self._stage_of: dict[int, str] = {}  # id(job) -> stage
         self._speeds = Speeds()  # how long this run's finished jobs took against their expected cost
         self.eta_log: list[tuple[float, float, float]] = []  # (time.time(), our ETA, tqdm's rate ETA) in s
         self._closed = threading.Event()
@@ -98,18 +97,18 @@ class StudyContext:
         while not self._closed.wait(TICK_S):
             with self._lock:
                 now = time.time()
-                self._draw(now)
+                eta = self._draw(now)
                 if now - logged >= ETA_LOG_S:
                     logged = now
-                    self.eta_log.append((now, self.eta(now), self._rate_eta()))
+                    self.eta_log.append((now, eta, self._rate_eta()))
 
     def eta(self, now: float) -> float:
         """Seconds until the study ends, from what is left of it (lock held):
         :func:`~uavris.experiments.forecast.eta_seconds` with this run's measured speed."""
         active = list(self.runner.active.values())
         running_ids = {id(job) for job, _ in active}
-        running = [(self._stage_of[id(job)], job.cost, now - start) for job, start in active
-                   if self._stage_of.get(id(job)) not in (None, *self._ended)]
+        stage_of = {id(j): name for name, jobs in self._open.items() if name not in self._ended for j in jobs.values()}
+        running = [(stage_of[id(job)], job.cost, now - start) for job, start in active if id(job) in stage_of]
         stages = {}
         for name, (deps, costs) in self._stages.items():
             if name in self._ended:
@@ -126,13 +125,15 @@ class StudyContext:
             return float("nan")
         return (self.bar.total - self.bar.n) / (self.bar.n / elapsed)
 
-    def _draw(self, now: float) -> None:
+    def _draw(self, now: float) -> float:
         """The bar's count (credited work plus the running jobs' elapsed time up to their cost,
-        never past the total, which tqdm would print as 0%) and its ETA (lock held)."""
+        never past the total, which tqdm would print as 0%) and its ETA, which it returns (lock held)."""
         partial = sum(min(now - start, job.cost) for job, start in list(self.runner.active.values()))
         self.bar.n = min(self.bar.total, sum(self._credited.values()) + partial)
-        self.bar.postfix = f"ETA {_clock(self.eta(now))}" if self._stages else ""
+        eta = self.eta(now) if self._stages else 0.0
+        self.bar.postfix = f"ETA {_clock(eta)}" if self._stages else ""
         self.bar.refresh()
+        return eta
 
     def priority(self, stage: str) -> float:
         """Expected seconds of the longest chain after ``stage`` (its jobs add their own cost)."""
@@ -158,7 +159,6 @@ class StudyContext:
         with self._lock:
             self._job_costs.update({(stage, j.name): j.cost for j in jobs})
             self._open.setdefault(stage, {}).update({j.name: j for j in jobs})
-            self._stage_of.update({id(j): stage for j in jobs})
             if self.bar is not None and jobs:  # every stage submits its jobs at once: now its work is known
                 known = sum(j.cost for j in jobs) + self._credited.get(stage, 0.0)
                 self.bar.total += known - self._expected.get(stage, 0.0)
