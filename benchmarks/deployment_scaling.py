@@ -40,10 +40,13 @@ def main() -> None:
     args = parser.parse_args()
 
     from uavris.agents.references import HOVER_OPTIMIZER, ORACLE
-    from uavris.experiments.report.deployment import NEAREST, layout_scores, over_layouts
-    from uavris.experiments.reproduce import ReproduceConfig, build_pipeline, reproduce
-    from uavris.experiments.scheduling import StudyContext
+    from uavris.experiments.engine.scheduling import StudyContext
+    from uavris.experiments.study.config import ReproduceConfig
+    from uavris.experiments.study.pipeline import build_pipeline
+    from uavris.experiments.study.report.deployment import NEAREST, layout_scores
+    from uavris.experiments.study.reproduce import reproduce
     from uavris.io import read_json
+    from uavris.stats import over_units
 
     points = sorted(set(args.points))
     rc = ReproduceConfig(args.preset, track="deployment", train_layouts=points[-1], unseen_layouts=args.unseen,
@@ -58,13 +61,13 @@ def main() -> None:
     results = {w.name: read_json(pipeline.directory(track.stage(f"evaluate-{w.name}")) / "stage.json")["result"]
                for w in unseen}
     scores = layout_scores(results)
-    print(f"deployment track, preset {args.preset}: {len(unseen)} unseen layouts x {rc.n_eval} episodes; "
+    print(f"deployment track, preset {args.preset}: {len(unseen)} unseen layouts x {rc.eval_episodes} episodes; "
           f"machine: {cpu_model()}, {args.workers} workers; wall clock {wall / 60:.1f} min")
     print(f"{'training layouts':>16} | {'zero-shot DT / oracle':>28} | {'DT / nearest expert':>19} | "
           f"{'DT / hover, optimiser':>21}")
     for n in points:
         key = "dt-zero-shot" if n == points[-1] else f"dt-zero-shot-n{n}"
-        frac = over_layouts([scores[lay][key] / scores[lay][ORACLE] for lay in scores])
+        frac = over_units([scores[lay][key] / scores[lay][ORACLE] for lay in scores])
         vs_near = sum(scores[lay][key] for lay in scores) / sum(scores[lay][NEAREST] for lay in scores)
         vs_hover = sum(scores[lay][key] for lay in scores) / sum(scores[lay][HOVER_OPTIMIZER] for lay in scores)
         print(f"{n:>16} | {frac['mean']:>8.1%} [{frac['ci_low']:.1%}, {frac['ci_high']:.1%}] | {vs_near:>18.3f}x | "

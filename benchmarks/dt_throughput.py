@@ -49,7 +49,8 @@ import numpy as np  # noqa: E402
 import torch  # noqa: E402
 from _machine import cpu_model, pin_to_one_core  # noqa: E402  (benchmarks/_machine.py)
 
-from uavris.agents.dt.model import ATTENTION_LAYOUTS, DecisionTransformer, DTConfig, masked_action_loss  # noqa: E402
+from uavris.agents.dt.config import ATTENTION_LAYOUTS, DTConfig  # noqa: E402
+from uavris.agents.dt.model import DecisionTransformer, masked_action_loss  # noqa: E402
 from uavris.agents.dt.policy import DTBatchPolicy  # noqa: E402
 from uavris.agents.dt.trajectories import TrainingWindows, Trajectory, record_episodes  # noqa: E402
 from uavris.config import SystemConfig  # noqa: E402

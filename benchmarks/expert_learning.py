@@ -39,7 +39,7 @@ from uavris.agents.evaluation import evaluate  # noqa: E402
 from uavris.agents.experts.imitation import ImitationConfig  # noqa: E402
 from uavris.agents.references import reference_policy  # noqa: E402
 from uavris.config import SystemConfig  # noqa: E402
-from uavris.experiments.train_expert import preset_config, train  # noqa: E402
+from uavris.experiments.training.train_expert import TrainConfig, train  # noqa: E402
 from uavris.io import read_json  # noqa: E402
 from uavris.presets import EVAL_SEED  # noqa: E402
 
@@ -77,13 +77,15 @@ def main(argv: list[str] | None = None) -> int:
             rows.append((name, wall, s, baseline))
 
         for steps in args.ppo_steps:
-            run(f"paper track: PPO, {steps:,} env steps", preset_config("ppo", "fig2", 0, "quick", total_steps=steps,
+            run(f"paper track: PPO, {steps:,} env steps", TrainConfig(algo="ppo", scenario="fig2", seed=0,
+                                                                      preset="quick", total_steps=steps,
                                                                          eval_episodes=args.episodes), "hover")
         run("strong track: imitation of the oracle (6 rounds x 32 episodes)",
-            preset_config("ppo", "fig2", 0, "quick", total_steps=0, eval_episodes=args.episodes,
+            TrainConfig(algo="ppo", scenario="fig2", seed=0, preset="quick", total_steps=0, eval_episodes=args.episodes,
                           phase_control="optimizer", imitation=ImitationConfig()), "hover-optimizer")
         run(f"strong track alternative: hybrid PPO from scratch, {args.hybrid_steps:,} env steps",
-            preset_config("ppo", "fig2", 0, "quick", total_steps=args.hybrid_steps, eval_episodes=args.episodes,
+            TrainConfig(algo="ppo", scenario="fig2", seed=0, preset="quick", total_steps=args.hybrid_steps,
+                        eval_episodes=args.episodes,
                           phase_control="optimizer"), "hover-optimizer")
     print("| policy | training (s) | average sum rate | 95% CI | vs its baseline | vs random | fraction of oracle |")
     print("|---|---:|---:|---|---|---|---:|")

@@ -43,8 +43,8 @@ from uavris.agents.experts import ALGORITHMS, default_hyperparams  # noqa: E402
 from uavris.agents.experts.sb3 import build_model  # noqa: E402
 from uavris.agents.experts.vec_env import UavRisVecEnv  # noqa: E402
 from uavris.config import SystemConfig  # noqa: E402
-from uavris.experiments.pretrain import pretrain_config  # noqa: E402
-from uavris.presets import PRETRAIN, TRAIN_STEPS  # noqa: E402
+from uavris.experiments.training.pretrain import PretrainConfig  # noqa: E402
+from uavris.presets import PRETRAIN, TRAIN  # noqa: E402
 
 SEEDS_PER_ALGO = 5
 SCENARIO_EXPERTS = 10  # 8 training + 2 unseen scenarios, DDPG
@@ -76,7 +76,7 @@ def seconds_per_pretrain_step(steps: int) -> float:
     """One pre-training step exactly as ``uavris pretrain-dt --preset paper`` takes it (the
     pipeline's own optimiser and step, windows cut from random 100-slot episodes)."""
     system = SystemConfig()
-    cfg = pretrain_config("<benchmark>", "paper")
+    cfg = PretrainConfig(dataset="<benchmark>", preset="paper")
     rng = np.random.default_rng(0)
     trajs = [Trajectory(rng.standard_normal((system.horizon + 1, system.observation_dim)).astype(np.float32),
                         rng.uniform(-1, 1, (system.horizon, system.action_dim)).astype(np.float32),
@@ -104,7 +104,7 @@ def main() -> None:
     torch.set_num_threads(1)
     print(f"# expected wall clock of `reproduce --preset paper`\n\n- cpu: {cpu_model()}; {pinning}; torch threads 1"
           f"\n- command: {' '.join([sys.executable] + sys.argv)}\n")
-    total_steps = TRAIN_STEPS["paper"]
+    total_steps = TRAIN["paper"]["total_steps"]
     print("| part | measured cost | runs x work | core-hours |\n|---|---:|---|---:|")
     jobs_h: list[float] = []
     for algo in ALGORITHMS:

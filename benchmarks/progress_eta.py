@@ -1,7 +1,7 @@
 """How far the progress bar's ETA of a finished `uavris reproduce` run was from the truth.
 
 ``reproduce`` records, once a minute, the ETA its bar showed (the replay of what is left,
-:mod:`uavris.experiments.forecast`) and tqdm's own rate-based ETA (the work left over the
+:mod:`uavris.experiments.engine.forecast`) and tqdm's own rate-based ETA (the work left over the
 rate so far) in ``OUT/schedule.json``; the run's true end is its last job's. This prints,
 per sample after ``--after`` minutes, both ETAs against the truth, and the worst factor of
 each (max of ETA/truth and truth/ETA): ours against tqdm's, measured in the same run.

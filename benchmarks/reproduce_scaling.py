@@ -4,7 +4,7 @@ Two measurements, each configuration in a fresh temporary folder so nothing is s
 
 1. **Training jobs**, the part of the study that scales: ``--jobs`` DDPG runs (quick-preset
    hyperparameters, ``--steps`` env steps each, seeds 0..jobs-1, scenario ``fig2``) sent
-   through ``uavris.experiments.jobs.run_jobs``, the dispatcher the pipeline uses for
+   through ``uavris.experiments.engine.jobs.run_jobs``, the dispatcher the pipeline uses for
    algorithm x seed and scenario-expert jobs. Every job is minutes long in ``quick`` and
    hours in ``paper``, so this is the ratio that predicts the big presets.
 2. **End to end**, ``reproduce --preset smoke``: seconds-long jobs, so it measures the
@@ -36,13 +36,14 @@ from _machine import cpu_model  # noqa: E402  (benchmarks/_machine.py)
 
 def run_training_jobs(backend: str, workers: int, jobs: int, steps: int) -> tuple[float, list[float]]:
     """(wall clock s, final evaluation means in seed order)."""
-    from uavris.experiments.jobs import Job, run_jobs
-    from uavris.experiments.train_expert import preset_config, train_job
+    from uavris.experiments.engine.jobs import Job, run_jobs
+    from uavris.experiments.training.train_expert import TrainConfig, train_job
 
     with tempfile.TemporaryDirectory(prefix=f"uavris-jobs-{backend}-{workers}-") as tmp:
         out = Path(tmp)
         todo = [Job(f"ddpg-s{s}", train_job,
-                    (preset_config("ddpg", "fig2", s, "quick", total_steps=steps, eval_every=steps,
+                    (TrainConfig(algo="ddpg", scenario="fig2", seed=s, preset="quick", total_steps=steps,
+                                 eval_every=steps,
                                    checkpoint_every=steps, eval_episodes=8).to_dict(), str(out / f"s{s}")),
                     out / "logs" / f"s{s}.log") for s in range(jobs)]
         t0 = time.perf_counter()
@@ -56,7 +57,8 @@ def run_training_jobs(backend: str, workers: int, jobs: int, steps: int) -> tupl
 
 
 def run_smoke(backend: str, workers: int) -> float:
-    from uavris.experiments.reproduce import ReproduceConfig, reproduce
+    from uavris.experiments.study.config import ReproduceConfig
+    from uavris.experiments.study.reproduce import reproduce
 
     with tempfile.TemporaryDirectory(prefix=f"uavris-smoke-{backend}-{workers}-") as out:
         t0 = time.perf_counter()

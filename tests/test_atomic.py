@@ -46,5 +46,5 @@ def test_run_guard_refuses_a_file_in_place_of_the_run_directory(tmp_path):
     path.write_text("keep me")
     for resume, force in ((False, False), (True, False), (False, True)):
         with pytest.raises(UavrisError, match="exists and is not a directory"):
-            prepare(path, "config.yaml", lambda p: p.write_text("x"), lambda p: True, resume=resume, force=force)
+            prepare(path, {"x": 1}, resume=resume, force=force)
     assert path.read_text() == "keep me"

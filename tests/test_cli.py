@@ -253,13 +253,13 @@ def test_config_file_unknown_field(tmp_path: Path, capsys: pytest.CaptureFixture
 def test_config_file_then_flags(tmp_path: Path) -> None:
     """A partial YAML fills from the preset; flags override the file; the result is validated."""
     from uavris.cli.training import train_defaults
-    from uavris.experiments.train_expert import preset_config
+    from uavris.experiments.training.train_expert import TrainConfig
 
     cfg = tmp_path / "c.yaml"
     cfg.write_text("algo: ppo\npreset: smoke\ntotal_steps: 320\nhyperparams:\n  learning_rate: 0.001\n"
                    "system:\n  noise_dbm: -90\n")
     got = train_defaults(["--config", str(cfg), "--seed", "3"])
-    want = preset_config("ppo", "fig2", 3, "smoke")
+    want = TrainConfig(algo="ppo", scenario="fig2", seed=3, preset="smoke")
     assert got.total_steps == 320 and got.seed == 3 and got.hyperparams.learning_rate == 0.001
     assert got.system.noise_dbm == -90 and got.system.v_max == want.system.v_max
     assert got.hyperparams.n_steps == want.hyperparams.n_steps
@@ -301,7 +301,7 @@ def test_evaluate_writes_what_it_prints(tmp_path: Path, capsys: pytest.CaptureFi
 
 def test_demo_prints_every_policy(capsys: pytest.CaptureFixture[str]) -> None:
     from uavris.agents.references import REFERENCES
-    from uavris.demo import DEMO_POLICIES
+    from uavris.experiments.tools.demo import DEMO_POLICIES
 
     assert main(["demo", "--episodes", "2"]) == 0
     out = capsys.readouterr().out
@@ -312,9 +312,9 @@ def test_plot_overlays_runs_of_every_kind(tmp_path: Path, capsys: pytest.Capture
     """`uavris plot` reads the logs each kind of run writes and draws one panel per kind (PNG and PDF)."""
     import matplotlib.image as mpimg
 
-    from uavris.experiments.finetune import ROUND_HEADER
-    from uavris.experiments.pretrain import LOG_HEADER
-    from uavris.experiments.train_expert import EPISODE_HEADER, EVAL_HEADER
+    from uavris.experiments.training.finetune import ROUND_HEADER
+    from uavris.experiments.training.pretrain import LOG_HEADER
+    from uavris.experiments.training.train_expert import EPISODE_HEADER, EVAL_HEADER
     from uavris.io import write_csv
 
     runs = []

@@ -8,8 +8,8 @@ from types import SimpleNamespace
 
 import pytest
 
-from uavris.experiments import costs
-from uavris.experiments.costs import (
+from uavris.experiments.engine import costs
+from uavris.experiments.engine.costs import (
     dataset_cost,
     demonstration_cost,
     evaluate_cost,

@@ -13,7 +13,7 @@ from uavris.agents.references import reference_policy
 from uavris.config import SystemConfig
 from uavris.env.wrappers import optimised_action
 from uavris.errors import ConfigError, DatasetError
-from uavris.experiments.demonstrations import DemonstrationConfig, collect_demonstrations
+from uavris.experiments.training.demonstrations import DemonstrationConfig, collect_demonstrations
 
 SHORT_SEEN = SystemConfig(observe_devices=True, horizon=16)
 MIXED = DemonstrationConfig(halls=3, episodes=2, quality="mixed", system=SHORT_SEEN)

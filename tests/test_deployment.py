@@ -19,9 +19,9 @@ from uavris.agents.evaluation import evaluate
 from uavris.agents.references import reference_policy
 from uavris.cli import main as cli_main
 from uavris.config import SystemConfig
-from uavris.experiments.dt_runs import load_dt_policy
-from uavris.experiments.finetune import finetune, finetune_config
-from uavris.experiments.pretrain import pretrain, pretrain_config
+from uavris.experiments.training.dt_runs import load_dt_policy
+from uavris.experiments.training.finetune import FinetuneConfig, finetune
+from uavris.experiments.training.pretrain import PretrainConfig, pretrain
 from uavris.layouts import LayoutGenerator, write_layout
 
 BASE = SystemConfig(observe_devices=True, horizon=12)
@@ -81,7 +81,7 @@ def test_minari_recovers_the_first_layout(layouts_dataset, monkeypatch):
 
 def test_checkpoint_round_trip_keeps_the_observation(layouts_dataset, tmp_path):
     _, path, _ = layouts_dataset
-    pre = pretrain(pretrain_config(path, "smoke"), tmp_path / "pre", progress=False)
+    pre = pretrain(PretrainConfig(dataset=path, preset="smoke"), tmp_path / "pre", progress=False)
     model, meta = load_dt(pre)
     assert model.cfg.state_dim == BASE.observation_dim == 170 and model.cfg.act_dim == 6
     policy, system, scenario = load_dt_policy(pre)
@@ -91,9 +91,11 @@ def test_checkpoint_round_trip_keeps_the_observation(layouts_dataset, tmp_path):
     a = evaluate(policy, *UNSEEN, 2, 5).episode_return
     b = evaluate(again, *UNSEEN, 2, 5).episode_return
     np.testing.assert_array_equal(a, b)
-    bc = pretrain(pretrain_config(path, "smoke", condition_on_return=False), tmp_path / "bc", progress=False)
+    bc = pretrain(PretrainConfig(dataset=path, preset="smoke", condition_on_return=False), tmp_path / "bc",
+                  progress=False)
     assert load_dt(bc)[0].cfg.condition_on_return is False
-    only = pretrain(pretrain_config(path, "smoke", scenarios=("layout-train-1",)), tmp_path / "one", progress=False)
+    only = pretrain(PretrainConfig(dataset=path, preset="smoke", scenarios=("layout-train-1",)), tmp_path / "one",
+                    progress=False)
     assert json.loads((only / "model.json").read_text())["scenarios"] == ["layout-train-1"]
 
 
@@ -102,9 +104,9 @@ def test_finetuning_in_an_unseen_layout_resumes_and_matches_evaluate(layouts_dat
     one, and `uavris evaluate` of the same checkpoints in the same layout and episodes gives
     the scores its rounds recorded."""
     _, path, _ = layouts_dataset
-    pre = pretrain(pretrain_config(path, "smoke"), tmp_path / "pre", progress=False)
+    pre = pretrain(PretrainConfig(dataset=path, preset="smoke"), tmp_path / "pre", progress=False)
     system, where = UNSEEN
-    cfg = finetune_config(pre, where.name, "smoke", rounds=2, system=system, start=where.start)
+    cfg = FinetuneConfig(model=pre, scenario=where.name, preset="smoke", rounds=2, system=system, start=where.start)
     with pytest.raises(KeyboardInterrupt):
         finetune(cfg, tmp_path / "killed", progress=False, interrupt_after_round=1)
     finetune(cfg, tmp_path / "killed", resume=True, progress=False)
@@ -181,7 +183,7 @@ def test_system_users_on_the_command_line_give_a_hall(tmp_path, capsys):
 
 def test_a_dt_in_a_hall_with_another_number_of_devices_is_one_line(layouts_dataset, tmp_path, capsys):
     _, path, _ = layouts_dataset
-    pre = pretrain(pretrain_config(path, "smoke"), tmp_path / "pre", progress=False)
+    pre = pretrain(PretrainConfig(dataset=path, preset="smoke"), tmp_path / "pre", progress=False)
     hall = _bad_file(tmp_path, "devices: [[5, 5, 1], [20, 5, 1], [35, 5, 1], [5, 35, 1], [35, 35, 1]]\n")
     before = _tree(tmp_path)
     assert cli_main(["evaluate", str(pre), "--layout", str(hall), "--episodes", "1"]) == 2

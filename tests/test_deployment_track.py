@@ -10,9 +10,11 @@ import numpy as np
 import pytest
 
 from uavris.agents.dt.dataset import load_dataset
-from uavris.experiments.reproduce import ReproduceConfig, build_pipeline, reproduce
-from uavris.experiments.scheduling import StudyContext
-from uavris.experiments.study import TRACK_SPECS, pretraining_stages, stage_policy
+from uavris.experiments.engine.scheduling import StudyContext
+from uavris.experiments.study.config import ReproduceConfig
+from uavris.experiments.study.pipeline import build_pipeline
+from uavris.experiments.study.reproduce import reproduce
+from uavris.experiments.study.tracks import TRACK_SPECS, pretraining_stages, stage_policy
 from uavris.io import read_json
 from uavris.layouts import LayoutGenerator, layout_distance
 

@@ -8,8 +8,9 @@ import pytest
 import torch
 
 from uavris.agents.dt.checkpoint import load_dt, save_dt
+from uavris.agents.dt.config import DTConfig
 from uavris.agents.dt.encoders import pooled_over_devices
-from uavris.agents.dt.model import DecisionTransformer, DTConfig
+from uavris.agents.dt.model import DecisionTransformer
 from uavris.agents.references import reference_policy
 from uavris.config import SystemConfig
 from uavris.env import observation_layout

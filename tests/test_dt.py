@@ -11,15 +11,16 @@ import torch
 
 from tests.conftest import SHORT
 from uavris.agents.dt.checkpoint import load_dt, save_dt
+from uavris.agents.dt.config import DTConfig
 from uavris.agents.dt.dataset import load_dataset, write_dataset
-from uavris.agents.dt.model import DecisionTransformer, DTConfig, masked_action_loss
+from uavris.agents.dt.model import DecisionTransformer, masked_action_loss
 from uavris.agents.dt.policy import DTBatchPolicy
 from uavris.agents.dt.trajectories import TrainingWindows, Trajectory, record_episodes, returns_to_go, select_elites
 from uavris.agents.evaluation import evaluate
 from uavris.cli import main as cli_main
 from uavris.errors import CheckpointError, DatasetError, UavrisError
-from uavris.experiments.finetune import finetune, finetune_config
-from uavris.experiments.pretrain import pretrain, pretrain_config
+from uavris.experiments.training.finetune import FinetuneConfig, finetune
+from uavris.experiments.training.pretrain import PretrainConfig, pretrain
 
 torch.set_num_threads(1)
 
@@ -264,7 +265,7 @@ def _weights(run_dir):
 
 
 def test_pretrain_resume_continues_to_the_same_model(dataset_dir, tmp_path):
-    cfg = pretrain_config(dataset_dir, "smoke", seed=3)
+    cfg = PretrainConfig(dataset=dataset_dir, preset="smoke", seed=3)
     straight = pretrain(cfg, tmp_path / "a", progress=False)
     with pytest.raises(KeyboardInterrupt):
         pretrain(cfg, tmp_path / "b", progress=False, interrupt_at=13)  # checkpoint at 10, killed at 13
@@ -272,7 +273,8 @@ def test_pretrain_resume_continues_to_the_same_model(dataset_dir, tmp_path):
     with pytest.raises(UavrisError, match="--resume"):
         pretrain(cfg, tmp_path / "b", progress=False)
     with pytest.raises(UavrisError, match="different configuration"):
-        pretrain(pretrain_config(dataset_dir, "smoke", seed=4), tmp_path / "b", resume=True, progress=False)
+        pretrain(PretrainConfig(dataset=dataset_dir, preset="smoke", seed=4), tmp_path / "b", resume=True,
+                 progress=False)
     resumed = pretrain(cfg, tmp_path / "b", resume=True, progress=False)
     a, b = _weights(straight), _weights(resumed)
     assert all(torch.equal(a[k], b[k]) for k in a)
@@ -320,8 +322,8 @@ def test_exploration_noise_is_seeded_and_bounded():
 
 # ------------------------------------------------------------------------------ fine-tuning and the CLI
 def test_finetune_counts_interactions_and_resumes(dataset_dir, tmp_path):
-    pre = pretrain(pretrain_config(dataset_dir, "smoke"), tmp_path / "pre", progress=False)
-    cfg = finetune_config(pre, "unseen1", "smoke", rounds=2)
+    pre = pretrain(PretrainConfig(dataset=dataset_dir, preset="smoke"), tmp_path / "pre", progress=False)
+    cfg = FinetuneConfig(model=pre, scenario="unseen1", preset="smoke", rounds=2)
     with pytest.raises(KeyboardInterrupt):
         finetune(cfg, tmp_path / "ft", progress=False, interrupt_after_round=1)
     finetune(cfg, tmp_path / "ft", resume=True, progress=False)
@@ -341,10 +343,11 @@ def test_finetune_counts_interactions_and_resumes(dataset_dir, tmp_path):
 
 @pytest.mark.slow
 def test_cli_collect_pretrain_evaluate_finetune(tmp_path, capsys):
-    from uavris.experiments.train_expert import preset_config, train
+    from uavris.experiments.training.train_expert import TrainConfig, train
 
     expert = tmp_path / "expert"
-    train(preset_config("ddpg", "train4", 0, "smoke", eval_episodes=2, system=SHORT), expert, progress=False)
+    train(TrainConfig(algo="ddpg", scenario="train4", seed=0, preset="smoke", eval_episodes=2, system=SHORT), expert,
+          progress=False)
     ds, pre, ft = tmp_path / "ds-v0", tmp_path / "pre", tmp_path / "ft"
     assert cli_main(["collect", "--experts", str(expert), "--trajectories", "4", "--out", str(ds),
                      "--no-progress"]) == 0

@@ -10,13 +10,14 @@ from scipy import stats
 from tests.conftest import SHORT
 from tests.test_dt import random_inputs, tiny_model
 from uavris.agents.dt.checkpoint import load_dt, save_dt
-from uavris.agents.dt.model import DecisionTransformer, DTConfig
+from uavris.agents.dt.config import DTConfig
+from uavris.agents.dt.model import DecisionTransformer
 from uavris.agents.dt.policy import DTBatchPolicy
 from uavris.agents.dt.trajectories import TrainingWindows, Trajectory, record_episodes
 from uavris.agents.evaluation import evaluate
 from uavris.config import ConfigError
-from uavris.experiments.finetune import finetune, finetune_config
-from uavris.experiments.pretrain import pretrain, pretrain_config
+from uavris.experiments.training.finetune import FinetuneConfig, finetune
+from uavris.experiments.training.pretrain import PretrainConfig, pretrain
 
 torch.set_num_threads(1)
 
@@ -128,10 +129,11 @@ def test_policy_actions_equal_the_models_prediction_on_the_whole_episode():
 
 
 def test_banded_pipeline_pretrains_finetunes_and_round_trips(dataset_dir, tmp_path):
-    pre = pretrain(pretrain_config(dataset_dir, "smoke", attention="banded"), tmp_path / "pre", progress=False)
+    pre = pretrain(PretrainConfig(dataset=dataset_dir, preset="smoke", attention="banded"), tmp_path / "pre",
+                   progress=False)
     model, meta = load_dt(pre)
     assert model.cfg.attention == "banded"
-    cfg = finetune_config(pre, "unseen1", "smoke")
+    cfg = FinetuneConfig(model=pre, scenario="unseen1", preset="smoke")
     ft = finetune(cfg, tmp_path / "ft", progress=False)
     tuned, tuned_meta = load_dt(ft)
     assert tuned.cfg.attention == "banded"

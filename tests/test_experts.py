@@ -16,7 +16,7 @@ from uavris.cli import main as cli_main
 from uavris.config import ConfigError, SystemConfig
 from uavris.env import UavRisD2DEnv
 from uavris.errors import UavrisError
-from uavris.experiments.train_expert import preset_config, run_policy, train
+from uavris.experiments.training.train_expert import TrainConfig, run_policy, train
 
 
 def test_sb3_env_checker_passes():
@@ -75,7 +75,7 @@ def test_vec_env_adapter_matches_dummy_vec_env():
                                   pytest.param("sac", marks=pytest.mark.slow),
                                   pytest.param("td3", marks=pytest.mark.slow)])
 def test_each_algorithm_trains_saves_loads_and_evaluates(algo, tmp_path):
-    cfg = preset_config(algo, "fig2", 0, "smoke", eval_episodes=4)
+    cfg = TrainConfig(algo=algo, scenario="fig2", seed=0, preset="smoke", eval_episodes=4)
     model_path = train(cfg, tmp_path / algo, progress=False)
     assert model_path.exists()
     done = json.loads((tmp_path / algo / "done.json").read_text())
@@ -95,7 +95,7 @@ def test_each_algorithm_trains_saves_loads_and_evaluates(algo, tmp_path):
 
 
 def test_resume_continues_step_count_and_keeps_first_checkpoint(tmp_path):
-    cfg = preset_config("ddpg", "fig2", 1, "smoke", eval_episodes=4, checkpoint_every=160)
+    cfg = TrainConfig(algo="ddpg", scenario="fig2", seed=1, preset="smoke", eval_episodes=4, checkpoint_every=160)
     run = tmp_path / "run"
     with pytest.raises(KeyboardInterrupt):
         train(cfg, run, progress=False, interrupt_at=400)
@@ -119,7 +119,8 @@ def test_resume_continues_step_count_and_keeps_first_checkpoint(tmp_path):
 def test_killed_and_resumed_run_equals_uninterrupted_run(tmp_path, algo, interrupt):
     """Checkpoints carry the environments mid-episode and every random stream, so a resume
     continues exactly: same episodes, same evaluations, same final weights."""
-    cfg = preset_config(algo, "fig2", 2, "smoke", eval_episodes=4, eval_every=160, checkpoint_every=160)
+    cfg = TrainConfig(algo=algo, scenario="fig2", seed=2, preset="smoke", eval_episodes=4, eval_every=160,
+                      checkpoint_every=160)
     train(cfg, tmp_path / "whole", progress=False)
     with pytest.raises(KeyboardInterrupt):
         train(cfg, tmp_path / "resumed", progress=False, interrupt_at=interrupt)
@@ -133,7 +134,7 @@ def test_killed_and_resumed_run_equals_uninterrupted_run(tmp_path, algo, interru
 
 
 def test_corrupt_resume_state_is_one_clear_error_and_nothing_changes(tmp_path):
-    cfg = preset_config("ddpg", "fig2", 0, "smoke", eval_episodes=2, checkpoint_every=160)
+    cfg = TrainConfig(algo="ddpg", scenario="fig2", seed=0, preset="smoke", eval_episodes=2, checkpoint_every=160)
     with pytest.raises(KeyboardInterrupt):
         train(cfg, tmp_path / "r", progress=False, interrupt_at=200)
     state = tmp_path / "r" / "checkpoints" / "step_160.state.pkl"
@@ -145,17 +146,17 @@ def test_corrupt_resume_state_is_one_clear_error_and_nothing_changes(tmp_path):
 
 
 def test_resume_with_changed_config_is_refused(tmp_path):
-    cfg = preset_config("td3", "fig2", 0, "smoke", eval_episodes=2)
+    cfg = TrainConfig(algo="td3", scenario="fig2", seed=0, preset="smoke", eval_episodes=2)
     with pytest.raises(KeyboardInterrupt):
         train(cfg, tmp_path / "r", progress=False, interrupt_at=330)
-    other = preset_config("td3", "fig2", 0, "smoke", eval_episodes=2, total_steps=999)
+    other = TrainConfig(algo="td3", scenario="fig2", seed=0, preset="smoke", eval_episodes=2, total_steps=999)
     with pytest.raises(UavrisError, match="different configuration"):
         train(other, tmp_path / "r", resume=True, progress=False)
 
 
 @pytest.mark.slow
 def test_identical_seeds_give_identical_evaluation(tmp_path):
-    cfg = preset_config("td3", "fig2", 3, "smoke", eval_episodes=4)
+    cfg = TrainConfig(algo="td3", scenario="fig2", seed=3, preset="smoke", eval_episodes=4)
     train(cfg, tmp_path / "a", progress=False)
     train(cfg, tmp_path / "b", progress=False)
     ev = [json.loads((tmp_path / r / "done.json").read_text())["final_eval"]["mean"] for r in "ab"]
@@ -172,7 +173,8 @@ def test_strong_expert_learns_beyond_hovering_with_optimised_phases(tmp_path):
     95% CIs. Measured over seeds 0-2 in fig2 and train8: 42.99-43.23 against ~36.4 bps/Hz
     (smaller imitation budgets were unreliable: 17-40 bps/Hz over seeds)."""
     from uavris.agents.experts.imitation import ImitationConfig
-    cfg = preset_config("ppo", "fig2", 0, "quick", eval_episodes=8, total_steps=0, phase_control="optimizer",
+    cfg = TrainConfig(algo="ppo", scenario="fig2", seed=0, preset="quick", eval_episodes=8, total_steps=0,
+                      phase_control="optimizer",
                         imitation=ImitationConfig())
     train(cfg, tmp_path / "strong", progress=False)
     expert = json.loads((tmp_path / "strong" / "done.json").read_text())["final_eval"]
@@ -187,7 +189,7 @@ def test_paper_track_expert_learns_beyond_random_actions(tmp_path):
     CI-sized budget: 20,000 env steps beat uniform random actions on 16 episodes by more than
     both 95% CIs. It does not beat doing nothing (the zero action, ~12.3 bps/Hz) at any
     budget we measured (benchmarks/expert_learning.py): a finding, not asserted here."""
-    cfg = preset_config("ppo", "fig2", 0, "smoke", total_steps=20_000, eval_episodes=16)
+    cfg = TrainConfig(algo="ppo", scenario="fig2", seed=0, preset="smoke", total_steps=20_000, eval_episodes=16)
     train(cfg, tmp_path / "learn", progress=False)
     ppo = json.loads((tmp_path / "learn" / "done.json").read_text())["final_eval"]
     random = evaluate(reference_policy("random"), cfg.system, "fig2", 16, cfg.eval_seed).summary()
@@ -227,7 +229,7 @@ def test_not_a_run_dir_and_corrupt_checkpoint(tmp_path, capsys):
     assert code == 2 and "not a uavris run directory" in err
     assert (tmp_path / "junk" / "notes.txt").read_text() == "keep me"  # nothing overwritten
 
-    cfg = preset_config("ddpg", "fig2", 0, "smoke", eval_episodes=2)
+    cfg = TrainConfig(algo="ddpg", scenario="fig2", seed=0, preset="smoke", eval_episodes=2)
     run = tmp_path / "run"
     train(cfg, run, progress=False)
     (run / "model.zip").write_bytes(b"not a zip")
@@ -249,11 +251,12 @@ def test_not_a_run_dir_and_corrupt_checkpoint(tmp_path, capsys):
 
 
 def test_hybrid_controller_trains_and_evaluates_reproducibly(tmp_path):
-    from uavris.experiments.evaluate import evaluate_target
+    from uavris.experiments.tools.evaluate import evaluate_target
 
     env = UavRisVecEnv(2, phase_control="optimizer")
     assert env.action_space.shape == (6,)
-    cfg = preset_config("td3", "fig2", 0, "smoke", eval_episodes=1, total_steps=160, phase_control="optimizer")
+    cfg = TrainConfig(algo="td3", scenario="fig2", seed=0, preset="smoke", eval_episodes=1, total_steps=160,
+                      phase_control="optimizer")
     train(cfg, tmp_path / "hyb", progress=False)
     a, _ = evaluate_target(str(tmp_path / "hyb"), None, 2, 11, out=tmp_path / "e1")
     b, _ = evaluate_target(str(tmp_path / "hyb"), None, 2, 11, out=tmp_path / "e2")
@@ -264,4 +267,4 @@ def test_hybrid_controller_trains_and_evaluates_reproducibly(tmp_path):
     hybrid = evaluate(hover, cfg.system, "fig2", 2, 1_000_000, phase_control="optimizer").summary()["mean"]
     assert hybrid > plain + 10.0, (hybrid, plain)
     with pytest.raises(ConfigError, match="unknown phase control"):
-        preset_config("ddpg", "fig2", 0, "smoke", phase_control="magic")
+        TrainConfig(algo="ddpg", scenario="fig2", seed=0, preset="smoke", phase_control="magic")

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from uavris.experiments.jobs import Job, JobRunner
+from uavris.experiments.engine.jobs import Job, JobRunner
 
 HANG_S = 120.0  # the six jobs take seconds (worker start-up included)
 

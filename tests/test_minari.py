@@ -10,14 +10,14 @@ import minari
 import numpy as np
 import pytest
 
-import uavris.experiments.collect as collect_mod
+import uavris.experiments.training.collect as collect_mod
 from tests.conftest import SHORT
 from uavris.agents.dt.dataset import dataset_id_for, episode_environment, load_dataset, write_dataset
 from uavris.agents.dt.trajectories import record_episodes
 from uavris.agents.references import reference_policy
 from uavris.env import ENV_ID
 from uavris.errors import DatasetError
-from uavris.experiments.train_expert import preset_config
+from uavris.experiments.training.train_expert import TrainConfig
 from uavris.layouts import LayoutGenerator
 
 # The first expert's scenario is deliberately not the alphabetically first one.
@@ -28,7 +28,7 @@ SEED = 2_000_000
 
 def _fake_expert_runs(monkeypatch):
     """Training a real expert takes ~10 s; collect's own code runs, the experts are baselines."""
-    cfgs = {name: preset_config("ddpg", scen, 0, "smoke", eval_episodes=2, system=SHORT)
+    cfgs = {name: TrainConfig(algo="ddpg", scenario=scen, seed=0, preset="smoke", eval_episodes=2, system=SHORT)
             for name, (scen, _) in EXPERTS.items()}
     monkeypatch.setattr(collect_mod, "load_run_config", lambda run_dir: cfgs[Path(run_dir).name])
     monkeypatch.setattr(collect_mod, "final_model_path", lambda run_dir: Path(run_dir).name)

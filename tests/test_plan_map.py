@@ -11,7 +11,7 @@ import pytest
 
 from uavris.agents.references import reference_policy
 from uavris.config import SystemConfig
-from uavris.experiments import plan as plan_module
+from uavris.experiments.tools import plan as plan_module
 from uavris.layouts import Layout
 
 GRID_STEP = 2.0

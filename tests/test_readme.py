@@ -36,15 +36,15 @@ def test_python_block_runs_on_its_own(index: int, tmp_path: Path) -> None:
 def test_preset_numbers_are_the_codes() -> None:
     """The README's preset sentence states the training budgets and evaluation episodes of
     :mod:`uavris.presets`."""
-    from uavris.presets import TRAIN_EVAL, TRAIN_STEPS
+    from uavris.presets import TRAIN
 
     text = " ".join(README.read_text(encoding="utf-8").split())
     for preset in ("smoke", "quick", "paper"):
         m = re.search(rf"`{preset}` \(([\d,.]+) (M )?env steps per run, (\d+) evaluation episodes", text)
         assert m, f"README does not state the {preset} preset's budget"
         steps = float(m.group(1).replace(",", "")) * (1_000_000 if m.group(2) else 1)
-        assert steps == TRAIN_STEPS[preset], preset
-        assert int(m.group(3)) == TRAIN_EVAL[preset][1], preset
+        assert steps == TRAIN[preset]["total_steps"], preset
+        assert int(m.group(3)) == TRAIN[preset]["eval_episodes"], preset
 
 
 QUICK_REPORT = README.parent / "docs" / "results" / "quick-report.md"

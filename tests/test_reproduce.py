@@ -14,12 +14,15 @@ from scipy import stats as sps
 
 from uavris.config import SystemConfig
 from uavris.errors import UavrisError
-from uavris.experiments import pretrain as pretrain_module
-from uavris.experiments.jobs import Job, JobRunner, run_jobs
-from uavris.experiments.reproduce import ReproduceConfig, build_pipeline, nearest_training_scenarios, reproduce
-from uavris.experiments.scheduling import StudyContext
-from uavris.experiments.stages import Pipeline, Stage
-from uavris.experiments.train_expert import preset_config, train_job
+from uavris.experiments.engine.jobs import Job, JobRunner, run_jobs
+from uavris.experiments.engine.scheduling import StudyContext
+from uavris.experiments.engine.stages import Pipeline, Stage
+from uavris.experiments.study.config import ReproduceConfig
+from uavris.experiments.study.pipeline import build_pipeline
+from uavris.experiments.study.reproduce import reproduce
+from uavris.experiments.study.tracks import nearest_training_scenarios
+from uavris.experiments.training import pretrain as pretrain_module
+from uavris.experiments.training.train_expert import TrainConfig, train_job
 from uavris.io import read_json
 
 RC = ReproduceConfig("smoke", compare_seeds=1, eval_episodes=4, trajectories=2)
@@ -300,7 +303,8 @@ def test_changed_parameter_invalidates_exactly_its_dependents(tmp_path):
     assert deploy == {"deploy-dataset", "deploy-dataset-mixed", "deploy-finetune-layout-unseen-0",
                       "deploy-finetune-layout-unseen-1", "deploy-evaluate-layout-unseen-0",
                       "deploy-evaluate-layout-unseen-1"} | {f"deploy-{m}{s}" for m in models for s in ("", "-s1")}
-    assert changed(trajectories=3) == dt | {f"strong-{n}" for n in dt} | deploy
+    assert changed(trajectories=3) == dt | {f"strong-{n}" for n in dt}
+    assert changed(layout_trajectories=3) == deploy
     # the paper track's experts follow the comparison (they are its winner's)
     assert changed(compare_seeds=2) == {"compare", "experts-train", "experts-unseen"} | dt
     assert changed(expert_algo="ppo") == {"experts-train", "experts-unseen"} | dt
@@ -363,7 +367,7 @@ def test_ray_backend_gives_the_same_numbers_as_the_process_pool(smoke_run, tmp_p
     out, _, _ = smoke_run
     stage = next((out / "stages").glob("experts-unseen-*"))
     algo = read_json(stage / "stage.json")["result"]["algo"]
-    cfg = preset_config(algo, "unseen1", RC.seed, "smoke", eval_episodes=RC.n_eval)
+    cfg = TrainConfig(algo=algo, scenario="unseen1", seed=RC.seed, preset="smoke", eval_episodes=RC.eval_episodes)
     local_dir = stage / "runs" / "unseen1"
     jobs = [Job(f"{algo}-unseen1", train_job, (cfg.to_dict(), str(tmp_path / "ray" / "unseen1")),
                 tmp_path / "ray.log")]
@@ -475,8 +479,8 @@ def test_expected_schedule_replays_the_longest_chain_first(tmp_path: Path) -> No
     """The estimate of `reproduce --estimate`: a chain A -> B of 10 s jobs and three 3 s stages
     on two workers end at 20 s (the chain on one worker, the rest beside it); on one worker
     the work adds up; on many the chain bounds it."""
-    from uavris.experiments.forecast import expected_schedule
-    from uavris.experiments.stages import Pipeline, Stage
+    from uavris.experiments.engine.forecast import expected_schedule
+    from uavris.experiments.engine.stages import Pipeline, Stage
 
     def noop(d: Path, deps: dict[str, Path]) -> None:
         return None
@@ -510,7 +514,7 @@ def test_the_progress_bar_counts_this_invocations_work(tmp_path: Path) -> None:
 
     from tqdm import tqdm
 
-    from uavris.experiments.stages import StageRecord
+    from uavris.experiments.engine.stages import StageRecord
 
     bar = tqdm(total=0, file=io.StringIO())
     ctx = StudyContext(1, "local", None, bar)

@@ -10,7 +10,7 @@ import sys
 import pytest
 
 from uavris.config import SystemConfig
-from uavris.experiments.plan import MAX_MAP_POSES, check_grid
+from uavris.experiments.tools.plan import MAX_MAP_POSES, check_grid
 
 
 def _cli(tmp_path, *args: str) -> subprocess.CompletedProcess:

@@ -5,8 +5,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from uavris.experiments.scheduling import StudyContext, stage_line
-from uavris.experiments.stages import StageRecord
+from uavris.experiments.engine.scheduling import StudyContext, stage_line
+from uavris.experiments.engine.stages import StageRecord
 
 
 class _Bar:

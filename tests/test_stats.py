@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from scipy import stats as sps
 
-from uavris.experiments.report.deployment import (
+from uavris.experiments.study.report.deployment import (
     HOVER_OPTIMIZER,
     NEAREST,
     ORACLE,
@@ -17,9 +17,8 @@ from uavris.experiments.report.deployment import (
     _excludes_zero,
     deployment_section,
     layout_scores,
-    over_layouts,
 )
-from uavris.stats import bootstrap_band, bootstrap_ci, iqm, summarize, t_interval, versus
+from uavris.stats import bootstrap_band, bootstrap_ci, iqm, over_units, summarize, t_interval, versus
 
 
 # ------------------------------------------------------------------------------ uavris.stats
@@ -85,9 +84,9 @@ def test_versus_states_its_rule(low, high, ref, want):
 
 
 # ------------------------------------------------------------------------------ the deployment section
-def test_over_layouts_is_the_t_interval_over_layouts():
+def test_over_layouts_is_the_t_interval_over_units():
     x = [0.8, 0.9, 0.95, 0.7]
-    s = over_layouts(x)
+    s = over_units(x)
     want = sps.t.interval(0.95, 3, loc=np.mean(x), scale=sps.sem(x))
     assert s["n"] == 4 and s["mean"] == pytest.approx(0.8375)
     assert (s["ci_low"], s["ci_high"]) == pytest.approx(want, rel=1e-12)

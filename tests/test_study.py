@@ -18,7 +18,7 @@ from uavris.config import ConfigError, SystemConfig
 from uavris.env.simulator import BatchedSimulator
 from uavris.env.wrappers import MOTION_DIM
 from uavris.errors import UavrisError
-from uavris.experiments.compare import expert_choice, select_expert
+from uavris.experiments.training.compare import expert_choice, select_expert
 
 
 def test_hover_is_exactly_the_zero_action():
@@ -110,9 +110,9 @@ def test_paired_finetune_counts_candidates_and_elites(dataset_dir, tmp_path, mon
     import csv
     import math
 
-    from uavris.experiments import finetune as finetune_module
-    from uavris.experiments.finetune import finetune, finetune_config
-    from uavris.experiments.pretrain import pretrain, pretrain_config
+    from uavris.experiments.training import finetune as finetune_module
+    from uavris.experiments.training.finetune import FinetuneConfig, finetune
+    from uavris.experiments.training.pretrain import PretrainConfig, pretrain
 
     rounds = []  # (candidates, elites) of every round, as fine-tuning saw them
     real = finetune_module.select_elites
@@ -123,8 +123,9 @@ def test_paired_finetune_counts_candidates_and_elites(dataset_dir, tmp_path, mon
         return elites
 
     monkeypatch.setattr(finetune_module, "select_elites", seen)
-    model = pretrain(pretrain_config(dataset_dir, "smoke", 0), tmp_path / "pre", progress=False)
-    cfg = finetune_config(model, "unseen1", "smoke", 0, candidates=6, elites=4, rollouts_per_seed=3)
+    model = pretrain(PretrainConfig(dataset=dataset_dir, preset="smoke", seed=0), tmp_path / "pre", progress=False)
+    cfg = FinetuneConfig(model=model, scenario="unseen1", preset="smoke", seed=0, candidates=6, elites=4,
+                         rollouts_per_seed=3)
     run = finetune(cfg, tmp_path / "ft", progress=False)
     done = json.loads((run / "done.json").read_text())
     assert done["env_interactions"] == 6 * SHORT.horizon
@@ -145,7 +146,7 @@ def test_paired_finetune_counts_candidates_and_elites(dataset_dir, tmp_path, mon
         steps += cfg.epochs_per_round * math.ceil(sum(e.length for e in elites) / cfg.batch_size)
         assert int(row["gradient_steps"]) == steps
     with pytest.raises(ConfigError, match="rollouts_per_seed"):
-        finetune_config(model, "unseen1", "smoke", 0, candidates=6, rollouts_per_seed=4)
+        FinetuneConfig(model=model, scenario="unseen1", preset="smoke", seed=0, candidates=6, rollouts_per_seed=4)
 
 
 def test_optimizer_within_half_a_percent_of_release_0_1_0():
@@ -180,12 +181,13 @@ def motion_dataset(tmp_path_factory):
 
 def test_motion_actions_round_trip_through_dataset_and_checkpoint(motion_dataset, tmp_path):
     from uavris.agents.dt.checkpoint import load_dt
-    from uavris.experiments.pretrain import pretrain, pretrain_config
+    from uavris.experiments.training.pretrain import PretrainConfig, pretrain
 
     ds = load_dataset(motion_dataset)
     assert ds.phase_control == "optimizer"
     assert all(tr.actions.shape == (tr.length, MOTION_DIM) for tr in ds.trajectories)
-    model_dir = pretrain(pretrain_config(motion_dataset, "smoke", 0), tmp_path / "pre", progress=False)
+    model_dir = pretrain(PretrainConfig(dataset=motion_dataset, preset="smoke", seed=0), tmp_path / "pre",
+                         progress=False)
     model, meta = load_dt(model_dir)
     assert model.cfg.act_dim == MOTION_DIM and meta["phase_control"] == "optimizer"
 
@@ -193,11 +195,12 @@ def test_motion_actions_round_trip_through_dataset_and_checkpoint(motion_dataset
 def test_strong_dt_rollout_in_finetuning_equals_uavris_evaluate(motion_dataset, tmp_path, capsys):
     """The zero-shot evaluation inside fine-tuning (round 0) and `uavris evaluate` of the same
     checkpoint on the same seeds give the same mean; with --phase-control agent it is refused."""
-    from uavris.experiments.finetune import finetune, finetune_config
-    from uavris.experiments.pretrain import pretrain, pretrain_config
+    from uavris.experiments.training.finetune import FinetuneConfig, finetune
+    from uavris.experiments.training.pretrain import PretrainConfig, pretrain
 
-    model_dir = pretrain(pretrain_config(motion_dataset, "smoke", 0), tmp_path / "pre", progress=False)
-    cfg = finetune_config(model_dir, "unseen1", "smoke", 0, eval_episodes=3)
+    model_dir = pretrain(PretrainConfig(dataset=motion_dataset, preset="smoke", seed=0), tmp_path / "pre",
+                         progress=False)
+    cfg = FinetuneConfig(model=model_dir, scenario="unseen1", preset="smoke", seed=0, eval_episodes=3)
     run = finetune(cfg, tmp_path / "ft", progress=False)
     zero_shot = json.loads((run / "done.json").read_text())["zero_shot_eval"]["mean"]
     assert cli_main(["evaluate", str(model_dir), "--scenario", "unseen1", "--episodes", "3",

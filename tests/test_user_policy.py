@@ -91,7 +91,7 @@ def test_module_and_file_score_as_the_python_api(controller: Path, tmp_path: Pat
                                                  capsys: pytest.CaptureFixture[str]) -> None:
     from uavris.agents.evaluation import evaluate
     from uavris.config import SystemConfig
-    from uavris.experiments.user_policy import load_user_policy
+    from uavris.experiments.tools.user_policy import load_user_policy
 
     args = ["--scenario", "unseen1", "--episodes", "3", "--no-progress"]
     assert main(["evaluate", "mypkg.control:toward_centre", *args, "--out", str(tmp_path / "m")]) == 0
@@ -145,14 +145,14 @@ def test_benchmark_cells_are_the_reports_and_uavris_evaluates(controller: Path, 
     """Every cell's numbers equal `uavris evaluate` of the target and the references there, on
     the report's episodes; the layout cells are the study's unseen deployments."""
     from uavris.config import SystemConfig
-    from uavris.experiments.benchmark import protocol_cells
-    from uavris.experiments.study import TRACK_SPECS, deployments
+    from uavris.experiments.study.tracks import TRACK_SPECS, deployments
+    from uavris.experiments.tools.benchmark import protocol_cells
     from uavris.layouts import resolve_layout
-    from uavris.presets import STUDY_EVAL_EPISODES, STUDY_UNSEEN_LAYOUTS
+    from uavris.presets import STUDY
 
     cells = protocol_cells("smoke")
     assert [c.name for c in cells] == ["unseen1", "unseen2", "layout-unseen-0", "layout-unseen-1"]
-    _, unseen = deployments(TRACK_SPECS["deployment"], SystemConfig(), 1, STUDY_UNSEEN_LAYOUTS["smoke"])
+    _, unseen = deployments(TRACK_SPECS["deployment"], SystemConfig(), 1, STUDY["smoke"]["unseen_layouts"])
     for cell, dep in zip(cells[2:], unseen):
         hall, where = resolve_layout(cell.name).resolve(SystemConfig())
         assert dep.name == cell.name and dep.system.users == hall.users and dep.start == where.start
@@ -161,9 +161,9 @@ def test_benchmark_cells_are_the_reports_and_uavris_evaluates(controller: Path, 
     assert main(["benchmark", "mypkg.control:toward_centre", "--preset", "smoke", "--no-progress",
                  "--out", str(out)]) == 0
     summary = json.loads((out / "benchmark.json").read_text())
-    assert summary["episodes"] == STUDY_EVAL_EPISODES["smoke"]
+    assert summary["episodes"] == STUDY["smoke"]["eval_episodes"]
     rows = {r["cell"]: r for r in summary["cells"]}
-    n = str(STUDY_EVAL_EPISODES["smoke"])
+    n = str(STUDY["smoke"]["eval_episodes"])
     for cell, place in (("unseen2", ["--scenario", "unseen2"]), ("layout-unseen-1", ["--layout", "layout-unseen-1"])):
         for target, key in (("mypkg.control:toward_centre", "mean"), ("oracle", "oracle"), ("hover", "zero_action")):
             ev = tmp_path / "ev" / cell / target.replace(":", "_")

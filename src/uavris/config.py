@@ -6,8 +6,9 @@ attitude step, noise power, energy budget, flight region) carry documented defau
 ``docs/model.md``. Configs are frozen and validated on construction: a bad value raises
 :class:`~uavris.errors.ConfigError` naming the field and the allowed range.
 
-Lives here: :class:`SystemConfig`, :class:`PropulsionParams`, :class:`Scenario` and the
-named scenarios. Not here: the configurations of learning (each with its algorithm) and
+Lives here: :class:`SystemConfig`, :class:`PropulsionParams`, :class:`Scenario`, the
+named scenarios and :class:`DictConfig`, the one ``to_dict`` / ``from_dict`` convention of
+every config dataclass of uavris. Not here: the configurations of learning (each with its algorithm) and
 the presets (:mod:`uavris.presets`).
 """
 
@@ -15,10 +16,93 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import sys
+import types
+import typing
 from dataclasses import dataclass, field
-from typing import Any, Literal, Mapping, Sequence, get_args
+from typing import Any, Literal, Mapping, Sequence, TypeVar, get_args
 
 from uavris.errors import ConfigError
+from uavris.io import to_plain
+
+C = TypeVar("C", bound="DictConfig")
+
+
+class DictConfig:
+    """The one dict convention of uavris's frozen config dataclasses (a mixin).
+
+    :meth:`to_dict` gives plain JSON / YAML values (tuples as lists, nested configs as
+    dicts): what run directories, stage keys and job arguments store. :meth:`from_dict`
+    is its inverse: a partial dict takes the defaults for what it leaves out, an unknown
+    field is one :class:`~uavris.errors.ConfigError` line naming it, a nested config field
+    is rebuilt from its dict (a stored :class:`SystemConfig` by :meth:`SystemConfig.from_stored`),
+    and the class's own validation runs as on any construction.
+    """
+
+    def to_dict(self) -> dict[str, Any]:
+        return to_plain(self)
+
+    @classmethod
+    def from_dict(cls: type[C], d: Mapping[str, Any]) -> C:
+        if not isinstance(d, Mapping):
+            raise ConfigError(f"{cls.__name__} must be given as a mapping of its fields, got {type(d).__name__}")
+        known = {f.name for f in dataclasses.fields(cls)}  # type: ignore[arg-type]
+        unknown = sorted(set(d) - known)
+        if unknown:
+            raise ConfigError(f"{cls.__name__} has no field(s) {unknown}; known fields: {sorted(known)}")
+        hints = typing.get_type_hints(cls, vars(sys.modules[cls.__module__]))
+        values = {}
+        for name, value in d.items():
+            nested = _nested_config(hints.get(name))
+            if nested is not None and isinstance(value, Mapping):
+                value = getattr(nested, "from_stored", nested.from_dict)(value)
+            elif isinstance(value, list) and _holds_tuple(hints.get(name)):
+                value = tuple(value)  # JSON and YAML have lists only; the configs hold tuples (hashable)
+            values[name] = value
+        try:
+            return cls(**values)
+        except TypeError as e:
+            raise ConfigError(f"bad {cls.__name__}: {e}") from None
+
+
+class _PresetValue:
+    """The default of a field whose value comes from the config's preset (:data:`PRESET`)."""
+
+    def __repr__(self) -> str:
+        return "<the preset's>"
+
+
+PRESET: Any = _PresetValue()
+
+
+def fill_from_preset(cfg: Any, table: Mapping[str, Any]) -> None:
+    """Give every field of the frozen dataclass ``cfg`` still at :data:`PRESET` the preset
+    table's value (a :mod:`uavris.presets` table's row): the one way a preset acts, so that
+    ``PretrainConfig(dataset, preset="paper")`` is the paper preset's run, in Python as on the
+    command line. Call it first in ``__post_init__``, before validation."""
+    for f in dataclasses.fields(cfg):
+        if getattr(cfg, f.name) is PRESET:
+            if f.name not in table:
+                raise ConfigError(f"{type(cfg).__name__}.{f.name} has no value in the preset's table")
+            object.__setattr__(cfg, f.name, table[f.name])
+
+
+def _options(hint: Any) -> tuple[Any, ...]:
+    """The types a field's annotation allows (``X | Y`` -> X, Y)."""
+    union = isinstance(hint, types.UnionType) or typing.get_origin(hint) is typing.Union
+    return get_args(hint) if union else (hint,)
+
+
+def _nested_config(hint: Any) -> type[DictConfig] | None:
+    """The config class a field's annotation holds (``X`` or ``X | None``), else None."""
+    for opt in _options(hint):
+        if isinstance(opt, type) and issubclass(opt, DictConfig):
+            return opt
+    return None
+
+
+def _holds_tuple(hint: Any) -> bool:
+    return any(opt is tuple or typing.get_origin(opt) is tuple for opt in _options(hint))
 
 Vec3 = tuple[float, float, float]
 
@@ -67,7 +151,7 @@ def check_non_negative(owner: str, cfg: Any, names: Sequence[str]) -> None:
 
 
 @dataclass(frozen=True)
-class PropulsionParams:
+class PropulsionParams(DictConfig):
     """Rotary-wing propulsion power model of Zeng, Xu and Zhang (IEEE TWC 2019).
 
     Defaults are that paper's values; hovering costs ``blade_profile_w + induced_w``
@@ -90,7 +174,7 @@ class PropulsionParams:
 
 
 @dataclass(frozen=True)
-class SystemConfig:
+class SystemConfig(DictConfig):
     """The UAV-mounted RIS D2D system (paper Sec. II and V, docs/model.md).
 
     Units: metres, seconds, watts, joules, dBm for the noise power.
@@ -219,21 +303,6 @@ class SystemConfig:
 
     def replace(self, **changes: Any) -> SystemConfig:
         return dataclasses.replace(self, **changes)
-
-    def to_dict(self) -> dict[str, Any]:
-        d = dataclasses.asdict(self)
-        d["room"] = list(self.room)
-        d["users"] = [list(u) for u in self.users]
-        return d
-
-    @classmethod
-    def from_dict(cls, d: dict[str, Any]) -> SystemConfig:
-        """A config from a (possibly partial) dict; missing fields take their defaults."""
-        known = {f.name for f in dataclasses.fields(cls)}
-        unknown = sorted(set(d) - known)
-        if unknown:
-            raise ConfigError(f"SystemConfig has no field(s) {unknown}; known fields: {sorted(known)}")
-        return cls(**d)
 
     @classmethod
     def from_stored(cls, d: dict[str, Any]) -> SystemConfig:

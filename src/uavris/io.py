@@ -15,7 +15,7 @@ import json
 import os
 import tempfile
 from pathlib import Path
-from typing import Any, Iterable, Sequence
+from typing import Any, Iterable, Mapping, Sequence
 
 import yaml
 
@@ -100,16 +100,19 @@ def read_json(path: str | Path) -> Any:
     return _read(path, json.load, (json.JSONDecodeError,), "JSON")
 
 
-def write_csv(path: str | Path, header: Sequence[str], rows: Iterable[Sequence[Any]]) -> None:
+def write_csv(path: str | Path, header: Sequence[str], rows: Iterable[Sequence[Any] | Mapping[str, Any]]) -> None:
+    """A CSV file of ``rows`` under ``header``; a row is a sequence in header order or a
+    mapping from the header's names (a log's record)."""
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
     w.writerow(header)
-    w.writerows(rows)
+    w.writerows([r[h] for h in header] if isinstance(r, Mapping) else r for r in rows)
     atomic_write_text(path, buf.getvalue())
 
 
-def read_rows(path: str | Path, header: Sequence[str], limit: int, int_columns: set[str]) -> list[list[Any]]:
-    """The first ``limit`` rows of a CSV log as lists in ``header`` order (ints where named).
+def read_rows(path: str | Path, header: Sequence[str], limit: int, int_columns: set[str]) -> list[dict[str, Any]]:
+    """The first ``limit`` rows of a CSV log as records ``{column: value}`` of ``header``'s
+    columns (ints where named, floats otherwise).
 
     Used on resume: a log may hold rows written after the checkpoint being resumed, and
     those are dropped so they are not counted twice.
@@ -120,7 +123,7 @@ def read_rows(path: str | Path, header: Sequence[str], limit: int, int_columns: 
     out = []
     for r in read_csv(path)[:limit]:
         try:
-            out.append([int(r[h]) if h in int_columns else float(r[h]) for h in header])
+            out.append({h: int(r[h]) if h in int_columns else float(r[h]) for h in header})
         except (KeyError, TypeError, ValueError):
             raise UavrisError(f"{path} is corrupt (bad row {r})") from None
     return out

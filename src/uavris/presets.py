@@ -2,8 +2,9 @@
 
 Lives here: :data:`PRESETS`, :func:`check_preset` and the budgets of the ``smoke``
 (seconds, for tests), ``quick`` (the laptop study) and ``paper`` (sized like the paper)
-presets for expert training (:data:`TRAIN_STEPS`, ...), the DT's pre-training and
-fine-tuning (:data:`PRETRAIN`, :data:`FINETUNE`), the strong track's experts and the study;
+presets, one table per config class: expert training (:data:`TRAIN`), the DT's pre-training
+and fine-tuning (:data:`PRETRAIN`, :data:`FINETUNE`), the study (:data:`STUDY`), and the
+strong track's experts;
 the experts' hyperparameter tables (:data:`HYPERPARAMS`, :data:`ALGO_HYPERPARAMS`); and the
 seed bases (:data:`EVAL_SEED`, ...) that keep evaluation, collection, fine-tuning and
 imitation episodes apart. Not here: what the numbers mean and why (the module that uses a
@@ -23,32 +24,44 @@ COLLECT_SEED = 2_000_000  # expert trajectories for the DT's dataset
 FINETUNE_SEED = 3_000_000  # the DT's fine-tuning candidates
 IMITATION_SEED = 4_000_000  # the strong experts' imitation rollouts
 
-# Expert training: env steps, (evaluation interval, episodes) and checkpoint interval.
-# smoke exercises the code; quick is 500 episodes per run; paper matches the paper's
-# ~25,000 training episodes.
-TRAIN_STEPS = {"smoke": 640, "quick": 50_000, "paper": 2_500_000}
-TRAIN_EVAL = {"smoke": (320, 8), "quick": (10_000, 32), "paper": (50_000, 100)}
-TRAIN_CHECKPOINT = {"smoke": 320, "quick": 10_000, "paper": 50_000}
+# A table per config class, each complete: a config built with ``preset=NAME`` takes every
+# field of ``TABLE[NAME]`` that it is not given (uavris.config.PRESET marks those fields), in
+# Python as on the command line.
 
-# DT pre-training: smoke exercises the code in a second; quick is a few minutes on one
-# core with the DT paper's model size; paper is the DT paper's training schedule.
+# Expert training (uavris.experiments.training.train_expert.TrainConfig): env steps, the
+# periodic evaluation (interval, episodes) and the checkpoint interval. smoke exercises the
+# code; quick is 500 episodes per run; paper matches the paper's ~25,000 training episodes.
+# The hyperparameters' tables are below (HYPERPARAMS).
+TRAIN: dict[str, dict[str, Any]] = {
+    "smoke": dict(total_steps=640, eval_every=320, eval_episodes=8, checkpoint_every=320),
+    "quick": dict(total_steps=50_000, eval_every=10_000, eval_episodes=32, checkpoint_every=10_000),
+    "paper": dict(total_steps=2_500_000, eval_every=50_000, eval_episodes=100, checkpoint_every=50_000),
+}
+
+# DT pre-training (uavris.experiments.training.pretrain.PretrainConfig): smoke exercises the
+# code in a second; quick is a few minutes on one core with the DT paper's model size; paper
+# is the DT paper's training schedule.
+_DT_PAPER_MODEL = dict(learning_rate=1e-4, context=20, width=128, depth=3, heads=1)
 PRETRAIN: dict[str, dict[str, Any]] = {
     "smoke": dict(steps=20, batch_size=8, warmup_steps=5, checkpoint_every=10, log_every=5, learning_rate=1e-3,
                   context=4, width=16, depth=1, heads=1),
-    "quick": dict(steps=1500, batch_size=64, warmup_steps=150, checkpoint_every=500, log_every=50),
-    "paper": dict(steps=100_000, batch_size=64, warmup_steps=10_000, checkpoint_every=5_000, log_every=200),
+    "quick": dict(steps=1500, batch_size=64, warmup_steps=150, checkpoint_every=500, log_every=50,
+                  **_DT_PAPER_MODEL),
+    "paper": dict(steps=100_000, batch_size=64, warmup_steps=10_000, checkpoint_every=5_000, log_every=200,
+                  **_DT_PAPER_MODEL),
 }
 
-# DT fine-tuning (Algorithm 1, stage 2).
+# DT fine-tuning (Algorithm 1, stage 2; uavris.experiments.training.finetune.FinetuneConfig).
+_FT_PAPER = dict(candidates=80, elites=50, rollouts_per_seed=5, batch_size=64, warmup_steps=100)
 FINETUNE: dict[str, dict[str, Any]] = {
     "smoke": dict(rounds=1, candidates=4, elites=2, rollouts_per_seed=2, epochs_per_round=1, batch_size=8,
                   warmup_steps=2, eval_episodes=2),
-    "quick": dict(rounds=3, epochs_per_round=2, eval_episodes=16),
-    "paper": dict(rounds=10, epochs_per_round=5, eval_episodes=100),
+    "quick": dict(rounds=3, epochs_per_round=2, eval_episodes=16, **_FT_PAPER),
+    "paper": dict(rounds=10, epochs_per_round=5, eval_episodes=100, **_FT_PAPER),
 }
 
 # The strong track's experts: imitation of the oracle (DAgger rounds, episodes per round,
-# epochs) and the PPO steps after it (docs/model.md section 20).
+# epochs) and the PPO steps after it (docs/study.md section 20).
 STRONG_IMITATION: dict[str, dict[str, Any]] = {
     "smoke": dict(rounds=2, episodes=4, epochs=5),
     "quick": dict(rounds=6, episodes=32, epochs=30),
@@ -56,27 +69,27 @@ STRONG_IMITATION: dict[str, dict[str, Any]] = {
 }
 STRONG_RL_STEPS = {"smoke": 0, "quick": 0, "paper": 0}
 
-# The study (``uavris reproduce``): evaluation episodes per policy, comparison seeds per
-# algorithm, expert trajectories per training scenario (the paper: 500). quick: 3 seeds (5
-# before the strong track): both tracks must fit 60 minutes on 2 cores, and the comparison
-# alone took 37.8 min with 5 seeds on the project machine (README); paper keeps 5.
-STUDY_EVAL_EPISODES = {"smoke": 8, "quick": 32, "paper": 100}
-STUDY_COMPARE_SEEDS = {"smoke": 2, "quick": 3, "paper": 5}
-STUDY_TRAJECTORIES = {"smoke": 4, "quick": 100, "paper": 500}
-
-# The deployment track (docs/model.md section 21): generated training halls with the planning
-# oracle's demonstrations (episodes per hall), unseen halls, the smaller training sets of the
-# data curve (zero-shot score against the number of training halls; the full set is its last
-# point), pre-training seeds of every learned row, and the halls of the mixed-quality dataset
-# (the oracle, another hall's plan, hovering, a noisy oracle: where return conditioning can
-# matter). quick: 512 halls x 2 episodes, about as many episodes as the paper track's dataset
-# (8 scenarios x 100), spread over many halls (docs/model.md section 21 measures the split).
-STUDY_TRAIN_LAYOUTS = {"smoke": 3, "quick": 512, "paper": 4096}
-STUDY_UNSEEN_LAYOUTS = {"smoke": 2, "quick": 16, "paper": 32}
-STUDY_LAYOUT_TRAJECTORIES = {"smoke": 2, "quick": 2, "paper": 2}
-STUDY_SCALING: dict[str, tuple[int, ...]] = {"smoke": (1,), "quick": (32, 128), "paper": (32, 128, 512, 1024, 2048)}
-STUDY_DT_SEEDS = {"smoke": 2, "quick": 3, "paper": 3}
-STUDY_MIXED_LAYOUTS = {"smoke": 2, "quick": 64, "paper": 1024}
+# The study (``uavris reproduce``, uavris.experiments.study.config.ReproduceConfig):
+# evaluation episodes per policy, comparison seeds per algorithm, expert trajectories per
+# training scenario (the paper: 500). quick: 3 seeds (5 before the strong track): both
+# tracks must fit 60 minutes on 2 cores, and the comparison alone took 37.8 min with 5 seeds
+# on the project machine; paper keeps 5.
+# The deployment track (docs/study.md section 21): generated training halls with the planning
+# oracle's demonstrations (episodes per hall: layout_trajectories), unseen halls, the smaller
+# training sets of the data curve (zero-shot score against the number of training halls; the
+# full set is its last point), pre-training seeds of every learned row, and the halls of the
+# mixed-quality dataset (the oracle, another hall's plan, hovering, a noisy oracle: where
+# return conditioning can matter). quick: 512 halls x 2 episodes, about as many episodes as
+# the paper track's dataset (8 scenarios x 100), spread over many halls (docs/study.md
+# section 21 measures the split).
+STUDY: dict[str, dict[str, Any]] = {
+    "smoke": dict(compare_seeds=2, eval_episodes=8, trajectories=4, layout_trajectories=2, train_layouts=3,
+                  unseen_layouts=2, scaling=(1,), dt_seeds=2, mixed_layouts=2),
+    "quick": dict(compare_seeds=3, eval_episodes=32, trajectories=100, layout_trajectories=2, train_layouts=512,
+                  unseen_layouts=16, scaling=(32, 128), dt_seeds=3, mixed_layouts=64),
+    "paper": dict(compare_seeds=5, eval_episodes=100, trajectories=500, layout_trajectories=2, train_layouts=4096,
+                  unseen_layouts=32, scaling=(32, 128, 512, 1024, 2048), dt_seeds=3, mixed_layouts=1024),
+}
 DEMONSTRATION_CHUNK = 64  # halls per demonstration job (a job writes its part of the dataset)
 
 

@@ -30,6 +30,14 @@ def t_interval(x: ArrayLike, confidence: float = 0.95) -> tuple[float, float]:
     return mean - half, mean + half
 
 
+def over_units(values: ArrayLike) -> dict[str, float]:
+    """Mean and Student-t 95% interval of per-unit values, each unit (a hall, a cell) one
+    sample: ``n``, ``mean``, ``ci_low``, ``ci_high`` (the interval NaN for one unit)."""
+    x = np.asarray(values, dtype=np.float64)
+    low, high = t_interval(x)
+    return {"n": int(x.size), "mean": float(x.mean()), "ci_low": low, "ci_high": high}
+
+
 def bootstrap_ci(x: ArrayLike, statistic: str = "mean", confidence: float = 0.95, n_resamples: int = 2000,
                  seed: int = 0) -> tuple[float, float]:
     """Percentile-bootstrap CI of the mean or IQM of a 1-D sample (NaN for fewer than 2 values)."""

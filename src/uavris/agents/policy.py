@@ -5,7 +5,7 @@ Lives here: the protocols every policy of uavris follows, as the rollout loop
 (:func:`uavris.env.rollout.rollout`) uses them, and :class:`Privileged`, the marker of a
 reference that reads the simulator's state. Not here: any policy (baselines, experts,
 the Decision Transformer and the oracle each live with their family) and loading a user's
-policy by name (:mod:`uavris.experiments.user_policy`).
+policy by name (:mod:`uavris.experiments.tools.user_policy`).
 
 The contract (README, "Your own controller"):
 

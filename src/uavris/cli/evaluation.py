@@ -16,8 +16,8 @@ from uavris.agents.torch_device import Device
 from uavris.cli.parsing import output_dir, parse
 from uavris.config import ScenarioName, SystemConfig
 from uavris.env.wrappers import PhaseControl
-from uavris.experiments.benchmark import Cells
-from uavris.presets import COLLECT_SEED, EVAL_SEED, STUDY_EVAL_EPISODES, Preset
+from uavris.experiments.tools.benchmark import Cells
+from uavris.presets import COLLECT_SEED, EVAL_SEED, STUDY, Preset
 
 
 # ---------------------------------------------------------------------------------------- evaluate
@@ -35,7 +35,7 @@ class EvaluateArgs:
     layout: Optional[str] = None
     """the hall: paper, layout-train-N / layout-unseen-N, or a YAML layout file (devices, optionally start and
     room); default: the target's own"""
-    episodes: int = STUDY_EVAL_EPISODES["quick"]
+    episodes: int = STUDY["quick"]["eval_episodes"]
     """evaluation episodes (seeds SEED .. SEED+EPISODES-1); the default is the quick report's (the paper
     preset's report uses 100)"""
     seed: int = EVAL_SEED
@@ -64,15 +64,17 @@ def evaluate_command(args: list[str]) -> None:
     """
     from uavris.agents.torch_device import resolve_device
     from uavris.cli.options import layout_defaults
-    from uavris.experiments.evaluate import evaluate_target, target_system
+    from uavris.experiments.tools.evaluate import evaluate_target
+    from uavris.experiments.tools.targets import resolve_target
 
     doc = evaluate_command.__doc__ or ""
     # Two passes: the first finds the target, whose own system is the default the flags change.
     first = parse(EvaluateArgs, args, "uavris evaluate", doc)
-    system, hall = layout_defaults(args, target_system(first.target))
+    target = resolve_target(first.target)
+    system, hall = layout_defaults(args, target.own_system())
     a = parse(EvaluateArgs, args, "uavris evaluate", doc, default=EvaluateArgs(first.target, system=system))
     output_dir(a.out)
-    summary, path = evaluate_target(a.target, scenario=a.scenario or hall, episodes=a.episodes, seed=a.seed,
+    summary, path = evaluate_target(target, scenario=a.scenario or hall, episodes=a.episodes, seed=a.seed,
                                     out=a.out, phase_control=a.phase_control, device=resolve_device(a.device),
                                     progress=not a.no_progress, system=a.system)
     print(f"{a.target} in {summary['scenario']}: average sum rate {summary['mean']:.2f} bps/Hz "
@@ -117,12 +119,12 @@ def benchmark_command(args: list[str]) -> None:
     each cell's per-episode CSVs.
     """
     from uavris.agents.torch_device import resolve_device
-    from uavris.experiments.benchmark import benchmark
-    from uavris.experiments.evaluate import target_system
+    from uavris.experiments.tools.benchmark import benchmark
+    from uavris.experiments.tools.targets import resolve_target
 
     doc = benchmark_command.__doc__ or ""
     first = parse(BenchmarkArgs, args, "uavris benchmark", doc)
-    default = BenchmarkArgs(first.target, system=target_system(first.target))
+    default = BenchmarkArgs(first.target, system=resolve_target(first.target).own_system())
     a = parse(BenchmarkArgs, args, "uavris benchmark", doc, default=default)
     output_dir(a.out)
     _, md = benchmark(a.target, a.preset, a.cells, a.out, resolve_device(a.device), progress=not a.no_progress,
@@ -157,7 +159,7 @@ def plan_command(args: list[str]) -> None:
     and the target).
     """
     from uavris.cli.options import layout_defaults
-    from uavris.experiments.plan import check_grid, plan_hall
+    from uavris.experiments.tools.plan import check_grid, plan_hall
     from uavris.layouts import PAPER_LAYOUT, Layout, default_start, resolve_layout
 
     a = parse(PlanArgs, args, "uavris plan", plan_command.__doc__ or "")
@@ -203,7 +205,7 @@ def collect_command(args: list[str]) -> None:
     (metadata.json + main_data.hdf5): per-episode scenario, expert and seed, the system
     configuration and the environment spec (minari's recover_environment() rebuilds the env).
     """
-    from uavris.experiments.collect import collect, dataset_summary
+    from uavris.experiments.training.collect import collect, dataset_summary
 
     a = parse(CollectArgs, args, "uavris collect", collect_command.__doc__ or "")
     output_dir(a.out)
@@ -231,7 +233,7 @@ class DemoArgs:
 def demo_command(args: list[str]) -> None:
     """Roll out the zero action, random actions and a co-phasing hover, and print their average sum rate."""
     from uavris.cli.options import layout_defaults
-    from uavris.demo import run_demo
+    from uavris.experiments.tools.demo import run_demo
 
     a = parse(DemoArgs, args, "uavris demo", demo_command.__doc__ or "")
     system, hall = layout_defaults(args, SystemConfig())
@@ -256,7 +258,7 @@ def plot_command(args: list[str]) -> None:
     against gradient steps; DT fine-tuning: evaluation after each round. Writes OUT.png and
     OUT.pdf.
     """
-    from uavris.experiments.run_curves import plot_runs
+    from uavris.experiments.tools.run_curves import plot_runs
 
     a = parse(PlotArgs, args, "uavris plot", plot_command.__doc__ or "")
     output_dir(a.out.parent, "--out's folder")

@@ -16,6 +16,7 @@ from typing import Optional
 from uavris.agents.torch_device import Device, resolve_device
 from uavris.cli.parsing import UsageError, output_dir, peek
 from uavris.config import Scenario, SystemConfig
+from uavris.runs import CONFIG_FILE, config_path
 
 
 @dataclass(frozen=True)
@@ -35,7 +36,7 @@ class RunOptions:
     """no progress bar"""
 
 
-def check_run_options(opts: RunOptions, run_dir: Path, config_file: str) -> str:
+def check_run_options(opts: RunOptions, run_dir: Path) -> str:
     """Reject contradictory or empty resumes; returns the resolved torch device.
 
     The library's ``resume=True`` means "continue if there is something to continue" (the
@@ -50,8 +51,8 @@ def check_run_options(opts: RunOptions, run_dir: Path, config_file: str) -> str:
         if not run_dir.exists():
             raise UsageError(f"--resume: {run_dir} does not exist, so there is no run to resume; drop --resume to "
                              "start a new run")
-        if not (run_dir / config_file).exists():
-            raise UsageError(f"--resume: {run_dir} holds no run ({config_file} is missing); drop --resume to start "
+        if config_path(run_dir) is None:
+            raise UsageError(f"--resume: {run_dir} holds no run ({CONFIG_FILE} is missing); drop --resume to start "
                              "a new run")
     return resolve_device(opts.device)
 

@@ -3,7 +3,8 @@
 Lives here: :func:`parse` (tyro over a dataclass whose defaults come from a preset or a
 file; tyro's boxed usage errors become one :class:`UsageError` line), :func:`peek` (the
 few flags that choose those defaults, read before tyro runs) and the checks of paths and
-devices that every command shares. Not here: the commands themselves (:mod:`.commands`).
+devices that every command shares. Not here: the commands themselves (:mod:`.training`,
+:mod:`.evaluation`).
 """
 
 from __future__ import annotations
@@ -89,6 +90,15 @@ def peek_int(args: list[str], name: str, default: int) -> int:
         return int(raw)
     except ValueError:
         raise UsageError(f"{name} expects an integer, got {raw!r}") from None
+
+
+def peek_preset(args: list[str]) -> str:
+    """The ``--preset`` in ``args``, whose table gives every other field its default; an
+    unknown one reads as ``quick`` here, so that tyro then reports it with the choices."""
+    from uavris.presets import PRESETS
+
+    preset = peek(args, "--preset", "quick")
+    return preset if preset in PRESETS else "quick"
 
 
 def output_dir(path: Path | None, flag: str = "--out") -> None:

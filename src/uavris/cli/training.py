@@ -18,14 +18,14 @@ import tyro
 from uavris.agents.experts import Algorithm
 from uavris.agents.torch_device import Device
 from uavris.cli.options import LAYOUT_HELP, RunOptions, check_run_options, layout_defaults
-from uavris.cli.parsing import UsageError, load_overrides, output_dir, parse, peek, peek_int
+from uavris.cli.parsing import UsageError, load_overrides, output_dir, parse, peek, peek_int, peek_preset
 from uavris.config import ScenarioName, SystemConfig
-from uavris.experiments.finetune import FinetuneConfig
-from uavris.experiments.jobs import Backend
-from uavris.experiments.pretrain import PretrainConfig
-from uavris.experiments.reproduce import ReproduceConfig
-from uavris.experiments.train_expert import TrainConfig
-from uavris.presets import STUDY_COMPARE_SEEDS, Preset
+from uavris.experiments.engine.jobs import Backend
+from uavris.experiments.study.config import ReproduceConfig
+from uavris.experiments.training.finetune import FinetuneConfig
+from uavris.experiments.training.pretrain import PretrainConfig
+from uavris.experiments.training.train_expert import TrainConfig
+from uavris.presets import STUDY, Preset
 
 Flat = tyro.conf.arg(name="")  # the config's fields become the command's own flags
 HELP = ("-h", "--help")
@@ -67,7 +67,7 @@ def _nested_update(base: dict[str, Any], changes: dict[str, Any], where: str) ->
 def train_defaults(args: list[str]) -> TrainConfig:
     """The preset chosen on the command line (or in ``--config``), with the file's fields on top.
     ``--resume`` without ``--config`` continues with the run's own ``OUT/config.yaml``."""
-    from uavris.experiments.train_expert import preset_config
+    from uavris.experiments.training.train_expert import TrainConfig
 
     file = peek(args, "--config")
     out = peek(args, "--out")
@@ -83,7 +83,7 @@ def train_defaults(args: list[str]) -> TrainConfig:
     named = hall is None or peek(args, "--scenario") is not None  # a named scenario's start, in the layout's hall
     where = {} if hall is None else {"system": system, "start": None if named else hall.start}
     pick["scenario"] = pick["scenario"] if named else hall.name
-    base = preset_config(pick["algo"], pick["scenario"], seed, pick["preset"], **where)
+    base = TrainConfig(algo=pick["algo"], scenario=pick["scenario"], seed=seed, preset=pick["preset"], **where)
     if not data:
         return base
     merged = _nested_update(base.to_dict(), data, f"--config {file}")
@@ -97,13 +97,13 @@ def train_command(args: list[str]) -> None:
     (rerun it with --config), episodes.csv, evals.csv, TensorBoard logs (tb/), checkpoints/
     and model.zip. Every TrainConfig field is a flag; --preset and --algo choose the defaults.
     """
-    from uavris.experiments.train_expert import default_run_dir, train
+    from uavris.experiments.training.train_expert import default_run_dir, train
     from uavris.runs import read_done
 
     a = parse(TrainArgs, args, "uavris train", train_command.__doc__ or "",
               default=TrainArgs(train_defaults(args)))
     run_dir = a.options.out or default_run_dir(a.run)
-    device = check_run_options(a.options, run_dir, "config.yaml")
+    device = check_run_options(a.options, run_dir)
     model = train(a.run, run_dir, resume=a.options.resume, force=a.options.force,
                   progress=not a.options.no_progress, device=device)
     final = read_done(run_dir)["final_eval"]
@@ -147,14 +147,14 @@ def compare_command(args: list[str]) -> None:
     report.md. Finished jobs are skipped on a rerun; interrupted ones resume.
     """
     from uavris.agents.torch_device import resolve_device
-    from uavris.experiments.compare import compare_algorithms
+    from uavris.experiments.training.compare import compare_algorithms
 
     system, hall = layout_defaults(args, SystemConfig())
     a = parse(CompareArgs, args, "uavris compare-algorithms", compare_command.__doc__ or "",
               default=CompareArgs(system=system, scenario="fig2" if hall is None else hall.name))
     output_dir(a.out)
     start = hall.start if hall is not None and a.scenario == hall.name else None
-    seeds = STUDY_COMPARE_SEEDS[a.preset] if a.seeds is None else a.seeds
+    seeds = STUDY[a.preset]["compare_seeds"] if a.seeds is None else a.seeds
     report = compare_algorithms(preset=a.preset, seeds=seeds, workers=a.workers, out=a.out, algos=a.algos,
                                 scenario=a.scenario, eval_episodes=a.eval_episodes, backend=a.backend,
                                 ray_address=a.ray_address, device=resolve_device(a.device), system=a.system,
@@ -165,7 +165,7 @@ def compare_command(args: list[str]) -> None:
 def _run_dt(fn: Callable[..., Path], cfg: Any, opts: RunOptions, default_dir: Callable[[Any], Path]) -> Path:
     """Run a DT stage (pre-training or fine-tuning) as the options say; its run directory."""
     run_dir = opts.out or default_dir(cfg)
-    device = check_run_options(opts, run_dir, "config.json")
+    device = check_run_options(opts, run_dir)
     return fn(cfg, run_dir, resume=opts.resume, force=opts.force, progress=not opts.no_progress, device=device)
 
 
@@ -180,17 +180,17 @@ def pretrain_command(args: list[str]) -> None:
     """Pre-train a Decision Transformer offline on an expert dataset (paper Algorithm 1, stage 1).
 
     --dataset is a directory written by `uavris collect`. Writes the run directory OUT
-    (default runs/dt/pretrain-DATASET-sSEED-PRESET): config.json, train_log.csv, TensorBoard
+    (default runs/dt/pretrain-DATASET-sSEED-PRESET): config.yaml, train_log.csv, TensorBoard
     logs (tb/), checkpoints/ and model/ (model.safetensors + model.json), which `uavris
     evaluate` and `uavris finetune-dt --model` accept.
     """
-    from uavris.experiments.pretrain import default_pretrain_dir, pretrain, pretrain_config
+    from uavris.experiments.training.pretrain import PretrainConfig, default_pretrain_dir, pretrain
     from uavris.runs import read_done
 
     dataset = peek(args, "--dataset", "DATASET" if _is_help(args) else None)
     if dataset is None:
         raise UsageError("pretrain-dt: --dataset DIR is required (a dataset written by `uavris collect`)")
-    cfg = pretrain_config(dataset, str(peek(args, "--preset", "quick")), peek_int(args, "--seed", 0))
+    cfg = PretrainConfig(dataset=dataset, preset=peek_preset(args), seed=peek_int(args, "--seed", 0))
     default = PretrainArgs(_required_in_help(cfg, "dataset") if _is_help(args) else cfg)
     a = parse(PretrainArgs, args, "uavris pretrain-dt", pretrain_command.__doc__ or "", default=default)
     run_dir = _run_dt(pretrain, a.run, a.options, default_pretrain_dir)
@@ -217,8 +217,8 @@ def finetune_command(args: list[str]) -> None:
     finetune.csv (with the environment interactions used), TensorBoard logs, checkpoints/
     and model/.
     """
-    from uavris.experiments.dt_runs import dt_system
-    from uavris.experiments.finetune import default_finetune_dir, finetune, finetune_config
+    from uavris.experiments.training.dt_runs import dt_system
+    from uavris.experiments.training.finetune import FinetuneConfig, default_finetune_dir, finetune
     from uavris.runs import read_done
 
     placeholder = _is_help(args)
@@ -229,7 +229,8 @@ def finetune_command(args: list[str]) -> None:
     system, hall = layout_defaults(args, SystemConfig() if placeholder else dt_system(model))
     start = hall.start if hall is not None and scenario is None else None
     scenario = scenario or (hall.name if hall is not None else "unseen1")
-    cfg = finetune_config(model, scenario, str(peek(args, "--preset", "quick")), peek_int(args, "--seed", 0),
+    cfg = FinetuneConfig(model=model, scenario=scenario, preset=peek_preset(args),
+                         seed=peek_int(args, "--seed", 0),
                           system=system, start=start)
     default = FinetuneArgs(_required_in_help(cfg, "model") if placeholder else cfg)
     a = parse(FinetuneArgs, args, "uavris finetune-dt", finetune_command.__doc__ or "", default=default)
@@ -264,7 +265,7 @@ class ReproduceArgs:
     """no progress bar"""
     estimate: bool = False
     """print each stage's expected core-minutes and the expected wall clock on --workers, and exit (nothing run
-    or written; the cost model of uavris.experiments.costs, measured on a 2-core AMD EPYC)"""
+    or written; the cost model of uavris.experiments.engine.costs, measured on a 2-core AMD EPYC)"""
 
 
 def reproduce_command(args: list[str]) -> None:
@@ -281,11 +282,11 @@ def reproduce_command(args: list[str]) -> None:
     Writes OUT/report.md and OUT/figures/.
     """
     from uavris.agents.torch_device import resolve_device
-    from uavris.experiments.reproduce import estimate, reproduce
+    from uavris.experiments.study.reproduce import estimate, reproduce
 
-    system, _ = layout_defaults(args, ReproduceConfig().system)
+    system, _ = layout_defaults(args, SystemConfig())
     a = parse(ReproduceArgs, args, "uavris reproduce", reproduce_command.__doc__ or "",
-              default=ReproduceArgs(ReproduceConfig(system=system)))
+              default=ReproduceArgs(ReproduceConfig(preset=peek_preset(args), system=system)))
     if a.estimate:
         print(estimate(a.study, a.workers), end="")
         return

@@ -4,7 +4,8 @@ Lives here: the one implementation of what every training command (expert traini
 DT pre-training and fine-tuning) does with its run directory. Not here: what a run writes
 besides (its logs, checkpoints and models, each written by its own command).
 
-A run directory holds its configuration (``config.yaml`` or ``config.json``), a
+A run directory holds its configuration (``config.yaml``, :data:`CONFIG_FILE`, for every
+kind of run; DT runs made before 0.3 hold ``config.json``, which still loads), a
 ``checkpoints/latest.json`` pointer to the newest checkpoint (moved last and atomically,
 so a kill at any moment leaves the previous checkpoint usable), ``timing.json`` (the
 wall-clock time it took, over every session: the one file that differs between two runs
@@ -21,8 +22,10 @@ from pathlib import Path
 from typing import Any, Callable
 
 from uavris.errors import UavrisError
-from uavris.io import read_json, write_json
+from uavris.io import read_json, read_yaml, to_plain, write_json, write_yaml
 
+CONFIG_FILE = "config.yaml"
+LEGACY_CONFIG_FILE = "config.json"  # DT runs before 0.3
 DONE_FILE = "done.json"
 POINTER = Path("checkpoints") / "latest.json"
 TIMING_FILE = "timing.json"  # wall-clock measurements: kept apart so every other file is reproducible to the bit
@@ -32,20 +35,38 @@ def is_finished(run_dir: str | Path) -> bool:
     return (Path(run_dir) / DONE_FILE).exists()
 
 
-def prepare(run_dir: Path, config_file: str, write_config: Callable[[Path], None], same_config: Callable[[Path], bool],
-            *, resume: bool, force: bool, what: str = "uavris run") -> bool:
+def config_path(run_dir: str | Path) -> Path | None:
+    """The run's configuration file (:data:`CONFIG_FILE`, or an older run's JSON), or None."""
+    for name in (CONFIG_FILE, LEGACY_CONFIG_FILE):
+        path = Path(run_dir) / name
+        if path.is_file():
+            return path
+    return None
+
+
+def read_config(run_dir: str | Path) -> Any:
+    """The stored configuration of a run (a mapping, unless the file is not a run's), or None
+    when the directory holds none."""
+    path = config_path(run_dir)
+    if path is None:
+        return None
+    return read_json(path) if path.suffix == ".json" else read_yaml(path)
+
+
+def prepare(run_dir: Path, record: dict[str, Any], *, resume: bool, force: bool, what: str = "uavris run",
+            same: Callable[[Any], bool] | None = None) -> bool:
     """Check ``run_dir`` before training into it; returns True when an unfinished run is resumed.
 
-    ``write_config(path)`` writes a new run's configuration; ``same_config(path)`` says
-    whether the stored one equals the requested one. Raises :class:`UavrisError` for a
-    finished run (unless ``force``), an existing run without ``resume`` or ``force``, a
-    resume with another configuration, a file in the run directory's place, and a
-    directory that is not a run (never deleted).
+    ``record`` is the run's configuration as a dict, written to :data:`CONFIG_FILE` for a new
+    run; ``same(stored)`` says whether a stored one is the requested one (default: equal to
+    ``record``). Raises :class:`UavrisError` for a finished run (unless ``force``), an
+    existing run without ``resume`` or ``force``, a resume with another configuration, a file
+    in the run directory's place, and a directory that is not a run (never deleted).
     """
     if run_dir.exists() and not run_dir.is_dir():
         raise UavrisError(f"{run_dir} exists and is not a directory")
-    cfg_path = run_dir / config_file
-    has_config = cfg_path.exists()
+    record = to_plain(record)
+    has_config = config_path(run_dir) is not None
     if force and run_dir.exists() and not resume:
         if not has_config and any(run_dir.iterdir()):
             raise UavrisError(f"{run_dir} exists and is not a {what} directory; refusing to overwrite it")
@@ -59,12 +80,13 @@ def prepare(run_dir: Path, config_file: str, write_config: Callable[[Path], None
     elif run_dir.exists() and not has_config and any(run_dir.iterdir()):
         raise UavrisError(f"{run_dir} exists and is not a {what} directory")
     if has_config:
-        if not same_config(cfg_path):
+        stored = read_config(run_dir)
+        if not (same(stored) if same is not None else stored == record):
             raise UavrisError(f"{run_dir} was started with a different configuration; resume it without changing "
                               "parameters, or pass --force to start over")
         return True
     run_dir.mkdir(parents=True, exist_ok=True)
-    write_config(cfg_path)
+    write_yaml(run_dir / CONFIG_FILE, record)
     return False
 
 

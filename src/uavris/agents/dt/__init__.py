@@ -7,6 +7,6 @@ layout's key/value cache), :mod:`.checkpoint` (safetensors + JSON), :mod:`.traje
 :mod:`.policy` (deployment).
 
 Lives here: nothing at package level; import from the modules. Not here: the pipelines that
-use them (:mod:`uavris.experiments.collect`, :mod:`uavris.experiments.pretrain`,
-:mod:`uavris.experiments.finetune`) and DT run directories (:mod:`uavris.experiments.dt_runs`).
+use them (:mod:`uavris.experiments.training.collect`, :mod:`uavris.experiments.training.pretrain`,
+:mod:`uavris.experiments.training.finetune`) and DT run directories (:mod:`uavris.experiments.training.dt_runs`).
 """

@@ -6,13 +6,10 @@ Not here: the model that fills and reads it (:mod:`.model`).
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 import numpy as np
 import torch
 
-if TYPE_CHECKING:
-    from uavris.agents.dt.model import DTConfig
+from uavris.agents.dt.config import DTConfig
 
 
 class KVCache:

@@ -15,7 +15,8 @@ from typing import Any
 
 import torch
 
-from uavris.agents.dt.model import DecisionTransformer, DTConfig
+from uavris.agents.dt.config import DTConfig
+from uavris.agents.dt.model import DecisionTransformer
 from uavris.errors import CheckpointError, ConfigError
 from uavris.io import atomic_write_bytes, write_json
 

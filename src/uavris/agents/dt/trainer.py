@@ -5,7 +5,7 @@ Lives here: :func:`make_optimizer` (AdamW, weight decay on the weight matrices o
 eq. 19, with a linear warm-up, ``torch.optim.lr_scheduler.LambdaLR``, and gradient-norm
 clipping) and the trainer state a resumed run needs (optimiser moments and random
 streams, safetensors + JSON, no pickle). Not here: the runs that use them, their
-directories and logs (:mod:`uavris.experiments.pretrain`, :mod:`uavris.experiments.finetune`).
+directories and logs (:mod:`uavris.experiments.training.pretrain`, :mod:`uavris.experiments.training.finetune`).
 """
 
 from __future__ import annotations

@@ -34,7 +34,7 @@ from uavris.env.rollout import rollout
 from uavris.errors import DatasetError
 
 if TYPE_CHECKING:
-    from uavris.agents.dt.model import DTConfig
+    from uavris.agents.dt.config import DTConfig
 
 STATE_STD_FLOOR = 0.1
 

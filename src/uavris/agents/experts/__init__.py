@@ -7,7 +7,7 @@ batched simulator), :mod:`.resume_state` (what exact resume needs beyond SB3's f
 
 Lives here: the re-exports of :mod:`.hyperparams` (:data:`ALGORITHMS`, :data:`OFF_POLICY`,
 :class:`Hyperparams`, :func:`check_algorithm`, :func:`default_hyperparams`,
-:func:`hyperparams_for`). Not here: training runs (:mod:`uavris.experiments.train_expert`)
+:func:`hyperparams_for`). Not here: training runs (:mod:`uavris.experiments.training.train_expert`)
 and the per-preset hyperparameter values (:mod:`uavris.presets`).
 """
 

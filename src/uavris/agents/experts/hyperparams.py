@@ -34,6 +34,7 @@ import dataclasses
 from dataclasses import dataclass
 from typing import Any, Literal, get_args
 
+from uavris.config import DictConfig
 from uavris.errors import ConfigError
 from uavris.presets import ALGO_HYPERPARAMS, HYPERPARAMS, check_preset
 
@@ -43,7 +44,7 @@ OFF_POLICY: tuple[str, ...] = ("ddpg", "sac", "td3")
 
 
 @dataclass(frozen=True)
-class Hyperparams:
+class Hyperparams(DictConfig):
     """Hyperparameters of one algorithm (fields not used by an algorithm are ignored)."""
 
     net_arch: tuple[int, ...] = (256, 256)

@@ -3,7 +3,7 @@
 Lives here: :class:`ImitationConfig` and :func:`imitate`, which fits an SB3 PPO policy
 acting on the 6 motion entries (the hybrid action of :mod:`uavris.env.wrappers`; the phase
 optimiser sets the phases) to the planning oracle's motion. Not here: the run directory,
-checkpoints and the RL that may follow (:mod:`uavris.experiments.train_expert`).
+checkpoints and the RL that may follow (:mod:`uavris.experiments.training.train_expert`).
 
 Why (docs/model.md, "Strong track"): end-to-end RL does not learn the 16 phases at any
 budget we could afford, and RL on the motion alone needs 100-150k env steps per scenario
@@ -34,16 +34,16 @@ import numpy as np
 from numpy.typing import NDArray
 
 from uavris.agents.policy import Privileged
-from uavris.config import ConfigError, Scenario, SystemConfig
+from uavris.config import ConfigError, DictConfig, Scenario, SystemConfig
 from uavris.env.rollout import rollout
 from uavris.env.simulator import BatchedSimulator
+from uavris.presets import IMITATION_SEED
 
-IMITATION_SEED = 4_000_000
 TEACHERS: tuple[str, ...] = ("oracle",)
 
 
 @dataclass(frozen=True)
-class ImitationConfig:
+class ImitationConfig(DictConfig):
     """Behaviour cloning with DAgger from a teacher (see the module docstring)."""
 
     teacher: str = "oracle"

@@ -3,7 +3,7 @@ run to continue exactly as an uninterrupted one would.
 
 Lives here: :func:`capture`, :func:`restore` and :data:`STATE_VERSION`. Not here: when a
 checkpoint is taken and what else it holds
-(:func:`uavris.experiments.train_expert.save_checkpoint`) and the ``latest.json`` pointer
+(:func:`uavris.experiments.training.train_expert.save_checkpoint`) and the ``latest.json`` pointer
 (:mod:`uavris.runs`).
 
 ``model.save`` keeps weights, optimisers and counters, and ``save_replay_buffer`` the

@@ -3,7 +3,7 @@
 Lives here: the SB3 class of each algorithm, :func:`build_model` with uavris's
 hyperparameters, :func:`load_model` with a clear error for a corrupt archive, and
 :class:`SB3Policy`, a trained model as an observation-only policy. Not here: the
-hyperparameters (:mod:`.hyperparams`), training runs (:mod:`uavris.experiments.train_expert`).
+hyperparameters (:mod:`.hyperparams`), training runs (:mod:`uavris.experiments.training.train_expert`).
 """
 
 from __future__ import annotations

@@ -1,0 +1,94 @@
+"""What a job of the study is expected to cost: seconds of one core, from its amount of work.
+
+Lives here: the measured cost per unit of each kind of work (:data:`SB3_STEP_S`, ...) and the
+expected cost of each kind of job (:func:`train_cost`, :func:`dataset_cost`,
+:func:`demonstration_cost`, :func:`pretrain_cost`, :func:`finetune_cost`, :func:`evaluate_cost`). Not here: what uses
+them, the order in which the job runner starts jobs (:mod:`.jobs`, :mod:`.stages`: the
+longest chain first) and the progress bar of ``reproduce`` (each job weighs its cost).
+
+The unit costs were measured on the project machine (2-core AMD EPYC, one job per core,
+quick preset, 2026-11; recalibrated from the job times of a whole quick study, its
+``schedule.json``): an SB3 env step with the quick networks (64 x 64) from the 50,000-
+step comparison jobs, the paper preset's 256 x 256 networks from
+``benchmarks/paper_wallclock.py``; a simulated slot with a learned policy, with and
+without the per-slot phase optimiser; a DT gradient step at the DT paper's size (batch 64
+windows of 20 slots, width 128, 3 layers), scaled by the tokens it reads. They order and
+weigh jobs; nothing depends on them being exact, only on their ratios being about right.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+# SB3 training, seconds per env step (networks of the preset; smoke uses quick's rates).
+SB3_STEP_S: dict[str, dict[str, float]] = {
+    "quick": {"ddpg": 2.6e-3, "td3": 2.7e-3, "sac": 5.1e-3, "ppo": 0.11e-3},
+    "paper": {"ddpg": 10.3e-3, "td3": 11.4e-3, "sac": 17.8e-3, "ppo": 0.34e-3},
+}
+# A simulated slot of one episode with a learned policy, by who sets the phases, and with the
+# planning oracle as the teacher of imitation (its motion only, no phases).
+SLOT_S = {"agent": 0.15e-3, "optimizer": 0.45e-3}
+IMITATION_SLOT_S = 0.45e-3  # a DAgger slot: the rollout, the oracle's label and its share of the fitting
+PLAN_S = 1.05  # the planning oracle's plan of one hall (the screening grid and the valued candidates)
+# A DT gradient step at the DT paper's size: batch 64 windows of 20 slots, width 128, 3 layers;
+# other sizes scale with the slots read times width^2 times depth (the matrix products).
+DT_STEP_S = 0.17
+DT_REFERENCE = 64 * 20 * 128 * 128 * 3
+# What a gradient step costs whatever the model's size (the sampling of windows, the optimiser,
+# the autograd bookkeeping): small models are dominated by it. And the device-set encoder's
+# per-device and pair networks, per state it reads (docs/model.md, section 21).
+DT_STEP_OVERHEAD_S = 0.03
+DEVICE_ENCODER_STATE_S = 2.5e-5
+
+
+def _dt_step(batch: int, context: int, width: int, depth: int) -> float:
+    return DT_STEP_S * batch * context * width * width * depth / DT_REFERENCE
+
+
+def train_cost(cfg: Any) -> float:
+    """An expert's training run (a :class:`~uavris.experiments.training.train_expert.TrainConfig`):
+    imitation rollouts and fitting, the RL env steps, and its periodic and final evaluations."""
+    rates = SB3_STEP_S.get(cfg.preset, SB3_STEP_S["quick"])
+    cost = cfg.total_steps * rates[cfg.algo]
+    horizon = cfg.system.horizon
+    evaluations = cfg.total_steps // cfg.eval_every + 1
+    cost += evaluations * cfg.eval_episodes * horizon * SLOT_S[cfg.phase_control]
+    if cfg.imitation is not None:
+        cost += PLAN_S + cfg.imitation.rounds * cfg.imitation.episodes * horizon * IMITATION_SLOT_S
+    return cost
+
+
+def dataset_cost(episodes: int, horizon: int, phase_control: str) -> float:
+    """Collecting ``episodes`` expert episodes."""
+    return episodes * horizon * SLOT_S[phase_control]
+
+
+def demonstration_cost(halls: int, episodes_per_hall: int, horizon: int) -> float:
+    """The planning oracle's demonstrations in ``halls`` halls: a plan each, and the episodes
+    (all behaviours of a hall) with the optimiser's phases."""
+    return halls * (PLAN_S + episodes_per_hall * horizon * SLOT_S["optimizer"])
+
+
+def pretrain_cost(cfg: Any) -> float:
+    """A DT pre-training run (a :class:`~uavris.experiments.training.pretrain.PretrainConfig`)."""
+    encoder = DEVICE_ENCODER_STATE_S * cfg.batch_size * cfg.context if cfg.state_encoder == "devices" else 0.0
+    return cfg.steps * (DT_STEP_OVERHEAD_S + _dt_step(cfg.batch_size, cfg.context, cfg.width, cfg.depth) + encoder)
+
+
+def finetune_cost(cfg: Any, horizon: int, phase_control: str, context: int = 20, width: int = 128,
+                  depth: int = 3) -> float:
+    """A DT fine-tuning run (a :class:`~uavris.experiments.training.finetune.FinetuneConfig`): per round,
+    the noisy candidates, the gradient steps on the elites and an evaluation."""
+    slots = (cfg.candidates + cfg.eval_episodes) * horizon
+    steps = cfg.epochs_per_round * -(-cfg.elites * horizon // cfg.batch_size)
+    per_round = slots * (SLOT_S[phase_control] + _dt_step(1, context, width, depth) / 4) + steps * _dt_step(
+        cfg.batch_size, context, width, depth)
+    return cfg.eval_episodes * horizon * SLOT_S[phase_control] + cfg.rounds * per_round
+
+
+def evaluate_cost(policies: int, episodes: int, horizon: int, phase_control: str) -> float:
+    """Evaluating ``policies`` learned policies and the references (zero action, hover with the
+    optimiser's phases, the planning oracle) on ``episodes`` episodes."""
+    learned = policies * episodes * horizon * SLOT_S[phase_control]
+    references = PLAN_S + 2 * episodes * horizon * SLOT_S["optimizer"]
+    return learned + references

@@ -1,0 +1,87 @@
+"""What determines a study: :class:`ReproduceConfig`, dumped into every report.
+
+Lives here: :class:`ReproduceConfig` (the preset, the tracks chosen, their sizes and seeds,
+the system) and the choices ``--track`` and ``--expert-algo`` accept. Not here: the stages
+it becomes (:mod:`.pipeline`), the tracks themselves (:mod:`.tracks`), the preset tables
+(:data:`uavris.presets.STUDY`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Literal, get_args
+
+from uavris.agents.experts import ALGORITHMS
+from uavris.config import PRESET, DictConfig, SystemConfig, fill_from_preset
+from uavris.errors import UavrisError
+from uavris.experiments.study.tracks import TRACK_SPECS, TRACKS, Deployment, Track, deployments
+from uavris.presets import STUDY, Preset, check_preset
+
+# "all": the three tracks; "both": the paper and the strong track (the study before layouts).
+TrackChoice = Literal["all", "both", "paper", "strong", "deployment"]
+TRACK_CHOICES: tuple[str, ...] = get_args(TrackChoice)
+AUTO = "auto"
+ExpertAlgo = Literal["auto", "ddpg", "ppo", "sac", "td3"]
+TRACK_SETS = {"all": TRACKS, "both": ("paper", "strong")}
+SIZE_BOUNDS = {"compare_seeds": 100, "eval_episodes": 100_000, "trajectories": 100_000,
+               "layout_trajectories": 100_000, "train_layouts": 100_000, "unseen_layouts": 10_000, "dt_seeds": 100,
+               "mixed_layouts": 100_000}
+assert set(TRACK_CHOICES) == set(TRACK_SETS) | set(TRACKS) and set(get_args(ExpertAlgo)) == {AUTO, *ALGORITHMS}
+
+
+@dataclasses.dataclass(frozen=True)
+class ReproduceConfig(DictConfig):
+    """Everything that determines the study (dumped into the report). Fields left at
+    ``PRESET`` take the preset's values (:data:`uavris.presets.STUDY`)."""
+
+    preset: Preset = "quick"  # smoke (seconds, for tests), quick (under an hour on 2 cores) or paper (days)
+    seed: int = 0  # seed of every training run (experts, DT); evaluation episodes have their own
+    compare_seeds: int = PRESET  # paper track: seeds per algorithm in the comparison
+    eval_episodes: int = PRESET  # evaluation episodes per policy and scenario
+    trajectories: int = PRESET  # paper and strong tracks: expert trajectories per training scenario
+    track: TrackChoice = "all"  # all, both (paper and strong), paper, strong or deployment
+    expert_algo: ExpertAlgo = AUTO  # paper track: auto (the comparison's choice) or one of the four
+    train_layouts: int = PRESET  # deployment track: training layouts
+    unseen_layouts: int = PRESET  # deployment track: unseen layouts
+    layout_trajectories: int = PRESET  # deployment track: the oracle's demonstrations per training layout
+    layout_seed: int = 0  # deployment track: seed of the layout generator
+    scaling: tuple[int, ...] = PRESET  # deployment track: smaller training sets of the data curve
+    dt_seeds: int = PRESET  # deployment track: pre-training seeds of every learned row
+    mixed_layouts: int = PRESET  # deployment track: halls of the mixed-quality dataset
+    system: SystemConfig = dataclasses.field(default_factory=SystemConfig)
+
+    def __post_init__(self) -> None:
+        check_preset(self.preset)
+        fill_from_preset(self, STUDY[self.preset])
+        if self.track not in TRACK_CHOICES:
+            raise UavrisError(f"unknown track {self.track!r}; choose one of {', '.join(TRACK_CHOICES)}")
+        if self.expert_algo not in (AUTO,) + ALGORITHMS:
+            raise UavrisError(f"unknown expert algorithm {self.expert_algo!r}; choose {AUTO} (the comparison's "
+                              f"winner) or one of {', '.join(ALGORITHMS)}")
+        for name, top in SIZE_BOUNDS.items():  # a typo's bound: beyond it a run exhausts memory or days
+            v = getattr(self, name)
+            if not 1 <= v <= top:
+                raise UavrisError(f"--{name.replace('_', '-')} must be in [1, {top:,}], got {v}")
+        if self.unseen_layouts < 2:
+            raise UavrisError(f"--unseen-layouts must be >= 2 (a CI over layouts needs two), got {self.unseen_layouts}")
+        for name in ("seed", "layout_seed"):
+            if getattr(self, name) < 0:
+                raise UavrisError(f"--{name.replace('_', '-')} must be >= 0, got {getattr(self, name)}")
+        object.__setattr__(self, "scaling", tuple(int(n) for n in self.scaling))
+        bad = [n for n in self.scaling if not 1 <= n < self.train_layouts]
+        if bad:
+            raise UavrisError(f"--scaling {list(self.scaling)}: each must be >= 1 and below "
+                              f"--train-layouts ({self.train_layouts}), got {bad}")
+
+    def trajectories_for(self, track: Track) -> int:
+        """Expert trajectories (or the oracle's demonstrations) per training deployment of
+        ``track``: a generated hall gets few (many halls, few episodes each: docs/study.md
+        section 21), a scenario of the paper's hall many."""
+        return self.layout_trajectories if track.layouts else self.trajectories
+
+    @property
+    def tracks(self) -> tuple[Track, ...]:
+        return tuple(TRACK_SPECS[t] for t in TRACK_SETS.get(self.track, (self.track,)))
+
+    def deployments(self, track: Track) -> tuple[list[Deployment], list[Deployment]]:
+        return deployments(track, self.system, self.train_layouts, self.unseen_layouts, self.layout_seed)

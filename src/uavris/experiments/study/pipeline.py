@@ -1,0 +1,298 @@
+"""The study's pipeline: its stages, their configurations (the stage keys), inputs and expected costs.
+
+Lives here: :func:`build_pipeline`, which turns a :class:`~.config.ReproduceConfig` into the
+stages below, and :class:`TrackStages`, the stages of one track (a
+:class:`~.tracks.Track`: its parameters). Not here: what a stage's jobs do
+(:mod:`.workers`), running the pipeline (:mod:`.reproduce`; keying, skipping and ordering
+stages: :mod:`uavris.experiments.engine`).
+
+Stages (each in ``OUT/stages/NAME-KEY``, keyed by its configuration and its inputs):
+
+1. ``compare``: DDPG, PPO, SAC, TD3 over seeds in the Fig. 2 scenario (paper Fig. 2).
+2. ``experts-train``: an expert in each of the eight training scenarios, of the algorithm
+   the comparison picks (largest IQM, as the paper's Sec. IV-B) or ``expert_algo``.
+3. ``experts-unseen``: a scenario-specific expert in each unseen scenario.
+4. ``dataset``: the experts' deterministic trajectories as a Minari dataset.
+5. ``pretrain``: the Decision Transformer, offline (Algorithm 1, stage 1).
+6. ``finetune-unseenX``: elite online fine-tuning in each unseen scenario (stage 2).
+7. ``evaluate-unseenX``: the expert, the zero-shot DT, the fine-tuned DT, the experts of the
+   nearest training scenarios (transferred) and the references (zero action, hover with
+   the optimiser's phases, oracle), all on the same seeded evaluation episodes (Fig. 3).
+8. ``report``: figures and ``OUT/report.md`` with every number read from the stage files.
+
+Stages 2-7 exist once per track: the paper track as above, and the strong track (learned
+motion, optimised phases) with the same names prefixed ``strong-``. The deployment track
+(``deploy-``) is the same pipeline with other parameters: its dataset is the planning
+oracle's demonstrations in many generated halls (``deploy-dataset``, and
+``deploy-dataset-mixed`` of mixed quality), its pre-training stages are the ablation's rows
+over several seeds (``deploy-pretrain``, ``-bc``, ``-flat``, ``-pretrain-nN``, ``-mixed-dt``,
+``-mixed-bc``, each with ``-sK`` copies), and it deploys to unseen halls. Stages whose inputs
+are ready run at the same time, and all their jobs share the study's workers, so the tracks
+interleave.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from functools import partial
+from pathlib import Path
+from typing import Any, Sequence
+
+from uavris import runs
+from uavris.agents.experts import ALGORITHMS
+from uavris.experiments.engine.costs import (
+    dataset_cost,
+    demonstration_cost,
+    evaluate_cost,
+    finetune_cost,
+    pretrain_cost,
+    train_cost,
+)
+from uavris.experiments.engine.jobs import Job
+from uavris.experiments.engine.scheduling import StudyContext
+from uavris.experiments.engine.stages import Pipeline, Stage
+from uavris.experiments.study.config import AUTO, ReproduceConfig
+from uavris.experiments.study.tracks import (
+    Deployment,
+    Track,
+    evaluated_policies,
+    pretraining_stages,
+    strong_expert_config,
+    transfer_sources,
+)
+from uavris.experiments.study.workers import (
+    dataset_job,
+    demonstrations_job,
+    evaluate_job,
+    finetune_job,
+    merge_demonstrations,
+    pretrain_job,
+)
+from uavris.experiments.training.demonstrations import DemonstrationConfig
+from uavris.experiments.training.finetune import FinetuneConfig
+from uavris.experiments.training.pretrain import PretrainConfig
+from uavris.experiments.training.train_expert import TrainConfig, train_job
+from uavris.io import read_json
+from uavris.presets import COLLECT_SEED, DEMONSTRATION_CHUNK, EVAL_SEED
+
+REFERENCE_ROWS = ["hover", "hover-optimizer", "oracle"]  # what every evaluation stage scores beside its policies
+
+
+def build_pipeline(rc: ReproduceConfig, out: Path, ctx: StudyContext) -> Pipeline:
+    """The study's stages in dependency order: the comparison (paper track), then every
+    track's experts, then every track's dataset, pre-training, fine-tuning and evaluation."""
+    stages = []
+    if any(t.name == "paper" for t in rc.tracks):
+        stages.append(_compare_stage(rc, ctx))
+    tracks = [TrackStages(rc, track, ctx) for track in rc.tracks]
+    for t in tracks:
+        stages += t.experts()
+    for t in tracks:
+        stages += t.dt()
+    return Pipeline(out, stages)
+
+
+def _compare_stage(rc: ReproduceConfig, ctx: StudyContext) -> Stage:
+    from uavris.experiments.training.compare import comparison_configs
+
+    costs = tuple(train_cost(c) for c in comparison_configs(rc.preset, rc.compare_seeds, ALGORITHMS, "fig2",
+                                                            rc.eval_episodes, rc.system).values())
+    return Stage("compare", {"preset": rc.preset, "seeds": rc.compare_seeds, "eval_episodes": rc.eval_episodes,
+                             "system": rc.system.to_dict()}, partial(_run_compare, rc, ctx), costs=costs)
+
+
+def _run_compare(rc: ReproduceConfig, ctx: StudyContext, d: Path, deps: dict[str, Path]) -> dict[str, Any]:
+    from uavris.experiments.training.compare import compare_algorithms
+
+    compare_algorithms(preset=rc.preset, seeds=rc.compare_seeds, workers=ctx.workers, out=d,
+                       eval_episodes=rc.eval_episodes, progress=False, device=ctx.device, system=rc.system,
+                       submit=lambda jobs: ctx.submit("compare", jobs))
+    summary = read_json(d / "summary.json")
+    return {"rows": summary["rows"], "expert": summary["expert"], "expert_choice": summary["expert_choice"]}
+
+
+class TrackStages:
+    """The stages of one track: experts, dataset, pre-training, fine-tuning, evaluation.
+
+    Each ``*_stage`` method returns a :class:`~uavris.experiments.engine.stages.Stage`
+    whose ``run`` is a method of this object bound to its parameters; it submits the
+    stage's jobs (:mod:`.workers`) to the study's shared runner (``ctx``).
+    """
+
+    def __init__(self, rc: ReproduceConfig, track: Track, ctx: StudyContext) -> None:
+        self.rc, self.track, self.ctx = rc, track, ctx
+        self.t = track.stage  # a stage's name in this track
+        self.train, self.unseen = rc.deployments(track)
+        self.horizon, self.control = rc.system.horizon, track.phase_control
+        self.schedule = self._pretrain_schedule()
+        self.context = self.schedule.get("context", self._preset_pretrain().context)  # what the models read
+
+    # ------------------------------------------------------------------ experts
+    def experts(self) -> list[Stage]:
+        """Experts of the training (and, where the track has them, the unseen) deployments."""
+        stages = []
+        for name, where in (("experts-train", self.train if not self.track.demonstrations else []),
+                            ("experts-unseen", self.unseen if self.track.unseen_experts else [])):
+            if not where:
+                continue
+            if self.track.phase_control == "optimizer":  # the strong recipe: imitation of the planning oracle
+                cfgs = {d.name: strong_expert_config(d.name, self.rc.seed, self.rc.preset, self.rc.eval_episodes,
+                                                     d.system, d.start) for d in where}
+                stages.append(Stage(self.t(name), {s: c.to_dict() for s, c in cfgs.items()},
+                                    partial(self._run_experts, self.t(name), cfgs),
+                                    costs=tuple(train_cost(c) for c in cfgs.values())))
+            else:
+                stages.append(self._paper_experts_stage(name, where))
+        return stages
+
+    def _expert_configs(self, algo: str, where: Sequence[Deployment]) -> dict[str, TrainConfig]:
+        return {w.name: TrainConfig(algo=algo, scenario=w.name, seed=self.rc.seed, preset=self.rc.preset,
+                                    eval_episodes=self.rc.eval_episodes, system=w.system) for w in where}
+
+    def _paper_experts_stage(self, name: str, where: Sequence[Deployment]) -> Stage:
+        """The paper track's experts, of the comparison's algorithm (or ``--expert-algo``).
+        Before the comparison has chosen, their cost is the dearest algorithm's for the order
+        (the chain through the comparison is then sure to go first) and the mean over the
+        algorithms for the progress bar, which takes the chosen one's when its jobs come."""
+        rc = self.rc
+        guesses = [rc.expert_algo] if rc.expert_algo != AUTO else list(ALGORITHMS)
+        by_algo = [tuple(train_cost(c) for c in self._expert_configs(a, where).values()) for a in guesses]
+        config = {"algo": rc.expert_algo, "scenarios": [w.name for w in where], "seed": rc.seed, "preset": rc.preset,
+                  "eval_episodes": rc.eval_episodes, "system": rc.system.to_dict()}
+        return Stage(name, config, partial(self._run_paper_experts, name, tuple(where)),
+                     ("compare",) if rc.expert_algo == AUTO else (), max(by_algo, key=sum),
+                     sum(map(sum, by_algo)) / len(by_algo))
+
+    def _run_paper_experts(self, stage: str, where: Sequence[Deployment], d: Path,
+                           deps: dict[str, Path]) -> dict[str, Any]:
+        algo = self.rc.expert_algo
+        if algo == AUTO:
+            algo = read_json(deps["compare"] / "summary.json")["expert"]
+        return self._run_experts(stage, self._expert_configs(algo, where), d, deps)
+
+    def _run_experts(self, stage: str, cfgs: dict[str, TrainConfig], d: Path, deps: dict[str, Path]
+                     ) -> dict[str, Any]:
+        jobs = [Job(f"{cfg.algo}-{s}", train_job, (cfg.to_dict(), str(d / "runs" / s), self.ctx.device),
+                    d / "logs" / f"{s}.log", train_cost(cfg))
+                for s, cfg in cfgs.items() if not runs.is_finished(d / "runs" / s)]
+        self.ctx.run_all(stage, jobs, "expert job")
+        algos = sorted({cfg.algo for cfg in cfgs.values()})
+        return {"algo": "+".join(algos), "final_evals": {s: runs.read_done(d / "runs" / s)["final_eval"]
+                                                         for s in cfgs}}
+
+    # ------------------------------------------------------------------ dataset, pre-training, fine-tuning, evaluation
+    def dt(self) -> list[Stage]:
+        """Dataset, pre-training (the DT, behaviour cloning, the data curve and, with the
+        ablation, its rows over several seeds), fine-tuning and evaluation."""
+        stages = self.datasets()
+        models = pretraining_stages(self.track, self.schedule, [w.name for w in self.train], self.rc.scaling,
+                                    self.rc.dt_seeds if self.track.ablation else 1)
+        for name, (data, overrides) in models.items():
+            cfg = self._pretrain_config("<dataset>", overrides)
+            stages.append(Stage(self.t(name), cfg.to_dict(), partial(self._run_pretrain, name, data, overrides),
+                                (self.t(data),), (pretrain_cost(cfg),)))
+        for w in self.unseen:
+            ft = self._finetune_config("<pretrain>", w)
+            stages.append(Stage(self.t(f"finetune-{w.name}"), ft.to_dict(), partial(self._run_finetune, w),
+                                (self.t("pretrain"),), (finetune_cost(ft, self.horizon, self.control, self.context),)))
+        inputs = [*(["experts-train"] if not self.track.demonstrations else []),
+                  *(["experts-unseen"] if self.track.unseen_experts else []), *models]
+        for w in self.unseen:
+            stages.append(self._evaluate_stage(w, inputs))
+        return stages
+
+    def datasets(self) -> list[Stage]:
+        """The track's dataset: its experts' trajectories, or the planning oracle's demonstrations
+        in its training halls (jobs of :data:`DEMONSTRATION_CHUNK` halls, each a finished part on
+        disk that a rerun reuses), and, with the ablation, the mixed-quality demonstrations."""
+        t, episodes = self.t, self.rc.trajectories_for(self.track)
+        if not self.track.demonstrations:
+            cost = dataset_cost(len(self.train) * episodes, self.horizon, self.control)
+            return [Stage(t("dataset"), {"trajectories": episodes, "seed": COLLECT_SEED},
+                          partial(self._run_collect, episodes, cost), (t("experts-train"),), (cost,))]
+        system = self.rc.system.replace(observe_devices=True)
+        oracle = DemonstrationConfig(halls=len(self.train), episodes=episodes, layout_seed=self.rc.layout_seed,
+                                     system=system)
+        stages = [self._demonstrations_stage("dataset", oracle)]
+        if self.track.ablation:
+            stages.append(self._demonstrations_stage("dataset-mixed", dataclasses.replace(
+                oracle, halls=min(self.rc.mixed_layouts, len(self.train)), quality="mixed")))
+        return stages
+
+    def _run_collect(self, episodes: int, cost: float, d: Path, deps: dict[str, Path]) -> dict[str, Any]:
+        experts = [str(deps[self.t("experts-train")] / "runs" / w.name) for w in self.train]
+        return self.ctx.run_one(self.t("dataset"), dataset_job, (experts, episodes, str(d / "dataset")),
+                                d / "job.log", cost)
+
+    @staticmethod
+    def _chunks(cfg: DemonstrationConfig) -> list[tuple[int, int]]:
+        return [(first, min(DEMONSTRATION_CHUNK, cfg.halls - first)) for first in range(0, cfg.halls,
+                                                                                         DEMONSTRATION_CHUNK)]
+
+    def _demonstrations_stage(self, name: str, cfg: DemonstrationConfig) -> Stage:
+        costs = tuple(demonstration_cost(n, cfg.episodes * len(cfg.behaviours), self.horizon)
+                      for _, n in self._chunks(cfg))
+        return Stage(self.t(name), cfg.to_dict(), partial(self._run_demonstrations, name, cfg, costs), (), costs)
+
+    def _run_demonstrations(self, name: str, cfg: DemonstrationConfig, costs: tuple[float, ...], d: Path,
+                            deps: dict[str, Path]) -> dict[str, Any]:
+        chunks = self._chunks(cfg)
+        parts = [d / "parts" / f"halls-{first}" for first, _ in chunks]
+        jobs = [Job(f"halls-{first}", demonstrations_job, (cfg.to_dict(), first, n, str(part)),
+                    d / "logs" / f"halls-{first}.log", cost)
+                for (first, n), part, cost in zip(chunks, parts, costs) if not part.exists()]
+        self.ctx.run_all(self.t(name), jobs, "demonstration job")
+        return self.ctx.run_one(self.t(name), merge_demonstrations, (cfg.to_dict(), [str(p) for p in parts],
+                                                                        str(d / "dataset")), d / "merge.log", 1.0)
+
+    def _preset_pretrain(self) -> PretrainConfig:
+        return PretrainConfig(dataset="<dataset>", preset=self.rc.preset, seed=self.rc.seed)
+
+    def _pretrain_schedule(self) -> dict[str, Any]:
+        """The track's PretrainConfig overrides; a track's smaller model never grows a
+        preset's (smoke's is tiny)."""
+        schedule = dict(self.track.pretrain)
+        preset_cfg = self._preset_pretrain()
+        for size in ("context", "width", "depth"):
+            if size in schedule:
+                schedule[size] = min(schedule[size], getattr(preset_cfg, size))
+        return schedule
+
+    def _pretrain_config(self, data: Path | str, overrides: dict[str, Any]) -> PretrainConfig:
+        seed = self.rc.seed + overrides.get("seed", 0)
+        return PretrainConfig(dataset=data, preset=self.rc.preset, seed=seed,
+                              **{k: v for k, v in overrides.items() if k != "seed"})
+
+    def _run_pretrain(self, name: str, data: str, overrides: dict[str, Any], d: Path,
+                      deps: dict[str, Path]) -> dict[str, Any]:
+        cfg = self._pretrain_config(deps[self.t(data)] / "dataset", overrides)
+        return self.ctx.run_one(self.t(name), pretrain_job, (cfg.to_dict(), str(d / "model"), self.ctx.device),
+                                d / "job.log", pretrain_cost(cfg))
+
+    def _finetune_config(self, model: Path | str, where: Deployment) -> FinetuneConfig:
+        own = {} if not self.track.layouts else {"system": where.system, "start": where.start}
+        return FinetuneConfig(model=model, scenario=where.name, preset=self.rc.preset, seed=self.rc.seed,
+                              eval_episodes=self.rc.eval_episodes, **own)
+
+    def _run_finetune(self, where: Deployment, d: Path, deps: dict[str, Path]) -> dict[str, Any]:
+        cfg = self._finetune_config(deps[self.t("pretrain")] / "model", where)
+        return self.ctx.run_one(self.t(f"finetune-{where.name}"), finetune_job,
+                                (cfg.to_dict(), str(d / "model"), self.ctx.device), d / "job.log",
+                                finetune_cost(cfg, self.horizon, self.control, self.context))
+
+    def _evaluate_stage(self, where: Deployment, inputs: list[str]) -> Stage:
+        sources = transfer_sources(self.track, where, self.train)
+        keys = [*inputs, f"finetune-{where.name}"]
+        policies = evaluated_policies(self.track, where, sources, {k: Path() for k in keys}, self.train)
+        cost = evaluate_cost(len(policies), self.rc.eval_episodes, self.horizon, self.control)
+        config = {"episodes": self.rc.eval_episodes, "seed": EVAL_SEED, "track": self.track.name,
+                  "references": REFERENCE_ROWS, "transfer_from": [s for s, _ in sources]}
+        return Stage(self.t(f"evaluate-{where.name}"), config, partial(self._run_evaluate, where, sources, keys, cost),
+                     tuple(self.t(k) for k in keys), (cost,))
+
+    def _run_evaluate(self, where: Deployment, sources: list[tuple[str, float]], keys: list[str], cost: float,
+                      d: Path, deps: dict[str, Path]) -> dict[str, Any]:
+        policies = evaluated_policies(self.track, where, sources, {k: deps[self.t(k)] for k in keys}, self.train)
+        return self.ctx.run_one(self.t(f"evaluate-{where.name}"), evaluate_job,
+                                (str(d), where.to_dict(), self.track.name, self.rc.eval_episodes, policies),
+                                d / "job.log", cost)

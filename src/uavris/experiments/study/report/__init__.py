@@ -1,0 +1,281 @@
+"""``report.md`` of ``uavris reproduce``: both tracks side by side, every number read from stage files.
+
+Lives here: :func:`write_report`, the report's text (tables, the paper's claims checked on
+each track). Not here: its figures (:mod:`.figures`) and the stage files it reads (written by
+:mod:`uavris.experiments.training.compare` and :mod:`uavris.experiments.study.tracks`).
+"""
+
+from __future__ import annotations
+
+import math
+import shutil
+from pathlib import Path
+from typing import Any, Sequence
+
+import yaml
+
+from uavris.agents.references import HOVER_OPTIMIZER, ORACLE, ZERO_ACTION
+from uavris.config import UNSEEN_SCENARIOS, get_scenario
+from uavris.experiments.display.tables import fraction, interval, markdown_table, num
+from uavris.experiments.engine.stages import Pipeline, StageRecord
+from uavris.experiments.study.report.deployment import (
+    NEAREST,
+    SEED_MARK,
+    deployment_section,
+    layout_scores,
+    layouts_figure,
+    scaling_figure,
+)
+from uavris.experiments.study.report.figures import fig3, interactions_figure, trajectory_figure
+from uavris.experiments.study.report.schedule import schedule_figure, stage_table
+from uavris.experiments.study.tracks import Track
+from uavris.experiments.training.compare import fig2_table
+from uavris.io import atomic_write_text, read_json
+from uavris.presets import EVAL_SEED
+from uavris.runs import is_finished
+from uavris.stats import versus
+
+WITHIN_EXPERT = 0.05  # "nearly the same performance": within 5% of the expert's mean
+REFERENCE_KEYS = (ZERO_ACTION, HOVER_OPTIMIZER, ORACLE)
+
+
+class _Report:
+    def __init__(self, out: Path, rc: Any, pipeline: Pipeline, records: Sequence[StageRecord]) -> None:
+        self.out, self.rc, self.pipeline = out, rc, pipeline
+        self.ok = {r.name for r in records if r.status in ("done", "skipped")}
+        self.figs = out / "figures"
+        self.figs.mkdir(parents=True, exist_ok=True)
+        self.lines: list[str] = []
+        self.claims: list[str] = []
+
+    def add(self, *lines: str) -> None:
+        self.lines.extend(lines)
+
+    # ------------------------------------------------------------------ Fig. 2
+    def fig2(self) -> None:
+        self.add("", "## Algorithm comparison (paper Fig. 2, paper track)", "")
+        if "compare" not in self.ok:
+            self.add("Not available: the `compare` stage did not finish." if "compare" in self.pipeline.stages
+                     else "Not run: the paper track was not selected.")
+            return
+        cdir = self.pipeline.directory("compare")
+        for ext in ("png", "pdf"):
+            if (cdir / f"learning_curves.{ext}").exists():
+                shutil.copyfile(cdir / f"learning_curves.{ext}", self.figs / f"fig2_learning_curves.{ext}")
+        summary = read_json(cdir / "summary.json")
+        rows = summary["rows"]
+        self.add("![Fig. 2](figures/fig2_learning_curves.png)", "", *fig2_table(rows))
+        drl = [r for r in rows if r["kind"] == "DRL"]
+        if drl:
+            best = max(drl, key=lambda r: r["mean"])
+            verdict = "holds" if best["policy"] == "DDPG" else "does not hold"
+            self.claims.append(
+                f"- **DDPG is the best of the four** (paper: DDPG 29.5 > PPO 25.0 > TD3 20.5 > SAC 17.0): "
+                f"**{verdict}** on our simulator; best mean is {best['policy']} ({best['mean']:.2f} bps/Hz); "
+                + ", ".join(f"{r['policy']} {r['mean']:.2f}" for r in drl) + f". Full table: `{cdir / 'report.md'}`.")
+            choice = summary.get("expert_choice") or {}
+            self.add("", f"Expert algorithm of the paper track: **{str(summary.get('expert')).upper()}**"
+                     + (f" (overridden: {self.rc.expert_algo.upper()})" if self.rc.expert_algo != "auto" else "")
+                     + ". " + choice.get("text", "The largest IQM of the final evaluations, as the paper chooses.")
+                     + " Among algorithms the comparison has not separated (95% CIs of the IQM overlapping the "
+                     "winner's), uavris takes the cheapest to train (docs/model.md, departures).")
+
+    # ------------------------------------------------------------------ Fig. 3, one track
+    def track(self, track: Track) -> dict[str, dict[str, Any]]:
+        self.add("", f"## {track.title[0].upper() + track.title[1:]}", "")
+        results = {}
+        for i, scenario in enumerate(UNSEEN_SCENARIOS):
+            name = track.stage(f"evaluate-{scenario}")
+            label = "ab"[i]
+            self.add(f"### Unseen scenario {scenario} {list(get_scenario(scenario).start)} (paper Fig. 3{label})", "")
+            if name not in self.ok:
+                self.add(f"Not available: the `{name}` stage did not finish.", "")
+                continue
+            edir = self.pipeline.directory(name)
+            stem = f"{track.prefix}fig3{label}_{scenario}"
+            fig3(scenario, edir, self.figs / stem, track.name)
+            res = read_json(edir / "stage.json")["result"]
+            results[scenario] = res
+            oracle, zero = res[ORACLE]["mean"], res[ZERO_ACTION]["mean"]
+            self.add(f"![Fig. 3{label}, {track.name} track](figures/{stem}.png)", "")
+            self.add(*markdown_table(
+                ("policy", "mean", "95% CI (t)", "IQM", "95% CI (IQM, bootstrap)", "vs zero action",
+                 "fraction of oracle"),
+                [(s["label"], num(s["mean"]), interval(s["ci_low"], s["ci_high"]), num(s["iqm"]),
+                  interval(s["boot_iqm_ci_low"], s["boot_iqm_ci_high"]),
+                  "-" if key == ZERO_ACTION else versus(s["ci_low"], s["ci_high"], zero), fraction(s["mean"], oracle))
+                 for key, s in res.items()], "lrlrllr"), "")
+            self._claims(track, scenario, res)
+            finetuned = self.pipeline.directory(track.stage(f"finetune-{scenario}")) / "model"
+            if i == 0 and is_finished(finetuned):
+                tstem = f"{track.prefix}trajectory_{scenario}"
+                trajectory_figure(scenario, finetuned,
+                                  self.rc.system, self.figs / tstem, EVAL_SEED)
+                self.add(f"![trajectory, {track.name} track](figures/{tstem}.png)", "")
+        return results
+
+    def _claims(self, track: Track, scenario: str, res: dict[str, dict[str, Any]]) -> None:
+        zs, ft, ex = res["dt-zero-shot"], res["dt-finetuned"], res["expert"]
+        transfers = [s for k, s in res.items() if k.startswith("transfer")]
+        best_tr = max(transfers, key=lambda s: s["mean"])
+        above = zs["mean"] > best_tr["mean"]
+        separated = zs["ci_low"] > best_tr["ci_high"] or zs["ci_high"] < best_tr["ci_low"]
+        where = f"{track.name} track, {scenario}"
+        self.claims.append(f"- {where}: **zero-shot DT above transferred experts**: "
+                           f"{'holds' if above else 'does not hold'} (zero-shot {zs['mean']:.2f} vs best transferred "
+                           f"{best_tr['mean']:.2f}, {best_tr['label']}; 95% CIs "
+                           f"{'do not overlap' if separated else 'overlap'}).")
+        gap = (ft["mean"] - ex["mean"]) / ex["mean"] if ex["mean"] else float("nan")
+        interactions = ""
+        fdir = self.pipeline.directory(track.stage(f"finetune-{scenario}"))
+        xdir = self.pipeline.directory(track.stage("experts-unseen"))
+        if (fdir / "model" / "finetune.csv").exists() and (xdir / "runs" / scenario / "evals.csv").exists():
+            istem = f"{track.prefix}interactions_{scenario}"
+            _, info = interactions_figure(scenario, fdir / "model", xdir / "runs" / scenario, self.figs / istem,
+                                          ex["label"])
+            self.add(f"![interactions, {track.name} track](figures/{istem}.png)", "")
+            interactions = (f" Fine-tuning used {info['finetune_interactions']:,.0f} environment interactions; the "
+                            f"expert was trained with {info['expert_steps']:,.0f}"
+                            + (" and first reached the fine-tuned DT's level after "
+                               f"{info['expert_steps_to_match']:,.0f}"
+                               if not math.isnan(info["expert_steps_to_match"]) else
+                               " and never reached the fine-tuned DT's level in its periodic evaluations") + ".")
+        self.claims.append(f"- {where}: **fine-tuned DT within {WITHIN_EXPERT:.0%} of the expert**: "
+                           f"{'holds' if abs(gap) <= WITHIN_EXPERT or gap > 0 else 'does not hold'} (fine-tuned "
+                           f"{ft['mean']:.2f} vs expert {ex['mean']:.2f}, {gap:+.1%}).{interactions}")
+
+    # ------------------------------------------------------------------ the deployment track
+    def deployment(self, track: Track) -> None:
+        """Unseen layouts as the unit of generalisation (:mod:`.deployment`)."""
+        self.add("", f"## {track.title[0].upper() + track.title[1:]}", "")
+        _, unseen = self.rc.deployments(track)
+        results = {}
+        for w in unseen:
+            name = track.stage(f"evaluate-{w.name}")
+            if name in self.ok:
+                results[w.name] = read_json(self.pipeline.directory(name) / "stage.json")["result"]
+        missing = [w.name for w in unseen if w.name not in results]
+        if missing:
+            self.add(f"Not available for {len(missing)} of {len(unseen)} unseen layouts (their evaluation stage did "
+                     f"not finish): {', '.join(missing)}.", "")
+        if not results:
+            return
+        scores = layout_scores(results)
+        first = next(iter(results.values()))
+        curve_keys = [k for k in first if k.startswith("dt-zero-shot-n") and SEED_MARK not in k]
+        labels = {k: first[k]["label"] for k in curve_keys}
+        if any(v["label"].startswith("oracle plan of") for k, v in first.items() if k.startswith("transfer-")):
+            labels[NEAREST] = "oracle plan of the nearest training layout, flown here"
+        stem = f"{track.prefix}layouts"
+        layouts_figure(scores, labels, self.figs / stem)
+        curve = {int(k.rsplit("n", 1)[1]): [scores[lay][k] / scores[lay][ORACLE] for lay in scores]
+                 for k in curve_keys}
+        scaling = None
+        if curve:
+            curve[self.rc.train_layouts] = [scores[lay]["dt-zero-shot"] / scores[lay][ORACLE] for lay in scores]
+            refs = {label: [scores[lay][k] / scores[lay][ORACLE] for lay in scores]
+                    for k, label in ((HOVER_OPTIMIZER, "hover, optimiser's phases"),
+                                     (NEAREST, labels.get(NEAREST, "nearest layout's expert")))
+                    if all(k in scores[lay] for lay in scores)}
+            scaling = f"{track.prefix}scaling"
+            scaling_figure(curve, refs, self.figs / scaling)
+        lines, claims = deployment_section(scores, labels, f"figures/{stem}.png",
+                                           f"figures/{scaling}.png" if scaling else None)
+        self.add(*lines)
+        self.claims += claims
+
+    # ------------------------------------------------------------------ both tracks side by side
+    def side_by_side(self, tracks: Sequence[Track], results: dict[str, dict[str, dict[str, Any]]]) -> None:
+        cols = [(t, s) for t in tracks for s in UNSEEN_SCENARIOS if s in results.get(t.name, {})]
+        if not cols:
+            return
+        self.add("", "## Both tracks side by side", "",
+                 "Average sum rate (bps/Hz) on the same seeded episodes; in brackets, the fraction of the oracle.", "")
+        rows = [("scenario's own expert", "expert"), ("zero-shot DT", "dt-zero-shot"),
+                ("fine-tuned DT", "dt-finetuned"), ("best transferred expert", None),
+                ("zero action (hover)", ZERO_ACTION), ("hover, optimiser's phases", HOVER_OPTIMIZER),
+                ("oracle", ORACLE)]
+        def cell(res: dict[str, Any], key: str | None) -> str:
+            item = (max((v for k, v in res.items() if k.startswith("transfer")), key=lambda v: v["mean"])
+                    if key is None else res[key])
+            return f"{item['mean']:.2f} ({fraction(item['mean'], res[ORACLE]['mean'])})"
+
+        self.add(*markdown_table(("policy", *(f"{t.name}, {s}" for t, s in cols)),
+                                 [(label, *(cell(results[t.name][s], key) for t, s in cols)) for label, key in rows],
+                                 "l" + "r" * len(cols)))
+        learned = ("expert", "dt-zero-shot", "dt-finetuned")
+        self.add("", "Against doing nothing (the zero action) and the oracle, per track and scenario:", "")
+        for t, s in cols:
+            res = results[t.name][s]
+            zero = res[ZERO_ACTION]["mean"]
+            parts = [f"{res[k]['label']} {versus(res[k]['ci_low'], res[k]['ci_high'], zero)}" for k in learned]
+            zs = res["dt-zero-shot"]["mean"]
+            self.add(f"- {t.name}, {s}: vs zero action ({zero:.2f}): " + "; ".join(parts)
+                     + f". Zero-shot DT at {fraction(zs, res[ORACLE]['mean'])} of the oracle; "
+                     + finetuning_effect(res["dt-zero-shot"], res["dt-finetuned"]) + ".")
+
+
+def finetuning_effect(zero_shot: dict[str, float], finetuned: dict[str, float]) -> str:
+    """What fine-tuning did, in words that do not overstate it: "raised" or "lowered" only when
+    the two 95% CIs over episodes do not overlap, "unchanged" when the means agree to the
+    printed digits; otherwise the change is within the CIs."""
+    zs, ft = zero_shot["mean"], finetuned["mean"]
+    if f"{zs:.2f}" == f"{ft:.2f}":
+        return f"fine-tuning left it unchanged ({zs:.2f} -> {ft:.2f})"
+    if finetuned["ci_low"] > zero_shot["ci_high"]:
+        return f"fine-tuning raised it ({zs:.2f} -> {ft:.2f}, 95% CIs apart)"
+    if finetuned["ci_high"] < zero_shot["ci_low"]:
+        return f"fine-tuning lowered it ({zs:.2f} -> {ft:.2f}, 95% CIs apart)"
+    return f"fine-tuning moved it within the 95% CIs ({zs:.2f} -> {ft:.2f}); one fine-tuning run, one seed"
+
+
+def write_report(out: Path, rc: Any, pipeline: Pipeline, records: Sequence[StageRecord], wall_s: float,
+                 origin: float = math.nan) -> Path:
+    rep = _Report(out, rc, pipeline, records)
+    rep.add(f"# uavris reproduction of the paper, preset `{rc.preset}`", "",
+            f"Everything below is read from the stage files under `{out / 'stages'}`; rerunning `uavris reproduce` "
+            "with the same parameters skips finished stages. Evaluation: deterministic policies on "
+            f"{rc.eval_episodes} seeded episodes (seeds {EVAL_SEED}..{EVAL_SEED + rc.eval_episodes - 1}), "
+            "the same episodes for every "
+            "policy of a scenario. Every policy is read against doing nothing (the zero action: hover at the start, "
+            "level, all phases equal) and the oracle (`uavris.agents.oracle`: optimised phases every slot, motion "
+            "planned over the whole room; docs/model.md section 19). 'vs zero action' says whether the policy's 95% "
+            "CI lies above or below the zero action's mean ('tie': not resolved).",
+            "", "## Stages", "")
+    schedule = read_json(out / "schedule.json") if (out / "schedule.json").exists() else {"jobs": [], "workers": 1}
+    if schedule_figure(schedule["jobs"], int(schedule["workers"]), rep.figs / "schedule"):
+        rep.add("![schedule](figures/schedule.png)", "")
+    rep.add(*stage_table(records, schedule["jobs"], origin))
+    rep.add("", f"Total wall clock of this invocation: {wall_s / 60:.1f} min. Stages run as soon as their inputs "
+                "are ready, and a free worker takes the job whose stage heads the longest remaining chain of work "
+                "(expected costs: `uavris.experiments.engine.costs`); start and end are minutes after this invocation "
+                "began, workers the slots that ran the stage's jobs. A stage finished by an earlier invocation is "
+                "'skipped' here, with the wall clock it took then.")
+    rep.fig2()
+    scenario_tracks = [t for t in rc.tracks if not t.layouts]
+    results = {t.name: rep.track(t) for t in scenario_tracks}
+    rep.side_by_side(scenario_tracks, results)
+    for t in rc.tracks:
+        if t.layouts:
+            rep.deployment(t)
+    rep.add("", "## The paper's claims, checked", "", *(rep.claims or ["No claim could be checked: stages failed."]),
+            "", "The paper's numbers come from its own, unstated parameters (noise power, slot length, energy budget, "
+            "training length); ours are in `docs/model.md` and below. Where a claim does not hold here, that is the "
+            "finding on this simulator, not a tuning target.")
+    rep.add("", "## Parameters", "", "```yaml",
+            yaml.safe_dump({"preset": rc.preset, "seed": rc.seed, "tracks": [t.name for t in rc.tracks],
+                            "expert_algo": rc.expert_algo, "compare_seeds": rc.compare_seeds,
+                            "eval_episodes": rc.eval_episodes, "trajectories_per_scenario": rc.trajectories,
+                            **({"train_layouts": rc.train_layouts, "unseen_layouts": rc.unseen_layouts,
+                                "layout_seed": rc.layout_seed, "scaling": list(rc.scaling)}
+                               if any(t.layouts for t in rc.tracks) else {})},
+                           sort_keys=False).rstrip(), "```", "",
+            "Stage configurations (hyperparameters, the strong track's imitation, DT and fine-tuning settings) are in "
+            "each `stages/NAME-KEY/stage.json`. System configuration:", "", "```yaml",
+            yaml.safe_dump(rc.system.to_dict(), sort_keys=False).rstrip(), "```", "")
+    failed = [r for r in records if r.status == "failed"]
+    if failed:
+        rep.add("## Failures", "", *[f"- {r.name}: {r.error}" for r in failed])
+    report = out / "report.md"
+    atomic_write_text(report, "\n".join(rep.lines) + "\n")
+    return report

@@ -1,0 +1,202 @@
+"""The deployment track's part of the report: unseen layouts as the unit of generalisation.
+
+Lives here: :func:`layout_scores` (every policy's score in every unseen layout, from the
+evaluation stages), the means with 95% CIs over layouts (:func:`uavris.stats.over_units`) and paired
+differences, :func:`deployment_section` (the tables and verdicts) and the two figures
+(:func:`layouts_figure`, :func:`scaling_figure`). Not here: the evaluations (written by
+:func:`uavris.experiments.study.tracks.evaluate_policies`) and the other tracks' report.
+
+Statistics (docs/model.md, section 21): a policy's score in a layout is its mean average sum
+rate over the evaluation episodes, and its fraction of the oracle there. Across layouts:
+the mean and Student's t 95% interval over the unseen layouts (each layout one sample);
+paired differences (DT minus another policy) are taken per layout first, on the same
+episodes, then summarised the same way, so that what varies from hall to hall cancels.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any, Sequence
+
+import numpy as np
+
+from uavris.agents.references import HOVER_OPTIMIZER, ORACLE, ZERO_ACTION
+from uavris.experiments.display.plots import REFERENCE_STYLE, plt, save_figure
+from uavris.experiments.display.tables import MISSING, markdown_table, pct, signed, with_ci
+from uavris.stats import over_units
+
+# Targets of the deployment track (the issues that asked for it; docs/model.md, section 21).
+ZERO_SHOT_TARGET, FINETUNED_TARGET = 0.95, 0.98
+NEAREST, MEAN_TRANSFER, BEST_TRANSFER = "transfer-nearest", "transfer-mean", "transfer-best"
+SEED_MARK = "@s"  # "dt-zero-shot@s1": the row's model of pre-training seed 1 (the row itself: the mean over seeds)
+ROWS: tuple[tuple[str, str], ...] = (
+    ("dt-zero-shot", "zero-shot DT"), ("dt-ensemble", "zero-shot DT, ensemble of the seeds' models (mean action)"),
+    ("dt-finetuned", "fine-tuned DT"),
+    ("bc", "behaviour cloning (same data, model and budget)"), ("dt-flat", "zero-shot DT, flat encoder (same data)"),
+    ("dt-mixed", "zero-shot DT, mixed-quality data"), ("bc-mixed", "behaviour cloning, mixed-quality data"),
+    (NEAREST, "expert of the nearest training layout"),
+    (MEAN_TRANSFER, "transferred experts, mean"), (BEST_TRANSFER, "transferred experts, best (chosen afterwards)"),
+    (ZERO_ACTION, "zero action (hover)"), (HOVER_OPTIMIZER, "hover, optimiser's phases"), (ORACLE, "oracle"))
+PAIRS: tuple[tuple[str, str], ...] = (("dt-zero-shot", HOVER_OPTIMIZER), ("dt-zero-shot", NEAREST),
+                                      ("dt-ensemble", HOVER_OPTIMIZER), ("dt-ensemble", NEAREST),
+                                      ("dt-zero-shot", MEAN_TRANSFER), ("dt-zero-shot", "bc"),
+                                      ("dt-zero-shot", "dt-flat"), ("dt-mixed", "bc-mixed"),
+                                      ("dt-finetuned", "dt-zero-shot"))
+
+
+def layout_scores(results: dict[str, dict[str, Any]]) -> dict[str, dict[str, float]]:
+    """``{layout: {policy: mean}}`` from the evaluation stages' results, with the transferred
+    experts summarised as the nearest (its label says so), their mean and their best, and a
+    learned row with several pre-training seeds (``KEY`` for seed 0, ``KEY@sK`` for the others)
+    as the mean over its seeds in the layout under ``KEY`` (seed 0's own under ``KEY@s0``)."""
+    out = {}
+    for layout, res in results.items():
+        row = {k: float(v["mean"]) for k, v in res.items() if not k.startswith("transfer-")}
+        seeded = {k.split(SEED_MARK)[0] for k in row if SEED_MARK in k}
+        for key in seeded:
+            row[f"{key}{SEED_MARK}0"] = row[key]
+            row[key] = float(np.mean([v for k, v in row.items() if k.split(SEED_MARK)[0] == key and SEED_MARK in k]))
+        transfers = {k: v for k, v in res.items() if k.startswith("transfer-")}
+        if transfers:
+            nearest = next((v for v in transfers.values() if "(nearest)" in v["label"]), None)
+            if nearest is not None:
+                row[NEAREST] = float(nearest["mean"])
+            if len(transfers) > 1:  # one transferred policy (the nearest hall's) is its own mean and best
+                row[MEAN_TRANSFER] = float(np.mean([v["mean"] for v in transfers.values()]))
+                row[BEST_TRANSFER] = float(max(v["mean"] for v in transfers.values()))
+        out[layout] = row
+    return out
+
+
+def _excludes_zero(s: dict[str, float]) -> str:
+    if math.isnan(s["ci_low"]):
+        return "not resolved (one layout)"
+    return "above zero" if s["ci_low"] > 0 else "below zero" if s["ci_high"] < 0 else "includes zero"
+
+
+def deployment_section(scores: dict[str, dict[str, float]], labels: dict[str, str], figure: str | None,
+                       scaling: str | None) -> tuple[list[str], list[str]]:
+    """The report's lines for the deployment track and its claims (each a bullet)."""
+    layouts = list(scores)
+    labels = {**dict(ROWS), **labels}
+    rows = [(k, labels[k]) for k, _ in ROWS if all(k in scores[lay] for lay in layouts)]
+    extra = sorted((k for k in scores[layouts[0]] if k.startswith("dt-zero-shot-n") and SEED_MARK not in k),
+                   key=lambda k: int(k.rsplit("n", 1)[1]))
+    rows += [(k, labels.get(k, k)) for k in extra]
+    frac = {k: [scores[lay][k] / scores[lay][ORACLE] for lay in layouts] for k, _ in rows}
+    lines = [f"Unseen layouts: {len(layouts)}; the unit of generalisation is the layout: means and 95% CIs are "
+             "over layouts (Student's t), each layout's score being its mean over the evaluation episodes.", ""]
+    if figure:
+        lines += [f"![deployment track, per layout]({figure})", ""]
+    summary = {k: over_units(frac[k]) for k, _ in rows}
+    lines += markdown_table(
+        ("policy", "fraction of oracle, mean [95% CI over layouts]", "mean (bps/Hz)", "worst layout"),
+        [(label, with_ci(summary[k], pct), f"{np.mean([scores[lay][k] for lay in layouts]):.2f}", pct(min(frac[k])))
+         for k, label in rows], "llrr")
+    seeded = [(k, label) for k, label in rows if f"{k}{SEED_MARK}0" in scores[layouts[0]]]
+    if seeded:
+        n_seeds = max(int(k.rsplit(SEED_MARK, 1)[1]) for k in scores[layouts[0]] if SEED_MARK in k) + 1
+        lines += ["", f"A learned row is the mean over {n_seeds} pre-training seeds in each layout; each seed's own "
+                  "model (fraction of the oracle, mean [95% CI over layouts]):", ""]
+        lines += markdown_table(("policy", *(f"seed {i}" for i in range(n_seeds))), [
+            (label, *(with_ci(over_units([scores[lay][f"{k}{SEED_MARK}{i}"] / scores[lay][ORACLE] for lay in layouts]),
+                              pct) if f"{k}{SEED_MARK}{i}" in scores[layouts[0]] else MISSING for i in range(n_seeds)))
+            for k, label in seeded])
+    lines += ["", "Per layout (bps/Hz; in brackets the fraction of the oracle):", ""]
+    lines += markdown_table(("layout", *(label for _, label in rows)), [
+        (lay, *(f"{scores[lay][k]:.2f} ({scores[lay][k] / scores[lay][ORACLE]:.0%})" for k, _ in rows))
+        for lay in layouts], "l" + "r" * len(rows))
+    lines += ["", "Paired differences per layout (bps/Hz, same episodes), mean [95% CI over layouts]:", ""]
+    diffs, table = {}, []
+    for a, b in PAIRS:
+        if a in summary and b in summary:
+            d = [scores[lay][a] - scores[lay][b] for lay in layouts]
+            diffs[(a, b)] = over_units(d)
+            table.append((f"{labels.get(a, a)} - {labels.get(b, b)}", *(signed(x) for x in d),
+                          with_ci(diffs[(a, b)], signed), _excludes_zero(diffs[(a, b)])))
+    lines += markdown_table(("difference", *layouts, "mean [95% CI]", "the CI"), table,
+                            "l" + "r" * len(layouts) + "ll")
+    if scaling:
+        lines += ["", f"![zero-shot score against the number of training layouts]({scaling})"]
+    return lines, _claims(summary, diffs, labels)
+
+
+def _claims(summary: dict[str, dict[str, float]], diffs: dict[tuple[str, str], dict[str, float]],
+            labels: dict[str, str]) -> list[str]:
+    out = []
+    zs, ft = summary.get("dt-zero-shot"), summary.get("dt-finetuned")
+    for key, what in (("dt-zero-shot", "zero-shot DT"), ("dt-ensemble", "zero-shot DT ensemble (one controller)")):
+        own, hover, near = summary.get(key), diffs.get((key, HOVER_OPTIMIZER)), diffs.get((key, NEAREST))
+        if own is None or near is None or hover is None:
+            continue
+        holds = own["mean"] >= ZERO_SHOT_TARGET and hover["ci_low"] > 0 and near["ci_low"] > 0
+        out.append(f"- deployment track: **{what} >= {ZERO_SHOT_TARGET:.0%} of the oracle, above hovering with "
+                   f"optimised phases and above the nearest training hall's expert (paired CIs over layouts "
+                   f"excluding zero)**: {'holds' if holds else 'does not hold'} ({with_ci(own, pct)} of the oracle; "
+                   f"minus hovering {with_ci(hover, signed)} bps/Hz, {_excludes_zero(hover)}; minus nearest "
+                   f"{with_ci(near, signed)} bps/Hz, {_excludes_zero(near)}).")
+    if ft is not None and zs is not None:
+        gain = diffs.get(("dt-finetuned", "dt-zero-shot"))
+        holds = ft["mean"] >= FINETUNED_TARGET and ft["mean"] >= zs["mean"]
+        out.append(f"- deployment track: **fine-tuned DT >= {FINETUNED_TARGET:.0%} of the oracle and not below "
+                   f"zero-shot**: {'holds' if holds else 'does not hold'} (fine-tuned {with_ci(ft, pct)}; "
+                   "fine-tuned minus "
+                   f"zero-shot {with_ci(gain, signed) if gain else 'n/a'} bps/Hz).")
+    for (a, b), what in ((("dt-zero-shot", "bc"), "return conditioning on demonstrations of one quality (DT minus "
+                                                    "behaviour cloning on the same data, model and budget)"),
+                         (("dt-mixed", "bc-mixed"), "return conditioning on mixed-quality data (DT minus behaviour "
+                                                    "cloning, both on the mixed dataset)"),
+                         (("dt-zero-shot", "dt-flat"), "the device-set encoder (DT minus the flat encoder, same "
+                                                       "data)")):
+        d = diffs.get((a, b))
+        if d is not None:
+            out.append(f"- deployment track: **{what}**: {with_ci(d, signed)} bps/Hz per layout, {_excludes_zero(d)}.")
+    return out
+
+
+def layouts_figure(scores: dict[str, dict[str, float]], labels: dict[str, str], stem: Path) -> list[Path]:
+    """Every policy's fraction of the oracle in every unseen layout (dots), with the mean over
+    layouts and its 95% CI (bar)."""
+    layouts = list(scores)
+    keys = [k for k, _ in ROWS if k != ORACLE and all(k in scores[lay] for lay in layouts)]
+    fig, ax = plt.subplots(figsize=(5.6, 0.45 * len(keys) + 1.2))
+    rng = np.random.default_rng(0)
+    for i, k in enumerate(keys):
+        f = np.array([scores[lay][k] / scores[lay][ORACLE] for lay in layouts])
+        s = over_units(f)
+        y = len(keys) - 1 - i
+        color = REFERENCE_STYLE.get(k, ("#1f77b4" if k.startswith("dt") else "#7f7f7f", "-"))[0]
+        ax.scatter(f, y + rng.uniform(-0.15, 0.15, f.size), s=12, color=color, alpha=0.7, zorder=3)
+        ax.errorbar(s["mean"], y, xerr=[[s["mean"] - s["ci_low"]], [s["ci_high"] - s["mean"]]]
+                    if not math.isnan(s["ci_low"]) else None, fmt="|", color="k", ms=14, capsize=3, zorder=4)
+    ax.axvline(1.0, color="k", ls=":", lw=1.0)
+    ax.set_yticks(range(len(keys)))
+    ax.set_yticklabels([labels.get(k, dict(ROWS).get(k, k)) for k in reversed(keys)], fontsize=7)
+    ax.set_xlabel("fraction of the oracle in the unseen layout")
+    ax.set_title(f"deployment track: {len(layouts)} unseen layouts (dots), mean and 95% CI over layouts (bars)",
+                 fontsize=8)
+    return save_figure(fig, stem)
+
+
+def scaling_figure(points: dict[int, Sequence[float]], references: dict[str, Sequence[float]],
+                   stem: Path) -> list[Path]:
+    """Zero-shot fraction of the oracle against the number of training layouts: mean and 95% CI
+    over unseen layouts, with reference policies' means as lines."""
+    fig, ax = plt.subplots(figsize=(4.4, 3.2))
+    ns = sorted(points)
+    stats = [over_units(points[n]) for n in ns]
+    mean = np.array([s["mean"] for s in stats])
+    ax.plot(ns, mean, "o-", color="#ff7f0e", label="zero-shot DT")
+    if all(not math.isnan(s["ci_low"]) for s in stats):
+        ax.fill_between(ns, [s["ci_low"] for s in stats], [s["ci_high"] for s in stats], color="#ff7f0e", alpha=0.2,
+                        lw=0)
+    for label, values in references.items():
+        ax.axhline(float(np.mean(values)), color="0.4", ls="--" if "hover" in label else ":", lw=1.0, label=label)
+    ax.set_xscale("log", base=2)
+    ax.set_xticks(ns)
+    ax.set_xticklabels([str(n) for n in ns])
+    ax.set_xlabel("training layouts")
+    ax.set_ylabel("fraction of the oracle (unseen layouts)")
+    ax.legend(fontsize=7, frameon=False)
+    return save_figure(fig, stem)

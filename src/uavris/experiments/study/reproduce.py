@@ -1,0 +1,94 @@
+"""``uavris reproduce``: the paper's whole study in three tracks, resumable, on a process pool or Ray.
+
+Lives here: :func:`reproduce` (run or resume the study, then write the report) and
+:func:`estimate` (its expected schedule, nothing run). Not here: what the study is
+(:class:`~.config.ReproduceConfig`), its stages (:mod:`.pipeline`), the work of each
+(:mod:`.workers`), keying, skipping and scheduling stages and jobs
+(:mod:`uavris.experiments.engine`) and the report (:mod:`.report`).
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+from typing import Sequence
+
+from uavris.errors import UavrisError
+from uavris.experiments.display.progress import progress_bar
+from uavris.experiments.display.tables import markdown_table
+from uavris.experiments.engine.forecast import expected_schedule
+from uavris.experiments.engine.jobs import BACKENDS, configure_threads
+from uavris.experiments.engine.scheduling import StudyContext
+from uavris.experiments.study.config import AUTO, ReproduceConfig
+from uavris.experiments.study.pipeline import build_pipeline
+from uavris.io import write_json
+
+
+# ------------------------------------------------------------------------------------------ entry point
+def estimate(rc: ReproduceConfig, workers: int) -> str:
+    """The study's stages with their expected core-minutes and expected start and end on
+    ``workers`` workers, and the expected wall clock (:func:`~.forecast.expected_schedule`),
+    as markdown. Nothing is run or written."""
+    if workers < 1:
+        raise UavrisError(f"--workers must be >= 1, got {workers}")
+    pipeline = build_pipeline(rc, Path("<estimate>"), StudyContext(workers, "local", None))
+    wall, spans = expected_schedule(pipeline, workers)
+    algo = rc.expert_algo if rc.expert_algo != AUTO else "the dearest algorithm (SAC) until the comparison chooses"
+    table = markdown_table(("stage", "jobs", "core-min", "expected start (min)", "expected end (min)"),
+                           [(name, len(st.costs), f"{sum(st.costs) / 60:.1f}", f"{spans[name][0] / 60:.1f}",
+                             f"{spans[name][1] / 60:.1f}") for name, st in pipeline.stages.items()], "lrrrr")
+    lines = [f"expected wall clock of `uavris reproduce --preset {rc.preset} --track {rc.track}` on {workers} "
+             f"worker(s): {wall / 3600:.1f} h ({wall / 60:.0f} min); paper-track experts: {algo}", "", *table]
+    total = sum(sum(st.costs) for st in pipeline.stages.values())
+    lines += ["", f"total work {total / 3600:.1f} core-hours; unit costs measured on a 2-core AMD EPYC, one job per "
+              "core (uavris.experiments.engine.costs); an estimate, not a promise", ""]
+    return "\n".join(lines)
+
+
+def reproduce(rc: ReproduceConfig, out: str | Path, *, workers: int = 2, backend: str = "local",
+              ray_address: str | None = None, force: Sequence[str] = (), progress: bool = True,
+              device: str = "cpu") -> Path:
+    """Run (or resume) the whole study into ``out`` (torch on ``device``); returns the report path.
+
+    Raises :class:`UavrisError` at the end when any job or stage failed (after writing the
+    report of everything that finished).
+    """
+    if backend not in BACKENDS:
+        raise UavrisError(f"unknown backend {backend!r}; choose one of {', '.join(BACKENDS)}")
+    if workers < 1:
+        raise UavrisError(f"--workers must be >= 1, got {workers}")
+    out = Path(out)
+    configure_threads()  # before any worker starts: they inherit it, and jobs run here with one worker
+    # The bar counts expected seconds of work (uavris.experiments.engine.scheduling), shown as a share.
+    bar = progress_bar(0, "reproduce", "s", progress,
+                       bar_format="{desc}: {percentage:3.0f}%|{bar}| [{elapsed}{postfix}]")
+    ctx = StudyContext(workers, backend, ray_address, bar, device)
+    pipeline = build_pipeline(rc, out, ctx)
+    unknown = [f for f in force if f not in pipeline.stages and f != "report"]
+    if unknown:
+        bar.close()
+        raise UavrisError(f"--force names unknown stage(s) {unknown}; stages: {list(pipeline.stages) + ['report']}")
+    ctx.plan(pipeline)
+    t0, origin = time.perf_counter(), time.time()
+    try:
+        records = pipeline.run(tuple(f for f in force if f != "report"), ctx.stage_done)
+    finally:
+        ctx.close()
+    from uavris.experiments.study.report import write_report
+
+    if progress and records and all(r.status == "skipped" for r in records):
+        bar.write("every stage was done earlier: only the report and its figures are drawn again")
+
+    write_json(out / "schedule.json", {"workers": workers, "origin": origin, "jobs": ctx.schedule(origin),
+                                       "eta": ctx.etas(origin)})
+    report = write_report(out, rc, pipeline, records, time.perf_counter() - t0, origin)
+    bar.close()
+    failed = [r for r in records if r.status == "failed"]
+    if failed or ctx.failures:
+        logs = "; ".join(f"{f.name}: {f.log}" for f in ctx.failures)
+        raise UavrisError(f"{len(failed)} stage(s) failed ({', '.join(r.name for r in failed)}); "
+                          f"report of the rest: {report}" + (f"; failed job logs: {logs}" if logs else ""))
+    return report
+
+
+__all__ = ["ReproduceConfig", "estimate", "reproduce"]

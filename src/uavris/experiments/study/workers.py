@@ -1,0 +1,136 @@
+"""The study's worker entry points: what a worker process runs for a stage's job.
+
+Lives here: one picklable function per kind of job (:func:`dataset_job`,
+:func:`demonstrations_job`, :func:`merge_demonstrations`, :func:`pretrain_job`,
+:func:`finetune_job`, :func:`evaluate_job`; an expert's is
+:func:`uavris.experiments.training.train_expert.train_job`) and the evaluation of every policy
+of a track in one unseen deployment (:func:`evaluate_policies`). Each takes plain values (a
+config as a dict, paths as strings), so that a process pool or Ray can ship it. Not here:
+which jobs a stage submits (:mod:`.pipeline`), the job runner (:mod:`uavris.experiments.engine`).
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any, Sequence
+
+import numpy as np
+
+from uavris.experiments.engine.jobs import configure_threads
+from uavris.experiments.study.tracks import TRACK_SPECS, Deployment, Track
+from uavris.presets import EVAL_SEED
+from uavris.runs import read_done
+
+
+def dataset_job(expert_dirs: list[str], trajectories: int, out: str) -> dict[str, Any]:
+    """Collect the experts' trajectories into a dataset; returns its summary."""
+    from uavris.experiments.training.collect import collect, dataset_summary
+
+    return dataset_summary(collect(expert_dirs, trajectories, out, force=True, progress=False))
+
+
+def demonstrations_job(cfg_dict: dict[str, Any], first: int, count: int, out: str) -> dict[str, Any]:
+    """Demonstrations of halls ``first .. first + count - 1`` as a dataset of their own at ``out``."""
+    from uavris.experiments.training.demonstrations import DemonstrationConfig, collect_demonstrations, demonstrate
+
+    configure_threads()
+    cfg = DemonstrationConfig.from_dict(cfg_dict)
+    trajectories = demonstrate(cfg, first, count)
+    collect_demonstrations(cfg, out, force=True, progress=False, trajectories=trajectories)
+    return {"halls": count, "episodes": len(trajectories)}
+
+
+def merge_demonstrations(cfg_dict: dict[str, Any], parts: Sequence[str], out: str) -> dict[str, Any]:
+    """The parts' demonstrations, in hall order, as one dataset at ``out``; returns its summary."""
+    from uavris.agents.dt.dataset import load_dataset
+    from uavris.experiments.training.collect import dataset_summary
+    from uavris.experiments.training.demonstrations import DemonstrationConfig, collect_demonstrations
+
+    cfg = DemonstrationConfig.from_dict(cfg_dict)
+    trajectories = [tr for part in parts for tr in load_dataset(part).trajectories]
+    summary = dataset_summary(collect_demonstrations(cfg, out, force=True, progress=False, trajectories=trajectories))
+    by = {}  # the dataset's quality per behaviour (the per-hall table would list thousands of halls)
+    for tr in trajectories:
+        by.setdefault(tr.expert, []).append(tr.episode_return / tr.length)
+    return {k: v for k, v in summary.items() if k != "scenarios"} | {
+        "halls": len(summary["scenarios"]), "behaviours": {b: float(np.mean(v)) for b, v in by.items()}}
+
+
+def pretrain_job(cfg_dict: dict[str, Any], out: str, device: str = "cpu") -> dict[str, Any]:
+    """Pre-train (or resume) a DT; returns its done.json."""
+    from uavris.experiments.training.pretrain import PretrainConfig, pretrain
+
+    model_dir = Path(out)
+    pretrain(PretrainConfig.from_dict(cfg_dict), model_dir, resume=model_dir.exists(), progress=False, device=device)
+    return read_done(model_dir)
+
+
+def finetune_job(cfg_dict: dict[str, Any], out: str, device: str = "cpu") -> dict[str, Any]:
+    """Fine-tune (or resume) a DT; returns its done.json."""
+    from uavris.experiments.training.finetune import FinetuneConfig, finetune
+
+    model_dir = Path(out)
+    finetune(FinetuneConfig.from_dict(cfg_dict), model_dir, resume=model_dir.exists(), progress=False, device=device)
+    return read_done(model_dir)
+
+
+def evaluate_job(out: str, deployment: dict[str, Any], track: str, episodes: int,
+                 policies: dict[str, tuple[str, str, str]]) -> dict[str, Any]:
+    """Every policy of a track in one unseen deployment on the same seeded episodes (see :func:`evaluate_policies`)."""
+    return evaluate_policies(Path(out), Deployment.from_dict(deployment), TRACK_SPECS[track], episodes, policies)
+
+
+def _load(label: str, kind: str, path: str) -> tuple[str, Any]:
+    """A policy of :func:`evaluate_policies` and its label."""
+    from uavris.experiments.training.dt_runs import load_dt_policy
+
+    if kind == "dt-ensemble":  # path: the models' directories as a JSON list
+        from uavris.agents.dt.policy import DTEnsemble
+
+        return label, DTEnsemble([load_dt_policy(p)[0] for p in json.loads(path)])
+    if kind == "plan":  # another hall's oracle plan flown here (path: that hall's Deployment as JSON)
+        from uavris.agents.oracle import PlanningOracle
+        from uavris.agents.oracle.policy import PlannedFlight
+
+        there = Deployment.from_dict(json.loads(path))
+        return label, PlannedFlight(PlanningOracle().plan(there.system, there.scenario.start))
+    from uavris.experiments.tools.targets import resolve_target
+
+    loaded = resolve_target(path).load()  # a DT model or an expert's run
+    return (label if loaded.expert_kind is None else f"{loaded.expert_kind} {label}"), loaded.policy
+
+
+def evaluate_policies(out: Path, where: Deployment, track: Track, episodes: int,
+                      policies: dict[str, tuple[str, str, str]]) -> dict[str, Any]:
+    """The learned ``policies`` and the references (zero action, hover with the optimiser's
+    phases, oracle), all in ``where`` on episodes ``EVAL_SEED ..``; per-episode CSVs in ``out``.
+
+    ``policies[key] = (label, kind, path)``: ``kind`` "expert" (a training run directory,
+    whose label gets what the expert is prefixed: its algorithm, or "oracle imitation"), "dt" (a
+    DT model directory), "dt-ensemble" (``path``: DT model directories as a JSON list, acting as
+    one: :class:`uavris.agents.dt.policy.DTEnsemble`) or "plan" (``path``: a training hall's
+    :class:`Deployment` as JSON, whose oracle plan is flown here:
+    :class:`uavris.agents.oracle.policy.PlannedFlight`).
+    """
+    from uavris.agents.evaluation import evaluate
+    from uavris.agents.references import HOVER_OPTIMIZER, ORACLE, REFERENCES, ZERO_ACTION, reference_policy
+    from uavris.experiments.tools.evaluate import write_results
+    from uavris.stats import summarize
+
+    configure_threads()
+    loaded = {key: _load(*spec) for key, spec in policies.items()}
+    for name in (ZERO_ACTION, HOVER_OPTIMIZER, ORACLE):
+        loaded[name] = (REFERENCES[name].label, reference_policy(name, where.system))
+    result: dict[str, Any] = {}
+    for key, (label, policy) in loaded.items():
+        res = evaluate(policy, where.system, where.scenario, episodes, EVAL_SEED)
+        summary = {"policy": key, "label": label, "scenario": where.name, "track": track.name, **res.summary(),
+                   **{f"boot_{k}": v for k, v in summarize(res.avg_sum_rate).items()}}
+        write_results(res, summary, out / key)
+        result[key] = summary
+    return result
+
+
+__all__ = ["dataset_job", "demonstrations_job", "evaluate_job", "evaluate_policies", "finetune_job",
+           "merge_demonstrations", "pretrain_job"]

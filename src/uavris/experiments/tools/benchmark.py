@@ -1,0 +1,144 @@
+"""``uavris benchmark``: any target on the study's protocol, in one table comparable with the report.
+
+Lives here: the protocol's cells (:func:`protocol_cells`: the paper's unseen scenarios and
+the deployment track's unseen layouts) and :func:`benchmark`, which scores a target beside
+the zero action and the oracle in every cell. Not here: resolving and evaluating a target
+(:mod:`uavris.experiments.tools.evaluate`, the code ``uavris evaluate`` runs, so a cell's numbers
+equal ``uavris evaluate TARGET --scenario S`` / ``--layout L`` on the same episodes).
+
+The protocol is the report's (docs/study.md, section 21): the preset's evaluation episodes
+(:data:`~uavris.presets.STUDY`) from :data:`~uavris.presets.EVAL_SEED`, the unseen scenarios
+of the paper in the paper's hall, and the preset's unseen layouts of the study's generator
+(seed 0). Fractions of the oracle are per cell; over layouts, their mean with a Student-t 95%
+interval (each layout one sample); against the zero action, the paired difference on the
+same episodes.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+
+from uavris.agents.references import ORACLE, ZERO_ACTION
+from uavris.config import UNSEEN_SCENARIOS, SystemConfig
+from uavris.experiments.display.progress import progress_bar
+from uavris.experiments.display.tables import interval, markdown_table, num, pct, signed
+from uavris.experiments.tools.evaluate import evaluate_target
+from uavris.experiments.tools.targets import Target, resolve_target
+from uavris.io import atomic_write_text, read_csv, write_csv, write_json
+from uavris.layouts import resolve_layout
+from uavris.presets import EVAL_SEED, STUDY, check_preset
+from uavris.stats import over_units, t_interval
+
+Cells = Literal["all", "scenarios", "layouts"]
+COLUMNS = ("cell", "kind", "mean", "ci_low", "ci_high", "zero_action", "oracle", "fraction_of_oracle",
+           "minus_zero_action", "minus_zero_action_low", "minus_zero_action_high")
+
+
+@dataclass(frozen=True)
+class Cell:
+    """One place of the protocol: a scenario of the paper's hall, or an unseen layout."""
+
+    name: str
+    kind: str  # "scenario" or "layout"
+
+
+def protocol_cells(preset: str, cells: Cells = "all") -> list[Cell]:
+    check_preset(preset)
+    out = []
+    if cells in ("all", "scenarios"):
+        out += [Cell(s, "scenario") for s in UNSEEN_SCENARIOS]
+    if cells in ("all", "layouts"):
+        out += [Cell(f"layout-unseen-{j}", "layout") for j in range(STUDY[preset]["unseen_layouts"])]
+    return out
+
+
+def _episodes(path: Path) -> np.ndarray:
+    return np.array([float(r["avg_sum_rate"]) for r in read_csv(path.with_suffix(".csv"))])
+
+
+def benchmark(target: str, preset: str = "quick", cells: Cells = "all", out: Path | None = None,
+              device: str = "cpu", progress: bool = False, system: SystemConfig | None = None,
+              phase_control: str | None = None) -> tuple[list[dict[str, Any]], Path]:
+    """Score ``target`` (whatever ``uavris evaluate`` takes) and the references in every cell.
+
+    Writes OUT/CELL/ (each policy's per-episode CSV and summary JSON, as ``uavris evaluate``
+    writes them) and OUT/benchmark.{csv,json,md}. Returns the rows and the markdown path.
+    """
+    check_preset(preset)
+    episodes = STUDY[preset]["eval_episodes"]
+    resolved = resolve_target(target)
+    system = system or resolved.own_system()
+    todo = protocol_cells(preset, cells)
+    for cell in todo:  # every layout resolves (devices fit the target's system) before any rollout
+        if cell.kind == "layout":
+            resolve_layout(cell.name, system)
+    out = Path(out) if out is not None else Path("runs/benchmarks") / Path(target.replace(":", "_")).name
+    rows = []
+    with progress_bar(len(todo), "benchmark", "cell", progress) as bar:
+        for cell in todo:
+            rows.append(_cell(resolved, cell, episodes, out / cell.name, system, phase_control, device))
+            bar.update(1)
+    summary = {"target": target, "preset": preset, "episodes": episodes, "seed": EVAL_SEED,
+               "system": system.to_dict(), "cells": rows, "over": _over(rows)}
+    write_csv(out / "benchmark.csv", COLUMNS, ([r[c] for c in COLUMNS] for r in rows))
+    write_json(out / "benchmark.json", summary)
+    md = out / "benchmark.md"
+    atomic_write_text(md, benchmark_table(summary))
+    return rows, md
+
+
+def _cell(target: Target, cell: Cell, episodes: int, out: Path, system: SystemConfig, phase_control: str | None,
+          device: str) -> dict[str, Any]:
+    """The target, the zero action and the oracle in one cell, each written under ``out``."""
+    place = dict(scenario=cell.name) if cell.kind == "scenario" else dict(scenario=None, layout=cell.name)
+    paths = {}
+    for key, who in (("target", target), (ZERO_ACTION, ZERO_ACTION), (ORACLE, ORACLE)):
+        pc = phase_control if key == "target" else None
+        _, paths[key] = evaluate_target(who, episodes=episodes, seed=EVAL_SEED, out=out / key, phase_control=pc,
+                                        device=device, system=system, references=False, **place)
+    x, zero, oracle = (_episodes(paths[k]) for k in ("target", ZERO_ACTION, ORACLE))
+    low, high = t_interval(x)
+    d_low, d_high = t_interval(x - zero)
+    return {"cell": cell.name, "kind": cell.kind, "mean": float(x.mean()), "ci_low": low, "ci_high": high,
+            "zero_action": float(zero.mean()), "oracle": float(oracle.mean()),
+            "fraction_of_oracle": float(x.mean() / oracle.mean()), "minus_zero_action": float((x - zero).mean()),
+            "minus_zero_action_low": d_low, "minus_zero_action_high": d_high}
+
+
+def _over(rows: list[dict[str, Any]]) -> dict[str, dict[str, float]]:
+    """Per kind of cell: the fraction of the oracle and the gain over the zero action, over cells."""
+    out = {}
+    for kind in ("scenario", "layout"):
+        part = [r for r in rows if r["kind"] == kind]
+        if part:
+            out[kind] = {"fraction_of_oracle": over_units([r["fraction_of_oracle"] for r in part]),
+                         "minus_zero_action": over_units([r["minus_zero_action"] for r in part])}
+    return out
+
+
+def benchmark_table(summary: dict[str, Any]) -> str:
+    """The benchmark as markdown: one row per cell, then the means over cells of each kind."""
+    def percent(x: float) -> str:
+        return f"{100 * x:.1f}"
+
+    rows = [(r["cell"], f"{num(r['mean'])} {interval(r['ci_low'], r['ci_high'])}", num(r["zero_action"]),
+             num(r["oracle"]), pct(r["fraction_of_oracle"]),
+             f"{signed(r['minus_zero_action'])} "
+             f"{interval(r['minus_zero_action_low'], r['minus_zero_action_high'], signed)}")
+            for r in summary["cells"]]
+    for kind, s in summary["over"].items():
+        f, d = s["fraction_of_oracle"], s["minus_zero_action"]
+        ci = "" if f["n"] < 2 else f" {interval(f['ci_low'], f['ci_high'], percent)}"
+        dci = "" if d["n"] < 2 else f" {interval(d['ci_low'], d['ci_high'], signed)}"
+        rows.append((f"**mean over {f['n']} {kind}s** (95% CI over {kind}s)", "", "", "",
+                     f"{percent(f['mean'])}%{ci}", f"{signed(d['mean'])}{dci}"))
+    lines = [f"# {summary['target']} on the study's protocol ({summary['preset']} preset)", "",
+             f"{summary['episodes']} episodes per cell from seed {summary['seed']}, the same as the "
+             f"report's; average sum rate in bps/Hz, 95% CIs over episodes.", "",
+             *markdown_table(("cell", "target [95% CI]", "zero action", "oracle", "fraction of oracle",
+                              "target - zero action [95% CI]"), rows, "lrrrrr")]
+    return "\n".join(lines) + "\n"

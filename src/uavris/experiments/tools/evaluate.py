@@ -1,0 +1,87 @@
+"""``uavris evaluate``: a run, a DT model, a reference or a user's policy on seeded episodes,
+written as CSV and JSON.
+
+Lives here: :func:`evaluate_target` and :func:`write_results` (a target's per-episode
+results); a user's policy (``MODULE:NAME`` or ``FILE.py:NAME``) is scored with the zero
+action and the oracle beside it on the same episodes. Not here: what a target names
+(:mod:`.targets`), the evaluation itself (:func:`uavris.agents.evaluation.evaluate`).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+from uavris.agents.evaluation import EpisodeResults, check_episodes, evaluate
+from uavris.agents.policy import check_policy_fits
+from uavris.agents.references import ORACLE, REFERENCE_SEED, ZERO_ACTION, reference_policy
+from uavris.config import Scenario, SystemConfig, get_scenario
+from uavris.env.rollout import policy_phase_control
+from uavris.env.wrappers import check_phase_control
+from uavris.errors import UavrisError
+from uavris.experiments.display.progress import progress_bar
+from uavris.experiments.tools.targets import Target, resolve_target
+from uavris.io import write_csv, write_json
+from uavris.layouts import Layout, resolve_layout
+
+
+def write_results(res: EpisodeResults, summary: dict[str, Any], stem: Path) -> None:
+    rows = zip(res.seeds.tolist(), res.avg_sum_rate.tolist(), res.episode_return.tolist(), res.length.tolist(),
+               res.energy_used.tolist())
+    write_csv(stem.with_suffix(".csv"), ("seed", "avg_sum_rate", "return", "length", "energy_j"), rows)
+    write_json(stem.with_suffix(".json"), summary)
+
+
+def evaluate_target(target: str | Target, scenario: str | Scenario | None, episodes: int, seed: int,
+                    out: Path | None = None, phase_control: str | None = None, device: str = "cpu",
+                    progress: bool = False, system: SystemConfig | None = None,
+                    layout: str | Layout | None = None, references: bool = True) -> tuple[dict[str, Any], Path]:
+    """Evaluate ``target`` (a name :func:`~.targets.resolve_target` reads, or a resolved
+    :class:`~.targets.Target`); ``phase_control="optimizer"`` replaces its phases by the optimiser's.
+
+    ``system`` replaces the target's own system (the CLI's ``--system.*``); ``layout`` (a
+    :class:`~uavris.layouts.Layout` or what :func:`~uavris.layouts.resolve_layout` reads)
+    puts it in another hall: the layout's devices, and its start unless ``scenario`` names
+    one. With ``progress`` a bar counts the simulated slots (the optimiser and the oracle
+    take milliseconds per slot, so a long evaluation is visibly alive). A user's policy gets the
+    zero action and the oracle beside it (``references=False``: not)."""
+    check_episodes(episodes, seed)
+    if phase_control is not None:
+        check_phase_control(phase_control)
+    target = target if isinstance(target, Target) else resolve_target(target)
+    system = system or target.own_system()
+    if layout is not None:
+        hall = resolve_layout(layout, system)
+        system, own = hall.resolve(system)
+        scenario = scenario or own
+    loaded = target.load(system, device)
+    check_policy_fits(loaded.policy, system, target.name)
+    if phase_control == "agent" and policy_phase_control(loaded.policy) == "optimizer":
+        raise UavrisError(f"{target.name} acts on the motion only (trained with the optimiser setting the phases, "
+                          "the strong track); it cannot be evaluated with --phase-control agent")
+    scenario = scenario or loaded.scenario
+    if scenario is None:
+        raise UavrisError("--scenario (or --layout) is required for a baseline or a pre-trained DT (it has no "
+                          "scenario of its own)")
+    where = get_scenario(scenario)
+    where.validate_for(system)
+    beside = [ZERO_ACTION, ORACLE] if target.kind == "user" and references else []
+    with progress_bar((1 + len(beside)) * episodes * system.horizon, f"evaluate {where.name}", "slot", progress,
+                      leave=False) as bar:
+        def run(policy: Any, mode: str | None) -> EpisodeResults:
+            return evaluate(policy, system, where, episodes, seed, phase_control=mode,
+                            on_slot=lambda sim, obs, executed, alive: bar.update(int(alive.sum())))
+
+        res = run(loaded.policy, phase_control)
+        # A user's policy: the references on the same episodes, so its number reads at once.
+        refs = {name: run(reference_policy(name, system, REFERENCE_SEED), None) for name in beside}
+    summary = {"target": target.name, "scenario": where.name, "start": list(where.start), "seed": seed,
+               "phase_control": phase_control or "as trained", **res.summary(), "system": system.to_dict()}
+    if refs:
+        summary["references"] = {name: r.summary() for name, r in refs.items()}
+        oracle = summary["references"][ORACLE]["mean"]
+        summary["fraction_of_oracle"] = summary["mean"] / oracle if oracle > 0 else None
+    suffix = "-optimizer-phases" if phase_control == "optimizer" else ""
+    stem = Path(out or target.default_out()) / f"{where.name}-seed{seed}-n{episodes}{suffix}"
+    write_results(res, summary, stem)
+    return summary, stem.with_suffix(".json")

@@ -1,0 +1,137 @@
+"""``uavris plan``: where the UAV should go in a hall, and what it is worth there.
+
+Lives here: :func:`plan_layout` (the planning oracle's plan for a layout, written as JSON)
+and :func:`rate_map` / :func:`plan_figure` (the expected sum rate over the hall at the
+plan's altitude, with the devices, their safety balls, the start and the target). Not
+here: the plan itself (:func:`uavris.agents.oracle.plan_target`) and the layouts
+(:mod:`uavris.layouts`).
+
+This is what a network planner asks first about a new hall: the best hovering pose, its
+expected sum rate with optimised phases, how long the trip takes from the start, and how
+sharply the rate falls off around it. The map values every feasible grid point with the
+planner's own expected-rate estimate (:func:`uavris.agents.oracle.expected_optimised_rate`:
+exact over the pairings, common NLoS draws, optimised phases), level RIS; the target's own
+value is with its refined attitude.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from uavris.agents.oracle import PlanSettings, expected_optimised_rate, plan_target
+from uavris.agents.oracle.planner import feasible
+from uavris.config import SystemConfig
+from uavris.errors import ConfigError
+from uavris.experiments.display.plots import plt, save_figure
+from uavris.experiments.display.progress import progress_bar
+from uavris.io import write_json
+from uavris.layouts import Layout
+
+MAP_CHUNK = 64  # poses valued per call (the progress bar's step)
+
+
+def plan_layout(layout: Layout, system: SystemConfig, settings: PlanSettings | None = None) -> dict[str, Any]:
+    """The planning oracle's plan for ``layout`` on ``system``: target pose, expected sum rate
+    there and at the start, travel time, the plan's expected episode average."""
+    hall, scenario = layout.resolve(system)
+    plan = plan_target(hall, scenario.start, settings or PlanSettings())
+    return {"layout": layout.to_dict(), "target": [float(v) for v in plan.target],
+            "attitude_deg": [float(v) for v in np.degrees(plan.attitude)],
+            "expected_sum_rate": plan.rate, "start_sum_rate": plan.start_rate, "travel_slots": plan.travel_slots,
+            "travel_s": plan.travel_slots * hall.slot_s, "expected_episode_average": plan.value,
+            "poses_valued": plan.poses_valued}
+
+
+MAX_MAP_POSES = 10_000  # about 3 min of one core (~19 ms a pose): a 0.4 m grid over the 40 m hall
+
+
+def check_grid(system: SystemConfig, step: float) -> int:
+    """The number of poses of the rate map's grid of spacing ``step`` (m); a step that is not a
+    positive distance, or that makes more than :data:`MAX_MAP_POSES` poses (a mistyped 0.01
+    would run for days and exhaust memory), is one :class:`ConfigError` line."""
+    if not (np.isfinite(step) and step > 0):
+        raise ConfigError(f"--grid-step must be a distance > 0 (m), got {step!r}")
+    nx, ny = _grid_points(system, step)
+    if nx * ny > MAX_MAP_POSES:
+        raise ConfigError(f"--grid-step {step:g} m makes a {nx} x {ny} grid ({nx * ny:,} poses) over the "
+                          f"{system.room[0]:g} x {system.room[1]:g} m floor; at most {MAX_MAP_POSES:,} "
+                          f"(a step of at least {_min_step(system):.2f} m)")
+    return nx * ny
+
+
+def _grid_points(system: SystemConfig, step: float) -> tuple[int, int]:
+    """Points of the rate map's grid along x and y: the floor's ends included, at least two."""
+    return max(2, int(round(system.room[0] / step)) + 1), max(2, int(round(system.room[1] / step)) + 1)
+
+
+def _min_step(system: SystemConfig) -> float:
+    area = (system.room[0] + 1.0) * (system.room[1] + 1.0)
+    return float(np.sqrt(area / MAX_MAP_POSES))
+
+
+def rate_map(system: SystemConfig, altitude: float, step: float, progress: bool = False
+             ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """``(x, y, R)``: the expected sum rate (level RIS, optimised phases) on a grid of spacing
+    ``step`` over the floor plan at ``altitude``; NaN where the UAV may not be (a safety ball)."""
+    check_grid(system, step)
+    nx, ny = _grid_points(system, step)
+    xs, ys = np.linspace(0.0, system.room[0], nx), np.linspace(0.0, system.room[1], ny)
+    grid = np.stack(np.meshgrid(xs, ys, indexing="ij"), axis=-1).reshape(-1, 2)
+    poses = np.column_stack([grid, np.full(len(grid), altitude)])
+    ok = np.flatnonzero(feasible(system, poses))
+    values = np.full(len(poses), np.nan)
+    with progress_bar(len(ok), "rate map", "pose", progress, leave=False) as bar:
+        for start in range(0, len(ok), MAP_CHUNK):
+            idx = ok[start:start + MAP_CHUNK]
+            values[idx] = expected_optimised_rate(system, poses[idx], np.zeros(3))
+            bar.update(len(idx))
+    return xs, ys, values.reshape(len(xs), len(ys))
+
+
+def plan_figure(system: SystemConfig, plan: dict[str, Any], xs: NDArray, ys: NDArray, rates: NDArray,
+                stem: Path) -> list[Path]:
+    """The rate map with the devices, their safety balls at the map's altitude, start and target."""
+    fig, ax = plt.subplots(figsize=(4.8, 4.2))
+    cmap = plt.get_cmap("viridis").with_extremes(bad="0.85")  # grey: inside a safety ball, no place to be
+    mesh = ax.pcolormesh(xs, ys, rates.T, shading="nearest", cmap=cmap)
+    ax.grid(False)
+    fig.colorbar(mesh, ax=ax, label="expected sum rate (bps/Hz)")
+    users = np.asarray(system.users)
+    altitude = plan["target"][2]
+    ring = np.linspace(0, 2 * np.pi, 90)
+    for k, u in enumerate(users):
+        r = np.sqrt(max(system.safety_distance ** 2 - (altitude - u[2]) ** 2, 0.0))
+        if r > 0:
+            ax.plot(u[0] + r * np.cos(ring), u[1] + r * np.sin(ring), color="k", lw=0.6)
+        ax.annotate(f"D{k + 1}", u[:2], textcoords="offset points", xytext=(4, 4), color="k", fontsize=7)
+    ax.scatter(users[:, 0], users[:, 1], marker="^", color="w", edgecolor="k", s=36, label="devices", zorder=3)
+    start, target = plan["layout"]["start"], plan["target"]
+    ax.scatter(*start[:2], marker="o", color="#ff7f0e", edgecolor="k", s=36, label="start", zorder=3)
+    ax.scatter(*target[:2], marker="*", color="#d62728", edgecolor="k", s=110, label="target", zorder=3)
+    ax.plot([start[0], target[0]], [start[1], target[1]], color="#d62728", lw=0.8, ls="--")
+    ax.set_xlim(0, system.room[0])
+    ax.set_ylim(0, system.room[1])
+    ax.set_aspect("equal")
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("y (m)")
+    ax.set_title(f"{plan['layout']['name']}: expected sum rate at z = {altitude:.2f} m (level RIS)\n"
+                 f"target {np.round(target, 2).tolist()}: {plan['expected_sum_rate']:.2f} bps/Hz, "
+                 f"{plan['travel_s']:.1f} s from the start", fontsize=8)
+    ax.legend(fontsize=7, loc="upper right", framealpha=0.7)
+    return save_figure(fig, stem)
+
+
+def plan_hall(layout: Layout, system: SystemConfig, out: Path, grid_step: float,
+                     progress: bool = True) -> tuple[dict[str, Any], list[Path]]:
+    """Plan, map and draw ``layout``: writes ``out.json``, ``out.png`` and ``out.pdf``."""
+    hall, _ = layout.resolve(system)
+    check_grid(hall, grid_step)
+    plan = plan_layout(layout, system)
+    xs, ys, rates = rate_map(hall, plan["target"][2], grid_step, progress)
+    paths = plan_figure(hall, plan, xs, ys, rates, out)
+    write_json(out.with_suffix(".json"), plan)
+    return plan, [out.with_suffix(".json"), *paths]
