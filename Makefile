@@ -1,14 +1,16 @@
-# Two commands on a fresh machine: `make run` (the main job) and `make test`.
+# Two commands on a fresh machine: `make run` (the main job) and `make test`; `make docs` builds the site.
 PYTHON ?= python3
 VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
+# mkdocs-material prints a notice about its successor on every build; the builds stay quiet.
+export NO_MKDOCS_2_WARNING := 1
 
-.PHONY: run test demo bench clean
+.PHONY: run test demo docs bench clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
-	$(PY) -m pip install --quiet -e '.[test]'
+	$(PY) -m pip install --quiet -e '.[test,docs]'
 	touch $(STAMP)
 
 run: $(STAMP)
@@ -19,7 +21,11 @@ demo: $(STAMP)
 
 test: $(STAMP)
 	$(VENV)/bin/ruff check src tests benchmarks
+	$(VENV)/bin/mkdocs build --strict --quiet
 	$(PY) -m pytest -q
+
+docs: $(STAMP)
+	$(VENV)/bin/mkdocs build --strict
 
 bench: $(STAMP)
 	$(PY) -m pip install --quiet -e '.[bench]'
@@ -31,4 +37,4 @@ bench: $(STAMP)
 	$(PY) benchmarks/reproduce_scaling.py
 
 clean:
-	rm -rf $(VENV) runs
+	rm -rf $(VENV) runs site

@@ -1,4 +1,5 @@
-"""The README runs: every Python block executes on its own, and what it says about presets is the code's."""
+"""The README and the docs run: every Python block of README.md and of every docs page executes on its
+own, what they say about presets is the code's, and the quick run's results they quote are the report's."""
 
 from __future__ import annotations
 
@@ -9,45 +10,65 @@ from pathlib import Path
 
 import pytest
 
-README = Path(__file__).resolve().parents[1] / "README.md"
+ROOT = Path(__file__).resolve().parents[1]
+README = ROOT / "README.md"
+DOCS = ROOT / "docs"
+# Every page whose Python blocks run: the README and the documentation site's pages.
+PAGES = [README, *sorted(DOCS.rglob("*.md"))]
 SKIP_MARK = "# readme: skip"  # in a block that is too long for the suite (documented there)
 
 
-def _python_blocks() -> list[str]:
-    return re.findall(r"^```python\n(.*?)^```", README.read_text(encoding="utf-8"), flags=re.S | re.M)
+def _python_blocks(page: Path = README) -> list[str]:
+    return re.findall(r"^```python\n(.*?)^```", page.read_text(encoding="utf-8"), flags=re.S | re.M)
+
+
+BLOCKS = [(page, index) for page in PAGES for index in range(len(_python_blocks(page)))]
 
 
 def test_readme_has_python_blocks() -> None:
     assert len(_python_blocks()) >= 3
 
 
-@pytest.mark.parametrize("index", range(len(_python_blocks())))
-def test_python_block_runs_on_its_own(index: int, tmp_path: Path) -> None:
+def test_docs_have_python_blocks() -> None:
+    """The pages the README's examples moved to still hold them (the collection is not empty)."""
+    for name in ("getting-started.md", "controller.md", "halls.md", "environment.md"):
+        assert _python_blocks(DOCS / name), name
+
+
+@pytest.mark.parametrize("page, index", BLOCKS, ids=[f"{p.relative_to(ROOT)}-{i}" for p, i in BLOCKS])
+def test_python_block_runs_on_its_own(page: Path, index: int, tmp_path: Path) -> None:
     """Each block in a fresh interpreter (no imports carried over from another block)."""
-    block = _python_blocks()[index]
+    block = _python_blocks(page)[index]
     if SKIP_MARK in block:
         pytest.skip("marked as too long for the test suite")
     script = tmp_path / f"block{index}.py"
     script.write_text(block, encoding="utf-8")
     proc = subprocess.run([sys.executable, str(script)], cwd=tmp_path, capture_output=True, text=True, timeout=300)
-    assert proc.returncode == 0, f"README block {index} failed:\n{block}\n{proc.stderr[-2000:]}"
+    assert proc.returncode == 0, f"{page.relative_to(ROOT)} block {index} failed:\n{block}\n{proc.stderr[-2000:]}"
+
+
+PRESET_PAGE = DOCS / "experts.md"  # the presets' sentence (it was the README's)
 
 
 def test_preset_numbers_are_the_codes() -> None:
-    """The README's preset sentence states the training budgets and evaluation episodes of
-    :mod:`uavris.presets`."""
+    """The preset sentence (docs/experts.md, once the README's) states the training budgets and
+    evaluation episodes of :mod:`uavris.presets`, and so does any other page that states them."""
     from uavris.presets import TRAIN
 
-    text = " ".join(README.read_text(encoding="utf-8").split())
-    for preset in ("smoke", "quick", "paper"):
-        m = re.search(rf"`{preset}` \(([\d,.]+) (M )?env steps per run, (\d+) evaluation episodes", text)
-        assert m, f"README does not state the {preset} preset's budget"
-        steps = float(m.group(1).replace(",", "")) * (1_000_000 if m.group(2) else 1)
-        assert steps == TRAIN[preset]["total_steps"], preset
-        assert int(m.group(3)) == TRAIN[preset]["eval_episodes"], preset
+    for page in PAGES:
+        text = " ".join(page.read_text(encoding="utf-8").split())
+        for preset in ("smoke", "quick", "paper"):
+            found = list(re.finditer(rf"`{preset}` \(([\d,.]+) (M )?env steps per run, (\d+) evaluation episodes",
+                                     text))
+            assert found or page != PRESET_PAGE, f"{PRESET_PAGE.name} does not state the {preset} preset's budget"
+            for m in found:
+                steps = float(m.group(1).replace(",", "")) * (1_000_000 if m.group(2) else 1)
+                assert steps == TRAIN[preset]["total_steps"], (page.name, preset)
+                assert int(m.group(3)) == TRAIN[preset]["eval_episodes"], (page.name, preset)
 
 
-QUICK_REPORT = README.parent / "docs" / "results" / "quick-report.md"
+QUICK_REPORT = DOCS / "results" / "quick-report.md"
+RESULTS_PAGE = DOCS / "results.md"  # the results of a quick run (they were the README's)
 
 
 def _section(text: str, title: str) -> str:
@@ -57,13 +78,17 @@ def _section(text: str, title: str) -> str:
 
 
 def test_readme_results_are_the_reports() -> None:
-    """Every score and fraction the README quotes from a quick run is one the committed report
-    of that run states, in its row: the README copies, never retypes. The report is
-    `runs/quick/report.md` of the run the section names."""
+    """Every score and fraction the results page (docs/results.md, once the README's section)
+    quotes from a quick run is one the committed report of that run states, in its row: the
+    page copies, never retypes. The report is `runs/quick/report.md` of the run the section names."""
     report = QUICK_REPORT.read_text(encoding="utf-8")
-    section = _section(README.read_text(encoding="utf-8"), "## Results of a quick run")
-    assert len(_tables(section)) >= 4 and len(re.findall(r"\d+\.\d\d", section)) > 100, "it quotes the report"
-    assert not _misplaced(section, report)
+    title = "## Results of a quick run"
+    pages = [page for page in PAGES if page != QUICK_REPORT and title in page.read_text(encoding="utf-8")]
+    assert RESULTS_PAGE in pages, f"{RESULTS_PAGE.name} has no section {title!r}"
+    for page in pages:  # the results page, and any other page that holds such a section
+        section = _section(page.read_text(encoding="utf-8"), title)
+        assert len(_tables(section)) >= 4 and len(re.findall(r"\d+\.\d\d", section)) > 100, "it quotes the report"
+        assert not _misplaced(section, report), page.name
 
 
 def _numbers(line: str) -> list[str]:

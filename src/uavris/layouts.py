@@ -3,7 +3,7 @@
 The paper's study varies only the UAV's start, and every start of it has the same best
 pose, so nothing there needs generalising. A layout moves the devices, and with them the
 best pose: the setting in which a policy that memorised one deployment fails and one that
-generalises pays (docs/model.md, section 21).
+generalises pays (docs/study.md, section 21).
 
 Lives here: :class:`Layout` (devices, start and optionally the room, with what it makes of
 a base system), the paper's layout (:data:`PAPER_LAYOUT`), the seeded generator
@@ -102,7 +102,7 @@ def default_start(system: SystemConfig, room: Sequence[float] | None = None) -> 
 
 @dataclass(frozen=True)
 class LayoutGenerator:
-    """Random halls of ``devices`` D2D devices (docs/model.md, section 21).
+    """Random halls of ``devices`` D2D devices (docs/study.md, section 21).
 
     Layout ``j`` of split ``s`` ("train" or "unseen") is drawn from its own random stream,
     keyed by ``(seed, s, j)``: the same layout from the same seed, whatever else is drawn,

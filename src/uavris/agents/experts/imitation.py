@@ -5,7 +5,7 @@ acting on the 6 motion entries (the hybrid action of :mod:`uavris.env.wrappers`;
 optimiser sets the phases) to the planning oracle's motion. Not here: the run directory,
 checkpoints and the RL that may follow (:mod:`uavris.experiments.training.train_expert`).
 
-Why (docs/model.md, "Strong track"): end-to-end RL does not learn the 16 phases at any
+Why (docs/study.md, "Strong track"): end-to-end RL does not learn the 16 phases at any
 budget we could afford, and RL on the motion alone needs 100-150k env steps per scenario
 to pass hovering with the optimiser's phases, by little. The planning oracle moves well
 and its motion depends only on what the observation holds (position, velocity, attitude)

@@ -36,7 +36,7 @@ DT_STEP_S = 0.17
 DT_REFERENCE = 64 * 20 * 128 * 128 * 3
 # What a gradient step costs whatever the model's size (the sampling of windows, the optimiser,
 # the autograd bookkeeping): small models are dominated by it. And the device-set encoder's
-# per-device and pair networks, per state it reads (docs/model.md, section 21).
+# per-device and pair networks, per state it reads (docs/study.md, section 21).
 DT_STEP_OVERHEAD_S = 0.03
 DEVICE_ENCODER_STATE_S = 2.5e-5
 

@@ -69,8 +69,8 @@ def configure_threads() -> None:
     The machine's cores go to parallel jobs, not to threads within one. It also makes the
     numbers independent of the machine: a BLAS reduction split over another number of threads
     rounds differently, and OpenBLAS sizes its pool by the CPUs the process may use, so the
-    same job pinned to one core and free on two gave different bits (docs/model.md,
-    "Reproducibility"). The environment variables make processes started from this one
+    same job pinned to one core and free on two gave different bits (docs/study.md,
+    section 22). The environment variables make processes started from this one
     (the job runner's workers) start with one thread too.
     """
     import os

@@ -34,23 +34,30 @@ on them. The paper fixes N = 80 and K = 50 and leaves the rest open; ours, with 
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable, Sequence
 
 import numpy as np
 
 from uavris.agents.dt.checkpoint import save_dt
 from uavris.agents.dt.policy import DTBatchPolicy, dt_policy_from_checkpoint
 from uavris.agents.dt.trainer import load_trainer_state, make_optimizer, train_steps
-from uavris.agents.dt.trajectories import ELITE_RULES, EliteRule, TrainingWindows, record_episodes, select_elites
+from uavris.agents.dt.trajectories import (
+    ELITE_RULES,
+    EliteRule,
+    TrainingWindows,
+    Trajectory,
+    record_episodes,
+    select_elites,
+)
 from uavris.agents.evaluation import evaluate
 from uavris.agents.policy import check_policy_fits
 from uavris.config import (
     PRESET,
     DictConfig,
+    Scenario,
     ScenarioName,
     SystemConfig,
     check_non_negative,
@@ -137,6 +144,33 @@ class FinetuneConfig(DictConfig):
             raise ConfigError(f"FinetuneConfig.target_return must be finite, got {self.target_return}")
 
 
+def _candidates(cfg: FinetuneConfig, h: int, dt_policy: Callable[..., DTBatchPolicy], system: SystemConfig,
+                scenario: Scenario, phase_control: str) -> list[Trajectory]:
+    """Round ``h``'s noisy rollouts: ``candidates / rollouts_per_seed`` episode seeds with
+    ``rollouts_per_seed`` rollouts each (paired selection; one each for plain top-K), the
+    noise seeded by (seed, round), so that a resumed run explores as an uninterrupted one."""
+    noise_seed = int(np.random.SeedSequence([cfg.seed, h]).generate_state(1)[0])
+    per_seed = cfg.rollouts_per_seed if cfg.selection == "paired" else 1
+    distinct = cfg.candidates // per_seed
+    seeds = np.repeat(cfg.collect_seed + (h - 1) * cfg.candidates + np.arange(distinct), per_seed)
+    return record_episodes(dt_policy(cfg.noise_sigma, noise_seed), system, scenario, seeds,
+                           expert="dt-finetune", expert_algo="dt", phase_control=phase_control)
+
+
+def _round_row(h: int, interactions: int, steps: int, cands: list[Trajectory], elites: list[Trajectory],
+               losses: Sequence[float], ev: dict[str, Any]) -> dict[str, Any]:
+    """Round ``h``'s row of finetune.csv (round 0, the zero-shot model, has no candidates)."""
+    def mean(x: Sequence[float]) -> float:
+        return float(np.mean(x)) if len(x) else float("nan")
+
+    return {"round": h, "env_interactions": interactions, "gradient_steps": steps,
+            "candidate_mean_return": mean([tr.episode_return for tr in cands]),
+            "candidate_avg_sum_rate": mean([tr.episode_return / tr.length for tr in cands]),
+            "elite_mean_return": mean([tr.episode_return for tr in elites]),
+            "elite_min_return": float(elites[-1].episode_return) if elites else float("nan"), "loss": mean(losses),
+            "eval_mean": ev["mean"], "eval_ci_low": ev["ci_low"], "eval_ci_high": ev["ci_high"]}
+
+
 def _evaluation(row: dict[str, Any]) -> dict[str, float]:
     """A round's evaluation from its log row: mean and 95% CI."""
     return {"mean": row["eval_mean"], "ci_low": row["eval_ci_low"], "ci_high": row["eval_ci_high"]}
@@ -161,7 +195,7 @@ def finetune(cfg: FinetuneConfig, run_dir: str | Path, *, resume: bool = False, 
     check_policy_fits(base, system, str(model_dir))
     scenario = scenario_at(cfg.scenario, cfg.start)
     scenario.validate_for(system)
-    resuming = prepare_run_dir(run_dir, FINETUNE_KIND, dataclasses.asdict(cfg), resume, force)
+    resuming = prepare_run_dir(run_dir, FINETUNE_KIND, cfg.to_dict(), resume, force)
     torch.manual_seed(cfg.seed)
     rng = np.random.default_rng(cfg.seed)
     opt = make_optimizer(model, cfg.learning_rate, cfg.weight_decay)
@@ -184,23 +218,14 @@ def finetune(cfg: FinetuneConfig, run_dir: str | Path, *, resume: bool = False, 
     model.eval()
     if not rows:  # round 0: the zero-shot policy
         ev = evaluate(dt_policy(), system, scenario, cfg.eval_episodes, cfg.eval_seed).summary()
-        nan = float("nan")
-        rows.append({"round": 0, "env_interactions": 0, "gradient_steps": 0, "candidate_mean_return": nan,
-                     "candidate_avg_sum_rate": nan, "elite_mean_return": nan, "elite_min_return": nan, "loss": nan,
-                     "eval_mean": ev["mean"], "eval_ci_low": ev["ci_low"], "eval_ci_high": ev["ci_high"]})
+        rows.append(_round_row(0, 0, 0, [], [], [], ev))
         writer.add_scalar("eval/avg_sum_rate", ev["mean"], 0)
         write_csv(run_dir / "finetune.csv", ROUND_HEADER, rows)
     bar = progress_bar(cfg.rounds, f"finetune-dt {cfg.scenario}", "round", progress, done_round)
     clock = RunClock(run_dir, resuming)
     try:
         for h in range(done_round + 1, cfg.rounds + 1):
-            # Noise seeded by (seed, round): a resumed run explores exactly as an uninterrupted one.
-            noise_seed = int(np.random.SeedSequence([cfg.seed, h]).generate_state(1)[0])
-            per_seed = cfg.rollouts_per_seed if cfg.selection == "paired" else 1
-            distinct = cfg.candidates // per_seed
-            seeds = np.repeat(cfg.collect_seed + (h - 1) * cfg.candidates + np.arange(distinct), per_seed)
-            cands = record_episodes(dt_policy(cfg.noise_sigma, noise_seed), system, scenario, seeds,
-                                    expert="dt-finetune", expert_algo="dt", phase_control=phase_control)
+            cands = _candidates(cfg, h, dt_policy, system, scenario, phase_control)
             interactions += sum(tr.length for tr in cands)
             elites = select_elites(cands, cfg.elites, cfg.selection)
             windows = TrainingWindows.for_model(elites, model.cfg)  # RTGs from the rewards actually received
@@ -209,13 +234,7 @@ def finetune(cfg: FinetuneConfig, run_dir: str | Path, *, resume: bool = False, 
                                   cfg.warmup_steps, cfg.grad_clip)
             steps += count
             ev = evaluate(dt_policy(), system, scenario, cfg.eval_episodes, cfg.eval_seed).summary()
-            ret = [tr.episode_return for tr in cands]
-            row = {"round": h, "env_interactions": interactions, "gradient_steps": steps,
-                   "candidate_mean_return": float(np.mean(ret)),
-                   "candidate_avg_sum_rate": float(np.mean([tr.episode_return / tr.length for tr in cands])),
-                   "elite_mean_return": float(np.mean([tr.episode_return for tr in elites])),
-                   "elite_min_return": float(elites[-1].episode_return), "loss": float(np.mean(losses)),
-                   "eval_mean": ev["mean"], "eval_ci_low": ev["ci_low"], "eval_ci_high": ev["ci_high"]}
+            row = _round_row(h, interactions, steps, cands, elites, losses, ev)
             rows.append(row)
             for name, value in (("eval/avg_sum_rate", ev["mean"]),
                                 ("rollout/candidate_mean_return", row["candidate_mean_return"]),

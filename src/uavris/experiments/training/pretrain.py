@@ -136,7 +136,7 @@ def pretrain(cfg: PretrainConfig, run_dir: str | Path, *, resume: bool = False, 
     configure_threads()
     run_dir = Path(run_dir)
     ds = training_subset(load_dataset(cfg.dataset), cfg.scenarios)
-    resuming = prepare_run_dir(run_dir, PRETRAIN_KIND, dataclasses.asdict(cfg), resume, force)
+    resuming = prepare_run_dir(run_dir, PRETRAIN_KIND, cfg.to_dict(), resume, force)
     system = ds.system
     torch.manual_seed(cfg.seed)
     rng = np.random.default_rng(cfg.seed)

@@ -6,7 +6,7 @@ differences, :func:`deployment_section` (the tables and verdicts) and the two fi
 (:func:`layouts_figure`, :func:`scaling_figure`). Not here: the evaluations (written by
 :func:`uavris.experiments.study.tracks.evaluate_policies`) and the other tracks' report.
 
-Statistics (docs/model.md, section 21): a policy's score in a layout is its mean average sum
+Statistics (docs/study.md, section 21): a policy's score in a layout is its mean average sum
 rate over the evaluation episodes, and its fraction of the oracle there. Across layouts:
 the mean and Student's t 95% interval over the unseen layouts (each layout one sample);
 paired differences (DT minus another policy) are taken per layout first, on the same
@@ -26,7 +26,7 @@ from uavris.experiments.display.plots import REFERENCE_STYLE, plt, save_figure
 from uavris.experiments.display.tables import MISSING, markdown_table, pct, signed, with_ci
 from uavris.stats import over_units
 
-# Targets of the deployment track (the issues that asked for it; docs/model.md, section 21).
+# Targets of the deployment track (the issues that asked for it; docs/study.md, section 21).
 ZERO_SHOT_TARGET, FINETUNED_TARGET = 0.95, 0.98
 NEAREST, MEAN_TRANSFER, BEST_TRANSFER = "transfer-nearest", "transfer-mean", "transfer-best"
 SEED_MARK = "@s"  # "dt-zero-shot@s1": the row's model of pre-training seed 1 (the row itself: the mean over seeds)
