@@ -18,7 +18,7 @@ from uavris.experiments.study.tracks import TRACK_SPECS, pretraining_stages, sta
 from uavris.io import read_json
 from uavris.layouts import LayoutGenerator, layout_distance
 
-RC = ReproduceConfig("smoke", track="deployment", eval_episodes=2, dt_seeds=2, scaling=(1,))
+RC = ReproduceConfig("smoke", track="deployment", eval_episodes=2, dt_seeds=2, scaling=(1,), ablation=True)
 
 
 @pytest.fixture(scope="module")
@@ -36,7 +36,10 @@ def test_stage_names_map_to_policies_and_seeds():
     assert stage_policy("mixed-bc")[0] == "bc-mixed" and stage_policy("flat-s1")[0] == "dt-flat@s1"
     for other in ("dataset", "dataset-mixed", "finetune-layout-unseen-0", "experts-train", "experts-unseen"):
         assert stage_policy(other) is None
-    rows = pretraining_stages(TRACK_SPECS["deployment"], {"state_encoder": "devices"}, ["a", "b", "c"], (1, 2), 3)
+    main = pretraining_stages(TRACK_SPECS["deployment"], {"state_encoder": "devices"}, ["a", "b", "c"], (1, 2), 3)
+    assert set(main) == {f"{m}{s}" for m in ("pretrain", "bc") for s in ("", "-s1", "-s2")}  # no ablation: DT and BC
+    rows = pretraining_stages(TRACK_SPECS["deployment"], {"state_encoder": "devices"}, ["a", "b", "c"], (1, 2), 3,
+                              ablation=True)
     assert len(rows) == (1 + 1 + 2 + 1 + 2) * 3  # DT, BC, two curve points, flat, mixed DT and BC; 3 seeds each
     assert rows["pretrain-n2-s2"] == ("dataset", {"state_encoder": "devices", "scenarios": ("a", "b"), "seed": 2})
     assert rows["flat"][1]["state_encoder"] == "flat" and rows["mixed-bc-s1"][0] == "dataset-mixed"

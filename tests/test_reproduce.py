@@ -25,7 +25,7 @@ from uavris.experiments.training import pretrain as pretrain_module
 from uavris.experiments.training.train_expert import TrainConfig, train_job
 from uavris.io import read_json
 
-RC = ReproduceConfig("smoke", compare_seeds=1, eval_episodes=4, trajectories=2)
+RC = ReproduceConfig("smoke", compare_seeds=1, eval_episodes=4, trajectories=2, ablation=True)
 
 
 @pytest.fixture(scope="module")
@@ -529,3 +529,22 @@ def test_the_progress_bar_counts_this_invocations_work(tmp_path: Path) -> None:
     ctx.stage_done(StageRecord("new", "k", tmp_path, "done", 1.0, None))
     ctx.close()
     assert (bar.total, bar.n) == (30.0, 30.0)
+
+
+def test_the_ablation_runs_on_demand_only(tmp_path):
+    """`make run` (no --ablation) has no ablation stage; with --ablation the data curve, the flat
+    encoder and the mixed-quality rows come back, each for every pre-training seed, and nothing
+    else changes but the evaluations that read them."""
+    ctx = StudyContext(1, "local", None)
+    plain = build_pipeline(dataclasses.replace(RC, ablation=False), tmp_path, ctx).stages
+    full = build_pipeline(RC, tmp_path, ctx).stages
+    ablation = {"deploy-dataset-mixed"} | {f"deploy-{m}{s}" for m in ("pretrain-n1", "flat", "mixed-dt", "mixed-bc")
+                                           for s in ("", "-s1")}
+    assert set(full) - set(plain) == ablation and set(plain) <= set(full)
+    assert not any(m in n for n in plain for m in ("-flat", "-mixed", "-pretrain-n"))
+    # the main rows are the same stages with the same keys: DT and BC over both seeds, fine-tuning
+    main = {f"deploy-{m}{s}" for m in ("pretrain", "bc") for s in ("", "-s1")} | {"deploy-dataset"}
+    assert main <= set(plain) and all(plain[n].key == full[n].key for n in main)
+    evaluations = {n for n in plain if "-evaluate-layout" in n}
+    assert all(plain[n].key != full[n].key for n in evaluations)
+    assert {n for n in plain if plain[n].key != full[n].key} == evaluations

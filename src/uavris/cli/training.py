@@ -274,11 +274,13 @@ def reproduce_command(args: list[str]) -> None:
     Paper track: compare, experts-train, experts-unseen, dataset, pretrain, finetune-unseen1/2,
     evaluate-unseen1/2 (experts: the comparison's winner). Strong track (learned motion,
     optimised phases, experts imitating the oracle): the same stages prefixed strong-.
-    Deployment track (the strong recipe over generated halls, docs/model.md section 21):
-    deploy-experts-train (one per training layout), deploy-dataset, deploy-pretrain, deploy-bc
-    (behaviour cloning), deploy-pretrain-nN (the data curve), deploy-finetune-LAYOUT and
-    deploy-evaluate-LAYOUT per unseen layout. Each stage is stored under OUT/stages/NAME-KEY
-    (KEY: a hash of its configuration and inputs); independent stages run concurrently.
+    Deployment track (the planning oracle's demonstrations in generated halls, docs/study.md
+    section 21): deploy-dataset, deploy-pretrain and deploy-bc (behaviour cloning) for each
+    pre-training seed, deploy-finetune-LAYOUT and deploy-evaluate-LAYOUT per unseen layout;
+    with --ablation also the data curve (deploy-pretrain-nN), the flat encoder (deploy-flat)
+    and the mixed-quality dataset (deploy-dataset-mixed, deploy-mixed-dt, deploy-mixed-bc).
+    Each stage is stored under OUT/stages/NAME-KEY (KEY: a hash of its configuration and
+    inputs); independent stages run concurrently.
     Writes OUT/report.md and OUT/figures/.
     """
     from uavris.agents.torch_device import resolve_device

@@ -19,14 +19,16 @@ import numpy as np
 from numba import njit
 
 LN2 = math.log(2.0)
-# LLVM fast-math without "no NaN/inf": reassociation and contraction let the loops over
-# elements vectorise (about 2x), while the finiteness guard of the polish stays meaningful.
-FAST = {"nsz", "arcp", "contract", "afn", "reassoc"}
+# No fast-math: every operation is IEEE, in the order written, so that the kernels give the
+# same bits whatever CPU numba compiles them for (vector widths, FMA contraction and
+# reassociated sums would otherwise differ between, say, an AVX-512 Xeon and an AMD EPYC:
+# docs/study.md, section 22). Elementwise loops still vectorise; only the sums do not.
+FAST = False
 # The helpers are inlined into their caller by numba itself (inline="always"), so that the
 # caller's machine code is the same whether this process compiles it or loads it from
 # numba's cache. Left to LLVM, they were inlined (and fast-math reassociated across them)
 # only when compiling, while a cached load linked them separately: the same slot got other
-# bits in a process that had compiled the kernels (docs/model.md, "Reproducibility").
+# bits in a process that had compiled the kernels (docs/study.md, section 22).
 
 
 @njit(cache=True, fastmath=FAST, inline="always")
@@ -203,6 +205,37 @@ def _lbfgs(phi, txr, txi, rxr, rxi, cos_tx, power, noise, angle_dependent, itera
 
 
 @njit(cache=True, fastmath=FAST, inline="always")
+def _cholesky_solve(a, b):  # pragma: no cover - compiled
+    """``a^-1 b`` for a symmetric positive definite ``a`` (overwritten by its Cholesky factor),
+    written out rather than LAPACK's, whose kernels depend on the CPU: a non-positive pivot
+    (a degenerate system) gives NaN, which the caller treats as a failed step."""
+    n = a.shape[0]
+    for j in range(n):
+        d = a[j, j]
+        for k in range(j):
+            d -= a[j, k] * a[j, k]
+        d = math.sqrt(d) if d > 0.0 else math.nan
+        a[j, j] = d
+        for i in range(j + 1, n):
+            s = a[i, j]
+            for k in range(j):
+                s -= a[i, k] * a[j, k]
+            a[i, j] = s / d
+    y = np.empty(n)
+    for i in range(n):
+        s = b[i]
+        for k in range(i):
+            s -= a[i, k] * y[k]
+        y[i] = s / a[i, i]
+    for i in range(n - 1, -1, -1):
+        s = y[i]
+        for k in range(i + 1, n):
+            s -= a[k, i] * y[k]
+        y[i] = s / a[i, i]
+    return y
+
+
+@njit(cache=True, fastmath=FAST, inline="always")
 def _polish(phi, txr, txi, rxr, rxi, cos_tx, power, noise, angle_dependent, steps, ws):  # pragma: no cover
     """Newton-Raphson least-norm steps towards nulls of the cross links; the best iterate by the
     true rate is returned (``phi`` itself when no step raises the rate)."""
@@ -249,7 +282,7 @@ def _polish(phi, txr, txi, rxr, rxi, cos_tx, power, noise, angle_dependent, step
             reg += 1e-12 * gram[r, r]
         for r in range(rows):
             gram[r, r] += reg
-        y = np.linalg.solve(gram, val)
+        y = _cholesky_solve(gram, val)
         finite = True
         for n in range(n_el):
             acc = 0.0
@@ -268,11 +301,12 @@ def _polish(phi, txr, txi, rxr, rxi, cos_tx, power, noise, angle_dependent, step
 
 
 @njit(cache=True, fastmath=FAST)
-def solve_slots(txr, txi, rxr, rxi, cos_tx, phi0, power, noise, levels, iterations, memory, polish_steps,
+def solve_slots(txr, txi, rxr, rxi, cos_tx, phi0, n_opt, power, noise, levels, iterations, memory, polish_steps,
                 angle_dependent, initial_step, max_step, min_step, out_phi, out_rate):  # pragma: no cover
-    """Every slot ``m``: from each start ``phi0[m, s]``, continuation over ``levels`` (multiples
-    of ``noise``) with L-BFGS, then the null polish; the best of the final points and the
-    starts by the true sum rate goes to ``out_phi[m]``, ``out_rate[m]`` (first best wins)."""
+    """Every slot ``m``: from each of the first ``n_opt`` starts ``phi0[m, s]``, continuation over
+    ``levels`` (multiples of ``noise``) with L-BFGS, then the null polish; the best of the
+    final points and of all the starts (the others are only valued) by the true sum rate goes
+    to ``out_phi[m]``, ``out_rate[m]`` (first best wins)."""
     n_slots, n_starts, n_el = phi0.shape
     n_links = txr.shape[1]
     dummy = np.empty(n_el)
@@ -282,7 +316,7 @@ def solve_slots(txr, txi, rxr, rxi, cos_tx, phi0, power, noise, levels, iteratio
               np.empty((n_links, n_links)))
         a, b, c, e, f, g, h = txr[m], txi[m], rxr[m], rxi[m], cos_tx[m], power, noise
         best_rate = -np.inf
-        for s in range(n_starts):
+        for s in range(min(n_opt, n_starts)):
             phi = phi0[m, s].copy()
             for level in levels:
                 _lbfgs(phi, a, b, c, e, f, g, h * level, angle_dependent, iterations, memory, initial_step, max_step,

@@ -136,6 +136,8 @@ DEFAULT_RESTARTS = 2  # random starts, besides one co-phasing start per active p
 DEFAULT_NOISE_LEVELS = (1e6, 1e5, 1e4, 1e3, 1e2, 1e1, 1.0)  # continuation: multiples of sigma^2
 DEFAULT_MEMORY = 8  # L-BFGS pairs kept
 DEFAULT_POLISH_STEPS = 10  # Newton-Raphson nulling steps after the continuation
+DEFAULT_WARM_ITERATIONS = 30  # L-BFGS iterations per level from a warm start
+DEFAULT_WARM_LEVELS = (1.0,)  # the continuation from a warm start
 INITIAL_STEP = 0.3  # rad, largest element change of a (normalised) gradient step
 MAX_STEP = 0.5 * np.pi  # rad, cap on any element's change in one step
 MIN_STEP = 1e-9  # rad, a backtracked step this small triggers a fresh direction
@@ -293,7 +295,9 @@ def optimize_phases(channels: ArrayLike, cos_theta: ArrayLike, pairing: ArrayLik
                     *, angle_dependent: bool = True, iterations: int = DEFAULT_ITERATIONS,
                     restarts: int = DEFAULT_RESTARTS, noise_levels: tuple[float, ...] = DEFAULT_NOISE_LEVELS,
                     memory: int = DEFAULT_MEMORY, polish_steps: int = DEFAULT_POLISH_STEPS,
-                    seed: int = 0) -> PhaseSolution:
+                    seed: int = 0, warm: ArrayLike | None = None,
+                    warm_iterations: int = DEFAULT_WARM_ITERATIONS,
+                    warm_levels: tuple[float, ...] = DEFAULT_WARM_LEVELS) -> PhaseSolution:
     """Sum-rate-maximising unit-modulus phases for every slot of a batch (method: module docstring).
 
     Args:
@@ -309,6 +313,13 @@ def optimize_phases(channels: ArrayLike, cos_theta: ArrayLike, pairing: ArrayLik
         memory: L-BFGS memory (pairs of steps and gradient changes kept).
         polish_steps: Newton-Raphson nulling steps after the continuation (0: none).
         seed: non-negative integer seed of the random starts (see :func:`random_starts`).
+        warm: ``(..., N)`` phases to start from instead (a nearby slot's solution), NaN
+            where a slot has none. A multi-pair slot with a warm start is solved from it
+            alone, at the true noise (no continuation), ``warm_iterations`` L-BFGS
+            iterations and the polish; the co-phasing starts are valued beside it, so the
+            result is never below the best single-pair co-phasing. Other slots: the full
+            method. (Which slots may start warm: :mod:`uavris.env.phase_tracking`.)
+        warm_iterations: L-BFGS iterations of a warm start.
 
     Returns:
         :class:`PhaseSolution` with ``phases`` ``(..., N)`` in [0, 2 pi) and ``sum_rate`` ``(...)``.
@@ -339,13 +350,27 @@ def optimize_phases(channels: ArrayLike, cos_theta: ArrayLike, pairing: ArrayLik
         h_tx = np.take_along_axis(h[multi], tx[multi][..., None], axis=1) * pad  # (M, L, N)
         h_rx = np.take_along_axis(h[multi], rx[multi][..., None], axis=1) * pad
         cos_tx = np.ascontiguousarray(np.take_along_axis(cos[multi], tx[multi], axis=1))
-        phi0 = np.concatenate([starts[multi], random_starts(h[multi], seed, restarts)], axis=1)  # (M, S, N)
+        part = [np.ascontiguousarray(x) for x in (h_tx.real, h_tx.imag, h_rx.real, h_rx.imag)]
+        has_warm = np.zeros(multi.size, dtype=bool)
+        if warm is not None:
+            w = np.broadcast_to(np.asarray(warm, dtype=np.float64), lead + (n,)).reshape(-1, n)[multi]
+            has_warm = np.all(np.isfinite(w), axis=1)
         out_phi = np.empty((multi.size, n))
         out_rate = np.empty(multi.size)
-        part = [np.ascontiguousarray(x) for x in (h_tx.real, h_tx.imag, h_rx.real, h_rx.imag)]
-        solve_slots(*part, cos_tx, np.ascontiguousarray(phi0), float(tx_power_w), float(noise_w),
-                    np.asarray(noise_levels, dtype=np.float64), iterations, memory, polish_steps, bool(angle_dependent),
-                    INITIAL_STEP, MAX_STEP, MIN_STEP, out_phi, out_rate)
+        for chosen, levels, its in ((~has_warm, noise_levels, iterations), (has_warm, warm_levels, warm_iterations)):
+            sel = np.flatnonzero(chosen)
+            if not sel.size:
+                continue
+            if levels is noise_levels:  # the full method: co-phasing and random starts, all optimised
+                phi0 = np.concatenate([starts[multi[sel]], random_starts(h[multi[sel]], seed, restarts)], axis=1)
+                n_opt = phi0.shape[1]
+            else:  # the warm start optimised, the co-phasing starts valued beside it
+                phi0, n_opt = np.concatenate([w[sel][:, None], starts[multi[sel]]], axis=1), 1
+            sub_phi, sub_rate = np.empty((sel.size, n)), np.empty(sel.size)
+            solve_slots(*(x[sel] for x in part), cos_tx[sel], np.ascontiguousarray(phi0), n_opt, float(tx_power_w),
+                        float(noise_w), np.asarray(levels, dtype=np.float64), its, memory, polish_steps,
+                        bool(angle_dependent), INITIAL_STEP, MAX_STEP, MIN_STEP, sub_phi, sub_rate)
+            out_phi[sel], out_rate[sel] = sub_phi, sub_rate
         phases[multi] = out_phi
         rate[multi] = out_rate
     return PhaseSolution(ph.wrap_angle(phases).reshape(lead + (n,)), rate.reshape(lead))

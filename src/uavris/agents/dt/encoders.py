@@ -4,7 +4,7 @@ Lives here: the two state encoders (:class:`FlatEncoder`, :class:`DeviceSetEncod
 choice between them (:data:`StateEncoder`, :func:`make_state_encoder`) and the state
 normalisation the device encoder needs (:func:`pooled_over_devices`). Not here: the model
 that reads the tokens (:mod:`.model`), the observation itself
-(:mod:`uavris.env.simulator`, docs/model.md sections 15 and 21).
+(:mod:`uavris.env.simulator`, docs/model.md section 15 and docs/study.md section 21).
 
 - ``"flat"`` (the DT paper's): one linear map of the whole normalised observation. It has
   no notion that a hall is a set of devices: list a layout's devices in another order and
@@ -69,10 +69,31 @@ class FlatEncoder(nn.Linear):
         return F.linear(normalised, self.weight, self.bias)
 
 
+def _sorted_sum(x: torch.Tensor) -> torch.Tensor:
+    """The sum over axis -2 of ``x``'s values sorted per feature (an odd-even transposition
+    network of ``torch.minimum``/``torch.maximum``, exact), without a gradient: the same bits
+    whatever the order of the slices."""
+    with torch.no_grad():
+        v = list(x.unbind(dim=-2))
+        for rnd in range(len(v)):
+            for i in range(rnd % 2, len(v) - 1, 2):
+                v[i], v[i + 1] = torch.minimum(v[i], v[i + 1]), torch.maximum(v[i], v[i + 1])
+        total = v[0]
+        for item in v[1:]:
+            total = total + item
+    return total
+
+
 def _pool(x: torch.Tensor, k: int) -> torch.Tensor:
-    """Maximum and mean over axis -2 (the devices), concatenated; the mean adds values sorted
-    per feature, so the result does not depend on the order of the devices to the last bit."""
-    return torch.cat([x.max(dim=-2).values, x.sort(dim=-2).values.sum(dim=-2) / k], dim=-1)
+    """Maximum and mean over axis -2 (the devices), concatenated, for ``x >= 0`` (ReLU
+    outputs). The mean's value is the sum of the values sorted per feature, so it does not
+    depend on the order of the devices to the last bit; its gradient is the plain sum's
+    (a sum's gradient does not depend on the order of its terms): ``s + (t - s)`` is ``t``
+    exactly, since two sums of the same non-negative terms are within a factor of two of
+    each other and their difference is then exact (Sterbenz)."""
+    plain = x.sum(dim=-2)
+    total = plain + (_sorted_sum(x) - plain).detach()
+    return torch.cat([x.amax(dim=-2), total / k], dim=-1)
 
 
 class DeviceSetEncoder(nn.Module):
@@ -112,12 +133,22 @@ class DeviceSetEncoder(nn.Module):
         role = torch.stack([pairing.sum(-1), pairing.sum(-2)], dim=-1)
         return torch.cat([offset, channel, role, partner @ own], dim=-1)
 
+    def pair_features(self, f: torch.Tensor) -> torch.Tensor:
+        """``(..., K, K, W)``: the pair network on every ordered pair ``[f_k, f_j]``. Its first
+        layer is linear in the concatenation, ``W_1 [f_k, f_j] = W_1a f_k + W_1b f_j``: the two
+        halves are applied once per device and added per pair (the same function as the
+        network on the concatenated pairs, at a K-th of the first layer's work)."""
+        first, second = self.pair_net[0], self.pair_net[2]
+        half = f.shape[-1]
+        mine = F.linear(f, first.weight[:, :half], first.bias)  # (..., K, W): W_1a f_k + b
+        theirs = F.linear(f, first.weight[:, half:])  # (..., K, W): W_1b f_j
+        hidden = (mine.unsqueeze(-2) + theirs.unsqueeze(-3)).relu_()  # (..., K, K, W), [k, j]; in place: a temporary
+        return second(hidden).relu_()
+
     def forward(self, raw: torch.Tensor, normalised: torch.Tensor) -> torch.Tensor:
         f = self.device_features(raw, normalised)  # (..., K, F)
         k = self.k
-        pairs = torch.cat([f.unsqueeze(-2).expand(*f.shape[:-2], k, k, f.shape[-1]),
-                           f.unsqueeze(-3).expand(*f.shape[:-2], k, k, f.shape[-1])], dim=-1)  # [f_k, f_j]
-        relations = _pool(self.pair_net(pairs), k)  # (..., K, 2W): device k's view of every j
+        relations = _pool(self.pair_features(f), k)  # (..., K, 2W): device k's view of every j
         per_device = self.device_net(torch.cat([f, relations], dim=-1))
         uav = normalised[..., self.uav_index.to(normalised.device)]
         return self.combine(torch.cat([_pool(per_device, k), uav], dim=-1))

@@ -48,6 +48,7 @@ class ReproduceConfig(DictConfig):
     scaling: tuple[int, ...] = PRESET  # deployment track: smaller training sets of the data curve
     dt_seeds: int = PRESET  # deployment track: pre-training seeds of every learned row
     mixed_layouts: int = PRESET  # deployment track: halls of the mixed-quality dataset
+    ablation: bool = False  # deployment track: also the ablation's rows (data curve, flat encoder, mixed-quality data)
     system: SystemConfig = dataclasses.field(default_factory=SystemConfig)
 
     def __post_init__(self) -> None:

@@ -23,10 +23,11 @@ Stages (each in ``OUT/stages/NAME-KEY``, keyed by its configuration and its inpu
 Stages 2-7 exist once per track: the paper track as above, and the strong track (learned
 motion, optimised phases) with the same names prefixed ``strong-``. The deployment track
 (``deploy-``) is the same pipeline with other parameters: its dataset is the planning
-oracle's demonstrations in many generated halls (``deploy-dataset``, and
-``deploy-dataset-mixed`` of mixed quality), its pre-training stages are the ablation's rows
-over several seeds (``deploy-pretrain``, ``-bc``, ``-flat``, ``-pretrain-nN``, ``-mixed-dt``,
-``-mixed-bc``, each with ``-sK`` copies), and it deploys to unseen halls. Stages whose inputs
+oracle's demonstrations in many generated halls (``deploy-dataset``), its learned rows are
+over several pre-training seeds (``deploy-pretrain``, ``deploy-bc``, each with ``-sK``
+copies), and it deploys to unseen halls. With ``--ablation`` the ablation's rows join them
+(``-pretrain-nN``, the data curve; ``-flat``; ``deploy-dataset-mixed`` with ``-mixed-dt`` and
+``-mixed-bc``), over the same seeds. Stages whose inputs
 are ready run at the same time, and all their jobs share the study's workers, so the tracks
 interleave.
 """
@@ -186,7 +187,7 @@ class TrackStages:
         ablation, its rows over several seeds), fine-tuning and evaluation."""
         stages = self.datasets()
         models = pretraining_stages(self.track, self.schedule, [w.name for w in self.train], self.rc.scaling,
-                                    self.rc.dt_seeds if self.track.ablation else 1)
+                                    self.rc.dt_seeds if self.track.seeded else 1, self.rc.ablation)
         for name, (data, overrides) in models.items():
             cfg = self._pretrain_config("<dataset>", overrides)
             stages.append(Stage(self.t(name), cfg.to_dict(), partial(self._run_pretrain, name, data, overrides),
@@ -214,7 +215,7 @@ class TrackStages:
         oracle = DemonstrationConfig(halls=len(self.train), episodes=episodes, layout_seed=self.rc.layout_seed,
                                      system=system)
         stages = [self._demonstrations_stage("dataset", oracle)]
-        if self.track.ablation:
+        if self.track.ablation and self.rc.ablation:
             stages.append(self._demonstrations_stage("dataset-mixed", dataclasses.replace(
                 oracle, halls=min(self.rc.mixed_layouts, len(self.train)), quality="mixed")))
         return stages

@@ -18,8 +18,8 @@ deployment. Not here: the pipeline and its stages (:mod:`.reproduce`), the repor
   their own scenario (behaviour cloning with DAgger, :mod:`uavris.agents.experts.imitation`), then
   trained by PPO for the preset's RL budget. The DT is the paper's, trained offline on
   those experts' trajectories (motion actions) and deployed with optimised phases.
-  Why this recipe: docs/model.md, "Strong track".
-- **deployment**: the strong track's recipe over generated halls (docs/model.md, section
+  Why this recipe: docs/study.md, "Strong track".
+- **deployment**: the strong track's recipe over generated halls (docs/study.md, section
   21). Both tracks above vary only the UAV's start in the paper's hall, where every start
   has the same best pose; here each training and each unseen deployment is a layout of its
   own (:class:`uavris.layouts.LayoutGenerator`), the observation holds the devices as the
@@ -68,7 +68,8 @@ class Track:
     behaviour_cloning: bool = False  # BC on the same dataset with the DT's model and budget, beside the DT
     pretrain: tuple[tuple[str, Any], ...] = ()  # PretrainConfig fields this track sets otherwise than the preset
     demonstrations: bool = False  # the dataset: the planning oracle in generated halls, not trained experts
-    ablation: bool = False  # several pre-training seeds per learned row, the flat encoder, a mixed-quality dataset
+    seeded: bool = False  # every learned row over several pre-training seeds (ReproduceConfig.dt_seeds)
+    ablation: bool = False  # an ablation on demand (--ablation): the data curve, the flat encoder, mixed-quality data
 
     def stage(self, name: str) -> str:
         return self.prefix + name
@@ -78,18 +79,18 @@ TRACK_SPECS: dict[str, Track] = {
     "paper": Track("paper", "", "agent", "paper track (end-to-end DRL experts, as published)"),
     # The strong and deployment tracks' DT reads 10 slots instead of the DT paper's 20: 1.7x
     # cheaper per step, and the zero-shot scores of the quick report stay within their CIs
-    # (docs/model.md, section 22). The paper track keeps the DT paper's model.
+    # (docs/study.md, section 22). The paper track keeps the DT paper's model.
     "strong": Track("strong", "strong-", "optimizer",
                     "strong track (learned motion, optimised phases; experts initialised from the oracle)",
                     pretrain=(("context", 10),)),
     "deployment": Track("deployment", "deploy-", "optimizer",
                         "deployment track (the oracle's demonstrations in many generated halls; unseen halls)",
                         layouts=True, unseen_experts=False, behaviour_cloning=True, demonstrations=True,
-                        ablation=True,
+                        seeded=True, ablation=True,
                         # 3e-4 instead of the DT paper's 1e-4: at the quick budget (1,500 steps) the DT
                         # fitted its 32 training layouts to 91% of the oracle with 1e-4 and to 98% with
                         # 3e-4. Width 64 and 2 blocks instead of 128 and 3: zero-shot within a point of
-                        # the larger model on 512 halls, 3.3x cheaper to train (docs/model.md, section 21).
+                        # the larger model on 512 halls, 3.3x cheaper to train (docs/study.md, section 21).
                         # The device-set encoder reads a hall as a set of devices (the ablation sets the
                         # flat one beside it).
                         pretrain=(("learning_rate", 3e-4), ("context", 10), ("width", 64), ("depth", 2),
@@ -192,28 +193,29 @@ def evaluated_policies(track: Track, where: Deployment, sources: list[tuple[str,
 
 
 def pretraining_stages(track: Track, schedule: dict[str, Any], train: Sequence[str], scaling: Sequence[int],
-                       seeds: int) -> dict[str, tuple[str, dict[str, Any]]]:
+                       seeds: int, ablation: bool = False) -> dict[str, tuple[str, dict[str, Any]]]:
     """The pre-training stages of ``track``: ``{stage: (dataset stage, PretrainConfig overrides)}``.
 
     Every track: the DT (``pretrain``). With behaviour cloning: ``bc``, the same model without
-    return conditioning. Over layouts: the DT on the first ``n`` training halls for each ``n``
-    of ``scaling`` (``pretrain-nN``, the data curve). With the ablation: every row above for
-    ``seeds`` pre-training seeds (``-sK``, K >= 1, beside seed 0's unsuffixed stage), the flat
-    encoder on the same data (``flat``), and the DT and BC on the mixed-quality dataset
-    (``mixed-dt``, ``mixed-bc``). ``schedule`` is the track's PretrainConfig overrides; ``seed``
-    in the overrides is added to the study's seed.
+    return conditioning. With ``ablation``, where the track has one: over layouts, the DT on
+    the first ``n`` training halls for each ``n`` of ``scaling`` (``pretrain-nN``, the data
+    curve), the flat encoder on the same data (``flat``), and the DT and BC on the
+    mixed-quality dataset (``mixed-dt``, ``mixed-bc``). Every row for ``seeds`` pre-training
+    seeds (``-sK``, K >= 1, beside seed 0's unsuffixed stage). ``schedule`` is the track's
+    PretrainConfig overrides; ``seed`` in the overrides is added to the study's seed.
     """
     base = dict(schedule)
     rows: dict[str, tuple[str, dict[str, Any]]] = {"pretrain": ("dataset", base)}
     if track.behaviour_cloning:
         rows["bc"] = ("dataset", {**base, "condition_on_return": False})
-    if track.layouts:
-        rows.update({f"pretrain-n{n}": ("dataset", {**base, "scenarios": tuple(train[:n])}) for n in scaling})
-    if not track.ablation:
+    if ablation and track.ablation:
+        if track.layouts:
+            rows.update({f"pretrain-n{n}": ("dataset", {**base, "scenarios": tuple(train[:n])}) for n in scaling})
+        rows["flat"] = ("dataset", {**base, "state_encoder": "flat"})
+        rows["mixed-dt"] = ("dataset-mixed", base)
+        rows["mixed-bc"] = ("dataset-mixed", {**base, "condition_on_return": False})
+    if seeds <= 1:
         return rows
-    rows["flat"] = ("dataset", {**base, "state_encoder": "flat"})
-    rows["mixed-dt"] = ("dataset-mixed", base)
-    rows["mixed-bc"] = ("dataset-mixed", {**base, "condition_on_return": False})
     out: dict[str, tuple[str, dict[str, Any]]] = {}
     for name, (data, overrides) in rows.items():
         out.update({name if k == 0 else f"{name}-s{k}": (data, {**overrides, "seed": k}) for k in range(seeds)})

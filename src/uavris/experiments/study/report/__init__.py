@@ -267,7 +267,8 @@ def write_report(out: Path, rc: Any, pipeline: Pipeline, records: Sequence[Stage
                             "expert_algo": rc.expert_algo, "compare_seeds": rc.compare_seeds,
                             "eval_episodes": rc.eval_episodes, "trajectories_per_scenario": rc.trajectories,
                             **({"train_layouts": rc.train_layouts, "unseen_layouts": rc.unseen_layouts,
-                                "layout_seed": rc.layout_seed, "scaling": list(rc.scaling)}
+                                "layout_seed": rc.layout_seed, "ablation": rc.ablation,
+                                **({"scaling": list(rc.scaling)} if rc.ablation else {})}
                                if any(t.layouts for t in rc.tracks) else {})},
                            sort_keys=False).rstrip(), "```", "",
             "Stage configurations (hyperparameters, the strong track's imitation, DT and fine-tuning settings) are in "
