@@ -16,6 +16,7 @@ from numpy.typing import NDArray
 
 from uavris.config import Scenario, SystemConfig
 from uavris.env.simulator import BatchedSimulator, observation_bounds, step_info
+from uavris.env.wrappers import PhaseControl, PhaseControlled
 
 _SCALARS = {"energy_used": float, "energy_remaining": float, "slot": int, "sum_rate": float, "slot_energy": float}
 
@@ -152,13 +153,15 @@ class UavRisD2DEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
 
     metadata = {"render_modes": []}
 
-    def __init__(self, config: SystemConfig | None = None, scenario: str | Scenario = "fig2") -> None:
+    def __init__(self, config: SystemConfig | None = None, scenario: str | Scenario = "fig2",
+                 phase_control: PhaseControl = "agent") -> None:
         self.config = config if config is not None else SystemConfig()
         self.sim = BatchedSimulator(self.config, scenario, 1)
         self.scenario = self.sim.scenario
+        self.controls = PhaseControlled(self.config, phase_control)
         low, high = observation_bounds(self.config)
         self.observation_space = gym.spaces.Box(low, high, dtype=np.float32)
-        self.action_space = gym.spaces.Box(-1.0, 1.0, (self.config.action_dim,), dtype=np.float32)
+        self.action_space = gym.spaces.Box(-1.0, 1.0, (self.controls.action_dim,), dtype=np.float32)
         self._seeded = False
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
@@ -178,6 +181,7 @@ class UavRisD2DEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
     def step(self, action: NDArray):
         if not self._seeded:
             raise RuntimeError("call reset() before step()")
-        reward, terminated, truncated, info = self.sim.step(np.asarray(action).reshape(1, -1))
+        executed = self.controls.executed(self.sim, np.asarray(action).reshape(1, -1))
+        reward, terminated, truncated, info = self.sim.step(executed)
         return (self.sim.observe()[0], float(reward[0]), bool(terminated[0]), bool(truncated[0]),
                 _row(step_info(self.sim, info)))

@@ -23,6 +23,7 @@ from numpy.typing import NDArray
 
 from uavris.config import Scenario, SystemConfig
 from uavris.env.simulator import BatchedSimulator, SlotInfo, observation_bounds, step_info
+from uavris.env.wrappers import PhaseControl, PhaseControlled
 
 
 class UavRisD2DVectorEnv(VectorEnv):
@@ -30,7 +31,7 @@ class UavRisD2DVectorEnv(VectorEnv):
 
     Args:
         num_envs: number of environments.
-        config, scenario: as for :class:`uavris.env.single.UavRisD2DEnv`.
+        config, scenario, phase_control: as for :class:`uavris.env.single.UavRisD2DEnv`.
         autoreset_mode: ``"NextStep"`` (Gymnasium's default: the step after an episode
             ends returns the reset observation with reward 0) or ``"SameStep"`` (the
             reset happens in the ending step; the last observation is in
@@ -40,10 +41,12 @@ class UavRisD2DVectorEnv(VectorEnv):
     metadata = {"render_modes": [], "autoreset_mode": AutoresetMode.NEXT_STEP}
 
     def __init__(self, num_envs: int = 1, config: SystemConfig | None = None, scenario: str | Scenario = "fig2",
-                 autoreset_mode: str | AutoresetMode = AutoresetMode.NEXT_STEP) -> None:
+                 autoreset_mode: str | AutoresetMode = AutoresetMode.NEXT_STEP,
+                 phase_control: PhaseControl = "agent") -> None:
         self.config = config if config is not None else SystemConfig()
         self.sim = BatchedSimulator(self.config, scenario, num_envs)
         self.scenario = self.sim.scenario
+        self.controls = PhaseControlled(self.config, phase_control)
         self.num_envs = num_envs
         self.autoreset_mode = AutoresetMode(autoreset_mode)
         if self.autoreset_mode == AutoresetMode.DISABLED:
@@ -51,7 +54,7 @@ class UavRisD2DVectorEnv(VectorEnv):
         self.metadata = {**self.metadata, "autoreset_mode": self.autoreset_mode}
         low, high = observation_bounds(self.config)
         self.single_observation_space = gym.spaces.Box(low, high, dtype=np.float32)
-        self.single_action_space = gym.spaces.Box(-1.0, 1.0, (self.config.action_dim,), dtype=np.float32)
+        self.single_action_space = gym.spaces.Box(-1.0, 1.0, (self.controls.action_dim,), dtype=np.float32)
         self.observation_space = batch_space(self.single_observation_space, num_envs)
         self.action_space = batch_space(self.single_action_space, num_envs)
         self._needs_reset = np.zeros(num_envs, dtype=bool)
@@ -82,7 +85,8 @@ class UavRisD2DVectorEnv(VectorEnv):
             raise RuntimeError("call reset() before step()")
         sim = self.sim
         pending = np.flatnonzero(self._needs_reset)
-        reward, terminated, truncated, slot = sim.step(np.asarray(actions).reshape(self.num_envs, -1))
+        executed = self.controls.executed(sim, np.asarray(actions).reshape(self.num_envs, -1))
+        reward, terminated, truncated, slot = sim.step(executed)
         infos: dict[str, Any] = {}
         if pending.size:
             # Next-step autoreset: these environments ignore this action and start anew.

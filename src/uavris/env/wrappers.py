@@ -18,7 +18,7 @@ from numpy.typing import NDArray
 
 from uavris.config import SystemConfig
 from uavris.env.simulator import BatchedSimulator, phases_to_action
-from uavris.errors import ConfigError
+from uavris.errors import ActionError, ConfigError
 from uavris.physics.phase_opt import optimize_slot_phases
 
 PhaseControl = Literal["agent", "optimizer"]  # who sets the RIS phases (--phase-control)
@@ -41,6 +41,28 @@ def motion_of(action: NDArray) -> NDArray[np.float32]:
     """The 6 motion entries (acceleration, attitude increments) of full actions ``(n, action_dim)``."""
     a = np.asarray(action)
     return np.concatenate([a[..., :3], a[..., -3:]], axis=-1).astype(np.float32)
+
+
+class PhaseControlled:
+    """What an environment executes under a phase control: the action as given (``"agent"``),
+    or its 6 motion entries with the optimiser's phases (``"optimizer"``, the hybrid controller),
+    checked for its shape and finiteness first, as the simulator checks a full action."""
+
+    def __init__(self, config: SystemConfig, phase_control: str) -> None:
+        check_phase_control(phase_control)
+        self.phase_control = phase_control
+        self.action_dim = action_dim_for(config, phase_control)
+
+    def executed(self, sim: BatchedSimulator, actions: NDArray) -> NDArray:
+        if self.phase_control == "agent":
+            return actions
+        a = np.asarray(actions, dtype=np.float32)
+        if a.shape != (sim.num_envs, MOTION_DIM):
+            raise ActionError(f"the hybrid controller takes {MOTION_DIM} motion entries per environment "
+                              f"(acceleration, attitude increments), got shape {a.shape[1:]}")
+        if not np.all(np.isfinite(a)):
+            raise ActionError("actions must be finite numbers in [-1, 1]; got NaN or inf")
+        return optimised_action(sim, np.clip(a, -1.0, 1.0))
 
 
 def optimised_action(sim: BatchedSimulator, action: NDArray) -> NDArray[np.float32]:
