@@ -28,7 +28,7 @@ def test_scenarios():
     [
         (dict(tx_power_w=-1.0), "tx_power_w"),
         (dict(users=((1.0, 1.0, 1.0),)), "users"),
-        (dict(users=((1.0, 1.0, 1.0), (50.0, 1.0, 1.0))), "users[1]"),
+        (dict(users=((1.0, 1.0, 1.0), (50.0, 1.0, 1.0))), "users[1] (device D2)"),
         (dict(v_max=0.0), "v_max"),
         (dict(a_max=float("nan")), "a_max"),
         (dict(horizon=0), "horizon"),

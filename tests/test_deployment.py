@@ -138,13 +138,13 @@ def _bad_file(tmp_path: Path, text: str) -> Path:
 
 
 BAD = {
-    "outside the room": ("devices: [[45, 5, 1], [20, 20, 1]]", "users[0] must be a point inside the room"),
+    "outside the room": ("devices: [[45, 5, 1], [20, 20, 1]]", "users[0] (device D1) must be a point inside the room"),
     "too close": ("devices: [[10, 10, 1], [13, 10, 1]]", "min_device_spacing"),
     "above z_min": ("devices: [[10, 10, 6], [30, 30, 1]]", "below the UAV's floor"),
     "start in a safety ball": ("devices: [[20, 20, 1.5], [5, 5, 1]]\nstart: [20, 21, 4]", "safety_distance"),
     "NaN": ("devices: [[10, 10, .nan], [30, 30, 1]]", "users[0]"),
     "inf": ("devices: [[10, .inf, 1], [30, 30, 1]]", "users[0]"),
-    "two coordinates": ("devices: [[10, 10], [30, 30, 1]]", "users[0]"),
+    "two coordinates": ("devices: [[10, 10], [30, 30, 1]]", "device D1 of"),
     "empty": ("devices: []", "non-empty list"),
     "does not parse": ("devices: [[10, 10, 1]\n  oops: {", "not valid YAML"),
 }
@@ -172,7 +172,8 @@ def test_system_users_on_the_command_line_give_a_hall(tmp_path, capsys):
     users = ["--system.users", "6", "8", "1", "12", "8", "1", "34", "36", "0.5", "34", "20", "0.5"]
     assert cli_main(["evaluate", "hover-optimizer", *users, "--scenario", "fig2", "--episodes", "2", "--out",
                      str(tmp_path / "a"), "--no-progress"]) == 0
-    got = json.loads((tmp_path / "a" / "fig2-seed1000000-n2.json").read_text())
+    (path,) = (tmp_path / "a").glob("fig2-seed1000000-n2-*.json")
+    got = json.loads(path.read_text())
     hall = SystemConfig(users=((6, 8, 1), (12, 8, 1), (34, 36, 0.5), (34, 20, 0.5)))
     assert got["system"]["users"] == [list(u) for u in hall.users]
     want = evaluate(reference_policy("hover-optimizer", hall), hall, "fig2", 2, 1_000_000).summary()["mean"]

@@ -130,14 +130,15 @@ def test_layout_files_round_trip_and_names_resolve(tmp_path) -> None:
 
 
 BAD_LAYOUTS = [
-    ("devices: [[50, 5, 1], [20, 20, 1]]", "users[0] must be a point inside the room"),
-    ("devices: [[10, 10, 1], [12, 10, 1]]", "users[1] must be at least min_device_spacing = 5 m"),
-    ("devices: [[10, 10, 6], [30, 30, 1]]", "users[0] must be below the UAV's floor z_min = 2 m"),
+    ("devices: [[50, 5, 1], [20, 20, 1]]", "users[0] (device D1) must be a point inside the room"),
+    ("devices: [[10, 10, 1], [12, 10, 1]]", "users[1] (device D2) must be at least min_device_spacing = 5 m"),
+    ("devices: [[10, 10, 6], [30, 30, 1]]", "users[0] (device D1) must be below the UAV's floor z_min = 2 m"),
     ("devices: [[20, 20, 1.5], [5, 5, 1]]\nstart: [20, 20, 4]", "start must be at least safety_distance = 3 m"),
-    ("devices: [[10, 10, .nan], [30, 30, 1]]", "users[0] must be a point inside the room"),
-    ("devices: [[10, 10, .inf], [30, 30, 1]]", "users[0] must be a point inside the room"),
-    ("devices: [[10, 10], [30, 30, 1]]", "users[0] must be a point inside the room"),
-    ("devices: [[10, 10, x], [30, 30, 1]]", "users[0] must be a point [x, y, z]"),
+    ("devices: [[10, 10, .nan], [30, 30, 1]]", "users[0] (device D1) must be a point inside the room"),
+    ("devices: [[10, 10, .inf], [30, 30, 1]]", "users[0] (device D1) must be a point inside the room"),
+    ("devices: [[10, 10], [30, 30, 1]]", "device D1 of"),
+    ("devices: [[10, 10, 1], [30, 30, 1, 2]]", "device D2 of"),
+    ("devices: [[10, 10, x], [30, 30, 1]]", "users[0] (device D1) must be a point [x, y, z]"),
     ("devices: []", "devices must be a non-empty list"),
     ("devices: [[10, 10, 1]]", "users must be a list of at least 2 positions"),
     ("name: no devices", "give the device positions as 'devices'"),

@@ -59,6 +59,18 @@ def broken_factory():
     raise RuntimeError("no model file")
 
 
+def for_the_system(system: SystemConfig):
+    """A factory whose one parameter, required, is the system: the zero action of its size."""
+    def policy(obs):
+        return np.zeros((obs.shape[0], system.action_dim), dtype=np.float32)
+
+    return policy
+
+
+def two_required(obs, gain):
+    return gain * np.zeros((obs.shape[0], 22))
+
+
 NOT_A_POLICY = 3
 '''
 
@@ -114,6 +126,21 @@ def test_module_and_file_score_as_the_python_api(controller: Path, tmp_path: Pat
     assert "of the oracle" in out and "beside it on the same episodes: oracle" in out
 
 
+def test_a_factory_whose_one_required_parameter_is_the_system(controller: Path, tmp_path: Path) -> None:
+    """`def make(system)` is a factory: it gets the system evaluated (2 x 2 elements here, so
+    10 action entries; the paper's system would give 22) and scores as the zero action."""
+    from uavris.agents.evaluation import evaluate
+    from uavris.agents.references import reference_policy
+    from uavris.config import SystemConfig
+
+    assert main(["evaluate", "mypkg.control:for_the_system", "--scenario", "fig2", "--episodes", "2",
+                 "--system.nx", "2", "--system.ny", "2", "--no-progress", "--out", str(tmp_path / "s")]) == 0
+    small = SystemConfig(nx=2, ny=2)
+    assert small.action_dim == 10
+    want = evaluate(reference_policy("hover", small), small, "fig2", 2, 1_000_000).summary()["mean"]
+    assert _summary(tmp_path / "s")["mean"] == pytest.approx(want, abs=1e-12)
+
+
 def test_an_object_policy(controller: Path, tmp_path: Path) -> None:
     assert main(["evaluate", "mypkg.control:Tilted", "--scenario", "fig2", "--episodes", "2", "--no-progress",
                  "--out", str(tmp_path / "o")]) == 0
@@ -126,6 +153,8 @@ def test_an_object_policy(controller: Path, tmp_path: Path) -> None:
     ("mypkg.control:non_finite", "returned a non-finite action (row 0, entry 3)"),
     ("mypkg.control:raises", "failed on an observation batch of shape (N, 158): RuntimeError: boom"),
     ("mypkg.control:broken_factory", "making the policy failed: RuntimeError: no model file"),
+    ("mypkg.control:two_required", "two_required(obs, gain) requires 2 arguments; a policy takes one (the "
+                                   "observation batch), a policy factory none or system"),
     ("mypkg.control:NOT_A_POLICY", "is a int, not a policy"),
     ("mypkg.control:missing", "has no attribute 'missing'"),
     ("mypkg.nothere:x", "cannot import module 'mypkg.nothere'"),

@@ -119,6 +119,11 @@ def _check(ok: bool, owner: str, name: str, allowed: str, value: Any) -> None:
         raise ConfigError(f"{owner}.{name} must be {allowed}, got {value!r}")
 
 
+def _device(k: int) -> str:
+    """Device ``k`` of ``users`` as errors name it: its index and D1, D2, ... as layout files and plots count."""
+    return f"users[{k}] (device D{k + 1})"
+
+
 def _finite(x: Any) -> bool:
     try:
         return math.isfinite(float(x))
@@ -197,6 +202,7 @@ class SystemConfig(DictConfig):
     z_min: float = 2.0  # the UAV's lowest altitude, m (every device stands below it)
     z_max: float = 8.0  # the UAV's highest altitude, m (at most the room's height)
     safety_distance: float = 3.0  # least UAV-device distance, m (docs/model.md, defaults table)
+    front_margin_deg: float | None = None  # attitude safety layer: every device kept this far (deg) in front of the RIS
     min_device_spacing: float = 5.0  # least horizontal distance between two devices, m (docs/study.md, section 21)
     energy_budget_j: float = 8000.0  # propulsion energy budget E_max of an episode, J
     max_active_pairs: int | None = None  # most D2D pairs active in a slot; None: floor(K/2)
@@ -212,7 +218,7 @@ class SystemConfig(DictConfig):
         object.__setattr__(self, "room", float_tuple(self.room, o, "room", "three finite lengths > 0 (x, y, z in m)"))
         _check(isinstance(self.users, (list, tuple)), o, "users", "a list of [x, y, z] device positions (m)",
                self.users)
-        object.__setattr__(self, "users", tuple(float_tuple(u, o, f"users[{k}]", "a point [x, y, z] (m)")
+        object.__setattr__(self, "users", tuple(float_tuple(u, o, _device(k), "a point [x, y, z] (m)")
                                                 for k, u in enumerate(self.users)))
         if isinstance(self.propulsion, dict):
             object.__setattr__(self, "propulsion", PropulsionParams(**self.propulsion))
@@ -235,6 +241,9 @@ class SystemConfig(DictConfig):
                "attitude_step_deg", "in [0, 180]", self.attitude_step_deg)
         _check(_finite(self.safety_distance) and self.safety_distance >= 0, o, "safety_distance",
                "a finite distance >= 0 (m)", self.safety_distance)
+        _check(self.front_margin_deg is None or (_finite(self.front_margin_deg) and 0 <= self.front_margin_deg < 90),
+               o, "front_margin_deg", "None (no attitude safety layer) or an angle in [0, 90) degrees",
+               self.front_margin_deg)
         _check(_finite(self.z_min) and _finite(self.z_max) and 0 <= self.z_min < self.z_max <= self.room[2],
                o, "z_min/z_max", f"0 <= z_min < z_max <= room height {self.room[2]}", (self.z_min, self.z_max))
         self._check_devices()
@@ -247,20 +256,22 @@ class SystemConfig(DictConfig):
         """Every device inside the room, below the UAV's floor, and apart from the others."""
         o = "SystemConfig"
         for k, u in enumerate(self.users):
-            inside = len(u) == 3 and all(_finite(c) and 0.0 <= c <= r for c, r in zip(u, self.room))
-            _check(inside, o, f"users[{k}]", f"a point inside the room [0, {self.room}]", list(u))
+            _check(len(u) == 3, o, _device(k), "a point [x, y, z] (m)", list(u))
+            inside = all(_finite(c) and 0.0 <= c <= r for c, r in zip(u, self.room))
+            _check(inside, o, _device(k), f"a point inside the room [0, {self.room}]", list(u))
             # The model has every device below the RIS (docs/model.md, section 3): a device above
             # the UAV's floor would be cut off by back-side blocking whenever the UAV flies lower.
-            _check(u[2] < self.z_min, o, f"users[{k}]", f"below the UAV's floor z_min = {self.z_min:g} m "
+            _check(u[2] < self.z_min, o, _device(k), f"below the UAV's floor z_min = {self.z_min:g} m "
                    f"(a device height < {self.z_min:g})", list(u))
         _check(_finite(self.min_device_spacing) and self.min_device_spacing >= 0, o, "min_device_spacing",
                "a finite distance >= 0 (m)", self.min_device_spacing)
         for i in range(len(self.users)):
             for j in range(i + 1, len(self.users)):
                 gap = math.dist(self.users[i][:2], self.users[j][:2])
-                _check(gap >= self.min_device_spacing, o, f"users[{j}]",
+                _check(gap >= self.min_device_spacing, o, _device(j),
                        f"at least min_device_spacing = {self.min_device_spacing:g} m (horizontally) from every other "
-                       f"device, but it is {gap:.2f} m from users[{i}] = {list(self.users[i])}", list(self.users[j]))
+                       f"device, but it is {gap:.2f} m from device D{i + 1} = {list(self.users[i])}",
+                       list(self.users[j]))
 
     @property
     def num_users(self) -> int:

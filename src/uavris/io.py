@@ -85,7 +85,10 @@ def _read(path: str | Path, parse: Any, errors: tuple[type[Exception], ...], kin
     except UnicodeDecodeError:
         raise UavrisError(f"{path} is not a {kind} file (not UTF-8 text)") from None
     except errors as e:
-        raise UavrisError(f"{path} is not valid {kind}: {str(e).splitlines()[0]}") from None
+        mark = getattr(e, "problem_mark", None)  # YAML's position of the problem (JSON's message has its own)
+        where = f" (line {mark.line + 1}, column {mark.column + 1})" if mark is not None else ""
+        problem = getattr(e, "problem", None) or str(e).splitlines()[0]
+        raise UavrisError(f"{path} is not valid {kind}{where}: {problem}") from None
 
 
 def read_yaml(path: str | Path) -> Any:

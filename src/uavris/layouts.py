@@ -55,7 +55,8 @@ class Layout:
 
     def __post_init__(self) -> None:
         # Lists from YAML or the CLI become tuples of floats, so a layout is hashable and exact.
-        object.__setattr__(self, "users", tuple(float_tuple(u, "Layout", f"users[{k}]", "a point [x, y, z] (m)")
+        object.__setattr__(self, "users", tuple(float_tuple(u, "Layout", f"users[{k}] (device D{k + 1})",
+                                                            "a point [x, y, z] (m)")
                                                 for k, u in enumerate(self.users)))
         object.__setattr__(self, "start", float_tuple(self.start, "Layout", "start", "a point [x, y, z] (m)"))
         if self.room is not None:
@@ -206,6 +207,9 @@ def layout_from_dict(data: Any, where: str, base: SystemConfig | None = None) ->
     devices = data.get("devices", data.get("users"))
     if not isinstance(devices, list) or not devices:
         raise ConfigError(f"{where}: devices must be a non-empty list of [x, y, z] positions (m), got {devices!r}")
+    for k, device in enumerate(devices, 1):  # before any check of where it is: a point has three coordinates
+        if not isinstance(device, (list, tuple)) or len(device) != 3:
+            raise ConfigError(f"device D{k} of {where}: expected [x, y, z], got {device!r}")
     name = str(data.get("name") or Path(where).stem)
     room = data.get("room")
     start = data.get("start")

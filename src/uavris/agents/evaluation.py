@@ -53,9 +53,9 @@ def check_episodes(episodes: int, seed: int) -> None:
     header) call it first, so bad input fails before anything is shown or loaded.
     """
     if not 1 <= episodes <= MAX_EPISODES:
-        raise ConfigError(f"--episodes must be in [1, {MAX_EPISODES:,}], got {episodes}")
+        raise ConfigError(f"episodes must be in [1, {MAX_EPISODES:,}], got {episodes}")
     if seed < 0:
-        raise ConfigError(f"--seed must be >= 0, got {seed}")
+        raise ConfigError(f"seed must be >= 0, got {seed}")
 
 
 def evaluate(policy: Any, config: SystemConfig, scenario: str | Scenario, episodes: int, seed: int,

@@ -57,9 +57,10 @@ def command(name: str) -> Callable[[list[str]], None]:
 
 
 def _usage() -> str:
-    doc = (__doc__ or "").split("Lives here:")[0].strip()
+    """``uavris --help``: the usage line, then the module docstring's list of commands."""
+    commands = (__doc__ or "").split("Lives here:")[0].split("\n", 1)[1].strip()
     return (f"uavris: UAV-mounted RIS D2D simulator, DRL experts and Decision Transformer.\n\n"
-            f"usage: {doc.split(chr(10), 1)[0].strip('.')}\n\n{doc.split(chr(10), 1)[1].strip()}\n\n"
+            f"usage: {PROG} COMMAND [FLAGS]\n\n{commands}\n\n"
             f"`{PROG} COMMAND --help` lists a command's flags and what it writes.\n")
 
 

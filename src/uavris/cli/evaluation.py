@@ -8,12 +8,12 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Annotated, Optional
+from typing import Annotated
 
 import tyro
 
 from uavris.agents.torch_device import Device
-from uavris.cli.parsing import output_dir, parse
+from uavris.cli.parsing import Unset, output_dir, parse
 from uavris.config import ScenarioName, SystemConfig
 from uavris.env.wrappers import PhaseControl
 from uavris.experiments.tools.benchmark import Cells
@@ -27,27 +27,27 @@ class EvaluateArgs:
     """a run directory (train, pretrain-dt, finetune-dt), a DT model directory, a reference:
     hover (the zero action), random, hover-random-phases, hover-aligned, hover-optimizer,
     oracle, oracle-greedy (also written baseline:NAME), or your own policy: pkg.module:NAME or
-    path/to/file.py:NAME (a policy obs -> actions, or a factory that returns one; README "Your own
-    controller")"""
-    scenario: Optional[ScenarioName] = None
+    path/to/file.py:NAME (a policy obs -> actions, or a factory that takes no argument or system and
+    returns one; docs/controller.md)"""
+    scenario: Unset[ScenarioName] = None
     """scenario to evaluate in (default: the run's own, or the layout's start; required for references, user
     policies and pre-trained DTs without --layout)"""
-    layout: Optional[str] = None
+    layout: Unset[str] = None
     """the hall: paper, layout-train-N / layout-unseen-N, or a YAML layout file (devices, optionally start and
-    room); default: the target's own"""
+    room; --system.* flags apply first) (default: the target's own)"""
     episodes: int = STUDY["quick"]["eval_episodes"]
     """evaluation episodes (seeds SEED .. SEED+EPISODES-1); the default is the quick report's (the paper
     preset's report uses 100)"""
     seed: int = EVAL_SEED
     """seed of the first evaluation episode"""
-    out: Optional[Path] = None
-    """output directory (default RUN/eval, or runs/baselines/NAME/eval for a reference)"""
-    phase_control: Optional[PhaseControl] = None
+    out: Unset[Path] = None
+    """output directory (default: RUN/eval, or runs/baselines/NAME/eval for a reference)"""
+    phase_control: Unset[PhaseControl] = None
     """optimizer: replace the policy's RIS phases by the per-slot optimiser's (default: as trained)"""
     device: Device = "cpu"
     """torch device (auto: CUDA when torch sees one)"""
-    no_progress: bool = False
-    """no progress bar"""
+    progress: bool = True
+    """show a progress bar"""
     system: SystemConfig = SystemConfig()
     """the system evaluated in: the target's own, with these fields changed"""
 
@@ -56,14 +56,18 @@ def evaluate_command(args: list[str]) -> None:
     """Evaluate a trained policy, a reference or your own policy deterministically on seeded episodes.
 
     The target's own system is the default of every --system.* flag; --layout puts it in
-    another hall. Writes OUT/SCENARIO-seedSEED-nEPISODES.csv (one row per episode: average
-    sum rate, return, length, energy) and .json (mean, 95% CI, IQM) and prints the summary.
+    another hall (the flags change the system first: --layout paper --system.room 40 40 8).
+    Writes OUT/SCENARIO-seedSEED-nEPISODES-KEY.csv (one row per episode: average sum rate,
+    return, length, energy) and .json (mean, 95% CI, IQM, the system) and prints the summary;
+    KEY, 8 hex digits of the system, phase control and start, keeps evaluations of other
+    systems in the same OUT apart.
     Your own policy (MODULE:NAME or FILE.py:NAME) is scored with the zero action and the
     oracle beside it on the same episodes (in the JSON under "references"; default OUT
     runs/policies/TARGET/eval). For the study's whole protocol use `uavris benchmark`.
     """
     from uavris.agents.torch_device import resolve_device
     from uavris.cli.options import layout_defaults
+    from uavris.experiments.display.tables import rate_interval
     from uavris.experiments.tools.evaluate import evaluate_target
     from uavris.experiments.tools.targets import resolve_target
 
@@ -71,18 +75,18 @@ def evaluate_command(args: list[str]) -> None:
     # Two passes: the first finds the target, whose own system is the default the flags change.
     first = parse(EvaluateArgs, args, "uavris evaluate", doc)
     target = resolve_target(first.target)
-    system, hall = layout_defaults(args, target.own_system())
+    system, hall = layout_defaults(args, target.own_system(), "uavris evaluate")
     a = parse(EvaluateArgs, args, "uavris evaluate", doc, default=EvaluateArgs(first.target, system=system))
     output_dir(a.out)
     summary, path = evaluate_target(target, scenario=a.scenario or hall, episodes=a.episodes, seed=a.seed,
                                     out=a.out, phase_control=a.phase_control, device=resolve_device(a.device),
-                                    progress=not a.no_progress, system=a.system)
+                                    progress=a.progress, system=a.system)
     print(f"{a.target} in {summary['scenario']}: average sum rate {summary['mean']:.2f} bps/Hz "
-          f"(95% CI {summary['ci_low']:.2f}-{summary['ci_high']:.2f}, IQM {summary['iqm']:.2f}, "
+          f"(95% CI {rate_interval(summary['ci_low'], summary['ci_high'])}, IQM {summary['iqm']:.2f}, "
           f"{summary['episodes']} episodes) -> {path}")
     for name, ref in summary.get("references", {}).items():
         print(f"  beside it on the same episodes: {name} {ref['mean']:.2f} bps/Hz "
-              f"(95% CI {ref['ci_low']:.2f}-{ref['ci_high']:.2f})")
+              f"(95% CI {rate_interval(ref['ci_low'], ref['ci_high'])})")
     if summary.get("fraction_of_oracle") is not None:
         print(f"  {a.target} reaches {100 * summary['fraction_of_oracle']:.1f}% of the oracle")
 
@@ -97,14 +101,14 @@ class BenchmarkArgs:
     layouts)"""
     cells: Cells = "all"
     """scenarios: the paper's unseen scenarios; layouts: the deployment track's unseen layouts; all: both"""
-    out: Optional[Path] = None
-    """output directory (default runs/benchmarks/TARGET)"""
-    phase_control: Optional[PhaseControl] = None
+    out: Unset[Path] = None
+    """output directory (default: runs/benchmarks/TARGET)"""
+    phase_control: Unset[PhaseControl] = None
     """optimizer: the target's motion with the per-slot optimiser's phases (default: as trained)"""
     device: Device = "cpu"
     """torch device (auto: CUDA when torch sees one)"""
-    no_progress: bool = False
-    """no progress bar"""
+    progress: bool = True
+    """show a progress bar"""
     system: SystemConfig = SystemConfig()
     """the system: the target's own, with these fields changed"""
 
@@ -127,7 +131,7 @@ def benchmark_command(args: list[str]) -> None:
     default = BenchmarkArgs(first.target, system=resolve_target(first.target).own_system())
     a = parse(BenchmarkArgs, args, "uavris benchmark", doc, default=default)
     output_dir(a.out)
-    _, md = benchmark(a.target, a.preset, a.cells, a.out, resolve_device(a.device), progress=not a.no_progress,
+    _, md = benchmark(a.target, a.preset, a.cells, a.out, resolve_device(a.device), progress=a.progress,
                       system=a.system, phase_control=a.phase_control)
     print(md.read_text(), end="")
     print(f"-> {md}")
@@ -136,16 +140,16 @@ def benchmark_command(args: list[str]) -> None:
 # -------------------------------------------------------------------------------------------- plan
 @dataclass(frozen=True)
 class PlanArgs:
-    layout: Annotated[Optional[str], tyro.conf.Positional, tyro.conf.arg(metavar="LAYOUT")] = None
+    layout: Annotated[Unset[str], tyro.conf.Positional, tyro.conf.arg(metavar="LAYOUT")] = None
     """the hall: paper, layout-train-N / layout-unseen-N (generated), or a YAML layout file (devices, optionally
     start and room); default: the devices of --system.users (the paper's unless given), starting above the
     middle of the floor"""
-    out: Optional[Path] = None
-    """output file stem: writes OUT.json, OUT.png and OUT.pdf (default runs/plans/LAYOUT)"""
+    out: Unset[Path] = None
+    """output file stem: writes OUT.json, OUT.png and OUT.pdf (default: runs/plans/LAYOUT)"""
     grid_step: float = 2.0
     """spacing of the rate map's grid, m (1.0 takes about four times as long)"""
-    no_progress: bool = False
-    """no progress bar"""
+    progress: bool = True
+    """show a progress bar"""
     system: SystemConfig = SystemConfig()
     """the system (the layout sets its devices and, if it has one, its room)"""
 
@@ -172,7 +176,7 @@ def plan_command(args: list[str]) -> None:
     check_grid(layout.system(a.system), a.grid_step)  # before anything is written
     out = a.out or Path("runs/plans") / layout.name
     output_dir(out.parent, "--out's folder")
-    plan, paths = plan_hall(layout, a.system, out, a.grid_step, progress=not a.no_progress)
+    plan, paths = plan_hall(layout, a.system, out, a.grid_step, progress=a.progress)
     t = plan["target"]
     print(f"{layout.name}: fly from {[round(v, 2) for v in plan['layout']['start']]} to "
           f"[{t[0]:.2f}, {t[1]:.2f}, {t[2]:.2f}] (attitude {[round(v, 1) for v in plan['attitude_deg']]} deg) in "
@@ -194,8 +198,8 @@ class CollectArgs:
     """seed of the first episode; expert k uses SEED + k*TRAJECTORIES onwards"""
     force: bool = False
     """replace an existing dataset"""
-    no_progress: bool = False
-    """no progress bar"""
+    progress: bool = True
+    """show a progress bar"""
 
 
 def collect_command(args: list[str]) -> None:
@@ -209,7 +213,7 @@ def collect_command(args: list[str]) -> None:
 
     a = parse(CollectArgs, args, "uavris collect", collect_command.__doc__ or "")
     output_dir(a.out)
-    path = collect(a.experts, a.trajectories, a.out, seed=a.seed, force=a.force, progress=not a.no_progress)
+    path = collect(a.experts, a.trajectories, a.out, seed=a.seed, force=a.force, progress=a.progress)
     summary = dataset_summary(path)
     rates = ", ".join(f"{s} {v['avg_sum_rate']:.2f}" for s, v in summary["scenarios"].items())
     print(f"dataset {path} ({summary['dataset_id']}): {summary['episodes']} episodes, {summary['slots']} slots; "
@@ -223,11 +227,13 @@ class DemoArgs:
     """episodes per policy"""
     seed: int = 0
     """seed of the first episode"""
-    scenario: Optional[ScenarioName] = None
+    scenario: Unset[ScenarioName] = None
     """start position (default: fig2, or the layout's start)"""
-    layout: Optional[str] = None
+    layout: Unset[str] = None
     """the hall: paper, layout-train-N / layout-unseen-N, or a YAML layout file (devices, optionally start and
-    room)"""
+    room; --system.* flags apply first) (default: the devices of --system.users, the paper's unless given)"""
+    system: SystemConfig = SystemConfig()
+    """the system (the paper's, with these fields changed)"""
 
 
 def demo_command(args: list[str]) -> None:
@@ -235,9 +241,9 @@ def demo_command(args: list[str]) -> None:
     from uavris.cli.options import layout_defaults
     from uavris.experiments.tools.demo import run_demo
 
-    a = parse(DemoArgs, args, "uavris demo", demo_command.__doc__ or "")
-    system, hall = layout_defaults(args, SystemConfig())
-    run_demo(a.episodes, a.seed, a.scenario or hall or "fig2", system)
+    system, hall = layout_defaults(args, SystemConfig(), "uavris demo")
+    a = parse(DemoArgs, args, "uavris demo", demo_command.__doc__ or "", default=DemoArgs(system=system))
+    run_demo(a.episodes, a.seed, a.scenario or hall or "fig2", a.system)
 
 
 # -------------------------------------------------------------------------------------------- plot
@@ -247,7 +253,7 @@ class PlotArgs:
     """run directories written by train, pretrain-dt or finetune-dt (overlaid by kind)"""
     out: Path = Path("runs/plots/curves")
     """output file stem: writes OUT.png and OUT.pdf"""
-    labels: Optional[tuple[str, ...]] = None
+    labels: Unset[tuple[str, ...]] = None
     """legend labels, one per run (default: the directory names)"""
 
 

@@ -9,12 +9,12 @@ directory itself (:mod:`uavris.runs`), layouts (:mod:`uavris.layouts`).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from pathlib import Path
-from typing import Optional
+from typing import Any
 
 from uavris.agents.torch_device import Device, resolve_device
-from uavris.cli.parsing import UsageError, output_dir, peek
+from uavris.cli.parsing import Unset, UsageError, output_dir, parse, peek
 from uavris.config import Scenario, SystemConfig
 from uavris.runs import CONFIG_FILE, config_path
 
@@ -23,7 +23,7 @@ from uavris.runs import CONFIG_FILE, config_path
 class RunOptions:
     """Where a training run is written and how it starts."""
 
-    out: Optional[Path] = None
+    out: Unset[Path] = None
     """run directory (default: under runs/, named after the configuration)"""
     resume: bool = False
     """continue the interrupted run in OUT from its last checkpoint, with its stored configuration (train: OUT/
@@ -32,8 +32,8 @@ class RunOptions:
     """delete the run in OUT and start from scratch"""
     device: Device = "cpu"
     """torch device (auto: CUDA when torch sees one)"""
-    no_progress: bool = False
-    """no progress bar"""
+    progress: bool = True
+    """show a progress bar"""
 
 
 def check_run_options(opts: RunOptions, run_dir: Path) -> str:
@@ -59,18 +59,52 @@ def check_run_options(opts: RunOptions, run_dir: Path) -> str:
 
 LAYOUT_HELP = ("the hall: paper (the paper's devices), layout-train-N / layout-unseen-N (generated, docs/model.md "
                "section 21) or a YAML layout file (devices, optionally start and room); it sets --system.users (and "
-               "--system.room) and the start (unless --scenario is given)")
+               "--system.room) and the start (unless --scenario is given); default: the devices of --system.users")
 
 
-def layout_defaults(args: list[str], system: SystemConfig) -> tuple[SystemConfig, Scenario | None]:
-    """``system`` in the hall ``--layout`` names in ``args`` and that layout's start; unchanged
-    (and None) without ``--layout``. ``--layout`` with ``--system.users`` gives the devices
-    twice, which is one error line."""
+class _DevicesLater(SystemConfig):
+    """A system whose devices are checked once a layout has given them: the ``--system.*``
+    flags change the base system before ``--layout`` resolves (a generated hall is drawn in
+    the room of ``--system.room``, the paper's devices fit a room the flag enlarges), and the
+    base's own devices need not fit the changed room. Every other field is checked as always;
+    :meth:`replace`, which is how a layout makes its system, gives a fully checked
+    :class:`SystemConfig`."""
+
+    def _check_devices(self) -> None:
+        pass
+
+    def replace(self, **changes: Any) -> SystemConfig:
+        return SystemConfig(**{**{f.name: getattr(self, f.name) for f in fields(SystemConfig)}, **changes})
+
+
+@dataclass(frozen=True)
+class _SystemFlags:
+    system: _DevicesLater
+
+
+def _given(args: list[str], flag: str) -> bool:
+    return any(a == flag or a.startswith(flag + "=") for a in args)
+
+
+def layout_defaults(args: list[str], system: SystemConfig,
+                    prog: str = "uavris") -> tuple[SystemConfig, Scenario | None]:
+    """``system`` with the ``--system.*`` flags of ``args`` applied, in the hall ``--layout``
+    names, and that layout's start; ``system`` unchanged (and None) without ``--layout``.
+
+    The flags apply to the base system before the layout resolves. A layout gives the devices
+    and, a layout file may, the room: ``--layout`` with ``--system.users``, or a file with a
+    room with ``--system.room``, gives them twice, which is one error line."""
     from uavris.layouts import resolve_layout
 
     ref = peek(args, "--layout")
     if ref is None:
         return system, None
-    if any(a == "--system.users" or a.startswith("--system.users=") for a in args):
+    if _given(args, "--system.users"):
         raise UsageError("--layout and --system.users both give the device positions; pass one of them")
-    return resolve_layout(ref, system).resolve(system)
+    loose = _DevicesLater(**{f.name: getattr(system, f.name) for f in fields(SystemConfig)})
+    flags = [a for a in args if a not in ("-h", "--help")]  # only the command's own parse prints help
+    base = parse(_SystemFlags, flags, prog, "", default=_SystemFlags(loose), known_only=True).system
+    layout = resolve_layout(ref, base)
+    if layout.room is not None and _given(args, "--system.room"):
+        raise UsageError(f"--layout {ref} sets the room; drop --system.room or the file's room")
+    return layout.resolve(base)

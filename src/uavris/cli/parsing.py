@@ -15,7 +15,7 @@ import io
 import re
 import sys
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import Annotated, Any, Optional, TypeVar
 
 import tyro
 
@@ -23,6 +23,10 @@ from uavris.errors import UavrisError
 
 T = TypeVar("T")
 
+# An optional flag whose help says what leaving it out means (--out, --layout, --scenario, ...):
+# its metavar without "{None}|" (typing None there means nothing) and no "(default: None)"
+# after the help's own default.
+Unset = Annotated[Optional[T], tyro.conf.DisallowNone, tyro.conf.arg(help_behavior_hint="")]
 # Nested configs become flags without their parent's prefix only where the command says so;
 # an Optional nested config (TrainConfig.imitation) stays at its default instead of turning
 # into a subcommand.
@@ -30,6 +34,8 @@ TYRO_CONFIG = (tyro.conf.AvoidSubcommands,)
 # tyro draws its errors in a box, with Unicode or ASCII lines depending on the terminal.
 _EDGES = re.compile(r"^[\s│|╭╮╰╯+]*(.*?)[\s│|╭╮╰╯+]*$")
 _RULE = re.compile(r"^[\s─\-│|╭╮╰╯+=]*$")
+# A list of points (--system.users) whose values do not come in threes: tyro only says it found no parse.
+_POINTS = re.compile(r"Error parsing (--[\w.-]*users): Could not find valid parse for arguments: \[(.*)\]")
 
 
 class UsageError(UavrisError):
@@ -54,21 +60,30 @@ def _first_message(text: str) -> str:
     return re.sub(r"Error parsing (run|study|options)\.?", "Error parsing ", message).replace("parsing :", "parsing:")
 
 
-def parse(cls: type[T], args: list[str], prog: str, description: str, default: T | None = None) -> T:
+def parse(cls: type[T], args: list[str], prog: str, description: str, default: T | None = None,
+          known_only: bool = False) -> T:
     """``tyro.cli(cls)`` on ``args``; a parse error raises one-line :class:`UsageError`.
 
-    ``--help`` prints tyro's help on stdout and exits 0 as usual.
+    ``--help`` prints tyro's help on stdout and exits 0 as usual. ``known_only``: the
+    arguments ``cls`` does not know are left alone (they belong to the rest of the command).
     """
     captured = io.StringIO()
     try:
         with contextlib.redirect_stderr(captured):
-            return tyro.cli(cls, args=args, prog=prog, description=inspect.cleandoc(description), default=default,
-                            config=TYRO_CONFIG)
+            got = tyro.cli(cls, args=args, prog=prog, description=inspect.cleandoc(description), default=default,
+                           config=TYRO_CONFIG, return_unknown_args=known_only)
+            return got[0] if known_only else got  # type: ignore[index,return-value]
     except SystemExit as e:
         if e.code in (0, None):
             sys.stderr.write(captured.getvalue())
             raise
-        raise UsageError(f"{_first_message(captured.getvalue())} (see {prog} --help)") from None
+        message = _first_message(captured.getvalue())
+        points = _POINTS.fullmatch(message)
+        if points:
+            values = [v.strip(" '\"") for v in points.group(2).split(",") if v.strip()]
+            message = (f"{points.group(1)} takes x y z per device: a multiple of 3 numbers, got {len(values)} "
+                       f"value{'s' * (len(values) != 1)}: {' '.join(values)}")
+        raise UsageError(f"{message} (see {prog} --help)") from None
 
 
 def peek(args: list[str], name: str, default: str | None = None) -> str | None:

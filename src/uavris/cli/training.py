@@ -11,14 +11,14 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Annotated, Any, Callable, Optional
+from typing import Annotated, Any, Callable
 
 import tyro
 
 from uavris.agents.experts import Algorithm
 from uavris.agents.torch_device import Device
 from uavris.cli.options import LAYOUT_HELP, RunOptions, check_run_options, layout_defaults
-from uavris.cli.parsing import UsageError, load_overrides, output_dir, parse, peek, peek_int, peek_preset
+from uavris.cli.parsing import Unset, UsageError, load_overrides, output_dir, parse, peek, peek_int, peek_preset
 from uavris.config import ScenarioName, SystemConfig
 from uavris.experiments.engine.jobs import Backend
 from uavris.experiments.study.config import ReproduceConfig
@@ -47,9 +47,10 @@ def _required_in_help(config: Any, field: str) -> Any:
 class TrainArgs:
     run: Annotated[TrainConfig, Flat]
     options: Annotated[RunOptions, Flat] = RunOptions()
-    config: Optional[Path] = None
-    """YAML file of TrainConfig fields (e.g. RUN/config.yaml); the preset fills what it leaves out, flags override it"""
-    layout: Annotated[Optional[str], tyro.conf.arg(help=LAYOUT_HELP)] = None
+    config: Unset[Path] = None
+    """YAML file of TrainConfig fields (e.g. RUN/config.yaml); the preset fills what it leaves out, flags override it
+    (default: none, the preset's)"""
+    layout: Annotated[Unset[str], tyro.conf.arg(help=LAYOUT_HELP)] = None
 
 
 def _nested_update(base: dict[str, Any], changes: dict[str, Any], where: str) -> dict[str, Any]:
@@ -79,7 +80,7 @@ def train_defaults(args: list[str]) -> TrainConfig:
     if not isinstance(data.get("seed", 0), int):
         raise UsageError(f"--config {file}: seed must be an integer, got {data['seed']!r}")
     seed = peek_int(args, "--seed", data.get("seed", 0))
-    system, hall = layout_defaults(args, TrainConfig().system)
+    system, hall = layout_defaults(args, TrainConfig().system, "uavris train")
     named = hall is None or peek(args, "--scenario") is not None  # a named scenario's start, in the layout's hall
     where = {} if hall is None else {"system": system, "start": None if named else hall.start}
     pick["scenario"] = pick["scenario"] if named else hall.name
@@ -97,6 +98,7 @@ def train_command(args: list[str]) -> None:
     (rerun it with --config), episodes.csv, evals.csv, TensorBoard logs (tb/), checkpoints/
     and model.zip. Every TrainConfig field is a flag; --preset and --algo choose the defaults.
     """
+    from uavris.experiments.display.tables import rate_interval
     from uavris.experiments.training.train_expert import default_run_dir, train
     from uavris.runs import read_done
 
@@ -105,33 +107,33 @@ def train_command(args: list[str]) -> None:
     run_dir = a.options.out or default_run_dir(a.run)
     device = check_run_options(a.options, run_dir)
     model = train(a.run, run_dir, resume=a.options.resume, force=a.options.force,
-                  progress=not a.options.no_progress, device=device)
+                  progress=a.options.progress, device=device)
     final = read_done(run_dir)["final_eval"]
     print(f"trained {model}: average sum rate {final['mean']:.2f} bps/Hz "
-          f"(95% CI {final['ci_low']:.2f}-{final['ci_high']:.2f}, {final['episodes']} episodes)")
+          f"(95% CI {rate_interval(final['ci_low'], final['ci_high'])}, {final['episodes']} episodes)")
 
 
 # ------------------------------------------------------------------------------ compare-algorithms
 @dataclass(frozen=True)
 class CompareArgs:
-    layout: Annotated[Optional[str], tyro.conf.arg(help=LAYOUT_HELP)] = None
+    layout: Annotated[Unset[str], tyro.conf.arg(help=LAYOUT_HELP)] = None
     preset: Preset = "quick"
     """budgets: smoke (seconds), quick (minutes per run), paper (hours per run)"""
-    seeds: Optional[int] = None
+    seeds: Unset[int] = None
     """seeds per algorithm (default: the preset's, as in the study: 2 smoke, 3 quick, 5 paper)"""
     workers: int = 2
     """parallel training processes"""
-    out: Optional[Path] = None
-    """output directory (default runs/compare-PRESET)"""
+    out: Unset[Path] = None
+    """output directory (default: runs/compare-PRESET)"""
     algos: tuple[Algorithm, ...] = ("ddpg", "ppo", "sac", "td3")
     """algorithms to compare"""
     scenario: ScenarioName | str = "fig2"
     """scenario (the paper's Fig. 2: fig2, [15, 20, 4.5]; with --layout: the layout's start by default)"""
-    eval_episodes: Optional[int] = None
+    eval_episodes: Unset[int] = None
     """final evaluation episodes per run (default: 32 smoke/quick, 100 paper)"""
     backend: Backend = "local"
     """local (process pool) or ray (pip install 'uavris[ray]')"""
-    ray_address: Optional[str] = None
+    ray_address: Unset[str] = None
     """address of a running Ray cluster (default: start a local instance)"""
     device: Device = "cpu"
     """torch device (auto: CUDA when torch sees one)"""
@@ -166,7 +168,7 @@ def _run_dt(fn: Callable[..., Path], cfg: Any, opts: RunOptions, default_dir: Ca
     """Run a DT stage (pre-training or fine-tuning) as the options say; its run directory."""
     run_dir = opts.out or default_dir(cfg)
     device = check_run_options(opts, run_dir)
-    return fn(cfg, run_dir, resume=opts.resume, force=opts.force, progress=not opts.no_progress, device=device)
+    return fn(cfg, run_dir, resume=opts.resume, force=opts.force, progress=opts.progress, device=device)
 
 
 # ------------------------------------------------------------------------------------- pretrain-dt
@@ -204,7 +206,7 @@ def pretrain_command(args: list[str]) -> None:
 class FinetuneArgs:
     run: Annotated[FinetuneConfig, Flat]
     options: Annotated[RunOptions, Flat] = RunOptions()
-    layout: Annotated[Optional[str], tyro.conf.arg(help=LAYOUT_HELP)] = None
+    layout: Annotated[Unset[str], tyro.conf.arg(help=LAYOUT_HELP)] = None
 
 
 def finetune_command(args: list[str]) -> None:
@@ -246,23 +248,24 @@ def finetune_command(args: list[str]) -> None:
 @dataclass(frozen=True)
 class ReproduceArgs:
     study: Annotated[ReproduceConfig, Flat]
-    layout: Annotated[Optional[str], tyro.conf.arg(help="the hall of the paper and strong tracks (their scenarios "
-                                                   "start in it): paper, layout-train-N / layout-unseen-N, or a YAML "
-                                                   "layout file; it sets --system.users (and --system.room)")] = None
-    out: Optional[Path] = None
-    """output directory (default runs/PRESET); a rerun skips finished stages and resumes the rest"""
+    layout: Annotated[Unset[str], tyro.conf.arg(help="the hall of the paper and strong tracks (their scenarios "
+                                                "start in it): paper, layout-train-N / layout-unseen-N, or a YAML "
+                                                "layout file; it sets --system.users (and --system.room); default: "
+                                                "the devices of --system.users")] = None
+    out: Unset[Path] = None
+    """output directory (default: runs/PRESET); a rerun skips finished stages and resumes the rest"""
     workers: int = 2
     """parallel job processes (local backend) or CPUs of a local Ray instance"""
     backend: Backend = "local"
     """local (process pool) or ray (pip install 'uavris[ray]')"""
-    ray_address: Optional[str] = None
+    ray_address: Unset[str] = None
     """address of a running Ray cluster (default: start a local instance)"""
     force: tuple[str, ...] = ()
     """stage(s) to rerun even if finished, e.g. --force pretrain"""
     device: Device = "cpu"
     """torch device (auto: CUDA when torch sees one)"""
-    no_progress: bool = False
-    """no progress bar"""
+    progress: bool = True
+    """show a progress bar"""
     estimate: bool = False
     """print each stage's expected core-minutes and the expected wall clock on --workers, and exit (nothing run
     or written; the cost model of uavris.experiments.engine.costs, measured on a 2-core AMD EPYC)"""
@@ -294,7 +297,7 @@ def reproduce_command(args: list[str]) -> None:
         return
     output_dir(a.out)
     report = reproduce(a.study, a.out or Path("runs") / a.study.preset, workers=a.workers, backend=a.backend,
-                       ray_address=a.ray_address, force=a.force, progress=not a.no_progress,
+                       ray_address=a.ray_address, force=a.force, progress=a.progress,
                        device=resolve_device(a.device))
     print(f"report: {report}")
 

@@ -2,9 +2,9 @@
 
 Lives here: :func:`markdown_table` (every table a report, a comparison, a benchmark or an
 estimate prints) and the formats of its cells: :func:`num`, :func:`signed`, :func:`pct`
-and :func:`with_ci` / :func:`interval`. A value that is missing (None) or undefined (NaN:
-an interval over one sample, a fraction of a zero oracle) prints as ``n/a``, never as a
-number. Not here: the statistics (:mod:`uavris.stats`).
+and :func:`with_ci` / :func:`interval` / :func:`rate_interval`. A value that is missing
+(None) or undefined (NaN: an interval over one sample, a fraction of a zero oracle) prints
+as ``n/a``, never as a number. Not here: the statistics (:mod:`uavris.stats`).
 """
 
 from __future__ import annotations
@@ -43,6 +43,12 @@ def fraction(x: float, of: float, digits: int = 0) -> str:
 def interval(low: float | None, high: float | None, fmt: Fmt = num) -> str:
     """``[low, high]``, or ``n/a`` when the interval is undefined."""
     return MISSING if _missing(low) else f"[{fmt(low)}, {fmt(high)}]"
+
+
+def rate_interval(low: float | None, high: float | None) -> str:
+    """A sum rate's interval ``[low, high]`` (bps/Hz), bounded below at 0: a rate is never
+    negative, though the t interval of a few spread-out episodes reaches below 0."""
+    return interval(low, high) if low is None or _missing(low) else interval(max(0.0, low), high)
 
 
 def with_ci(s: Mapping[str, float], fmt: Fmt = num) -> str:

@@ -10,8 +10,9 @@ The protocol is the report's (docs/study.md, section 21): the preset's evaluatio
 (:data:`~uavris.presets.STUDY`) from :data:`~uavris.presets.EVAL_SEED`, the unseen scenarios
 of the paper in the paper's hall, and the preset's unseen layouts of the study's generator
 (seed 0). Fractions of the oracle are per cell; over layouts, their mean with a Student-t 95%
-interval (each layout one sample); against the zero action, the paired difference on the
-same episodes.
+interval (each layout one sample; printed from :data:`MIN_UNITS_FOR_CI` layouts on, since two
+give one degree of freedom and an interval such as 84.2% [11.5, 156.8]); against the zero
+action, the paired difference on the same episodes.
 """
 
 from __future__ import annotations
@@ -23,7 +24,7 @@ from typing import Any, Literal
 import numpy as np
 
 from uavris.agents.references import ORACLE, ZERO_ACTION
-from uavris.config import UNSEEN_SCENARIOS, SystemConfig
+from uavris.config import UNSEEN_SCENARIOS, ConfigError, SystemConfig, get_scenario
 from uavris.experiments.display.progress import progress_bar
 from uavris.experiments.display.tables import interval, markdown_table, num, pct, signed
 from uavris.experiments.tools.evaluate import evaluate_target
@@ -34,6 +35,7 @@ from uavris.presets import EVAL_SEED, STUDY, check_preset
 from uavris.stats import over_units, t_interval
 
 Cells = Literal["all", "scenarios", "layouts"]
+MIN_UNITS_FOR_CI = 3  # an interval over cells (halls, scenarios) is printed from this many on
 COLUMNS = ("cell", "kind", "mean", "ci_low", "ci_high", "zero_action", "oracle", "fraction_of_oracle",
            "minus_zero_action", "minus_zero_action_low", "minus_zero_action_high")
 
@@ -73,9 +75,14 @@ def benchmark(target: str, preset: str = "quick", cells: Cells = "all", out: Pat
     resolved = resolve_target(target)
     system = system or resolved.own_system()
     todo = protocol_cells(preset, cells)
-    for cell in todo:  # every layout resolves (devices fit the target's system) before any rollout
-        if cell.kind == "layout":
-            resolve_layout(cell.name, system)
+    for cell in todo:  # every cell fits the target's system before any rollout: one line, nothing written
+        try:
+            if cell.kind == "layout":
+                resolve_layout(cell.name, system).resolve(system)
+            else:
+                get_scenario(cell.name).validate_for(system)
+        except ConfigError as e:
+            raise ConfigError(f"benchmark cell {cell.name} does not fit the system: {e}") from None
     out = Path(out) if out is not None else Path("runs/benchmarks") / Path(target.replace(":", "_")).name
     rows = []
     with progress_bar(len(todo), "benchmark", "cell", progress) as bar:
@@ -132,13 +139,16 @@ def benchmark_table(summary: dict[str, Any]) -> str:
             for r in summary["cells"]]
     for kind, s in summary["over"].items():
         f, d = s["fraction_of_oracle"], s["minus_zero_action"]
-        ci = "" if f["n"] < 2 else f" {interval(f['ci_low'], f['ci_high'], percent)}"
-        dci = "" if d["n"] < 2 else f" {interval(d['ci_low'], d['ci_high'], signed)}"
+        few = f"[n/a: {f['n']} {kind}{'s' * (f['n'] != 1)}]"  # Student's t on 1 degree of freedom reads nothing
+        ci = interval(f["ci_low"], f["ci_high"], percent) if f["n"] >= MIN_UNITS_FOR_CI else few
+        dci = interval(d["ci_low"], d["ci_high"], signed) if d["n"] >= MIN_UNITS_FOR_CI else few
         rows.append((f"**mean over {f['n']} {kind}s** (95% CI over {kind}s)", "", "", "",
-                     f"{percent(f['mean'])}%{ci}", f"{signed(d['mean'])}{dci}"))
+                     f"{percent(f['mean'])}% {ci}", f"{signed(d['mean'])} {dci}"))
     lines = [f"# {summary['target']} on the study's protocol ({summary['preset']} preset)", "",
              f"{summary['episodes']} episodes per cell from seed {summary['seed']}, the same as the "
-             f"report's; average sum rate in bps/Hz, 95% CIs over episodes.", "",
+             f"report's; average sum rate in bps/Hz, 95% CIs over episodes. The means over cells have a "
+             f"Student-t 95% CI over cells from {MIN_UNITS_FOR_CI} cells on (n/a with fewer: on one degree of "
+             "freedom the interval spans more than the values it summarises).", "",
              *markdown_table(("cell", "target [95% CI]", "zero action", "oracle", "fraction of oracle",
                               "target - zero action [95% CI]"), rows, "lrrrrr")]
     return "\n".join(lines) + "\n"

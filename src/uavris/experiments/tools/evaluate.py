@@ -1,5 +1,6 @@
 """``uavris evaluate``: a run, a DT model, a reference or a user's policy on seeded episodes,
-written as CSV and JSON.
+written as CSV and JSON (``OUT/SCENARIO-seedSEED-nEPISODES-KEY``, KEY: 8 hex digits of the
+system, phase control and start evaluated, :func:`evaluated_key`).
 
 Lives here: :func:`evaluate_target` and :func:`write_results` (a target's per-episode
 results); a user's policy (``MODULE:NAME`` or ``FILE.py:NAME``) is scored with the zero
@@ -9,6 +10,8 @@ action and the oracle beside it on the same episodes. Not here: what a target na
 
 from __future__ import annotations
 
+import hashlib
+import json
 from pathlib import Path
 from typing import Any
 
@@ -23,6 +26,14 @@ from uavris.experiments.display.progress import progress_bar
 from uavris.experiments.tools.targets import Target, resolve_target
 from uavris.io import write_csv, write_json
 from uavris.layouts import Layout, resolve_layout
+
+
+def evaluated_key(summary: dict[str, Any]) -> str:
+    """8 hex digits of what was evaluated beyond the file name's readable part (the system, the
+    phase control and the start): evaluations of another system into the same folder keep
+    their own files, and the same evaluation again replaces its own."""
+    what = {k: summary[k] for k in ("system", "phase_control", "start")}
+    return hashlib.sha256(json.dumps(what, sort_keys=True).encode()).hexdigest()[:8]
 
 
 def write_results(res: EpisodeResults, summary: dict[str, Any], stem: Path) -> None:
@@ -82,6 +93,6 @@ def evaluate_target(target: str | Target, scenario: str | Scenario | None, episo
         oracle = summary["references"][ORACLE]["mean"]
         summary["fraction_of_oracle"] = summary["mean"] / oracle if oracle > 0 else None
     suffix = "-optimizer-phases" if phase_control == "optimizer" else ""
-    stem = Path(out or target.default_out()) / f"{where.name}-seed{seed}-n{episodes}{suffix}"
+    stem = Path(out or target.default_out()) / f"{where.name}-seed{seed}-n{episodes}{suffix}-{evaluated_key(summary)}"
     write_results(res, summary, stem)
     return summary, stem.with_suffix(".json")

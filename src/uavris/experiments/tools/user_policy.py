@@ -5,10 +5,12 @@ which turns a wrong action into one line naming the controller. Not here: tellin
 name from a run or a reference (:mod:`.targets`), the contract itself
 (:mod:`uavris.agents.policy` documents what a policy receives and returns) and the evaluation.
 
-``NAME`` is either a policy (a callable ``policy(obs) -> actions``, a function or an
-object) or a factory that makes one: a class, or a function whose parameters all have
-defaults. A factory that accepts a ``system`` argument gets the
-:class:`~uavris.config.SystemConfig` the policy is evaluated in.
+``NAME`` is either a policy (a callable ``policy(obs) -> actions``: a function with one
+required parameter, or an object) or a factory that makes one: a class or a function that
+takes no argument or ``system`` (its only required parameter may be ``system``). A factory
+that accepts a ``system`` argument gets the :class:`~uavris.config.SystemConfig` the policy
+is evaluated in. A class or function with other required parameters (``def f(obs, gain)``)
+is one :class:`~uavris.errors.ConfigError` line naming them.
 """
 
 from __future__ import annotations
@@ -54,13 +56,22 @@ def _import(where: str, target: str) -> Any:
         raise ConfigError(f"{target}: cannot import module {where!r}: {type(e).__name__}: {e}") from e
 
 
-def _is_factory(obj: Any) -> bool:
-    if inspect.isclass(obj):
-        return True
-    if not (inspect.isfunction(obj) or inspect.ismethod(obj)):
+def _is_factory(obj: Any, target: str) -> bool:
+    """A class, or a function whose required parameters are none or ``system``, is a factory; a
+    function with one other required parameter (the observation batch) is a policy."""
+    if not (inspect.isclass(obj) or inspect.isfunction(obj) or inspect.ismethod(obj)):
         return False  # an object with __call__ is a policy
-    params = inspect.signature(obj).parameters.values()
-    return all(p.default is not p.empty or p.kind in (p.VAR_POSITIONAL, p.VAR_KEYWORD) for p in params)
+    try:
+        params = inspect.signature(obj).parameters.values()
+    except (TypeError, ValueError):  # a builtin without a signature: call it as a factory and see
+        return inspect.isclass(obj)
+    required = [p.name for p in params if p.default is p.empty and p.kind not in (p.VAR_POSITIONAL, p.VAR_KEYWORD)]
+    if set(required) <= {"system"}:
+        return True
+    if len(required) == 1 and not inspect.isclass(obj):
+        return False
+    raise ConfigError(f"{target}: {obj.__name__}({', '.join(required)}) requires {len(required)} arguments; a "
+                      "policy takes one (the observation batch), a policy factory none or system")
 
 
 def load_user_policy(target: str, system: SystemConfig) -> CheckedPolicy:
@@ -70,7 +81,7 @@ def load_user_policy(target: str, system: SystemConfig) -> CheckedPolicy:
     if not hasattr(module, name):
         raise ConfigError(f"{target}: {where} has no attribute {name!r}")
     obj = getattr(module, name)
-    if _is_factory(obj):
+    if _is_factory(obj, target):
         try:
             takes_system = "system" in inspect.signature(obj).parameters
             obj = obj(system=system) if takes_system else obj()

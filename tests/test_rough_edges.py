@@ -1,0 +1,277 @@
+"""Issue 31, "What broke or misled": each rough edge of the command line and the library,
+reproduced as it was reported and checked against what a user expects."""
+
+from __future__ import annotations
+
+import json
+import re
+from pathlib import Path
+
+import pytest
+
+from uavris.agents.evaluation import evaluate
+from uavris.agents.references import reference_policy
+from uavris.cli import main
+from uavris.config import PAPER_USERS, SCENARIOS, SystemConfig
+from uavris.layouts import LayoutGenerator
+from uavris.presets import EVAL_SEED
+
+HALL_30 = """room: [30, 20, 6]
+devices:
+  - [5, 5, 1]
+  - [12, 5, 1]
+  - [25, 15, 0.5]
+  - [18, 15, 0.5]
+"""
+
+
+def _tree(root: Path) -> dict[str, bytes]:
+    return {str(p.relative_to(root)): p.read_bytes() for p in sorted(root.rglob("*")) if p.is_file()}
+
+
+def _one_line(capsys: pytest.CaptureFixture[str], code: int) -> str:
+    out, err = capsys.readouterr()
+    assert code == 2, (code, err)
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("uavris: error: ") and "Traceback" not in out + err, err
+    return lines[0]
+
+
+def _only_json(out: Path) -> dict:
+    (path,) = out.glob("*.json")
+    return json.loads(path.read_text())
+
+
+@pytest.fixture(scope="module")
+def hall_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A smoke run trained in a 30 x 20 x 6 hall of a YAML layout file (about 6 s)."""
+    root = tmp_path_factory.mktemp("hall30")
+    (root / "hall.yaml").write_text(HALL_30)
+    run = root / "run"
+    assert main(["train", "--preset", "smoke", "--layout", str(root / "hall.yaml"), "--out", str(run),
+                 "--no-progress"]) == 0
+    return run
+
+
+# ---------------------------------------------------------------- 1. --system.* flags and --layout
+def test_system_room_applies_before_the_layout(hall_run: Path, tmp_path: Path) -> None:
+    """A run of a 30 x 20 x 6 hall evaluated with the paper's devices in a 40 x 40 x 8 room:
+    its own system, with the room the flag gives and the paper's devices and start."""
+    from uavris.experiments.training.train_expert import load_run_policy
+
+    cfg, policy = load_run_policy(hall_run)
+    assert cfg.system.room == (30.0, 20.0, 6.0)
+    out = tmp_path / "e"
+    assert main(["evaluate", str(hall_run), "--layout", "paper", "--system.room", "40", "40", "8",
+                 "--episodes", "2", "--out", str(out), "--no-progress"]) == 0
+    got = _only_json(out)
+    want = cfg.system.replace(room=(40.0, 40.0, 8.0), users=PAPER_USERS)
+    assert got["system"] == want.to_dict() and got["start"] == list(SCENARIOS["fig2"].start)
+    mean = evaluate(policy, want, SCENARIOS["fig2"], 2, EVAL_SEED).summary()["mean"]
+    assert got["mean"] == pytest.approx(mean, abs=1e-12)
+
+
+def test_a_generated_layout_is_drawn_in_the_room_of_the_flag(tmp_path: Path) -> None:
+    out = tmp_path / "e"
+    assert main(["evaluate", "hover", "--layout", "layout-unseen-0", "--system.room", "60", "60", "8",
+                 "--episodes", "1", "--out", str(out), "--no-progress"]) == 0
+    got = _only_json(out)
+    big = SystemConfig(room=(60.0, 60.0, 8.0))
+    layout = LayoutGenerator().layout("unseen", 0, big)
+    assert got["system"]["room"] == [60.0, 60.0, 8.0]
+    assert got["system"]["users"] == [list(u) for u in layout.users] and got["start"] == list(layout.start)
+    assert layout.users != LayoutGenerator().layout("unseen", 0).users  # not the 40 m hall's devices
+
+
+@pytest.mark.parametrize("command", ["evaluate", "demo", "train"])
+def test_a_layout_file_with_a_room_and_system_room_is_one_line(command: str, tmp_path: Path,
+                                                               capsys: pytest.CaptureFixture[str]) -> None:
+    hall = tmp_path / "hall.yaml"
+    hall.write_text(HALL_30)
+    before = _tree(tmp_path)
+    args = {"evaluate": ["evaluate", "hover", "--episodes", "1", "--out", str(tmp_path / "e")],
+            "demo": ["demo", "--episodes", "1"],
+            "train": ["train", "--preset", "smoke", "--out", str(tmp_path / "run")]}[command]
+    err = _one_line(capsys, main([*args, "--layout", str(hall), "--system.room", "50", "50", "8"]))
+    assert f"--layout {hall} sets the room; drop --system.room or the file's room" in err
+    assert _tree(tmp_path) == before
+
+
+# ---------------------------------------------------------------- 2. every benchmark cell checked first
+def test_benchmark_checks_every_cell_before_the_first_runs(hall_run: Path, tmp_path: Path,
+                                                           capsys: pytest.CaptureFixture[str]) -> None:
+    """The paper's unseen2 starts at y = 25 m, outside a hall 20 m deep: one line naming the
+    cell, before unseen1 (which fits) has been evaluated, and nothing written."""
+    assert SCENARIOS["unseen2"].start[1] > 20 >= SCENARIOS["unseen1"].start[1]
+    out = tmp_path / "bench"
+    before = _tree(hall_run)
+    err = _one_line(capsys, main(["benchmark", str(hall_run), "--preset", "smoke", "--out", str(out),
+                                  "--no-progress"]))
+    assert "unseen2" in err and "flight region" in err, err
+    assert not out.exists() and _tree(hall_run) == before
+
+
+def test_benchmark_checks_the_layout_cells_too(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A safety distance no start in the 40 m hall keeps: one line naming the layout cell, nothing
+    written (this held before issue 31 too: the generator refuses such a hall; a guard)."""
+    out = tmp_path / "bench"
+    err = _one_line(capsys, main(["benchmark", "hover", "--preset", "smoke", "--cells", "layouts",
+                                  "--system.safety-distance", "30", "--out", str(out), "--no-progress"]))
+    assert "layout-unseen-0" in err and "safety" in err, err
+    assert not out.exists()
+
+
+# ---------------------------------------------------------------- 3. evaluation files name the system
+def test_evaluations_of_two_systems_into_one_folder_keep_both(tmp_path: Path,
+                                                              capsys: pytest.CaptureFixture[str]) -> None:
+    """Two transmit powers into one --out: two result files, each with its own system and the
+    mean of its own evaluation; the same evaluation again names the same file."""
+    out = tmp_path / "e"
+    base = ["evaluate", "hover", "--scenario", "fig2", "--episodes", "2", "--out", str(out), "--no-progress"]
+    names = {}
+    for power in ("1", "2"):
+        assert main([*base, "--system.tx-power-w", power]) == 0
+        printed = capsys.readouterr().out
+        (new,) = set(out.glob("*.json")) - set(names.values())
+        names[power] = new
+        assert str(new) in printed
+    assert len(list(out.glob("*.csv"))) == 2
+    for power, path in names.items():
+        assert re.fullmatch(r"fig2-seed1000000-n2-[0-9a-f]{8}\.json", path.name), path.name
+        summary = json.loads(path.read_text())
+        system = SystemConfig(tx_power_w=float(power))
+        assert summary["system"]["tx_power_w"] == float(power)
+        want = evaluate(reference_policy("hover", system), system, "fig2", 2, EVAL_SEED).summary()["mean"]
+        assert summary["mean"] == pytest.approx(want, abs=1e-12)
+    assert main([*base, "--system.tx-power-w", "2"]) == 0  # the same evaluation: the same name, replaced
+    assert sorted(out.glob("*.json")) == sorted(names.values())
+    assert main([*base, "--phase-control", "optimizer"]) == 0  # another phase control: another file
+    assert len(list(out.glob("*.json"))) == 3
+
+
+# ---------------------------------------------------------------- 5. messages
+def test_a_layout_device_with_two_coordinates_says_so(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    hall = tmp_path / "hall.yaml"
+    hall.write_text("devices:\n  - [15, 5, 1]\n  - [5, 5]\n  - [30, 20, 0.1]\n")
+    err = _one_line(capsys, main(["evaluate", "hover", "--layout", str(hall), "--episodes", "1",
+                                  "--out", str(tmp_path / "e")]))
+    assert err.endswith(f"device D2 of {hall}: expected [x, y, z], got [5, 5]"), err
+    assert not (tmp_path / "e").exists()
+
+
+def test_system_users_not_in_threes_says_so(capsys: pytest.CaptureFixture[str]) -> None:
+    err = _one_line(capsys, main(["evaluate", "hover", "--scenario", "fig2", "--system.users", "5", "5", "1",
+                                  "15", "5"]))
+    assert "--system.users takes x y z per device: a multiple of 3 numbers, got 5 values: 5 5 1 15 5" in err, err
+
+
+def test_a_malformed_yaml_file_names_the_line_and_column(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A tab indents the third line's first character (YAML forbids tabs in indentation)."""
+    hall = tmp_path / "hall.yaml"
+    hall.write_text("name: hall\ndevices:\n\t- [15, 5, 1]\n")
+    err = _one_line(capsys, main(["plan", str(hall), "--out", str(tmp_path / "p")]))
+    assert f"{hall} is not valid YAML" in err and "(line 3, column 1)" in err, err
+
+
+def test_a_device_is_named_as_the_user_knows_it() -> None:
+    """Device k of a list (counted from 1, as the plots' D1, D2, ... and a file's devices) beside
+    its index in SystemConfig.users."""
+    from uavris.config import ConfigError
+
+    with pytest.raises(ConfigError) as e:
+        SystemConfig(users=((15.0, 5.0, 1.0), (50.0, 5.0, 1.0)))
+    assert "SystemConfig.users[1] (device D2) must be a point inside the room" in str(e.value)
+    with pytest.raises(ConfigError) as e:
+        SystemConfig(users=((15.0, 5.0, 1.0), (25.0, 5.0, 1.0), (27.0, 5.0, 1.0)))
+    assert "SystemConfig.users[2] (device D3) must be at least min_device_spacing" in str(e.value)
+    assert "from device D2 = [25.0, 5.0, 1.0]" in str(e.value)
+
+
+def test_python_evaluate_names_its_own_argument() -> None:
+    from uavris.config import ConfigError
+
+    system = SystemConfig()
+    for kwargs, name in ((dict(episodes=0, seed=0), "episodes"), (dict(episodes=1, seed=-1), "seed")):
+        with pytest.raises(ConfigError) as e:
+            evaluate(reference_policy("hover", system), system, "fig2", **kwargs)
+        assert str(e.value).startswith(f"{name} must be") and "--" not in str(e.value), str(e.value)
+
+
+# ---------------------------------------------------------------- 6. statistics that read right
+def _bench_summary(fractions: list[float]) -> dict:
+    from uavris.experiments.tools.benchmark import _over
+
+    cells = [{"cell": f"layout-unseen-{j}", "kind": "layout", "mean": 10 * f, "ci_low": 9 * f, "ci_high": 11 * f,
+              "zero_action": 5.0, "oracle": 10.0, "fraction_of_oracle": f, "minus_zero_action": 10 * f - 5,
+              "minus_zero_action_low": 9 * f - 5, "minus_zero_action_high": 11 * f - 5}
+             for j, f in enumerate(fractions)]
+    return {"target": "t", "preset": "smoke", "episodes": 8, "seed": EVAL_SEED, "cells": cells, "over": _over(cells)}
+
+
+def test_the_benchmark_prints_an_interval_over_cells_from_three_on() -> None:
+    """Two halls: Student's t with one degree of freedom gives [11.5, 156.8] around 84.2%, which
+    says nothing; the table says n/a instead, and its caption says why. Three: the interval."""
+    from scipy import stats
+
+    from uavris.experiments.tools.benchmark import benchmark_table
+
+    two = benchmark_table(_bench_summary([0.5, 0.9]))
+    row = next(line for line in two.splitlines() if "mean over 2 layouts" in line)
+    assert "70.0% [n/a: 2 layouts]" in row and "+2.00 [n/a: 2 layouts]" in row, row
+    assert "from 3" in two
+    x = [0.5, 0.7, 0.9]
+    half = stats.t.ppf(0.975, 2) * 0.2 / 3 ** 0.5  # sd 0.2 over 3 halls
+    three = benchmark_table(_bench_summary(x))
+    row = next(line for line in three.splitlines() if "mean over 3 layouts" in line)
+    assert f"70.0% [{100 * (0.7 - half):.1f}, {100 * (0.7 + half):.1f}]" in row, row
+
+
+def test_demo_prints_intervals_in_brackets_never_below_zero(capsys: pytest.CaptureFixture[str]) -> None:
+    from scipy import stats
+
+    from uavris.agents.references import REFERENCES
+
+    assert main(["demo", "--episodes", "2"]) == 0
+    out = capsys.readouterr().out
+    system = SystemConfig()
+    for name in ("hover", "random", "hover-aligned"):
+        x = evaluate(reference_policy(name, system), system, "fig2", 2, 0).avg_sum_rate
+        half = stats.t.ppf(0.975, 1) * stats.sem(x)
+        want = f"95% CI [{max(0.0, x.mean() - half):.2f}, {x.mean() + half:.2f}]"
+        line = next(line for line in out.splitlines() if REFERENCES[name].label in line)
+        assert want in line, (line, want)
+    assert "[0.00, " in out  # random actions' interval reaches below 0 on these two episodes
+
+
+def test_evaluate_prints_intervals_in_brackets_never_below_zero(tmp_path: Path,
+                                                                capsys: pytest.CaptureFixture[str]) -> None:
+    from scipy import stats
+
+    assert main(["evaluate", "random", "--scenario", "fig2", "--episodes", "2", "--seed", "0", "--out",
+                 str(tmp_path / "r"), "--no-progress"]) == 0
+    out = capsys.readouterr().out
+    system = SystemConfig()
+    from uavris.agents.references import REFERENCE_SEED
+
+    x = evaluate(reference_policy("random", system, REFERENCE_SEED), system, "fig2", 2, 0).avg_sum_rate
+    half = stats.t.ppf(0.975, 1) * stats.sem(x)
+    assert x.mean() - half < 0  # the interval the printout bounds
+    assert f"(95% CI [0.00, {x.mean() + half:.2f}], IQM" in out, out
+    assert main(["evaluate", "hover", "--scenario", "fig2", "--episodes", "1", "--out", str(tmp_path / "h"),
+                 "--no-progress"]) == 0
+    assert "(95% CI n/a, IQM" in capsys.readouterr().out  # one episode: no interval, not "nan-nan"
+
+
+# ---------------------------------------------------------------- 7. the demo's horizon
+@pytest.mark.parametrize("budget, label", [(None, "8,000"), ("4000", "4,000")])
+def test_demo_header_says_when_the_energy_budget_ends_an_episode(budget: str | None, label: str,
+                                                                 capsys: pytest.CaptureFixture[str]) -> None:
+    """The slot the header names is the length of a simulated hovering episode."""
+    flags = [] if budget is None else ["--system.energy-budget-j", budget]
+    assert main(["demo", "--episodes", "1", *flags]) == 0
+    header = capsys.readouterr().out.splitlines()[0]
+    system = SystemConfig() if budget is None else SystemConfig(energy_budget_j=float(budget))
+    slots = int(evaluate(reference_policy("hover", system), system, "fig2", 1, 0).length[0])
+    assert slots < 100
+    assert (f"T = 100 slots of 0.5 s, or until the {label} J energy budget is spent (hovering: slot {slots})"
+            in header), header
