@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import os
-import platform
 
 
 def pin_to_one_core() -> str:
@@ -16,13 +15,7 @@ def pin_to_one_core() -> str:
 
 
 def cpu_model() -> str:
-    """The CPU model from /proc/cpuinfo, falling back to platform.processor()."""
-    try:
-        with open("/proc/cpuinfo", encoding="utf-8") as cpuinfo:
-            for line in cpuinfo:
-                key, _, value = line.partition(":")
-                if key.strip() in ("model name", "Hardware", "Processor") and value.strip():
-                    return value.strip()
-    except OSError:
-        pass
-    return platform.processor() or "unknown"
+    """The machine, as every report of uavris describes it (:func:`uavris.experiments.engine.jobs.machine`)."""
+    from uavris.experiments.engine.jobs import machine
+
+    return machine()

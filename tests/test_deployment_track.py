@@ -4,6 +4,7 @@ stages over seeds, the data curve reusing finished points, the nearest hall's pl
 from __future__ import annotations
 
 import dataclasses
+import re
 import shutil
 
 import numpy as np
@@ -13,6 +14,7 @@ from uavris.agents.dt.dataset import load_dataset
 from uavris.experiments.engine.scheduling import StudyContext
 from uavris.experiments.study.config import ReproduceConfig
 from uavris.experiments.study.pipeline import build_pipeline
+from uavris.experiments.study.report.deployment import ZERO_SHOT_TARGET
 from uavris.experiments.study.reproduce import reproduce
 from uavris.experiments.study.tracks import TRACK_SPECS, pretraining_stages, stage_policy
 from uavris.io import read_json
@@ -77,7 +79,8 @@ def test_the_curve_reuses_finished_points_and_parts_on_a_rerun(deployment_run, t
     out, _ = deployment_run
     copy = tmp_path / "run"
     shutil.copytree(out, copy)
-    dataset_dir = next((copy / "stages").glob("deploy-dataset-*/"))
+    [dataset_dir] = [d for d in (copy / "stages").glob("deploy-dataset-*/")
+                     if re.fullmatch(r"deploy-dataset-[0-9a-f]{12}", d.name)]  # not deploy-dataset-mixed
     shutil.rmtree(dataset_dir / "dataset")  # the merged dataset is rebuilt from the parts on disk
     (dataset_dir / "stage.json").unlink()
     parts = sorted(p.name for p in (dataset_dir / "parts").iterdir())
@@ -104,4 +107,4 @@ def test_the_report_averages_seeds_and_states_the_claims(deployment_run):
     mean = float(np.mean(per_hall))
     row = next(line for line in section.splitlines() if line.startswith("| zero-shot DT |"))
     assert row.split("|")[2].strip().startswith(f"{mean:.1%}")  # the row is the mean over seeds, then over halls
-    assert "**zero-shot DT >= 95% of the oracle" in report and "**the device-set encoder" in report
+    assert f"**zero-shot DT >= {ZERO_SHOT_TARGET:.0%} of the oracle" in report and "**the device-set encoder" in report

@@ -171,3 +171,66 @@ def test_simulator_asserts_the_separation_in_debug_mode(monkeypatch):
 
     with pytest.raises(AssertionError, match="of a device"):
         fly(cfg, "train4", 1, 60, policy)
+
+
+# ------------------------------------------------------------------ the attitude safety layer
+STEP = np.radians(10.0)  # one slot's largest attitude change per angle
+
+
+def _one_device_1_degree_in_front():
+    """A level RIS at 3 m and one device 20 m away, 1 degree below the RIS plane: with pitch p
+    (yaw = roll = 0) the normal is (sin p, 0, cos p), and the device's elevation above the plane
+    is 1 degree - p, worked by hand."""
+    q = np.array([0.0, 0.0, 3.0])
+    device = np.array([[20.0, 0.0, 3.0 - 20.0 * np.tan(np.radians(1.0))]])
+    return q, device
+
+
+def test_the_layer_keeps_the_margin_against_an_increment_that_would_block():
+    q, device = _one_device_1_degree_in_front()
+    assert ph.worst_elevation(np.zeros(3), q, device) == pytest.approx(np.sin(np.radians(1.0)), abs=1e-12)
+    # pitch +2 degrees would put the device 1 degree behind the plane; a 0.5-degree margin allows 0.5
+    executed = ph.clear_attitude(np.zeros(3), np.radians([0.0, 2.0, 0.0]), q, device, np.radians(0.5), STEP)
+    assert np.degrees(executed) == pytest.approx([0.0, 0.5, 0.0], abs=1e-6)
+    assert ph.worst_elevation(executed, q, device) >= np.sin(np.radians(0.5)) - 1e-12
+
+
+def test_the_layer_passes_an_increment_away_from_every_device_unchanged():
+    q, device = _one_device_1_degree_in_front()
+    away = np.radians([5.0, -2.0, 3.0])  # pitch away from the device; yaw and roll keep it in front
+    assert np.array_equal(ph.clear_attitude(np.zeros(3), away, q, device, np.radians(0.5), STEP), away)
+    # the margin out of reach (2 degrees, the device at 1 even level): any move that does not lower it passes
+    assert np.array_equal(ph.clear_attitude(np.zeros(3), away, q, device, np.radians(2.0), STEP), away)
+    toward = np.radians([0.0, 0.4, 0.0])
+    assert np.degrees(ph.clear_attitude(np.zeros(3), toward, q, device, np.radians(2.0), STEP))[1] == pytest.approx(
+        0.0, abs=1e-6)
+
+
+def test_no_device_goes_behind_the_plane_under_the_layer_whatever_the_policy_does():
+    """Random tilts in the paper's hall put devices behind the RIS without the layer, never with it."""
+    from uavris.env.simulator import BatchedSimulator
+
+    rng = np.random.default_rng(0)
+    behind = {}
+    for margin in (None, 1.0):
+        c = SystemConfig(front_margin_deg=margin)
+        sim = BatchedSimulator(c, "fig2", 16)
+        sim.seed(np.arange(16))
+        sim.reset()
+        worst = np.inf
+        for _ in range(40):
+            action = rng.uniform(-1, 1, (16, c.action_dim)).astype(np.float32)
+            sim.step(action)
+            worst = min(worst, float(ph.worst_elevation(sim.att, sim.pos, np.asarray(c.users)).min()))
+        behind[margin] = worst
+    assert behind[None] < 0.0  # the policy alone blocks devices
+    assert behind[1.0] >= np.sin(np.radians(1.0)) - 1e-9
+
+
+def test_a_tilted_ris_whose_device_drops_behind_turns_back_towards_level():
+    """Tilted 15 degrees, the device 5 degrees behind the plane: the layer turns the RIS towards
+    level by up to one step, however the policy wanted to turn (here: further away)."""
+    q, device = _one_device_1_degree_in_front()
+    att = np.radians([0.0, 6.0, 0.0])  # the device at 1 - 6 = -5 degrees: behind
+    executed = ph.clear_attitude(att, np.radians([0.0, 10.0, 0.0]), q, device, np.radians(0.5), STEP)
+    assert np.degrees(executed)[1] == pytest.approx(-5.5, abs=1e-5)  # back to 0.5 degrees: the margin

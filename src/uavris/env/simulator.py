@@ -183,6 +183,9 @@ class BatchedSimulator:
         e_slot = ph.slot_energy(self.vel, accel, c.slot_s, **self._power)
         self.pos, self.vel = ph.kinematic_step(self.pos, self.vel, accel, c.slot_s, self.low, self.high,
                                                self.users, c.safety_distance)
+        if c.front_margin_deg is not None:  # the attitude safety layer, at the pose the slot's move reached
+            d_att = ph.clear_attitude(self.att, d_att, self.pos, self.users, np.radians(c.front_margin_deg),
+                                      c.attitude_step_rad)
         self.att = ph.accumulate_attitude(self.att, d_att)
         self.energy = self.energy + e_slot
         self.t = self.t + 1

@@ -34,7 +34,15 @@ from uavris.physics.channel import (
     effective_reflection_from_phases,
     rician_channels,
 )
-from uavris.physics.geometry import accumulate_attitude, incidence, ris_axes, rotation_matrix, wrap_angle
+from uavris.physics.geometry import (
+    accumulate_attitude,
+    clear_attitude,
+    incidence,
+    ris_axes,
+    rotation_matrix,
+    worst_elevation,
+    wrap_angle,
+)
 from uavris.physics.motion import (
     feasible_acceleration,
     kinematic_step,
@@ -57,6 +65,7 @@ __all__ = [
     "accumulate_attitude",
     "array_response",
     "cascaded_gains",
+    "clear_attitude",
     "effective_reflection",
     "effective_reflection_from_phases",
     "feasible_acceleration",
@@ -79,5 +88,6 @@ __all__ = [
     "slot_energy",
     "sum_rate",
     "unit_reflection_coefficient",
+    "worst_elevation",
     "wrap_angle",
 ]

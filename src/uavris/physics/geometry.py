@@ -3,7 +3,8 @@
 All functions are pure and batched over leading dimensions.
 
 Lives here: :func:`wrap_angle`, :func:`accumulate_attitude`, :func:`rotation_matrix`,
-:func:`ris_axes` and :func:`incidence`. Not here: the UAV's position and velocity
+:func:`ris_axes`, :func:`incidence` and the attitude safety layer (:func:`worst_elevation`,
+:func:`clear_attitude`). Not here: the UAV's position and velocity
 (:mod:`.motion`) and what the incidence feeds: the array response and back-side blocking
 (:mod:`.channel`), the angle-dependent reflection (:mod:`.reflection`).
 """
@@ -79,3 +80,41 @@ def incidence(
     local = np.matmul(d, np.asarray(axes, dtype=np.float64))
     inv = 1.0 / np.maximum(dist, 1e-12)
     return local[..., 0] * inv, local[..., 1] * inv, local[..., 2] * inv, dist
+
+
+def worst_elevation(attitude: ArrayLike, uav_pos: ArrayLike, user_pos: ArrayLike) -> NDArray[np.float64]:
+    """``min_k cos(theta_k)`` ``(...)``: the sine of the lowest device's elevation above the RIS
+    plane, seen from the RIS (negative: that device is behind the plane, docs/model.md section 3)."""
+    return incidence(uav_pos, user_pos, ris_axes(attitude))[2].min(axis=-1)
+
+
+def clear_attitude(attitude: ArrayLike, increment: ArrayLike, uav_pos: ArrayLike, user_pos: ArrayLike,
+                   margin_rad: float, step_rad: float, iterations: int = 30) -> NDArray[np.float64]:
+    """The attitude safety layer: the attitude increment ``(..., 3)`` executed instead of ``increment``.
+
+    The floor is every device ``margin_rad`` in front of the RIS plane (its elevation seen from
+    the RIS at ``uav_pos``, the UAV's position after the slot's move), or as far in front as
+    the increment towards level allows (at most ``step_rad`` per angle; a level RIS has every
+    device in front, since they all stand below the UAV's floor). An increment that keeps the
+    floor is executed unchanged; any other is moved towards the level-ward increment just far
+    enough to keep it (bisection on the segment between the two, ``iterations`` halvings). So
+    a policy steers freely where nothing can be blocked, and a tilt that would put a device
+    behind the plane (a few degrees suffice at the UAV's floor, and every pair with that device
+    is lost, docs/model.md section 3) is cut at the margin, like the safety separation cuts a
+    move at the devices' balls (:mod:`.motion`).
+    """
+    att = np.asarray(attitude, dtype=np.float64)
+    inc = np.asarray(increment, dtype=np.float64)
+    users = np.asarray(user_pos, dtype=np.float64)
+    tilt = np.mod(att + np.pi, TWO_PI) - np.pi  # the attitude as angles in [-pi, pi)
+    level = np.clip(-tilt, -step_rad, step_rad)  # one slot's turn towards level
+    floor = np.minimum(np.sin(margin_rad), worst_elevation(att + level, uav_pos, users))
+    ok = worst_elevation(att + inc, uav_pos, users) >= floor
+    if np.all(ok):
+        return inc
+    lo, hi = np.zeros(floor.shape), np.ones(floor.shape)  # share of the way to level: hi keeps the floor
+    for _ in range(iterations):
+        mid = 0.5 * (lo + hi)
+        keeps = worst_elevation(att + inc + mid[..., None] * (level - inc), uav_pos, users) >= floor
+        lo, hi = np.where(keeps, lo, mid), np.where(keeps, mid, hi)
+    return np.where(ok[..., None], inc, inc + hi[..., None] * (level - inc))

@@ -273,6 +273,8 @@ def plan_target(config: SystemConfig, start: tuple[float, float, float], setting
         na = np.concatenate([np.repeat(att[None], 6, 0)] + ([att + att_step * eye, att - att_step * eye]
                                                           if att_step > 0 else []))
         ok = feasible(c, nq)
+        if c.front_margin_deg is not None:  # the attitude safety layer: no pose it would not let the UAV hold
+            ok &= ph.worst_elevation(na, nq, np.asarray(c.users)) >= np.sin(np.radians(c.front_margin_deg))
         if not ok.any():
             pos_step, att_step = pos_step / 2, att_step / 2
             continue

@@ -1,8 +1,9 @@
 """Run independent jobs on a local process pool or on Ray; report failures with their logs.
 
-Lives here: :class:`Job`, :class:`JobResult`, :class:`JobRunner`, :func:`run_jobs` and
-:func:`configure_threads`. Not here: what the jobs do (:mod:`.train_expert`,
-:mod:`.study`) and the stages that submit them (:mod:`.stages`, :mod:`.reproduce`).
+Lives here: :class:`Job`, :class:`JobResult`, :class:`JobRunner`, :func:`run_jobs`,
+:func:`configure_threads` and :func:`machine` (what a report says it ran on). Not here: what
+the jobs do (:mod:`uavris.experiments.training`, :mod:`uavris.experiments.study.workers`) and
+the stages that submit them (:mod:`.stages`, :mod:`uavris.experiments.study.pipeline`).
 
 Each job runs in a worker process (spawned, so torch and numpy start clean) with one thread
 in every thread pool (:func:`configure_threads`) and writes its own log file. A job that
@@ -84,6 +85,30 @@ def configure_threads() -> None:
 
     torch.set_num_threads(1)
     threadpool_limits(limits=1)
+
+
+def machine() -> str:
+    """The machine a study or benchmark ran on, for its report: CPU model, CPUs, Python, numpy
+    and torch versions (a verdict that flips with the CPU is not a finding: docs/study.md
+    section 22)."""
+    import os
+    import platform
+
+    cpu = platform.processor() or "unknown CPU"
+    try:
+        with open("/proc/cpuinfo", encoding="utf-8") as info:
+            for line in info:
+                key, _, value = line.partition(":")
+                if key.strip() in ("model name", "Hardware", "Processor") and value.strip():
+                    cpu = value.strip()
+                    break
+    except OSError:
+        pass
+    import numpy
+    import torch
+
+    return (f"{cpu}, {os.cpu_count()} CPUs, Python {platform.python_version()}, numpy {numpy.__version__}, "
+            f"torch {torch.__version__}")
 
 
 def _run_logged(job: Job) -> JobResult:

@@ -287,7 +287,8 @@ class TrackStages:
         policies = evaluated_policies(self.track, where, sources, {k: Path() for k in keys}, self.train)
         cost = evaluate_cost(len(policies), self.rc.eval_episodes, self.horizon, self.control)
         config = {"episodes": self.rc.eval_episodes, "seed": EVAL_SEED, "track": self.track.name,
-                  "references": REFERENCE_ROWS, "transfer_from": [s for s, _ in sources]}
+                  "references": REFERENCE_ROWS, "transfer_from": [s for s, _ in sources],
+                  **({"front_margin_deg": self.track.front_margin_deg} if self.track.front_margin_deg else {})}
         return Stage(self.t(f"evaluate-{where.name}"), config, partial(self._run_evaluate, where, sources, keys, cost),
                      tuple(self.t(k) for k in keys), (cost,))
 

@@ -52,6 +52,11 @@ from uavris.layouts import LayoutGenerator, layout_distance
 from uavris.presets import STRONG_IMITATION, STRONG_RL_STEPS
 
 TRANSFER_NEIGHBOURS = 2
+# The attitude safety layer's margin in the deployment track's "safe" rows: every device at least
+# this far in front of the RIS plane (SystemConfig.front_margin_deg; docs/study.md section 21).
+SAFE_MARGIN_DEG = 1.0
+SAFE = "-safe"  # the suffix of a row evaluated under the safety layer
+SEED_MARK = "@s"  # "dt-zero-shot@s1": the row's model of pre-training seed 1 (the report averages over seeds)
 TRACKS: tuple[str, ...] = ("paper", "strong", "deployment")
 
 
@@ -70,6 +75,7 @@ class Track:
     demonstrations: bool = False  # the dataset: the planning oracle in generated halls, not trained experts
     seeded: bool = False  # every learned row over several pre-training seeds (ReproduceConfig.dt_seeds)
     ablation: bool = False  # an ablation on demand (--ablation): the data curve, the flat encoder, mixed-quality data
+    front_margin_deg: float | None = None  # the DT rows also under the attitude safety layer with this margin
 
     def stage(self, name: str) -> str:
         return self.prefix + name
@@ -86,7 +92,7 @@ TRACK_SPECS: dict[str, Track] = {
     "deployment": Track("deployment", "deploy-", "optimizer",
                         "deployment track (the oracle's demonstrations in many generated halls; unseen halls)",
                         layouts=True, unseen_experts=False, behaviour_cloning=True, demonstrations=True,
-                        seeded=True, ablation=True,
+                        seeded=True, ablation=True, front_margin_deg=SAFE_MARGIN_DEG,
                         # 3e-4 instead of the DT paper's 1e-4: at the quick budget (1,500 steps) the DT
                         # fitted its 32 training layouts to 91% of the oracle with 1e-4 and to 98% with
                         # 3e-4. Width 64 and 2 blocks instead of 128 and 3: zero-shot within a point of
@@ -164,8 +170,27 @@ def transfer_sources(track: Track, unseen: Deployment, train: Sequence[Deploymen
 def evaluated_policies(track: Track, where: Deployment, sources: list[tuple[str, float]], dirs: dict[str, Path],
                        train: Sequence[Deployment] = ()) -> dict[str, tuple[str, str, str]]:
     """What a track's evaluation stage scores in ``where`` beside the references:
-    ``{key: (label, kind, path)}`` (:func:`evaluate_policies`); ``dirs`` holds the directories
-    of the stages it reads (experts, pre-training stages by name, ``finetune-<where>``)."""
+    ``{key: (label, kind, path)}`` (:func:`~.workers.evaluate_policies`); ``dirs`` holds the
+    directories of the stages it reads (experts, pre-training stages by name,
+    ``finetune-<where>``). With the track's safety margin, every zero-shot and fine-tuned DT
+    again under the attitude safety layer (key + :data:`SAFE`), and the oracle under it."""
+    policies = _learned_policies(track, where, sources, dirs, train)
+    if track.front_margin_deg is None:
+        return policies
+    safe = {key: (f"{label}, safety layer", kind, path) for key, (label, kind, path) in policies.items()
+            if key.split(SEED_MARK)[0] in ("dt-zero-shot", "dt-ensemble", "dt-finetuned")}
+    safe["oracle"] = ("oracle (planning), safety layer", "oracle", "")
+    return policies | {_safe_key(key): spec for key, spec in safe.items()}
+
+
+def _safe_key(key: str) -> str:
+    """``dt-zero-shot@s1`` -> ``dt-zero-shot-safe@s1``: the seed mark stays last."""
+    name, mark, seed = key.partition(SEED_MARK)
+    return name + SAFE + mark + seed
+
+
+def _learned_policies(track: Track, where: Deployment, sources: list[tuple[str, float]], dirs: dict[str, Path],
+                      train: Sequence[Deployment]) -> dict[str, tuple[str, str, str]]:
     policies: dict[str, tuple[str, str, str]] = {}
     if track.unseen_experts:
         policies["expert"] = ("expert trained in the scenario", "expert",
@@ -236,7 +261,7 @@ def stage_policy(stage: str) -> tuple[str, str] | None:
     name, seed = stage, ""
     if "-s" in stage and stage.rsplit("-s", 1)[1].isdigit():
         name, k = stage.rsplit("-s", 1)
-        seed = f"@s{k}"
+        seed = f"{SEED_MARK}{k}"
     if name.startswith("pretrain-n") and name[len("pretrain-n"):].isdigit():
         n = name[len("pretrain-n"):]
         key, label = f"dt-zero-shot-n{n}", f"zero-shot DT, {n} training layout{'s' * (n != '1')}"

@@ -18,7 +18,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from uavris.experiments.engine.jobs import configure_threads
-from uavris.experiments.study.tracks import TRACK_SPECS, Deployment, Track
+from uavris.experiments.study.tracks import SAFE, TRACK_SPECS, Deployment, Track
 from uavris.presets import EVAL_SEED
 from uavris.runs import read_done
 
@@ -95,10 +95,49 @@ def _load(label: str, kind: str, path: str) -> tuple[str, Any]:
 
         there = Deployment.from_dict(json.loads(path))
         return label, PlannedFlight(PlanningOracle().plan(there.system, there.scenario.start))
+    if kind == "oracle":
+        from uavris.agents.references import reference_policy
+
+        return label, reference_policy("oracle")
     from uavris.experiments.tools.targets import resolve_target
 
     loaded = resolve_target(path).load()  # a DT model or an expert's run
     return (label if loaded.expert_kind is None else f"{loaded.expert_kind} {label}"), loaded.policy
+
+
+class _Whereabouts:
+    """What :func:`evaluate_policies` records of an evaluation besides the rates, slot by slot:
+    the share of slots in which a device is behind the RIS plane (docs/model.md section 3), and
+    each episode's last pose."""
+
+    def __init__(self, system: Any, episodes: int) -> None:
+        self.users = np.asarray(system.users, dtype=np.float64)
+        self.behind, self.slots = 0, 0
+        self.pos, self.att = np.zeros((episodes, 3)), np.zeros((episodes, 3))
+
+    def __call__(self, sim: Any, obs: Any, executed: Any, alive: Any) -> None:
+        from uavris import physics as ph
+
+        self.behind += int((ph.worst_elevation(sim.att, sim.pos, self.users) <= 0.0)[alive].sum())
+        self.slots += int(alive.sum())
+        self.pos[alive], self.att[alive] = sim.pos[alive], sim.att[alive]
+
+    def end_pose(self) -> tuple[Any, Any]:
+        """The episodes' median last position and attitude (angles in [-pi, pi))."""
+        return np.median(self.pos, axis=0), np.median(np.mod(self.att + np.pi, 2 * np.pi) - np.pi, axis=0)
+
+
+def _decomposition(system: Any, rec: _Whereabouts) -> dict[str, Any]:
+    """Where a policy ended and what that pose is worth: the expected sum rate with optimised
+    phases (the planner's R) at its median end position, level and with its own attitude, and
+    the share of its slots with a device behind the RIS (docs/study.md section 21)."""
+    from uavris.agents.oracle.planner import expected_optimised_rate
+
+    pos, att = rec.end_pose()
+    level, own = expected_optimised_rate(system, np.stack([pos, pos]), np.stack([np.zeros(3), att]))
+    return {"end_position": pos.tolist(), "end_attitude_deg": np.degrees(att).tolist(),
+            "end_rate_level": float(level), "end_rate_own": float(own),
+            "behind_share": rec.behind / max(rec.slots, 1)}
 
 
 def evaluate_policies(out: Path, where: Deployment, track: Track, episodes: int,
@@ -109,9 +148,12 @@ def evaluate_policies(out: Path, where: Deployment, track: Track, episodes: int,
     ``policies[key] = (label, kind, path)``: ``kind`` "expert" (a training run directory,
     whose label gets what the expert is prefixed: its algorithm, or "oracle imitation"), "dt" (a
     DT model directory), "dt-ensemble" (``path``: DT model directories as a JSON list, acting as
-    one: :class:`uavris.agents.dt.policy.DTEnsemble`) or "plan" (``path``: a training hall's
+    one: :class:`uavris.agents.dt.policy.DTEnsemble`), "plan" (``path``: a training hall's
     :class:`Deployment` as JSON, whose oracle plan is flown here:
-    :class:`uavris.agents.oracle.policy.PlannedFlight`).
+    :class:`uavris.agents.oracle.policy.PlannedFlight`) or "oracle". A key marked
+    :data:`~.tracks.SAFE` is evaluated under the attitude safety layer (the track's margin).
+    In the deployment track every summary also holds the decomposition of
+    :func:`_decomposition`, and the oracle's its plan's target (:func:`oracle_target`).
     """
     from uavris.agents.evaluation import evaluate
     from uavris.agents.references import HOVER_OPTIMIZER, ORACLE, REFERENCES, ZERO_ACTION, reference_policy
@@ -122,15 +164,30 @@ def evaluate_policies(out: Path, where: Deployment, track: Track, episodes: int,
     loaded = {key: _load(*spec) for key, spec in policies.items()}
     for name in (ZERO_ACTION, HOVER_OPTIMIZER, ORACLE):
         loaded[name] = (REFERENCES[name].label, reference_policy(name, where.system))
+    safe = where.system.replace(front_margin_deg=track.front_margin_deg)
     result: dict[str, Any] = {}
     for key, (label, policy) in loaded.items():
-        res = evaluate(policy, where.system, where.scenario, episodes, EVAL_SEED)
+        system = safe if SAFE in key else where.system
+        rec = _Whereabouts(system, episodes)
+        res = evaluate(policy, system, where.scenario, episodes, EVAL_SEED, on_slot=rec)
         summary = {"policy": key, "label": label, "scenario": where.name, "track": track.name, **res.summary(),
-                   **{f"boot_{k}": v for k, v in summarize(res.avg_sum_rate).items()}}
+                   **{f"boot_{k}": v for k, v in summarize(res.avg_sum_rate).items()},
+                   **(_decomposition(system, rec) if track.layouts else {})}
         write_results(res, summary, out / key)
         result[key] = summary
+    if track.layouts:
+        result[ORACLE].update(oracle_target(where))
     return result
 
 
-__all__ = ["dataset_job", "demonstrations_job", "evaluate_job", "evaluate_policies", "finetune_job",
-           "merge_demonstrations", "pretrain_job"]
+def oracle_target(where: Deployment) -> dict[str, Any]:
+    """The planning oracle's target in ``where``: its pose, R there with its attitude
+    (``plan_rate``) and level (``plan_rate_level``, what :func:`_decomposition`'s place gap
+    compares an end position with)."""
+    from uavris.agents.oracle import PlanningOracle
+    from uavris.agents.oracle.planner import expected_optimised_rate
+
+    plan = PlanningOracle().plan(where.system, where.scenario.start)
+    return {"plan_rate": plan.rate, "plan_rate_level": float(expected_optimised_rate(where.system, plan.target,
+                                                                                     np.zeros(3))[0]),
+            "plan_target": plan.target.tolist(), "plan_attitude_deg": np.degrees(plan.attitude).tolist()}

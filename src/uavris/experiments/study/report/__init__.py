@@ -17,7 +17,9 @@ import yaml
 from uavris.agents.references import HOVER_OPTIMIZER, ORACLE, ZERO_ACTION
 from uavris.config import UNSEEN_SCENARIOS, get_scenario
 from uavris.experiments.display.tables import fraction, interval, markdown_table, num
+from uavris.experiments.engine.jobs import machine
 from uavris.experiments.engine.stages import Pipeline, StageRecord
+from uavris.experiments.study.report.decomposition import decomposition_section
 from uavris.experiments.study.report.deployment import (
     NEAREST,
     SEED_MARK,
@@ -183,6 +185,9 @@ class _Report:
                                            f"figures/{scaling}.png" if scaling else None)
         self.add(*lines)
         self.claims += claims
+        lines, claims = decomposition_section(results, labels)
+        self.add(*lines)
+        self.claims += claims
 
     # ------------------------------------------------------------------ both tracks side by side
     def side_by_side(self, tracks: Sequence[Track], results: dict[str, dict[str, dict[str, Any]]]) -> None:
@@ -241,7 +246,7 @@ def write_report(out: Path, rc: Any, pipeline: Pipeline, records: Sequence[Stage
             "level, all phases equal) and the oracle (`uavris.agents.oracle`: optimised phases every slot, motion "
             "planned over the whole room; docs/model.md section 19). 'vs zero action' says whether the policy's 95% "
             "CI lies above or below the zero action's mean ('tie': not resolved).",
-            "", "## Stages", "")
+            "", f"Machine: {machine()}.", "", "## Stages", "")
     schedule = read_json(out / "schedule.json") if (out / "schedule.json").exists() else {"jobs": [], "workers": 1}
     if schedule_figure(schedule["jobs"], int(schedule["workers"]), rep.figs / "schedule"):
         rep.add("![schedule](figures/schedule.png)", "")

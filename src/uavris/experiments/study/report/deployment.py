@@ -24,34 +24,43 @@ import numpy as np
 from uavris.agents.references import HOVER_OPTIMIZER, ORACLE, ZERO_ACTION
 from uavris.experiments.display.plots import REFERENCE_STYLE, plt, save_figure
 from uavris.experiments.display.tables import MISSING, markdown_table, pct, signed, with_ci
+from uavris.experiments.study.tracks import SEED_MARK
 from uavris.stats import over_units
 
-# Targets of the deployment track (the issues that asked for it; docs/study.md, section 21).
-ZERO_SHOT_TARGET, FINETUNED_TARGET = 0.95, 0.98
+# Targets of the deployment track (issue 29; docs/study.md, section 21).
+ZERO_SHOT_TARGET, FINETUNED_TARGET = 0.96, 0.98
 NEAREST, MEAN_TRANSFER, BEST_TRANSFER = "transfer-nearest", "transfer-mean", "transfer-best"
-SEED_MARK = "@s"  # "dt-zero-shot@s1": the row's model of pre-training seed 1 (the row itself: the mean over seeds)
 ROWS: tuple[tuple[str, str], ...] = (
     ("dt-zero-shot", "zero-shot DT"), ("dt-ensemble", "zero-shot DT, ensemble of the seeds' models (mean action)"),
     ("dt-finetuned", "fine-tuned DT"),
+    ("dt-zero-shot-safe", "zero-shot DT, attitude safety layer"),
+    ("dt-ensemble-safe", "zero-shot DT ensemble, attitude safety layer"),
+    ("dt-finetuned-safe", "fine-tuned DT, attitude safety layer"),
     ("bc", "behaviour cloning (same data, model and budget)"), ("dt-flat", "zero-shot DT, flat encoder (same data)"),
     ("dt-mixed", "zero-shot DT, mixed-quality data"), ("bc-mixed", "behaviour cloning, mixed-quality data"),
     (NEAREST, "expert of the nearest training layout"),
     (MEAN_TRANSFER, "transferred experts, mean"), (BEST_TRANSFER, "transferred experts, best (chosen afterwards)"),
-    (ZERO_ACTION, "zero action (hover)"), (HOVER_OPTIMIZER, "hover, optimiser's phases"), (ORACLE, "oracle"))
+    (ZERO_ACTION, "zero action (hover)"), (HOVER_OPTIMIZER, "hover, optimiser's phases"), (ORACLE, "oracle"),
+    ("oracle-safe", "oracle under the attitude safety layer"))
 PAIRS: tuple[tuple[str, str], ...] = (("dt-zero-shot", HOVER_OPTIMIZER), ("dt-zero-shot", NEAREST),
                                       ("dt-ensemble", HOVER_OPTIMIZER), ("dt-ensemble", NEAREST),
+                                      ("dt-zero-shot-safe", HOVER_OPTIMIZER), ("dt-zero-shot-safe", NEAREST),
+                                      ("dt-zero-shot-safe", "dt-zero-shot"), ("dt-ensemble-safe", HOVER_OPTIMIZER),
+                                      ("dt-ensemble-safe", NEAREST), ("dt-finetuned-safe", "dt-zero-shot-safe"),
                                       ("dt-zero-shot", MEAN_TRANSFER), ("dt-zero-shot", "bc"),
                                       ("dt-zero-shot", "dt-flat"), ("dt-mixed", "bc-mixed"),
                                       ("dt-finetuned", "dt-zero-shot"))
 
 
-def layout_scores(results: dict[str, dict[str, Any]]) -> dict[str, dict[str, float]]:
-    """``{layout: {policy: mean}}`` from the evaluation stages' results, with the transferred
-    experts summarised as the nearest (its label says so), their mean and their best, and a
-    learned row with several pre-training seeds (``KEY`` for seed 0, ``KEY@sK`` for the others)
-    as the mean over its seeds in the layout under ``KEY`` (seed 0's own under ``KEY@s0``)."""
+def layout_scores(results: dict[str, dict[str, Any]], field: str = "mean") -> dict[str, dict[str, float]]:
+    """``{layout: {policy: mean}}`` from the evaluation stages' results (or another ``field`` of
+    the summaries, e.g. the decomposition's), with the transferred experts summarised as the
+    nearest (its label says so), their mean and their best, and a learned row with several
+    pre-training seeds (``KEY`` for seed 0, ``KEY@sK`` for the others) as the mean over its
+    seeds in the layout under ``KEY`` (seed 0's own under ``KEY@s0``)."""
     out = {}
     for layout, res in results.items():
+        res = {k: {**v, "mean": v[field]} for k, v in res.items() if field in v}
         row = {k: float(v["mean"]) for k, v in res.items() if not k.startswith("transfer-")}
         seeded = {k.split(SEED_MARK)[0] for k in row if SEED_MARK in k}
         for key in seeded:
@@ -126,7 +135,9 @@ def _claims(summary: dict[str, dict[str, float]], diffs: dict[tuple[str, str], d
             labels: dict[str, str]) -> list[str]:
     out = []
     zs, ft = summary.get("dt-zero-shot"), summary.get("dt-finetuned")
-    for key, what in (("dt-zero-shot", "zero-shot DT"), ("dt-ensemble", "zero-shot DT ensemble (one controller)")):
+    for key, what in (("dt-zero-shot", "zero-shot DT"), ("dt-ensemble", "zero-shot DT ensemble (one controller)"),
+                      ("dt-zero-shot-safe", "zero-shot DT under the attitude safety layer"),
+                      ("dt-ensemble-safe", "zero-shot DT ensemble under the attitude safety layer")):
         own, hover, near = summary.get(key), diffs.get((key, HOVER_OPTIMIZER)), diffs.get((key, NEAREST))
         if own is None or near is None or hover is None:
             continue

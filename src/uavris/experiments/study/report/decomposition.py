@@ -1,0 +1,75 @@
+"""Why a learned row falls short of the oracle in a new hall: its place, its attitude, blocked devices.
+
+Lives here: :func:`decomposition_section`, the deployment report's table of every row's gap to
+the oracle split into place and attitude, with the share of its slots in which a device is
+behind the RIS plane, over halls and per hall, and the claim that no learned row blocks a
+device. Not here: the numbers, which the evaluation stages record
+(:func:`uavris.experiments.study.workers.evaluate_policies`), and the rest of the deployment
+section (:mod:`.deployment`).
+
+Definitions (docs/study.md section 21), with R the planner's expected sum rate with
+optimised phases at a pose (:func:`uavris.agents.oracle.planner.expected_optimised_rate`):
+
+- **place gap** = R(the oracle's target, level) - R(the row's median end position, level):
+  what the place it flew to costs, whatever its attitude;
+- **attitude gap** = R(that position, level) - R(that position, the row's median end
+  attitude): what its tilt costs there; large when a device is behind the plane, negative
+  where a tilt helps (the oracle's own, by 1-2%);
+- **blocked** = the share of the row's slots (all episodes) in which at least one device is
+  behind the RIS plane (docs/model.md section 3: every pair with it is lost).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from uavris.agents.references import ORACLE
+from uavris.experiments.display.tables import markdown_table, pct, signed
+from uavris.experiments.study.report.deployment import ROWS, layout_scores
+
+BLOCKING_LIMIT = 0.01  # no learned row blocks a device in more than this share of its slots (issue 29)
+LEARNED = ("dt-zero-shot", "dt-ensemble", "dt-finetuned", "bc", "dt-zero-shot-safe", "dt-ensemble-safe",
+           "dt-finetuned-safe", "dt-flat", "dt-mixed", "bc-mixed")
+
+
+def decomposition_section(results: dict[str, dict[str, Any]], labels: dict[str, str]) -> tuple[list[str], list[str]]:
+    """The decomposition's lines and its claim, from the evaluation stages' ``results``
+    (``{layout: {policy: summary}}``); nothing when the summaries hold no decomposition."""
+    layouts = list(results)
+    if not layouts or "end_rate_level" not in next(iter(results.values()))[ORACLE]:
+        return [], []
+    level, own = layout_scores(results, "end_rate_level"), layout_scores(results, "end_rate_own")
+    blocked = layout_scores(results, "behind_share")
+    target = {lay: float(results[lay][ORACLE]["plan_rate_level"]) for lay in layouts}
+    labels = {**dict(ROWS), **labels}
+    keys = [k for k in (*LEARNED, ORACLE, "oracle-safe") if all(k in level[lay] for lay in layouts)]
+    place = {k: [target[lay] - level[lay][k] for lay in layouts] for k in keys}
+    tilt = {k: [level[lay][k] - own[lay][k] for lay in layouts] for k in keys}
+    block = {k: [blocked[lay][k] for lay in layouts] for k in keys}
+    lines = ["", "### Where the gap to the oracle is: place, attitude, blocked devices", "",
+             "R: the expected sum rate with optimised phases at a pose (the planner's). Place gap: R at the oracle's "
+             "target minus R at the row's median end position, both level; attitude gap: R there, level, minus R there "
+             "with the row's median end attitude; blocked: the share of slots with a device behind the RIS plane "
+             "(every pair with it is lost). Means over layouts; a learned row is the mean of its seeds' models.", ""]
+    lines += markdown_table(
+        ("policy", "place gap (bps/Hz)", "attitude gap (bps/Hz)", "blocked, mean", "blocked, worst layout"),
+        [(labels.get(k, k), signed(float(np.mean(place[k]))), signed(float(np.mean(tilt[k]))),
+          pct(float(np.mean(block[k]))), pct(float(np.max(block[k])))) for k in keys], "lrrrr")
+    per_hall = [k for k in ("dt-zero-shot", "dt-zero-shot-safe") if k in keys]
+    if per_hall:
+        lines += ["", "Per layout (place gap / attitude gap in bps/Hz, blocked slots):", ""]
+        lines += markdown_table(("layout", *(labels.get(k, k) for k in per_hall)), [
+            (lay, *(f"{signed(place[k][i])} / {signed(tilt[k][i])}, {pct(block[k][i])}" for k in per_hall))
+            for i, lay in enumerate(layouts)], "l" + "r" * len(per_hall))
+    learned = [k for k in keys if k in LEARNED]
+    worst = max(learned, key=lambda k: float(np.mean(block[k])), default=None)
+    if worst is None:
+        return lines, []
+    over = [k for k in learned if float(np.mean(block[k])) > BLOCKING_LIMIT]
+    claim = (f"- deployment track: **no learned row blocks a device in more than {BLOCKING_LIMIT:.0%} of its slots**: "
+             f"{'holds' if not over else 'does not hold'} (most: {labels.get(worst, worst)}, "
+             f"{pct(float(np.mean(block[worst])))} of its slots on average"
+             + (f"; above the limit: {', '.join(labels.get(k, k) for k in over)}" if over else "") + ").")
+    return lines, [claim]
