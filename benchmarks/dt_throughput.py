@@ -1,32 +1,51 @@
 """Single-core throughput of the uavris Decision Transformer: training and rollouts.
 
-Two measurements, in this one process pinned to a single CPU, one torch thread:
+Measurements, in this one process pinned to a single CPU, one torch thread:
 
-1. **Training samples/s** of ``uavris.agents.dt.model.DecisionTransformer`` against Hugging
-   Face ``transformers.DecisionTransformerModel`` at the same size (the DT paper's: context
-   20, width 128, 3 layers, 1 head, MLP 512 with ReLU, dropout 0.1; state 158, action 22),
-   the same batch (64 windows) and the same training step: forward, masked action MSE
-   over the real slots, backward, gradient clipping at 0.25, AdamW. Both read the same
-   pre-sampled windows, left-padded near episode starts as in real training. A *sample*
-   is one context window. Hugging Face's model comes from the benchmark-only extra
-   ``pip install -e '.[bench]'``; without it that row is skipped.
-2. **Rollout** of 80 episodes (``unseen1``, seeds 0..79, the default system) by a DT of
-   the same size: all 80 in one batched simulator with one forward pass per slot
+1. **Training samples/s** of two models, each against uavris 0.2's training step frozen
+   in ``benchmarks/_dt_step_v020.py`` (its device-set encoder forward, its optimiser and
+   its step; same parameters, same function), same batch (64 windows), same seed, same
+   windows (``TrainingWindows`` over 32 synthetic 100-slot trajectories, left-padded near
+   episode starts as in real training; every step samples its windows from a generator of
+   the same seed, so both steps read the same windows):
+
+   - the **deployment** track's model: state of ``SystemConfig(observe_devices=True)``
+     (170), the 6 motion entries, context 10, width 64, 2 layers, 1 head, the device-set
+     encoder (4 devices, 16 elements), AdamW lr 3e-4 (``make_optimizer``);
+   - the **paper-size** model (the DT paper's: context 20, width 128, 3 layers, 1 head,
+     MLP 512 with ReLU, dropout 0.1; flat encoder, state 158, action 22), AdamW lr 1e-4,
+     also beside Hugging Face ``transformers.DecisionTransformerModel`` of the same size
+     with the same step (foreach AdamW and clipping, as ours). Hugging Face's model comes
+     from the benchmark-only extra ``pip install -e '.[bench]'``; without it that row is
+     skipped.
+
+   Today's step is :func:`uavris.agents.dt.trainer.train_steps`: forward, masked action
+   MSE over the real slots, backward, gradient clipping at 0.25, AdamW (weight decay 1e-4
+   on the weight matrices), linear warm-up. A *sample* is one context window.
+2. **Same seed, same data, the same loss curve?** Each model trained ``--loss-steps``
+   steps (default 300) with today's step and with 0.2's, from the same seed: the final
+   loss (mean of the last 50 steps) of both and their relative difference.
+3. **Where the time goes**: torch.profiler over 20 steps of today's deployment-model step,
+   the 8 operators with the most self CPU time.
+4. **Rollout** of 80 episodes (``unseen1``, seeds 0..79, the default system) by a DT of
+   the paper's size: all 80 in one batched simulator with one forward pass per slot
    (``DTBatchPolicy`` + ``record_episodes``), against rolling the same 80 episodes out one
    by one (batch of 1). Same seeds, same model, same code path. Measured for both
    attention layouts: ``window`` (the DT paper's; every slot re-reads 59 tokens) and
    ``banded`` (every slot adds 3 tokens to a key/value cache; see
    ``uavris.agents.dt.model``).
 
-Each case is warmed up, then timed ``--repeats`` times; the best timing is kept. The
-script prints the machine, the command, a Markdown table and PASS/FAIL lines against the
-targets (ours >= Hugging Face's samples/s; batched rollout >= 20x one-by-one). It always
-exits 0: it is a report, not a test.
+Each case is warmed up, then timed ``--repeats`` times (the training cases interleaved, so
+that a busy moment of the machine does not fall on one of them only); the best timing is
+kept. The script prints the machine, the command, Markdown tables and PASS/FAIL lines
+against the targets (deployment model >= 3x 0.2's samples/s, paper-size >= 1.5x; final
+losses within 2%; ours >= Hugging Face's samples/s; batched rollout >= 20x one-by-one). It
+always exits 0: it is a report, not a test.
 
 Run from the repository root::
 
-    .venv/bin/python benchmarks/dt_throughput.py            # ~4 minutes
-    .venv/bin/python benchmarks/dt_throughput.py --quick    # ~40 seconds (16 episodes, fewer steps)
+    .venv/bin/python benchmarks/dt_throughput.py            # ~6 minutes
+    .venv/bin/python benchmarks/dt_throughput.py --quick    # ~1.5 minutes (16 episodes, fewer steps)
 """
 
 from __future__ import annotations
@@ -43,24 +62,63 @@ import platform  # noqa: E402
 import shlex  # noqa: E402
 import sys  # noqa: E402
 import time  # noqa: E402
+from dataclasses import dataclass  # noqa: E402
 from typing import Any, Callable  # noqa: E402
 
 import numpy as np  # noqa: E402
 import torch  # noqa: E402
+from _dt_step_v020 import as_v020, make_optimizer_v020, train_steps_v020  # noqa: E402  (benchmarks/)
 from _machine import cpu_model, pin_to_one_core  # noqa: E402  (benchmarks/_machine.py)
 
 from uavris.agents.dt.config import ATTENTION_LAYOUTS, DTConfig  # noqa: E402
 from uavris.agents.dt.model import DecisionTransformer, masked_action_loss  # noqa: E402
 from uavris.agents.dt.policy import DTBatchPolicy  # noqa: E402
+from uavris.agents.dt.trainer import make_optimizer, train_steps  # noqa: E402
 from uavris.agents.dt.trajectories import TrainingWindows, Trajectory, record_episodes  # noqa: E402
 from uavris.config import SystemConfig  # noqa: E402
+from uavris.env.simulator import observation_slices  # noqa: E402
 
 BATCH = 64
-CONTEXT, WIDTH, DEPTH, HEADS, DROPOUT = 20, 128, 3, 1, 0.1
+CONTEXT, WIDTH, DEPTH, HEADS, DROPOUT = 20, 128, 3, 1, 0.1  # the paper-size model (and the rollouts')
 EPISODES = 80
 SCENARIO = "unseen1"
 TARGET_RETURN = 2000.0
+RETURN_SCALE = 3000.0
 ROLLOUT_RATIO_TARGET = 20.0
+SEED = 0
+WEIGHT_DECAY, GRAD_CLIP, WARMUP = 1e-4, 0.25, 30  # warm-up: 10% of the loss check, as the quick preset's
+LOSS_TOLERANCE = 0.02
+PROFILE_STEPS, PROFILE_TOP = 20, 8
+
+
+@dataclass(frozen=True)
+class TrainedModel:
+    """A model of the training measurement: its system, size, learning rate and target."""
+
+    name: str
+    system: SystemConfig
+    act_dim: int
+    lr: float
+    target: float  # today's samples/s over 0.2's
+    model: dict[str, Any]  # DTConfig's fields besides state_dim and act_dim
+
+    def config(self) -> DTConfig:
+        return DTConfig(self.system.observation_dim, self.act_dim, max_timestep=self.system.horizon, **self.model)
+
+    def describe(self) -> str:
+        c = self.config()
+        encoder = f"device encoder ({c.devices} devices, {c.elements} elements)" if c.state_encoder == "devices" \
+            else "flat encoder"
+        return (f"context {c.context}, width {c.width}, {c.depth} layers, {c.heads} head, dropout {c.dropout}, "
+                f"{encoder}, state {c.state_dim}, action {c.act_dim}, lr {self.lr:g}")
+
+
+MODELS = (
+    TrainedModel("deployment", SystemConfig(observe_devices=True), 6, 3e-4, 3.0,
+                 dict(context=10, width=64, depth=2, heads=1, state_encoder="devices", devices=4, elements=16)),
+    TrainedModel("paper-size", SystemConfig(), SystemConfig().action_dim, 1e-4, 1.5,
+                 dict(context=CONTEXT, width=WIDTH, depth=DEPTH, heads=HEADS, dropout=DROPOUT)),
+)
 
 
 def best_of(fn: Callable[[], Any], repeats: int) -> float:
@@ -74,72 +132,132 @@ def best_of(fn: Callable[[], Any], repeats: int) -> float:
 
 
 # ------------------------------------------------------------------------------ training
-def training_batches(system: SystemConfig, count: int, seed: int) -> list[dict[str, torch.Tensor]]:
-    """Windows cut from random 100-slot trajectories, exactly as training samples them."""
-    rng = np.random.default_rng(seed)
-    trajs = [Trajectory(rng.standard_normal((system.horizon + 1, system.observation_dim)).astype(np.float32),
-                        rng.uniform(-1, 1, (system.horizon, system.action_dim)).astype(np.float32),
-                        rng.uniform(0, 30, system.horizon), False, True, SCENARIO, i) for i in range(32)]
-    windows = TrainingWindows(trajs, CONTEXT)
-    return [windows.sample(BATCH, rng) for _ in range(count)]
+def synthetic_windows(spec: TrainedModel, seed: int) -> TrainingWindows:
+    """Windows over 32 random 100-slot trajectories, sampled exactly as training samples them.
+    Observations are standard normal except the pairing, a valid 0/1 draw (one or two pairs
+    among the devices), which the device encoder reads raw."""
+    system, rng = spec.system, np.random.default_rng(seed)
+    k, slots = system.num_users, system.horizon + 1
+    pairing = observation_slices(k, system.num_elements, system.observe_devices)["pairing"]
+    trajs = []
+    for i in range(32):
+        obs = rng.standard_normal((slots, system.observation_dim)).astype(np.float32)
+        p = np.zeros((slots, k, k), dtype=np.float32)
+        for t in range(slots):
+            order = rng.permutation(k)
+            p[t, order[0], order[1]] = 1.0
+            if rng.random() < 0.5:
+                p[t, order[2], order[3]] = 1.0
+        obs[:, pairing] = p.reshape(slots, -1)
+        trajs.append(Trajectory(obs, rng.uniform(-1, 1, (system.horizon, spec.act_dim)).astype(np.float32),
+                                rng.uniform(0, 30, system.horizon), False, True, SCENARIO, i))
+    return TrainingWindows.for_model(trajs, spec.config())
 
 
-def ours_step_fn(system: SystemConfig) -> tuple[Callable[[dict], None], int]:
-    torch.manual_seed(0)
-    model = DecisionTransformer(DTConfig(system.observation_dim, system.action_dim, CONTEXT, WIDTH, DEPTH, HEADS,
-                                         DROPOUT, max_timestep=system.horizon), return_scale=3000.0).train()
-    opt = torch.optim.AdamW(model.parameters(), lr=1e-4, weight_decay=1e-4)
+class Trainer:
+    """One model and its optimiser, trained by today's step or by 0.2's; every call of
+    :meth:`run` samples its windows from a generator seeded ``SEED`` (the same windows)."""
 
-    def step(b: dict) -> None:
-        pred = model(b["returns_to_go"], b["states"], b["actions"], b["timesteps"], b["valid"])
-        loss = masked_action_loss(pred, b["actions"], b["valid"])
-        opt.zero_grad(set_to_none=True)
-        loss.backward()
-        torch.nn.utils.clip_grad_norm_(model.parameters(), 0.25)
-        opt.step()
+    def __init__(self, spec: TrainedModel, windows: TrainingWindows, v020: bool) -> None:
+        torch.manual_seed(SEED)
+        self.spec, self.windows, self.v020 = spec, windows, v020
+        model = DecisionTransformer(spec.config(), return_scale=RETURN_SCALE)
+        self.model = as_v020(model) if v020 else model
+        self.opt = (make_optimizer_v020 if v020 else make_optimizer)(self.model, spec.lr, WEIGHT_DECAY)
+        self.params = sum(p.numel() for p in self.model.parameters())
 
-    return step, sum(p.numel() for p in model.parameters())
+    def run(self, count: int) -> list[float]:
+        step = train_steps_v020 if self.v020 else train_steps
+        return step(self.model, self.opt, self.windows, np.random.default_rng(SEED), 0, count, BATCH, self.spec.lr,
+                    WARMUP, GRAD_CLIP)
 
 
-def hf_step_fn(system: SystemConfig) -> tuple[Callable[[dict], None], int, str] | None:
-    try:
+class HFTrainer:
+    """Hugging Face's ``DecisionTransformerModel`` at the paper size with the same step as
+    ours (foreach AdamW and clipping; no warm-up, which costs nothing), the same windows."""
+
+    def __init__(self, spec: TrainedModel, windows: TrainingWindows) -> None:
         import transformers
         from transformers import DecisionTransformerConfig, DecisionTransformerModel
+
+        transformers.logging.set_verbosity_error()
+        torch.manual_seed(SEED)
+        c = spec.config()
+        cfg = DecisionTransformerConfig(state_dim=c.state_dim, act_dim=c.act_dim, hidden_size=c.width,
+                                        n_layer=c.depth, n_head=c.heads, n_inner=4 * c.width,
+                                        activation_function="relu", resid_pdrop=c.dropout, embd_pdrop=c.dropout,
+                                        attn_pdrop=c.dropout, max_ep_len=c.max_timestep, action_tanh=True)
+        self.model = DecisionTransformerModel(cfg)
+        self.opt = torch.optim.AdamW(self.model.parameters(), lr=spec.lr, weight_decay=WEIGHT_DECAY, foreach=True)
+        self.windows = windows
+        self.params = sum(p.numel() for p in self.model.parameters())
+        impl = getattr(self.model.config, "_attn_implementation", None) or "default"
+        self.label = f"transformers {transformers.__version__}, attention {impl}"
+
+    def run(self, count: int) -> list[float]:
+        rng = np.random.default_rng(SEED)
+        self.model.train()
+        losses = []
+        for _ in range(count):
+            b = self.windows.sample(BATCH, rng)
+            # HF scales nothing itself; the same return scale as ours is applied here.
+            out = self.model(states=b["states"], actions=b["actions"],
+                             returns_to_go=b["returns_to_go"][..., None] / RETURN_SCALE, timesteps=b["timesteps"],
+                             attention_mask=b["valid"].long(), return_dict=True)
+            loss = masked_action_loss(out.action_preds, b["actions"], b["valid"])
+            self.opt.zero_grad(set_to_none=True)
+            loss.backward()
+            torch.nn.utils.clip_grad_norm_(self.model.parameters(), GRAD_CLIP, foreach=True)
+            self.opt.step()
+            losses.append(float(loss.detach()))
+        return losses
+
+
+def hf_trainer(spec: TrainedModel, windows: TrainingWindows) -> HFTrainer | None:
+    try:
+        return HFTrainer(spec, windows)
     except ImportError:
         return None
-    transformers.logging.set_verbosity_error()
-    torch.manual_seed(0)
-    cfg = DecisionTransformerConfig(state_dim=system.observation_dim, act_dim=system.action_dim, hidden_size=WIDTH,
-                                    n_layer=DEPTH, n_head=HEADS, n_inner=4 * WIDTH, activation_function="relu",
-                                    resid_pdrop=DROPOUT, embd_pdrop=DROPOUT, attn_pdrop=DROPOUT,
-                                    max_ep_len=system.horizon, action_tanh=True)
-    model = DecisionTransformerModel(cfg).train()
-    opt = torch.optim.AdamW(model.parameters(), lr=1e-4, weight_decay=1e-4)
-
-    def step(b: dict) -> None:
-        # HF scales nothing itself; the same 1/3000 return scale as ours is applied here.
-        out = model(states=b["states"], actions=b["actions"], returns_to_go=b["returns_to_go"][..., None] / 3000.0,
-                    timesteps=b["timesteps"], attention_mask=b["valid"].long(), return_dict=True)
-        loss = masked_action_loss(out.action_preds, b["actions"], b["valid"])
-        opt.zero_grad(set_to_none=True)
-        loss.backward()
-        torch.nn.utils.clip_grad_norm_(model.parameters(), 0.25)
-        opt.step()
-
-    impl = getattr(model.config, "_attn_implementation", None) or "default"
-    params = sum(p.numel() for p in model.parameters())
-    return step, params, f"transformers {transformers.__version__}, attention {impl}"
 
 
-def measure_training(step: Callable[[dict], None], batches: list[dict], steps: int, repeats: int) -> float:
-    for b in batches[:3]:
-        step(b)
+def measure_training(trainers: dict[str, Any], steps: int, repeats: int) -> dict[str, float]:
+    """Samples/s of each trainer: warmed up, then ``repeats`` timings of ``steps`` steps,
+    interleaved across the trainers, the best kept."""
+    for tr in trainers.values():
+        tr.run(3)
+    best = dict.fromkeys(trainers, float("inf"))
+    for _ in range(repeats):
+        for name, tr in trainers.items():
+            gc.collect()
+            start = time.perf_counter()
+            tr.run(steps)
+            best[name] = min(best[name], time.perf_counter() - start)
+    return {name: steps * BATCH / t for name, t in best.items()}
 
-    def run() -> None:
-        for i in range(steps):
-            step(batches[i % len(batches)])
 
-    return steps * BATCH / best_of(run, repeats)
+def loss_check(spec: TrainedModel, windows: TrainingWindows, steps: int) -> dict[str, list[float]]:
+    """The losses of ``steps`` steps from the same seed with today's step and with 0.2's."""
+    return {"today": Trainer(spec, windows, False).run(steps), "0.2": Trainer(spec, windows, True).run(steps)}
+
+
+def profile_step(spec: TrainedModel, windows: TrainingWindows) -> tuple[list[tuple[str, ...]], float, float]:
+    """torch.profiler over ``PROFILE_STEPS`` steps of today's step: the top operators by self
+    CPU time as table rows, the profiled wall time per step (ms) and the total self CPU (ms)."""
+    from torch.profiler import ProfilerActivity, profile
+
+    trainer = Trainer(spec, windows, False)
+    trainer.run(3)
+    with profile(activities=[ProfilerActivity.CPU]) as prof:
+        start = time.perf_counter()
+        trainer.run(PROFILE_STEPS)
+        wall = time.perf_counter() - start
+    events = sorted(prof.key_averages(), key=lambda e: e.self_cpu_time_total, reverse=True)
+    total = sum(e.self_cpu_time_total for e in events)
+    rows = [("operator", "calls per step", "self CPU per step (ms)", "share of self CPU")]
+    for e in events[:PROFILE_TOP]:
+        rows.append((e.key, f"{e.count / PROFILE_STEPS:.0f}", f"{e.self_cpu_time_total / 1e3 / PROFILE_STEPS:.2f}",
+                     f"{e.self_cpu_time_total / total:.1%}"))
+    return rows, 1e3 * wall / PROFILE_STEPS, total / 1e3 / PROFILE_STEPS
 
 
 # ------------------------------------------------------------------------------ rollouts
@@ -173,11 +291,18 @@ def table(rows: list[tuple[str, ...]]) -> str:
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--quick", action="store_true", help="16 episodes, fewer training steps, one timing")
-    p.add_argument("--repeats", type=int, default=None, help="timings per case, best kept (default 3, quick 1)")
+    p.add_argument("--quick", action="store_true",
+                   help="16 episodes, fewer training steps, 60-step loss check, fewer timings")
+    p.add_argument("--repeats", type=int, default=None, help="timings per case, best kept (default 3, quick 2)")
+    p.add_argument("--loss-steps", type=int, default=None, help="steps of the loss check (default 300, quick 60)")
     args = p.parse_args(argv)
-    args.repeats = args.repeats or (1 if args.quick else 3)
+    args.repeats = args.repeats or (2 if args.quick else 3)
+    args.loss_steps = args.loss_steps or (60 if args.quick else 300)
     return args
+
+
+def verdict(ok: bool) -> str:
+    return "PASS" if ok else "FAIL"
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -187,36 +312,82 @@ def main(argv: list[str] | None = None) -> int:
     system = SystemConfig()
     steps = 10 if args.quick else 30
     episodes = 16 if args.quick else EPISODES
+    tail = min(50, max(1, args.loss_steps // 3))
     print("# uavris Decision Transformer throughput (one core)\n")
     print(f"- command: {shlex.join([sys.executable, *sys.argv])}")
     print(f"- cpu: {cpu_model()}; {pinning}; torch threads {torch.get_num_threads()}")
     print(f"- platform: {platform.platform()}; python {platform.python_version()}, torch {torch.__version__}")
-    print(f"- model: context {CONTEXT}, width {WIDTH}, depth {DEPTH}, heads {HEADS}, dropout {DROPOUT}, "
-          f"state {system.observation_dim}, action {system.action_dim}; batch {BATCH}")
-    print(f"- mode: {'quick' if args.quick else 'full'}, {steps} timed training steps, {episodes} episodes, "
-          f"best of {args.repeats}\n", flush=True)
+    for spec in MODELS:
+        print(f"- {spec.name} model: {spec.describe()}; batch {BATCH}")
+    print(f"- training step: AdamW (weight decay {WEIGHT_DECAY:g}), clipping at {GRAD_CLIP}, warm-up {WARMUP} steps; "
+          f"today: uavris.agents.dt.trainer (train_steps, make_optimizer); 0.2: benchmarks/_dt_step_v020.py")
+    print(f"- mode: {'quick' if args.quick else 'full'}, {steps} timed training steps, best of {args.repeats}; loss "
+          f"check {args.loss_steps} steps (final loss: mean of the last {tail}); {episodes} rollout episodes\n",
+          flush=True)
 
-    batches = training_batches(system, 8, seed=0)
-    print("measuring training (uavris) ...", file=sys.stderr, flush=True)
-    ours_step, ours_params = ours_step_fn(system)
-    ours = measure_training(ours_step, batches, steps, args.repeats)
-    hf = hf_step_fn(system)
-    hf_rate = None
-    if hf is not None:
-        print("measuring training (Hugging Face) ...", file=sys.stderr, flush=True)
-        hf_rate = measure_training(hf[0], batches, steps, args.repeats)
+    rates: dict[str, dict[str, float]] = {}
+    params: dict[str, dict[str, int]] = {}
+    losses: dict[str, dict[str, list[float]]] = {}
+    hf_label = None
+    for spec in MODELS:
+        windows = synthetic_windows(spec, SEED)
+        trainers: dict[str, Any] = {"today": Trainer(spec, windows, False), "0.2": Trainer(spec, windows, True)}
+        if spec.name == "paper-size":
+            hf = hf_trainer(spec, windows)
+            if hf is not None:
+                trainers["hf"] = hf
+                hf_label = hf.label
+        print(f"measuring training, {spec.name} model ({', '.join(trainers)}) ...", file=sys.stderr, flush=True)
+        rates[spec.name] = measure_training(trainers, steps, args.repeats)
+        params[spec.name] = {name: tr.params for name, tr in trainers.items()}
+        print(f"loss check, {spec.name} model: {args.loss_steps} steps, today and 0.2 ...", file=sys.stderr,
+              flush=True)
+        losses[spec.name] = loss_check(spec, windows, args.loss_steps)
+    print("profiling the deployment model's step ...", file=sys.stderr, flush=True)
+    profile_rows, profile_ms, profile_self_ms = profile_step(MODELS[0], synthetic_windows(MODELS[0], SEED))
     rollouts = {}
     for attention in ATTENTION_LAYOUTS:
         print(f"measuring rollouts of {episodes} episodes ({attention} attention) ...", file=sys.stderr, flush=True)
         rollouts[attention] = measure_rollouts(system, episodes, args.repeats, attention)
 
+    print("## Training\n")
+    rows = [("model", "step", "parameters", "throughput", "relative to today")]
+    for spec in MODELS:
+        r, n = rates[spec.name], params[spec.name]
+        rows.append((spec.name, "today (train_steps)", f"{n['today']:,}", f"{r['today']:,.0f} samples/s", "1.00x"))
+        rows.append((spec.name, "0.2 (train_steps_v020)", f"{n['0.2']:,}", f"{r['0.2']:,.0f} samples/s",
+                     f"{r['0.2'] / r['today']:.2f}x"))
+        if spec.name == "paper-size":
+            if "hf" in r:
+                rows.append((spec.name, f"HF DecisionTransformerModel ({hf_label})", f"{n['hf']:,}",
+                             f"{r['hf']:,.0f} samples/s", f"{r['hf'] / r['today']:.2f}x"))
+            else:
+                rows.append((spec.name, "HF DecisionTransformerModel", "n/a", "skipped (pip install -e '.[bench]')",
+                             "n/a"))
+    print(table(rows))
+    print()
+    rows = [("model", "step", "first loss", f"final loss (mean of the last {tail})", "relative difference",
+             "largest step-wise difference")]
+    finals = {}
+    for spec in MODELS:
+        curves = losses[spec.name]
+        final = {k: float(np.mean(v[-tail:])) for k, v in curves.items()}
+        finals[spec.name] = final["today"] / final["0.2"] - 1.0
+        gap = np.abs(np.array(curves["today"]) / np.array(curves["0.2"]) - 1.0)
+        rows.append((spec.name, "today", f"{curves['today'][0]:.6f}", f"{final['today']:.6f}",
+                     f"{finals[spec.name]:+.4%}", f"{gap.max():.2e} (step {int(gap.argmax()) + 1})"))
+        rows.append((spec.name, "0.2", f"{curves['0.2'][0]:.6f}", f"{final['0.2']:.6f}", "", ""))
+    print(f"Loss check: {args.loss_steps} steps from seed {SEED}, same windows\n")
+    print(table(rows))
+    print()
+    print(f"## Where the time goes: today's deployment-model step (torch.profiler, {PROFILE_STEPS} steps, top "
+          f"{PROFILE_TOP} operators by self CPU time)\n")
+    print(table(profile_rows))
+    print()
+    print(f"profiled: {profile_ms:.1f} ms per step of wall time ({BATCH * 1e3 / profile_ms:,.0f} samples/s under the "
+          f"profiler), {profile_self_ms:.1f} ms of self CPU time in all operators\n")
+    print("## Rollouts\n")
     rows = [("case", "throughput", "relative")]
-    rows.append((f"training, uavris DT ({ours_params:,} parameters)", f"{ours:,.0f} samples/s", "1.00x"))
-    if hf is not None and hf_rate is not None:
-        rows.append((f"training, HF DecisionTransformerModel ({hf[1]:,} parameters; {hf[2]})",
-                     f"{hf_rate:,.0f} samples/s", f"{hf_rate / ours:.2f}x"))
-    else:
-        rows.append(("training, HF DecisionTransformerModel", "skipped (pip install -e '.[bench]')", "n/a"))
     for attention, (batched, sequential, slots) in rollouts.items():
         rows.append((f"rollout ({attention}), {episodes} episodes one by one",
                      f"{slots / sequential:,.0f} slots/s ({sequential:.2f} s)", "1.00x"))
@@ -224,13 +395,22 @@ def main(argv: list[str] | None = None) -> int:
                      f"{slots / batched:,.0f} slots/s ({batched:.2f} s)", f"{sequential / batched:.2f}x"))
     print(table(rows))
     print()
-    if hf_rate is not None:
-        print(f"training: uavris / Hugging Face = {ours / hf_rate:.2f}x (target >= 1x) "
-              f"{'PASS' if ours >= hf_rate else 'FAIL'}")
+    for spec in MODELS:
+        ratio = rates[spec.name]["today"] / rates[spec.name]["0.2"]
+        print(f"training, {spec.name} model: today / 0.2 = {ratio:.2f}x (target >= {spec.target:g}x) "
+              f"{verdict(ratio >= spec.target)}")
+    for spec in MODELS:
+        diff = finals[spec.name]
+        print(f"loss check, {spec.name} model: final loss today vs 0.2 {diff:+.2%} (target within "
+              f"{LOSS_TOLERANCE:.0%}) {verdict(abs(diff) <= LOSS_TOLERANCE)}")
+    paper = rates["paper-size"]
+    if "hf" in paper:
+        print(f"training, paper-size model: uavris / Hugging Face = {paper['today'] / paper['hf']:.2f}x (target >= 1x) "
+              f"{verdict(paper['today'] >= paper['hf'])}")
     for attention, (batched, sequential, _) in rollouts.items():
         ratio = sequential / batched
         print(f"rollout ({attention}): batched / one by one = {ratio:.2f}x (target >= {ROLLOUT_RATIO_TARGET:.0f}x) "
-              f"{'PASS' if ratio >= ROLLOUT_RATIO_TARGET else 'FAIL'}")
+              f"{verdict(ratio >= ROLLOUT_RATIO_TARGET)}")
     window_one, banded_batched = rollouts["window"][1], rollouts["banded"][0]
     print(f"rollout: banded batched / window one by one = {window_one / banded_batched:.2f}x")
     return 0

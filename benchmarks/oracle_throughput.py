@@ -10,14 +10,32 @@ thread:
    about half have two active pairs), reported separately for the two-pair slots, the
    one-pair slots (a closed form in both) and all of them. Best of ``--repeats`` timings
    each. Targets, on the two-pair slots: at least 5x 0.1.0's slots per second, mean sum
-   rate within 0.5% of 0.1.0's.
+   rate within 0.5% of 0.1.0's. Today's kernels are compiled without fast-math and with
+   their own Cholesky solve instead of LAPACK's, so that they give the same bits on any CPU.
 2. One slot at a time: the optimiser in a Python loop over the first ``--loop-slots``
    slots (the cost a policy pays per environment step with few environments), against
    the batched call.
-3. The planning stage: :func:`uavris.agents.oracle.plan_target` for every named scenario,
+3. A peer for unit-modulus problems: SciPy's ``minimize(method="L-BFGS-B")`` on the same
+   objective (minus :func:`uavris.physics.phase_opt.sum_rate_and_gradient`, its analytic
+   gradient, the 16 phases of one slot, no bounds), from the same starts as the full
+   multi-start (one co-phasing start per active link, ``co_phasing_phases``, and the 2
+   random starts of ``random_starts``), best of the starts, on the first ``--peer-slots``
+   two-pair slots of measurement 1 (default 128), once with SciPy's default iteration
+   limit and once with at most uavris's budget (7 levels x 30 = 210 iterations per start):
+   mean sum rate and slots/s beside uavris's optimiser on the same slots (SciPy timed once:
+   it is some 1000x slower). SciPy solves the true problem directly; uavris adds the noise
+   continuation and the null polish.
+4. The planning stage: :func:`uavris.agents.oracle.plan_target` for every named scenario,
    the first from scratch and the others with the poses valued so far (as the policy
    does). Target: at most 10 s per scenario.
-4. The oracle policy: the planning oracle and the greedy oracle evaluated with
+5. The planner's cheap ranking estimate: ``plan_target(system, start, PlanSettings(exact=False))``
+   against ``PlanSettings(exact=True)`` (the reference) on the 11 named scenarios and the
+   first 16 generated halls (``LayoutGenerator(devices=4, seed=0)``, training and unseen
+   halls alternating), every plan from scratch (no memo): the ratio of the total planning
+   time and the relative loss of the plan's value (``plan.value``, exact in both: the fast
+   plan values its chosen pose exactly) against the exact plan's. Target: >= 10x and the
+   worst plan within 0.5%.
+6. The oracle policy: the planning oracle and the greedy oracle evaluated with
    :func:`uavris.agents.evaluation.evaluate` on ``--episodes`` episodes (default 32) of
    fig2 and unseen2, seed 1_000_000, with the zero action (``hover``) on the same
    episodes. Target: a 32-episode evaluation under 5 minutes.
@@ -28,7 +46,7 @@ exits with status 0: it is a report, not a test.
 Run from the repository root::
 
     .venv/bin/python benchmarks/oracle_throughput.py            # ~3 minutes
-    .venv/bin/python benchmarks/oracle_throughput.py --quick    # 256 / 32 slots, 8 episodes
+    .venv/bin/python benchmarks/oracle_throughput.py --quick    # ~1.5 minutes: 256 / 32 / 32 slots, 4 halls, 8 episodes
 """
 
 from __future__ import annotations
@@ -48,16 +66,27 @@ import time  # noqa: E402
 
 import _phase_optimizer_v010 as v010  # noqa: E402  (benchmarks/_phase_optimizer_v010.py)
 import numpy as np  # noqa: E402
+import scipy  # noqa: E402
 from _machine import cpu_model, pin_to_one_core  # noqa: E402  (benchmarks/_machine.py)
 from numpy.typing import NDArray  # noqa: E402
 
 import uavris  # noqa: E402
 from uavris.agents.evaluation import evaluate  # noqa: E402
-from uavris.agents.oracle import PlanningOracle, greedy_oracle_policy  # noqa: E402
+from uavris.agents.oracle import PlanningOracle, PlanSettings, greedy_oracle_policy, plan_target  # noqa: E402
 from uavris.agents.references import reference_policy  # noqa: E402
 from uavris.config import SCENARIOS, SystemConfig  # noqa: E402
 from uavris.env.simulator import BatchedSimulator  # noqa: E402
-from uavris.physics.phase_opt import DEFAULT_RESTARTS, optimize_slot_phases  # noqa: E402
+from uavris.layouts import LayoutGenerator  # noqa: E402
+from uavris.physics.phase_opt import (  # noqa: E402
+    DEFAULT_ITERATIONS,
+    DEFAULT_NOISE_LEVELS,
+    DEFAULT_RESTARTS,
+    active_links,
+    co_phasing_phases,
+    optimize_slot_phases,
+    random_starts,
+    sum_rate_and_gradient,
+)
 from uavris.presets import EVAL_SEED  # noqa: E402
 
 SEED = 0
@@ -65,6 +94,10 @@ SPEED_TARGET = 5.0
 QUALITY_TARGET = 0.005
 PLAN_LIMIT_S = 10.0
 EVAL_LIMIT_S = 300.0
+FAST_PLAN_SPEED_TARGET = 10.0
+FAST_PLAN_LOSS_TARGET = 0.005
+HALLS = 16  # generated halls planned exactly and cheaply (training and unseen alternating)
+PEER_SLOTS = 128  # two-pair slots SciPy's L-BFGS-B solves
 
 
 def make_slots(config: SystemConfig, n: int, seed: int) -> tuple[NDArray, NDArray, NDArray]:
@@ -88,17 +121,66 @@ def best_time(fn, repeats: int):
     return best, out
 
 
+def scipy_peer(config: SystemConfig, h: NDArray, cos: NDArray, pairing: NDArray,
+               maxiter: int | None = None) -> tuple[NDArray, NDArray]:
+    """SciPy's L-BFGS-B on minus the sum rate of each slot, from the full multi-start's starts
+    (one co-phasing start per active link and ``DEFAULT_RESTARTS`` random ones, as
+    ``optimize_phases`` makes them), best of the starts: (sum rates, function evaluations per
+    slot). ``maxiter``: iterations per start (None: SciPy's default, 15,000)."""
+    from scipy.optimize import minimize
+
+    k = h.shape[-2]
+    tx, rx, valid = active_links(pairing, max(k // 2, 1))
+    starts = np.concatenate([co_phasing_phases(h[:, None], cos[:, None], tx, rx, config.angle_dependent_reflection),
+                             random_starts(h, 0, DEFAULT_RESTARTS)], axis=1)
+    rates, evaluations = np.empty(len(h)), np.zeros(len(h), dtype=np.int64)
+    for b in range(len(h)):
+        def objective(phi: NDArray, b: int = b) -> tuple[float, NDArray]:
+            rate, grad = sum_rate_and_gradient(phi, h[b], cos[b], pairing[b], config.tx_power_w, config.noise_w,
+                                               config.angle_dependent_reflection)
+            return -float(rate), -grad  # type: ignore[operator]
+
+        best = -np.inf
+        for i, x0 in enumerate(starts[b]):
+            if i < tx.shape[1] and not valid[b, i]:
+                continue  # a padding link repeats the first one's start
+            res = minimize(objective, x0, jac=True, method="L-BFGS-B",
+                           options={} if maxiter is None else {"maxiter": maxiter})
+            best = max(best, -float(res.fun))
+            evaluations[b] += res.nfev
+        rates[b] = best
+    return rates, evaluations
+
+
+def plan_sites(halls: int) -> list[tuple[str, SystemConfig, tuple[float, float, float]]]:
+    """(name, system, start) of the 11 named scenarios and the first ``halls`` generated halls."""
+    config = SystemConfig()
+    sites = [(name, config, tuple(scen.start)) for name, scen in SCENARIOS.items()]
+    gen = LayoutGenerator(devices=4, seed=0)
+    for j in range(halls):
+        hall = gen.layout(("train", "unseen")[j % 2], j // 2, config)
+        system, scenario = hall.resolve(config)
+        sites.append((hall.name, system, tuple(scenario.start)))
+    return sites
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--quick", action="store_true", help="256 batched / 32 looped slots, 8 episodes")
+    parser.add_argument("--quick", action="store_true",
+                        help="256 batched / 32 looped / 32 SciPy slots, 4 generated halls, 8 episodes")
     parser.add_argument("--slots", type=int, default=None, help="slots in the batched call (default 1024)")
     parser.add_argument("--loop-slots", type=int, default=None, help="slots optimised one at a time (default 128)")
     parser.add_argument("--episodes", type=int, default=None, help="evaluation episodes per scenario (default 32)")
+    parser.add_argument("--peer-slots", type=int, default=None, help="two-pair slots SciPy solves (default 128)")
+    parser.add_argument("--halls", type=int, default=None,
+                        help="generated halls planned both ways, besides the 11 scenarios (default 16)")
     parser.add_argument("--repeats", type=int, default=3, help="timings per optimiser measurement (best is kept)")
     args = parser.parse_args(argv)
     slots = args.slots or (256 if args.quick else 1024)
     loop_slots = min(args.loop_slots or (32 if args.quick else 128), slots)
     episodes = args.episodes or (8 if args.quick else 32)
+    peer_slots = args.peer_slots or (32 if args.quick else PEER_SLOTS)
+    halls = args.halls if args.halls is not None else (4 if args.quick else HALLS)
 
     pinning = pin_to_one_core()
     config = SystemConfig()
@@ -154,6 +236,48 @@ def main(argv: list[str] | None = None) -> int:
           f"{'PASS' if abs(quality) <= QUALITY_TARGET else 'FAIL'}")
     print(flush=True)
 
+    two = np.flatnonzero(groups["two-pair slots"])[:peer_slots]
+    hs, cs, ps = h[two], cos[two], pairing[two]
+    print(f"SciPy L-BFGS-B on {len(two)} two-pair slots, best of {args.repeats} ...", file=sys.stderr, flush=True)
+    t_ours, ours = best_time(lambda: optimize_slot_phases(config, hs, cs, ps), args.repeats)
+    start = time.perf_counter()
+    for i in range(len(two)):
+        optimize_slot_phases(config, hs[i], cs[i], ps[i])
+    t_ours_loop = time.perf_counter() - start
+    # SciPy once (it is ~1000x slower: a best of several would change nothing but the run time).
+    t_scipy, (scipy_rate, nfev) = best_time(lambda: scipy_peer(config, hs, cs, ps), 1)
+    budget = len(DEFAULT_NOISE_LEVELS) * DEFAULT_ITERATIONS
+    t_budget, (budget_rate, budget_nfev) = best_time(lambda: scipy_peer(config, hs, cs, ps, budget), 1)
+
+    print(f"## A peer: SciPy's L-BFGS-B on the same objective ({len(two)} two-pair slots)")
+    print()
+    print(f"SciPy {scipy.__version__}, `minimize(method='L-BFGS-B')` with its defaults and the analytic gradient, "
+          f"from the same {ps[0].sum():.0f} co-phasing + {DEFAULT_RESTARTS} random starts as uavris's multi-start, "
+          "best of the starts")
+    print()
+    print("| optimiser | time (s) | slots/s | speed vs SciPy | mean sum rate (bps/Hz) | "
+          "objective evaluations per slot |")
+    print("|---|---:|---:|---:|---:|---:|")
+    print(f"| SciPy L-BFGS-B, true problem, one slot and start at a time | {t_scipy:.2f} | {len(two) / t_scipy:,.1f} | "
+          f"1.0x | {scipy_rate.mean():.3f} | {nfev.mean():,.0f} |")
+    print(f"| SciPy L-BFGS-B, at most {budget} iterations per start (uavris's {len(DEFAULT_NOISE_LEVELS)} levels x "
+          f"{DEFAULT_ITERATIONS}) | {t_budget:.2f} | {len(two) / t_budget:,.1f} | {t_scipy / t_budget:,.1f}x | "
+          f"{budget_rate.mean():.3f} | {budget_nfev.mean():,.0f} |")
+    print(f"| uavris, one batched call (continuation + polish) | {t_ours:.3f} | {len(two) / t_ours:,.0f} | "
+          f"{t_scipy / t_ours:,.0f}x | {ours.sum_rate.mean():.3f} | |")
+    print(f"| uavris, one slot at a time | {t_ours_loop:.3f} | {len(two) / t_ours_loop:,.0f} | "
+          f"{t_scipy / t_ours_loop:,.0f}x | {ours.sum_rate.mean():.3f} | |")
+    print()
+    gap = ours.sum_rate - scipy_rate
+    print(f"uavris - SciPy (default iterations) per slot: mean {gap.mean():+.3f} bps/Hz "
+          f"({ours.sum_rate.mean() / scipy_rate.mean() - 1:+.2%} of SciPy's mean); uavris better by > 0.5 bps/Hz in "
+          f"{int(np.sum(gap > 0.5))} slots, worse by > 0.5 in {int(np.sum(gap < -0.5))}")
+    gap = ours.sum_rate - budget_rate
+    print(f"uavris - SciPy ({budget} iterations per start) per slot: mean {gap.mean():+.3f} bps/Hz "
+          f"({ours.sum_rate.mean() / budget_rate.mean() - 1:+.2%}); uavris better by > 0.5 bps/Hz in "
+          f"{int(np.sum(gap > 0.5))} slots, worse by > 0.5 in {int(np.sum(gap < -0.5))}")
+    print(flush=True)
+
     print("planning every named scenario ...", file=sys.stderr, flush=True)
     oracle = PlanningOracle()
     print("## Planning stage")
@@ -172,6 +296,40 @@ def main(argv: list[str] | None = None) -> int:
     print()
     print(f"planning stage: first scenario {plan_times[0]:.2f} s, slowest {max(plan_times):.2f} s "
           f"(target <= {PLAN_LIMIT_S:.0f} s per scenario) {'PASS' if max(plan_times) <= PLAN_LIMIT_S else 'FAIL'}")
+    print(flush=True)
+
+    sites = plan_sites(halls)
+    print("## The planner's cheap ranking estimate (PlanSettings(exact=False)) against the exact planner")
+    print()
+    print(f"{len(sites)} plans each way, every one from scratch (no memo); "
+          "loss = 1 - fast plan value / exact plan value")
+    print()
+    print("| where | exact (s) | fast (s) | exact: target | fast: target | exact plan value | fast plan value | loss |")
+    print("|---|---:|---:|---|---|---:|---:|---:|")
+    t_exact, t_fast, losses = 0.0, 0.0, []
+    for name, system, start_q in sites:
+        print(f"planning {name} exactly and cheaply ...", file=sys.stderr, flush=True)
+        start = time.perf_counter()
+        exact = plan_target(system, start_q, PlanSettings(exact=True))
+        te = time.perf_counter() - start
+        start = time.perf_counter()
+        fast = plan_target(system, start_q, PlanSettings(exact=False))
+        tf = time.perf_counter() - start
+        t_exact, t_fast = t_exact + te, t_fast + tf
+        losses.append(1.0 - fast.value / exact.value)
+        print(f"| {name} | {te:.2f} | {tf:.2f} | {np.round(exact.target, 2).tolist()} | "
+              f"{np.round(fast.target, 2).tolist()} | {exact.value:.3f} | {fast.value:.3f} | {losses[-1]:+.2%} |",
+              flush=True)
+    print()
+    loss_arr = np.array(losses)
+    worst = int(np.argmax(loss_arr))
+    speed = t_exact / t_fast
+    print(f"planning time, exact / fast: {t_exact:.1f} s / {t_fast:.1f} s = {speed:.1f}x; plan value loss: mean "
+          f"{loss_arr.mean():.2%}, worst {loss_arr[worst]:.2%} ({sites[worst][0]}); fast plan at or above the exact "
+          f"one in {int(np.sum(loss_arr <= 0))} of {len(sites)}")
+    ok = speed >= FAST_PLAN_SPEED_TARGET and loss_arr.max() <= FAST_PLAN_LOSS_TARGET
+    print(f"fast planner: {speed:.1f}x, worst loss {loss_arr[worst]:.2%} (target >= {FAST_PLAN_SPEED_TARGET:.0f}x and "
+          f"worst within {FAST_PLAN_LOSS_TARGET:.1%}) {'PASS' if ok else 'FAIL'}")
     print(flush=True)
 
     print("## Oracle policies")

@@ -34,8 +34,8 @@ always exits 0: it is a report, not a test.
 
 Run from the repository root::
 
-    .venv/bin/python benchmarks/warm_start.py            # ~2 minutes
-    .venv/bin/python benchmarks/warm_start.py --quick    # 2 episodes per rollout, 1 timing
+    .venv/bin/python benchmarks/warm_start.py            # ~1 minute
+    .venv/bin/python benchmarks/warm_start.py --quick    # ~20 seconds: 2 episodes per rollout, 1 timing
 """
 
 from __future__ import annotations

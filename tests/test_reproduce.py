@@ -174,7 +174,12 @@ def _table(text: str, header: str) -> list[list[str]]:
 DEPLOYMENT_PAIRS = (("dt-zero-shot", "hover-optimizer"), ("dt-zero-shot", "nearest"),
                     ("dt-ensemble", "hover-optimizer"), ("dt-ensemble", "nearest"), ("dt-zero-shot", "transfers"),
                     ("dt-zero-shot", "bc"), ("dt-zero-shot", "dt-flat"), ("dt-mixed", "bc-mixed"),
-                    ("dt-finetuned", "dt-zero-shot"))
+                    ("dt-finetuned", "dt-zero-shot"), ("dt-zero-shot-safe", "hover-optimizer"),
+                    ("dt-zero-shot-safe", "nearest"), ("dt-zero-shot-safe", "dt-zero-shot"),
+                    ("dt-ensemble-safe", "hover-optimizer"), ("dt-ensemble-safe", "nearest"),
+                    ("dt-finetuned-safe", "dt-zero-shot-safe"))
+LEARNED = ("dt-zero-shot", "dt-ensemble", "dt-finetuned", "bc", "dt-zero-shot-safe", "dt-ensemble-safe",
+           "dt-finetuned-safe", "dt-flat", "dt-mixed", "bc-mixed")
 
 
 def check_deployment_report(results: dict[str, dict], text: str) -> None:
@@ -220,7 +225,9 @@ def check_deployment_report(results: dict[str, dict], text: str) -> None:
 
     claims = [line for line in text.splitlines() if line.startswith("- deployment track: **")]
     expected = 0
-    for key, what in (("dt-zero-shot", "zero-shot DT"), ("dt-ensemble", "zero-shot DT ensemble (one controller)")):
+    for key, what in (("dt-zero-shot", "zero-shot DT"), ("dt-ensemble", "zero-shot DT ensemble (one controller)"),
+                      ("dt-zero-shot-safe", "zero-shot DT under the attitude safety layer"),
+                      ("dt-ensemble-safe", "zero-shot DT ensemble under the attitude safety layer")):
         if key not in keys:
             continue
         expected += 1
@@ -247,6 +254,15 @@ def check_deployment_report(results: dict[str, dict], text: str) -> None:
             expected += 1
             [claim] = [c for c in claims if c.startswith(f"- deployment track: {what}")]
             assert claim.endswith(f"**: {_num3(diffs[pair][:3])} bps/Hz per layout, {diffs[pair][3]}."), claim
+    # blocking: every learned row's share of slots with a device behind the RIS, its seeds averaged per layout
+    blocked = {}
+    for layout, result in results.items():
+        for key, s in result.items():
+            blocked.setdefault(key.split("@s")[0], {}).setdefault(layout, []).append(s["behind_share"])
+    share = {k: np.mean([np.mean(v) for v in by.values()]) for k, by in blocked.items() if k in LEARNED}
+    expected += 1
+    [claim] = [c for c in claims if c.startswith("- deployment track: **no learned row blocks a device")]
+    assert f"**: {'holds' if max(share.values()) <= 0.01 else 'does not hold'} (" in claim, claim
     assert len(claims) == expected >= 5
 
 

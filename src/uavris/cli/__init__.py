@@ -11,6 +11,7 @@ Commands:
   reproduce           the whole study in three tracks, with figures and report
   plot                learning curves of one or more runs (PNG and PDF)
   plan                where the UAV should go in a hall: the oracle's plan and a rate map
+  sweep               the sum rate of policies over a grid of one or two system parameters
   demo                a few simple policies side by side
 
 Lives here: dispatch to a command and the one rule for failures: any bad input (a flag
@@ -46,6 +47,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "reproduce": ("training", "reproduce_command"),
     "plot": ("evaluation", "plot_command"),
     "plan": ("evaluation", "plan_command"),
+    "sweep": ("evaluation", "sweep_command"),
     "demo": ("evaluation", "demo_command"),
 }
 

@@ -13,9 +13,10 @@ from typing import Annotated
 import tyro
 
 from uavris.agents.torch_device import Device
-from uavris.cli.parsing import Unset, output_dir, parse
+from uavris.cli.parsing import Unset, UsageError, output_dir, parse
 from uavris.config import ScenarioName, SystemConfig
 from uavris.env.wrappers import PhaseControl
+from uavris.experiments.engine.jobs import Backend
 from uavris.experiments.tools.benchmark import Cells
 from uavris.presets import COLLECT_SEED, EVAL_SEED, STUDY, Preset
 
@@ -135,6 +136,67 @@ def benchmark_command(args: list[str]) -> None:
                       system=a.system, phase_control=a.phase_control)
     print(md.read_text(), end="")
     print(f"-> {md}")
+
+
+# ------------------------------------------------------------------------------------------- sweep
+@dataclass(frozen=True)
+class SweepArgs:
+    targets: Annotated[tuple[str, ...], tyro.conf.Positional, tyro.conf.arg(metavar="POLICY")]
+    """what `uavris evaluate` takes, one or more: a reference (hover-optimizer, oracle, ...), a run or DT model
+    directory, or your own policy (MODULE:NAME, FILE.py:NAME)"""
+    param: Annotated[tuple[tuple[str, str], ...], tyro.conf.UseAppendAction,
+                     tyro.conf.arg(metavar="NAME VALUES")] = ()
+    """a system parameter and its values, once or twice: NAME a SystemConfig field (system.rician-factor,
+    system.nx, ...) or system.tx-power-dbm, system.ris-size (n x n), system.devices (generated halls);
+    VALUES start:stop:step (stop included) or v1,v2,..."""
+    scenario: Unset[ScenarioName] = None
+    """the start in the paper's hall (default fig2; a devices sweep uses each generated hall's own)"""
+    episodes: int = 16
+    """evaluation episodes per cell and policy (seeds 1,000,000 ..., the same in every cell)"""
+    halls: int = 4
+    """generated halls per cell of a devices sweep (the interval is then over halls)"""
+    out: Unset[Path] = None
+    """output directory (default runs/sweeps/NAME: the parameters and a hash of the whole configuration); a rerun
+    skips the cells it finds there"""
+    workers: int = 2
+    """parallel job processes (local backend) or CPUs of a local Ray instance"""
+    backend: Backend = "local"
+    """local (process pool) or ray (pip install 'uavris[ray]')"""
+    progress: bool = True
+    """show a progress bar"""
+    system: SystemConfig = SystemConfig()
+    """the system the grid varies"""
+
+
+def sweep_command(args: list[str]) -> None:
+    """The sum rate of policies over a grid of one or two system parameters: a CSV and a figure.
+
+    Every policy is scored on the same seeded episodes in every cell, with its 95% CI over
+    the episodes (over the halls, for a devices sweep). Cells run in parallel and are kept
+    under OUT/cells/, so a rerun skips the finished ones. Writes OUT/sweep.csv (policy,
+    parameter values, mean and CI), OUT/sweep.png and .pdf (the sum rate against the first
+    parameter, a line and band per policy and per value of the second) and OUT/sweep.json.
+    Example: uavris sweep hover-optimizer oracle --param system.tx-power-dbm -10:30:10
+    --param system.ris-size 2,4,8
+    """
+    import hashlib
+
+    from uavris.experiments.tools.sweep import parse_axis, sweep
+
+    a = parse(SweepArgs, args, "uavris sweep", sweep_command.__doc__ or "")
+    if not a.param:
+        raise UsageError("sweep: give one or two --param NAME VALUES (see uavris sweep --help)")
+    axes = [parse_axis(name, spec) for name, spec in a.param]
+    if a.out is None:
+        whole = repr((a.targets, a.param, a.scenario, a.episodes, a.halls, a.system.to_dict())).encode()
+        name = "-".join(ax.name for ax in axes) + "-" + hashlib.sha256(whole).hexdigest()[:8]
+        out = Path("runs/sweeps") / name
+    else:
+        out = a.out
+    output_dir(out)
+    paths = sweep(a.targets, axes, out, base=a.system, scenario=a.scenario, episodes=a.episodes, halls=a.halls,
+                  workers=a.workers, backend=a.backend, progress=a.progress)
+    print("wrote " + ", ".join(str(p) for p in paths))
 
 
 # -------------------------------------------------------------------------------------------- plan

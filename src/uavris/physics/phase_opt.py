@@ -315,11 +315,15 @@ def optimize_phases(channels: ArrayLike, cos_theta: ArrayLike, pairing: ArrayLik
         seed: non-negative integer seed of the random starts (see :func:`random_starts`).
         warm: ``(..., N)`` phases to start from instead (a nearby slot's solution), NaN
             where a slot has none. A multi-pair slot with a warm start is solved from it
-            alone, at the true noise (no continuation), ``warm_iterations`` L-BFGS
-            iterations and the polish; the co-phasing starts are valued beside it, so the
-            result is never below the best single-pair co-phasing. Other slots: the full
-            method. (Which slots may start warm: :mod:`uavris.env.phase_tracking`.)
-        warm_iterations: L-BFGS iterations of a warm start.
+            alone, over ``warm_levels`` with ``warm_iterations`` L-BFGS iterations each and
+            the polish; the co-phasing starts are valued beside it, so the result is never
+            below the best single-pair co-phasing. Other slots: the full method. An option,
+            not a default: on the study's own rollouts even the previous slot's full solution
+            as the warm start loses 1.8-4.6% of the sum rate (the NLoS draw of every slot
+            moves the nulls), measured by ``benchmarks/warm_start.py``.
+        warm_iterations: L-BFGS iterations per level of a warm start.
+        warm_levels: the continuation of a warm start (multiples of ``sigma^2``; default the
+            true problem only).
 
     Returns:
         :class:`PhaseSolution` with ``phases`` ``(..., N)`` in [0, 2 pi) and ``sum_rate`` ``(...)``.
@@ -357,11 +361,11 @@ def optimize_phases(channels: ArrayLike, cos_theta: ArrayLike, pairing: ArrayLik
             has_warm = np.all(np.isfinite(w), axis=1)
         out_phi = np.empty((multi.size, n))
         out_rate = np.empty(multi.size)
-        for chosen, levels, its in ((~has_warm, noise_levels, iterations), (has_warm, warm_levels, warm_iterations)):
-            sel = np.flatnonzero(chosen)
+        for warm_path, levels, its in ((False, noise_levels, iterations), (True, warm_levels, warm_iterations)):
+            sel = np.flatnonzero(has_warm == warm_path)
             if not sel.size:
                 continue
-            if levels is noise_levels:  # the full method: co-phasing and random starts, all optimised
+            if not warm_path:  # the full method: co-phasing and random starts, all optimised
                 phi0 = np.concatenate([starts[multi[sel]], random_starts(h[multi[sel]], seed, restarts)], axis=1)
                 n_opt = phi0.shape[1]
             else:  # the warm start optimised, the co-phasing starts valued beside it

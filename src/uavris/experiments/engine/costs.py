@@ -30,6 +30,7 @@ SB3_STEP_S: dict[str, dict[str, float]] = {
 SLOT_S = {"agent": 0.15e-3, "optimizer": 0.45e-3}
 IMITATION_SLOT_S = 0.45e-3  # a DAgger slot: the rollout, the oracle's label and its share of the fitting
 PLAN_S = 1.05  # the planning oracle's plan of one hall (the screening grid and the valued candidates)
+PLAN_FAST_S = PLAN_S / 7.7  # the same with the planner's cheap ranking (PlanSettings(exact=False), measured 7.7-11x)
 # A DT gradient step at the DT paper's size: batch 64 windows of 20 slots, width 128, 3 layers;
 # other sizes scale with the slots read times width^2 times depth (the matrix products).
 DT_STEP_S = 0.17
@@ -63,10 +64,11 @@ def dataset_cost(episodes: int, horizon: int, phase_control: str) -> float:
     return episodes * horizon * SLOT_S[phase_control]
 
 
-def demonstration_cost(halls: int, episodes_per_hall: int, horizon: int) -> float:
-    """The planning oracle's demonstrations in ``halls`` halls: a plan each, and the episodes
-    (all behaviours of a hall) with the optimiser's phases."""
-    return halls * (PLAN_S + episodes_per_hall * horizon * SLOT_S["optimizer"])
+def demonstration_cost(halls: int, episodes_per_hall: int, horizon: int, exact_plans: bool = False) -> float:
+    """The planning oracle's demonstrations in ``halls`` halls: a plan each (the reference
+    planner's or its cheap ranking's), and the episodes (all behaviours of a hall) with the
+    optimiser's phases."""
+    return halls * ((PLAN_S if exact_plans else PLAN_FAST_S) + episodes_per_hall * horizon * SLOT_S["optimizer"])
 
 
 def pretrain_cost(cfg: Any) -> float:

@@ -231,7 +231,7 @@ class TrackStages:
                                                                                          DEMONSTRATION_CHUNK)]
 
     def _demonstrations_stage(self, name: str, cfg: DemonstrationConfig) -> Stage:
-        costs = tuple(demonstration_cost(n, cfg.episodes * len(cfg.behaviours), self.horizon)
+        costs = tuple(demonstration_cost(n, cfg.episodes * len(cfg.behaviours), self.horizon, cfg.exact_plans)
                       for _, n in self._chunks(cfg))
         return Stage(self.t(name), cfg.to_dict(), partial(self._run_demonstrations, name, cfg, costs), (), costs)
 

@@ -22,6 +22,11 @@ Quality (``DemonstrationConfig.quality``):
   the start, and the oracle's motion with Gaussian noise (``noise`` on every motion entry),
   each with its true returns: the dataset on which return conditioning can matter.
 
+Plans: the cheap ranking of the planner (``PlanSettings(exact=False)``) chooses each hall's
+target, 11x cheaper than the reference planner for plans worth 0.23% less on average (1.2%
+in the worst of 27 halls and scenarios measured): a demonstration is training data, not a
+reference, and the plan was most of a demonstration's cost (``exact_plans`` restores it).
+
 Episode seeds: hall ``j``'s episodes are ``seed + j * episodes + i`` (``seed`` the collection
 base, never an evaluation seed), the same for every behaviour of a hall.
 """
@@ -38,6 +43,7 @@ from numpy.typing import NDArray
 
 from uavris.agents.dt.dataset import DATASET_NAMESPACE, check_dataset_target, write_dataset
 from uavris.agents.dt.trajectories import Trajectory, record_episodes
+from uavris.agents.oracle.planner import PlanSettings
 from uavris.agents.oracle.policy import PlannedFlight, PlanningOracle
 from uavris.agents.policy import Privileged
 from uavris.config import DictConfig, SystemConfig
@@ -61,6 +67,7 @@ class DemonstrationConfig(DictConfig):
     episodes: int = 2  # episodes per hall (and per behaviour)
     quality: Quality = "oracle"  # oracle, or mixed (oracle, another hall's plan, hovering, noisy oracle)
     noise: float = 0.3  # std of the noise on the noisy oracle's motion entries (in [-1, 1] units)
+    exact_plans: bool = False  # the reference planner; False: its cheap ranking (PlanSettings.exact), 11x cheaper
     layout_seed: int = 0  # seed of the layout generator
     seed: int = COLLECT_SEED  # first episode seed
     system: SystemConfig = dataclasses.field(default_factory=lambda: SystemConfig(observe_devices=True))
@@ -104,7 +111,7 @@ def demonstrate(cfg: DemonstrationConfig, first: int = 0, count: int | None = No
     """The demonstrations of halls ``first .. first + count - 1`` (module docstring), hall by
     hall, behaviour by behaviour; ``on_hall()`` is called after each hall (progress)."""
     layouts = cfg.layouts(first, count)
-    oracle = PlanningOracle()
+    oracle = PlanningOracle(settings=PlanSettings(exact=cfg.exact_plans))
     resolved = [layout.resolve(cfg.system) for layout in layouts]
     out: list[Trajectory] = []
     for i, (system, where) in enumerate(resolved):

@@ -1,0 +1,239 @@
+"""``uavris sweep``: the sum rate of policies over a grid of one or two system parameters.
+
+Lives here: :class:`Axis` and :func:`parse_axis` (what ``--param NAME VALUES`` means),
+:func:`sweep` (every cell and policy as a job of the engine, resumable, then the CSV and the
+figure) and :func:`sweep_cell` (one job). Not here: what a policy name names
+(:mod:`.targets`), the evaluation (:func:`uavris.agents.evaluation.evaluate`), the job runner
+(:mod:`uavris.experiments.engine.jobs`).
+
+The figures of every RIS paper: the sum rate against the transmit power, the number of
+elements, the number of users, the Rician factor. A parameter is any numeric field of
+:class:`~uavris.config.SystemConfig` (``rician_factor``, ``pathloss_exponent``,
+``noise_dbm``, ``safety_distance``, ``nx``, ...), or one of three a paper states otherwise:
+
+- ``tx_power_dbm``: the devices' transmit power in dBm (``tx_power_w = 10^(dBm/10) / 1000``);
+- ``ris_size``: an ``n x n`` RIS (``nx = ny = n``, ``N = n^2`` elements);
+- ``devices``: ``K`` devices, each cell over ``halls`` generated halls of K devices
+  (:class:`~uavris.layouts.LayoutGenerator`, unseen split, layout seed 0), each from its own
+  start; the interval is then over halls (each hall one sample), not over episodes.
+
+Every policy is scored on the same seeded episodes in every cell (``EVAL_SEED ..``): the
+curves differ by the parameter and the policy, never by the draws. A cell's result is a
+JSON file under ``OUT/cells/`` named by a hash of everything that determines it (a rerun
+skips the cells it finds), and ``OUT/sweep.csv`` / ``sweep.png`` / ``sweep.pdf`` are written
+from all of them at the end.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Sequence
+
+import numpy as np
+
+from uavris.config import SystemConfig, get_scenario
+from uavris.errors import ConfigError, UavrisError
+from uavris.experiments.display.plots import plt, save_figure
+from uavris.experiments.display.progress import progress_bar
+from uavris.experiments.engine.jobs import Job, run_jobs
+from uavris.io import read_json, to_plain, write_csv, write_json
+from uavris.presets import EVAL_SEED
+from uavris.stats import over_units, t_interval
+
+VIRTUAL = {"tx_power_dbm": "transmit power (dBm)", "ris_size": "RIS size n (n x n elements)",
+           "devices": "devices K (generated halls)"}
+MAX_CELLS = 400  # a typo's bound (a range with a tiny step): beyond it a sweep takes days
+COLUMNS = ("policy", "x", "y", "mean", "ci_low", "ci_high", "samples", "unit")
+
+
+@dataclass(frozen=True)
+class Axis:
+    """One parameter of a sweep and its values."""
+
+    name: str  # a SystemConfig field or a key of VIRTUAL
+    values: tuple[float, ...]
+
+    @property
+    def label(self) -> str:
+        return VIRTUAL.get(self.name, self.name.replace("_", " "))
+
+    @property
+    def symbol(self) -> str:
+        """A short name for legends: P (dBm), n, K or the field."""
+        return {"tx_power_dbm": "P", "ris_size": "n", "devices": "K"}.get(self.name, self.name)
+
+    def apply(self, system: SystemConfig, value: float) -> SystemConfig:
+        """``system`` at this parameter's ``value`` (``devices`` is applied by the cell)."""
+        if self.name == "tx_power_dbm":
+            return system.replace(tx_power_w=10.0 ** (value / 10.0) / 1000.0)
+        if self.name == "ris_size":
+            return system.replace(nx=int(value), ny=int(value))
+        if self.name == "devices":
+            return system
+        whole = self.name in ("nx", "ny", "horizon", "max_active_pairs")
+        return system.replace(**{self.name: int(value) if whole else float(value)})
+
+
+def parse_axis(name: str, spec: str) -> Axis:
+    """``--param NAME VALUES``: ``NAME`` a parameter (``system.`` prefix and dashes allowed),
+    ``VALUES`` ``start:stop:step`` (stop included) or ``v1,v2,...``; one line naming the problem."""
+    key = name.removeprefix("system.").replace("-", "_")
+    numeric = {f for f, v in vars(SystemConfig()).items() if isinstance(v, (int, float)) and not isinstance(v, bool)}
+    numeric |= {"max_active_pairs", "front_margin_deg"}  # numbers whose default is None
+    if key not in numeric and key not in VIRTUAL:
+        raise ConfigError(f"--param {name}: not a numeric system parameter; choose one of "
+                          f"{', '.join(sorted(numeric | set(VIRTUAL)))}")
+    try:
+        if ":" in spec:
+            start, stop, step = (float(x) for x in spec.split(":"))
+            if not step > 0 or stop < start:
+                raise ValueError
+            count = int(math.floor((stop - start) / step + 1e-9)) + 1
+            values = tuple(float(start + i * step) for i in range(count))
+        else:
+            values = tuple(float(x) for x in spec.split(","))
+    except ValueError:
+        raise ConfigError(f"--param {name} {spec}: values are start:stop:step (step > 0, stop >= start) or "
+                          "v1,v2,...") from None
+    if not values or len(values) > MAX_CELLS or not all(math.isfinite(v) for v in values):
+        raise ConfigError(f"--param {name} {spec}: between 1 and {MAX_CELLS} finite values, got {len(values)}")
+    if key in ("devices", "ris_size", "nx", "ny") and not all(v == int(v) and v >= (2 if key == "devices" else 1)
+                                                            for v in values):
+        raise ConfigError(f"--param {name} {spec}: whole numbers >= {2 if key == 'devices' else 1}")
+    return Axis(key, values)
+
+
+def cell_systems(base: SystemConfig, axes: Sequence[Axis], point: Sequence[float], halls: int,
+                 scenario: str | None) -> list[tuple[SystemConfig, Any]]:
+    """The (system, start) pairs a cell is evaluated in: one, or ``halls`` generated halls of
+    the cell's number of devices (``devices`` axis); checked before any job runs."""
+    from uavris.layouts import LayoutGenerator
+
+    system = base
+    for axis, value in zip(axes, point):
+        system = axis.apply(system, value)
+    devices = next((int(v) for a, v in zip(axes, point) if a.name == "devices"), None)
+    if devices is None:
+        where = get_scenario(scenario or "fig2")
+        where.validate_for(system)
+        return [(system, where)]
+    gen = LayoutGenerator(devices=devices, seed=0)
+    return [layout.resolve(system) for layout in gen.layouts("unseen", halls, system)]
+
+
+def _key(payload: dict[str, Any]) -> str:
+    return hashlib.sha256(json.dumps(to_plain(payload), sort_keys=True).encode()).hexdigest()[:12]
+
+
+def sweep_cell(target: str, system: dict[str, Any], scenario: dict[str, Any], episodes: int, out: str) -> None:
+    """A job: ``target`` in one hall of one cell on episodes ``EVAL_SEED ..``; its mean and its
+    per-episode rates to the JSON file ``out``."""
+    from uavris.agents.evaluation import evaluate
+    from uavris.agents.policy import check_policy_fits
+    from uavris.config import Scenario
+    from uavris.experiments.tools.targets import resolve_target
+
+    cfg = SystemConfig.from_stored(system)
+    loaded = resolve_target(target).load(cfg)
+    check_policy_fits(loaded.policy, cfg, target)
+    res = evaluate(loaded.policy, cfg, Scenario(scenario["name"], tuple(scenario["start"])), episodes, EVAL_SEED)
+    write_json(Path(out), {"target": target, "mean": float(res.avg_sum_rate.mean()),
+                           "rates": res.avg_sum_rate.tolist()})
+
+
+def sweep(targets: Sequence[str], axes: Sequence[Axis], out: Path, *, base: SystemConfig | None = None,
+          scenario: str | None = None, episodes: int = 16, halls: int = 4, workers: int = 1,
+          backend: str = "local", progress: bool = False) -> list[Path]:
+    """Every ``target`` in every cell of the grid of ``axes`` (one or two), written to ``out``
+    (module docstring); returns the paths of the CSV and the figures."""
+    from uavris.agents.evaluation import check_episodes
+    from uavris.experiments.tools.targets import resolve_target
+
+    if not 1 <= len(axes) <= 2 or len({a.name for a in axes}) != len(axes):
+        raise ConfigError("a sweep takes one or two different --param")
+    if not targets:
+        raise ConfigError("name at least one policy to sweep (e.g. hover-optimizer oracle)")
+    check_episodes(episodes, EVAL_SEED)
+    if not 2 <= halls <= 1000:
+        raise ConfigError(f"--halls must be in [2, 1000] (an interval over halls needs two), got {halls}")
+    base = base or SystemConfig()
+    for t in targets:
+        resolve_target(t)  # a name that names nothing: one line before anything runs
+    grid = [(x,) for x in axes[0].values] if len(axes) == 1 else [(x, y) for x in axes[0].values
+                                                                   for y in axes[1].values]
+    if len(grid) > MAX_CELLS:
+        raise ConfigError(f"the grid has {len(grid)} cells; at most {MAX_CELLS}")
+    places = {point: cell_systems(base, axes, point, halls, scenario) for point in grid}  # every cell checked first
+    jobs, files = [], {}
+    for point, where in places.items():
+        for target in targets:
+            for i, (system, start) in enumerate(where):
+                payload = {"target": target, "system": system.to_dict(), "start": list(start.start),
+                           "episodes": episodes, "seed": EVAL_SEED}
+                path = Path(out) / "cells" / f"{_key(payload)}.json"
+                files[(target, point, i)] = path
+                if not path.exists():
+                    jobs.append(Job(f"{target} {point} {i}", sweep_cell,
+                                    (target, system.to_dict(), {"name": start.name, "start": list(start.start)},
+                                     episodes, str(path)), Path(out) / "logs" / f"{path.stem}.log"))
+    with progress_bar(len(jobs), "sweep", "cell", progress) as bar:
+        results = run_jobs(jobs, workers, lambda r: bar.update(1), backend=backend)
+    failed = [r for r in results if not r.ok]
+    if failed:
+        raise UavrisError(f"{len(failed)} of {len(jobs)} sweep cells failed; first: {failed[0].name}: "
+                          f"{failed[0].error} (log {failed[0].log})")
+    rows = _rows(targets, axes, places, files)
+    write_csv(Path(out) / "sweep.csv", COLUMNS, rows)
+    write_json(Path(out) / "sweep.json", {"targets": list(targets), "axes": [to_plain(a) for a in axes],
+                                          "episodes": episodes, "seed": EVAL_SEED, "halls": halls,
+                                          "scenario": scenario, "system": base.to_dict()})
+    return [Path(out) / "sweep.csv", *sweep_figure(rows, axes, Path(out) / "sweep")]
+
+
+def _rows(targets: Sequence[str], axes: Sequence[Axis], places: dict[tuple, list], files: dict) -> list[dict]:
+    """One row per (policy, cell): the mean with its Student-t 95% interval over the episodes,
+    or over the halls where the cell is over generated halls."""
+    rows = []
+    for target in targets:
+        for point, where in places.items():
+            cells = [read_json(files[(target, point, i)]) for i in range(len(where))]
+            if len(cells) == 1:
+                rates = np.asarray(cells[0]["rates"])
+                low, high = t_interval(rates)
+                mean, samples, unit = float(rates.mean()), len(rates), "episodes"
+            else:
+                s = over_units([c["mean"] for c in cells])
+                mean, low, high, samples, unit = s["mean"], s["ci_low"], s["ci_high"], s["n"], "halls"
+            rows.append({"policy": target, "x": point[0], "y": point[1] if len(point) > 1 else "",
+                         "mean": mean, "ci_low": low, "ci_high": high, "samples": samples, "unit": unit})
+    return rows
+
+
+def sweep_figure(rows: list[dict], axes: Sequence[Axis], stem: Path) -> list[Path]:
+    """The sum rate against the first parameter, a line with its 95% band per policy (and per
+    value of the second parameter, by line style), on the parameter's natural axis."""
+    fig, ax = plt.subplots(figsize=(4.8, 3.6))
+    styles = ("-", "--", ":", "-.")
+    ys = sorted({r["y"] for r in rows}, key=lambda v: (v == "", v))
+    for i, target in enumerate(dict.fromkeys(r["policy"] for r in rows)):
+        color = f"C{i}"
+        for j, y in enumerate(ys):
+            part = sorted((r for r in rows if r["policy"] == target and r["y"] == y), key=lambda r: r["x"])
+            x = [r["x"] for r in part]
+            label = target + (f", {axes[1].symbol} = {y:g}" if y != "" else "")
+            ax.plot(x, [r["mean"] for r in part], styles[j % len(styles)], color=color, marker="o", ms=3,
+                    lw=1.3, label=label)
+            ax.fill_between(x, [r["ci_low"] for r in part], [r["ci_high"] for r in part], color=color, alpha=0.15,
+                            lw=0)
+    if axes[0].name in ("ris_size", "nx", "ny") and min(r["x"] for r in rows) > 0:
+        ax.set_xscale("log", base=2)
+    ax.set_xlabel(axes[0].label)
+    ax.set_ylabel("average sum rate (bps/Hz)")
+    ax.set_title("mean and 95% CI (over " + rows[0]["unit"] + ")"
+                 + (f"; {axes[1].symbol}: {axes[1].label}" if len(axes) > 1 else ""), fontsize=8)
+    ax.legend(fontsize=6, frameon=False, loc="upper left", bbox_to_anchor=(1.0, 1.0))
+    return save_figure(fig, stem)
