@@ -49,9 +49,9 @@ def permute_devices(states: np.ndarray, perm: tuple[int, ...]) -> np.ndarray:
     return out
 
 
-def model(encoder: str, seed: int = 0, attention: str = "window") -> DecisionTransformer:
+def model(encoder: str, seed: int = 0, attention: str = "window", ris_frame: bool = False) -> DecisionTransformer:
     torch.manual_seed(seed)
-    sized = dict(devices=K, elements=N) if encoder == "devices" else {}
+    sized = dict(devices=K, elements=N, ris_frame=ris_frame) if encoder == "devices" else {}
     cfg = DTConfig(SEEN.observation_dim, 6, context=4, width=32, depth=2, heads=2, dropout=0.0,
                    max_timestep=SEEN.horizon, attention=attention, state_encoder=encoder, **sized)
     rng = np.random.default_rng(seed)  # normalisation that differs per entry, pooled for the device encoder
@@ -76,6 +76,45 @@ def test_permuting_a_halls_devices_leaves_the_device_encoders_actions_bit_identi
     a, b = actions(m, states), actions(m, permute_devices(states, perm))
     assert torch.equal(a, b)
     assert a.abs().max() > 1e-3  # and the actions are not trivially zero
+
+
+@pytest.mark.parametrize("perm", PERMUTATIONS)
+def test_with_the_ris_frame_permuting_the_devices_changes_no_bit_either(perm):
+    states = tilted(hall_states()[:, :4])
+    m = model("devices", ris_frame=True)
+    a, b = actions(m, states), actions(m, permute_devices(states, perm))
+    assert torch.equal(a, b) and a.abs().max() > 1e-3
+    # and the elevations are read: the same hall level gives other actions
+    assert (a - actions(m, hall_states()[:, :4])).abs().max() > 1e-5
+
+
+def tilted(states: np.ndarray) -> np.ndarray:
+    """The same observations with the RIS tilted by up to 8 degrees in every angle."""
+    lay = observation_layout(HALL)
+    att = np.radians(np.random.default_rng(1).uniform(-8, 8, states.shape[:-1] + (3,)))
+    out = states.copy()
+    out[..., lay["attitude_sin"]], out[..., lay["attitude_cos"]] = np.sin(att), np.cos(att)
+    return out
+
+
+def test_the_ris_frame_elevations_worked_by_hand():
+    """Pitch p tilts the normal to (sin p, 0, cos p) (yaw = roll = 0, eq. 10). A device 20 m ahead
+    (+x) and 1 m below the UAV sits at elevation atan(1/20) = 2.86 degrees below a level RIS; with
+    p = 5 degrees it is 2.14 degrees behind the plane: cos(theta) = sin(2.86 - 5 degrees). One 20 m
+    behind (-x), 1 m below, is then 7.86 degrees in front; one 20 m to a side (+-y) keeps its
+    angle to the tilt axis: cos(theta) = cos(p) sin(2.86 degrees)."""
+    enc = model("devices", ris_frame=True).embed_state
+    lay = observation_layout(HALL)
+    raw = torch.zeros(SEEN.observation_dim)
+    p = np.radians(5.0)
+    raw[lay["attitude_sin"]] = torch.tensor([0.0, np.sin(p), 0.0], dtype=torch.float32)
+    raw[lay["attitude_cos"]] = torch.tensor([1.0, np.cos(p), 1.0], dtype=torch.float32)
+    offsets = np.array([[20.0, 0, -1.0], [-20.0, 0, -1.0], [0, 20.0, -1.0], [0, -20.0, -1.0]]) / 20.0
+    raw[lay["devices"]] = torch.tensor(offsets.ravel(), dtype=torch.float32)
+    elev = np.degrees(np.arctan(1 / 20))
+    side = np.cos(p) * np.sin(np.radians(elev))
+    want = [np.sin(np.radians(elev - 5.0)), np.sin(np.radians(elev + 5.0)), side, side]
+    np.testing.assert_allclose(enc.elevations(raw).numpy(), want, atol=1e-6)
 
 
 def test_the_flat_encoder_is_not_order_free():

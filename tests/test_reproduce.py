@@ -177,9 +177,9 @@ DEPLOYMENT_PAIRS = (("dt-zero-shot", "hover-optimizer"), ("dt-zero-shot", "neare
                     ("dt-finetuned", "dt-zero-shot"), ("dt-zero-shot-safe", "hover-optimizer"),
                     ("dt-zero-shot-safe", "nearest"), ("dt-zero-shot-safe", "dt-zero-shot"),
                     ("dt-ensemble-safe", "hover-optimizer"), ("dt-ensemble-safe", "nearest"),
-                    ("dt-finetuned-safe", "dt-zero-shot-safe"))
+                    ("dt-finetuned-safe", "dt-zero-shot-safe"), ("dt-zero-shot-safe", "dt-level"))
 LEARNED = ("dt-zero-shot", "dt-ensemble", "dt-finetuned", "bc", "dt-zero-shot-safe", "dt-ensemble-safe",
-           "dt-finetuned-safe", "dt-flat", "dt-mixed", "bc-mixed")
+           "dt-finetuned-safe", "dt-level", "dt-ensemble-level", "dt-flat", "dt-mixed", "bc-mixed")
 
 
 def check_deployment_report(results: dict[str, dict], text: str) -> None:

@@ -234,3 +234,29 @@ def test_a_tilted_ris_whose_device_drops_behind_turns_back_towards_level():
     att = np.radians([0.0, 6.0, 0.0])  # the device at 1 - 6 = -5 degrees: behind
     executed = ph.clear_attitude(att, np.radians([0.0, 10.0, 0.0]), q, device, np.radians(0.5), STEP)
     assert np.degrees(executed)[1] == pytest.approx(-5.5, abs=1e-5)  # back to 0.5 degrees: the margin
+
+
+def test_level_attitude_holds_the_attitude_and_keeps_the_policys_own_actions_in_its_memory():
+    from uavris.agents.policy import LevelAttitude
+    from uavris.env.rollout import rollout
+
+    class Tilter:
+        """Turns every angle by a full step every slot, and remembers what it was told it did."""
+
+        phase_control = "optimizer"
+
+        def begin(self, n):
+            self.seen = []
+
+        def __call__(self, obs):
+            return np.tile(np.array([0.1, 0.0, 0.0, 1.0, -1.0, 1.0], dtype=np.float32), (obs.shape[0], 1))
+
+        def record(self, actions, rewards):
+            self.seen.append(actions.copy())
+
+    inner = Tilter()
+    atts = []
+    rollout(LevelAttitude(inner), SystemConfig(horizon=5), "fig2", [0, 1],
+            on_slot=lambda sim, obs, executed, alive: atts.append(sim.att.copy()))
+    assert np.all(np.stack(atts) == 0.0)  # never turned
+    assert all(np.array_equal(a[:, 3:], np.tile([1.0, -1.0, 1.0], (2, 1))) for a in inner.seen)  # its own choice

@@ -92,6 +92,32 @@ class Constant:
     def __call__(self, obs: NDArray[np.float32]) -> NDArray[np.float32]:
         return np.broadcast_to(self.action, (obs.shape[0], self.action.size)).copy()
 
+class LevelAttitude:
+    """Another policy with its attitude increments replaced by zero: the UAV keeps the attitude it
+    starts with (level), whatever the policy turns. An episodic policy still reads its own
+    actions in its memory (the Decision Transformer's context keeps what it chose, not what
+    was executed), so this changes what happens, not what the policy thinks it did."""
+
+    def __init__(self, policy: object) -> None:
+        self.policy = policy
+        for name in ("phase_control", "observation_dim"):
+            if hasattr(policy, name):
+                setattr(self, name, getattr(policy, name))
+        self._chosen: NDArray[np.float32] | None = None
+
+    def begin(self, n: int) -> None:
+        if callable(getattr(self.policy, "begin", None)):
+            self.policy.begin(n)  # type: ignore[attr-defined]
+
+    def __call__(self, obs: NDArray[np.float32]) -> NDArray[np.float32]:
+        self._chosen = np.asarray(self.policy(obs), dtype=np.float32)  # type: ignore[operator]
+        level = self._chosen.copy()
+        level[:, -3:] = 0.0  # yaw, pitch and roll increments: the last three entries in both layouts
+        return level
+
+    def record(self, actions: NDArray[np.float32], rewards: NDArray[np.float64]) -> None:
+        if callable(getattr(self.policy, "record", None)):
+            self.policy.record(np.clip(self._chosen, -1.0, 1.0), rewards)  # type: ignore[attr-defined]
 
 
 def check_policy_fits(policy: object, system: SystemConfig, what: str = "the policy") -> None:

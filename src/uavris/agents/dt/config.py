@@ -37,6 +37,7 @@ class DTConfig(DictConfig):
     state_encoder: StateEncoder = "flat"  # "flat" (DT paper) or "devices" (a hall as a set of devices, .encoders)
     devices: int = 0  # the system's devices K (the device encoder's; 0 for flat)
     elements: int = 0  # the system's RIS elements N (the device encoder's; 0 for flat)
+    ris_frame: bool = False  # the device encoder also reads each device's elevation above the RIS plane
 
     def __post_init__(self) -> None:
         for name in ("state_dim", "act_dim", "context", "width", "depth", "heads", "max_timestep", "mlp_ratio"):
@@ -53,6 +54,8 @@ class DTConfig(DictConfig):
             raise ConfigError(f"DTConfig.condition_on_return must be true or false, got {self.condition_on_return!r}")
         if self.state_encoder not in STATE_ENCODERS:
             raise ConfigError(f"DTConfig.state_encoder must be one of {STATE_ENCODERS}, got {self.state_encoder!r}")
+        if self.ris_frame and self.state_encoder != "devices":
+            raise ConfigError("DTConfig.ris_frame needs state_encoder 'devices' (it is a feature of each device)")
         if self.state_encoder == "devices":
             device_layout(self.state_dim, self.devices, self.elements)
 

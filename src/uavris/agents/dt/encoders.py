@@ -45,6 +45,7 @@ StateEncoder = Literal["flat", "devices"]  # the DT's state encoder (--state-enc
 STATE_ENCODERS: tuple[str, ...] = get_args(StateEncoder)
 UAV_SLICES = ("position", "velocity", "attitude_sin", "attitude_cos", "energy_remaining", "time_fraction")
 PER_DEVICE_SLICES = ("channel_real", "channel_imag", "devices")
+RIS_FRAME_SCALE = 10.0  # the elevation feature's scale: a device 3 degrees in front reads 0.52, at the plane 0
 
 
 def device_layout(state_dim: int, devices: int, elements: int) -> dict[str, slice]:
@@ -109,12 +110,13 @@ class DeviceSetEncoder(nn.Module):
     before the devices are pooled.
     """
 
-    def __init__(self, state_dim: int, width: int, devices: int, elements: int) -> None:
+    def __init__(self, state_dim: int, width: int, devices: int, elements: int, ris_frame: bool = False) -> None:
         super().__init__()
-        self.k, self.n = devices, elements
+        self.k, self.n, self.ris_frame = devices, elements, ris_frame
         self.layout = device_layout(state_dim, devices, elements)
         self.uav_index = torch.cat([torch.arange(self.layout[s].start, self.layout[s].stop) for s in UAV_SLICES])
-        per_device = 3 + 2 * elements + 2 + 3 + 2 * elements
+        own = 3 + 2 * elements + (1 if ris_frame else 0)
+        per_device = own + 2 + own
         self.pair_net = nn.Sequential(nn.Linear(2 * per_device, width), nn.ReLU(), nn.Linear(width, width), nn.ReLU())
         self.device_net = nn.Sequential(nn.Linear(per_device + 2 * width, width), nn.ReLU(), nn.Linear(width, width),
                                         nn.ReLU())
@@ -130,8 +132,10 @@ class DeviceSetEncoder(nn.Module):
         pairing = raw[..., lay["pairing"]].reshape(*lead, k, k)  # P[tx, rx]
         partner = pairing + pairing.transpose(-1, -2)  # a device has at most one partner: one 1 per row
         own = torch.cat([offset, channel], dim=-1)
+        if self.ris_frame:
+            own = torch.cat([own, RIS_FRAME_SCALE * self.elevations(raw).unsqueeze(-1)], dim=-1)
         role = torch.stack([pairing.sum(-1), pairing.sum(-2)], dim=-1)
-        return torch.cat([offset, channel, role, partner @ own], dim=-1)
+        return torch.cat([own, role, partner @ own], dim=-1)
 
     def pair_features(self, f: torch.Tensor) -> torch.Tensor:
         """``(..., K, K, W)``: the pair network on every ordered pair ``[f_k, f_j]``. Its first
@@ -145,6 +149,19 @@ class DeviceSetEncoder(nn.Module):
         hidden = (mine.unsqueeze(-2) + theirs.unsqueeze(-3)).relu_()  # (..., K, K, W), [k, j]; in place: a temporary
         return second(hidden).relu_()
 
+    def elevations(self, raw: torch.Tensor) -> torch.Tensor:
+        """``(..., K)``: each device's ``cos(theta)`` at the RIS, the sine of its elevation above
+        the RIS plane (negative: behind it, docs/model.md section 3), from the raw observation:
+        the device's offset from the UAV and the attitude's sines and cosines give the plane's
+        normal ``n = R(zeta) e_z`` (eq. 10) and ``cos(theta_k) = <q_U - q_k, n> / |q_U - q_k|``."""
+        lay, k = self.layout, self.k
+        offset = raw[..., lay["devices"]].reshape(*raw.shape[:-1], k, 3)  # (q_k - q_U) / scale
+        s, c = raw[..., lay["attitude_sin"]], raw[..., lay["attitude_cos"]]  # yaw, pitch, roll
+        sy, sp, sr, cy, cp, cr = s[..., 0], s[..., 1], s[..., 2], c[..., 0], c[..., 1], c[..., 2]
+        normal = torch.stack([cy * sp * cr + sy * sr, sy * sp * cr - cy * sr, cp * cr], dim=-1)  # (..., 3)
+        along = (offset * normal.unsqueeze(-2)).sum(dim=-1)
+        return -along / offset.norm(dim=-1).clamp_min(1e-9)
+
     def forward(self, raw: torch.Tensor, normalised: torch.Tensor) -> torch.Tensor:
         f = self.device_features(raw, normalised)  # (..., K, F)
         k = self.k
@@ -154,12 +171,13 @@ class DeviceSetEncoder(nn.Module):
         return self.combine(torch.cat([_pool(per_device, k), uav], dim=-1))
 
 
-def make_state_encoder(kind: str, state_dim: int, width: int, devices: int = 0, elements: int = 0) -> nn.Module:
+def make_state_encoder(kind: str, state_dim: int, width: int, devices: int = 0, elements: int = 0,
+                       ris_frame: bool = False) -> nn.Module:
     """The state encoder named ``kind`` (:data:`STATE_ENCODERS`)."""
     if kind == "flat":
         return FlatEncoder(state_dim, width)
     if kind == "devices":
-        return DeviceSetEncoder(state_dim, width, devices, elements)
+        return DeviceSetEncoder(state_dim, width, devices, elements, ris_frame)
     raise ConfigError(f"unknown state encoder {kind!r}; choose one of {', '.join(STATE_ENCODERS)}")
 
 

@@ -122,7 +122,8 @@ class DecisionTransformer(nn.Module):
         self.cfg = cfg
         w = cfg.width
         self.embed_return = nn.Linear(1, w)
-        self.embed_state = make_state_encoder(cfg.state_encoder, cfg.state_dim, w, cfg.devices, cfg.elements)
+        self.embed_state = make_state_encoder(cfg.state_encoder, cfg.state_dim, w, cfg.devices, cfg.elements,
+                                              cfg.ris_frame)
         self.embed_action = nn.Linear(cfg.act_dim, w)
         self.embed_timestep = nn.Embedding(cfg.max_timestep, w)
         self.embed_norm = nn.LayerNorm(w)

@@ -284,7 +284,8 @@ class TrackStages:
     def _evaluate_stage(self, where: Deployment, inputs: list[str]) -> Stage:
         sources = transfer_sources(self.track, where, self.train)
         keys = [*inputs, f"finetune-{where.name}"]
-        policies = evaluated_policies(self.track, where, sources, {k: Path() for k in keys}, self.train)
+        policies = evaluated_policies(self.track, where, sources, {k: Path() for k in keys}, self.train,
+                                      self.rc.ablation)
         cost = evaluate_cost(len(policies), self.rc.eval_episodes, self.horizon, self.control)
         config = {"episodes": self.rc.eval_episodes, "seed": EVAL_SEED, "track": self.track.name,
                   "references": REFERENCE_ROWS, "transfer_from": [s for s, _ in sources],
@@ -294,7 +295,8 @@ class TrackStages:
 
     def _run_evaluate(self, where: Deployment, sources: list[tuple[str, float]], keys: list[str], cost: float,
                       d: Path, deps: dict[str, Path]) -> dict[str, Any]:
-        policies = evaluated_policies(self.track, where, sources, {k: deps[self.t(k)] for k in keys}, self.train)
+        policies = evaluated_policies(self.track, where, sources, {k: deps[self.t(k)] for k in keys}, self.train,
+                                      self.rc.ablation)
         return self.ctx.run_one(self.t(f"evaluate-{where.name}"), evaluate_job,
                                 (str(d), where.to_dict(), self.track.name, self.rc.eval_episodes, policies),
                                 d / "job.log", cost)

@@ -56,6 +56,7 @@ TRANSFER_NEIGHBOURS = 2
 # this far in front of the RIS plane (SystemConfig.front_margin_deg; docs/study.md section 21).
 SAFE_MARGIN_DEG = 1.0
 SAFE = "-safe"  # the suffix of a row evaluated under the safety layer
+LEVEL = "+level"  # the suffix of a policy kind whose attitude increments are replaced by zero
 SEED_MARK = "@s"  # "dt-zero-shot@s1": the row's model of pre-training seed 1 (the report averages over seeds)
 TRACKS: tuple[str, ...] = ("paper", "strong", "deployment")
 
@@ -168,19 +169,24 @@ def transfer_sources(track: Track, unseen: Deployment, train: Sequence[Deploymen
 
 
 def evaluated_policies(track: Track, where: Deployment, sources: list[tuple[str, float]], dirs: dict[str, Path],
-                       train: Sequence[Deployment] = ()) -> dict[str, tuple[str, str, str]]:
+                       train: Sequence[Deployment] = (), ablation: bool = False) -> dict[str, tuple[str, str, str]]:
     """What a track's evaluation stage scores in ``where`` beside the references:
     ``{key: (label, kind, path)}`` (:func:`~.workers.evaluate_policies`); ``dirs`` holds the
     directories of the stages it reads (experts, pre-training stages by name,
     ``finetune-<where>``). With the track's safety margin, every zero-shot and fine-tuned DT
-    again under the attitude safety layer (key + :data:`SAFE`), and the oracle under it."""
+    again under the attitude safety layer (key + :data:`SAFE`), and the oracle under it; with
+    the ``ablation`` too, every zero-shot DT with its attitude held level (``dt-level``)."""
     policies = _learned_policies(track, where, sources, dirs, train)
     if track.front_margin_deg is None:
         return policies
-    safe = {key: (f"{label}, safety layer", kind, path) for key, (label, kind, path) in policies.items()
-            if key.split(SEED_MARK)[0] in ("dt-zero-shot", "dt-ensemble", "dt-finetuned")}
-    safe["oracle"] = ("oracle (planning), safety layer", "oracle", "")
-    return policies | {_safe_key(key): spec for key, spec in safe.items()}
+    zero_shot = {key: spec for key, spec in policies.items()
+                 if key.split(SEED_MARK)[0] in ("dt-zero-shot", "dt-ensemble", "dt-finetuned")}
+    safe = {_safe_key(key): (f"{label}, safety layer", kind, path) for key, (label, kind, path) in zero_shot.items()}
+    safe["oracle" + SAFE] = ("oracle (planning), safety layer", "oracle", "")
+    level = {key.replace("dt-zero-shot", "dt-level").replace("dt-ensemble", "dt-ensemble-level"):
+             (f"{label}, attitude held level", kind + LEVEL, path) for key, (label, kind, path) in zero_shot.items()
+             if ablation and key.split(SEED_MARK)[0] in ("dt-zero-shot", "dt-ensemble")}
+    return policies | safe | level
 
 
 def _safe_key(key: str) -> str:

@@ -18,7 +18,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from uavris.experiments.engine.jobs import configure_threads
-from uavris.experiments.study.tracks import SAFE, TRACK_SPECS, Deployment, Track
+from uavris.experiments.study.tracks import LEVEL, SAFE, TRACK_SPECS, Deployment, Track
 from uavris.presets import EVAL_SEED
 from uavris.runs import read_done
 
@@ -85,6 +85,11 @@ def _load(label: str, kind: str, path: str) -> tuple[str, Any]:
     """A policy of :func:`evaluate_policies` and its label."""
     from uavris.experiments.training.dt_runs import load_dt_policy
 
+    if kind.endswith(LEVEL):  # the policy of the kind before the mark, its attitude held level
+        from uavris.agents.policy import LevelAttitude
+
+        label, policy = _load(label, kind[:-len(LEVEL)], path)
+        return label, LevelAttitude(policy)
     if kind == "dt-ensemble":  # path: the models' directories as a JSON list
         from uavris.agents.dt.policy import DTEnsemble
 
@@ -151,7 +156,8 @@ def evaluate_policies(out: Path, where: Deployment, track: Track, episodes: int,
     one: :class:`uavris.agents.dt.policy.DTEnsemble`), "plan" (``path``: a training hall's
     :class:`Deployment` as JSON, whose oracle plan is flown here:
     :class:`uavris.agents.oracle.policy.PlannedFlight`) or "oracle". A key marked
-    :data:`~.tracks.SAFE` is evaluated under the attitude safety layer (the track's margin).
+    :data:`~.tracks.SAFE` is evaluated under the attitude safety layer (the track's margin); a
+    kind ending in :data:`~.tracks.LEVEL` is that kind's policy with its attitude held level.
     In the deployment track every summary also holds the decomposition of
     :func:`_decomposition`, and the oracle's its plan's target (:func:`oracle_target`).
     """

@@ -76,6 +76,7 @@ class PretrainConfig(DictConfig):
     attention: Attention = "window"  # window (the DT paper's) or banded (cached deployment)
     condition_on_return: bool = True  # False: behaviour cloning with the same model and budget
     state_encoder: StateEncoder = "flat"  # flat (the DT paper's) or devices (a hall as a set; needs observed devices)
+    ris_frame: bool = False  # the device encoder also reads each device's elevation above the RIS plane
     scenarios: tuple[str, ...] | None = None  # train on the episodes of these scenarios (layouts) only; None: all
     target_quantile: float = TARGET_QUANTILE  # the default target return: this quantile of the dataset's returns
 
@@ -92,6 +93,8 @@ class PretrainConfig(DictConfig):
                 raise ConfigError("PretrainConfig.scenarios must name at least one scenario (or be None: all)")
         if not 0 < self.target_quantile <= 1:
             raise ConfigError(f"PretrainConfig.target_quantile must be in (0, 1], got {self.target_quantile}")
+        if self.ris_frame and self.state_encoder != "devices":
+            raise ConfigError("PretrainConfig.ris_frame needs state_encoder 'devices' (a feature of each device)")
         if self.state_encoder not in STATE_ENCODERS:
             raise ConfigError(f"PretrainConfig.state_encoder must be one of {', '.join(STATE_ENCODERS)}, "
                               f"got {self.state_encoder!r}")
@@ -106,7 +109,8 @@ class PretrainConfig(DictConfig):
         sized = dict(devices=system.num_users, elements=system.num_elements) if self.state_encoder == "devices" else {}
         return DTConfig(system.observation_dim, act_dim, context=self.context, width=self.width, depth=self.depth,
                         heads=self.heads, dropout=self.dropout, max_timestep=system.horizon, attention=self.attention,
-                        condition_on_return=self.condition_on_return, state_encoder=self.state_encoder, **sized)
+                        condition_on_return=self.condition_on_return, state_encoder=self.state_encoder,
+                        ris_frame=self.ris_frame, **sized)
 
 
 def training_subset(ds: ExpertDataset, scenarios: Sequence[str] | None) -> ExpertDataset:

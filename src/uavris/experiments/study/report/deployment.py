@@ -41,12 +41,15 @@ ROWS: tuple[tuple[str, str], ...] = (
     (NEAREST, "expert of the nearest training layout"),
     (MEAN_TRANSFER, "transferred experts, mean"), (BEST_TRANSFER, "transferred experts, best (chosen afterwards)"),
     (ZERO_ACTION, "zero action (hover)"), (HOVER_OPTIMIZER, "hover, optimiser's phases"), (ORACLE, "oracle"),
-    ("oracle-safe", "oracle under the attitude safety layer"))
+    ("oracle-safe", "oracle under the attitude safety layer"),
+    ("dt-level", "zero-shot DT, attitude held level"),
+    ("dt-ensemble-level", "zero-shot DT ensemble, attitude held level"))
 PAIRS: tuple[tuple[str, str], ...] = (("dt-zero-shot", HOVER_OPTIMIZER), ("dt-zero-shot", NEAREST),
                                       ("dt-ensemble", HOVER_OPTIMIZER), ("dt-ensemble", NEAREST),
                                       ("dt-zero-shot-safe", HOVER_OPTIMIZER), ("dt-zero-shot-safe", NEAREST),
                                       ("dt-zero-shot-safe", "dt-zero-shot"), ("dt-ensemble-safe", HOVER_OPTIMIZER),
                                       ("dt-ensemble-safe", NEAREST), ("dt-finetuned-safe", "dt-zero-shot-safe"),
+                                      ("dt-zero-shot-safe", "dt-level"),
                                       ("dt-zero-shot", MEAN_TRANSFER), ("dt-zero-shot", "bc"),
                                       ("dt-zero-shot", "dt-flat"), ("dt-mixed", "bc-mixed"),
                                       ("dt-finetuned", "dt-zero-shot"))
