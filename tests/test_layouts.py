@@ -185,3 +185,14 @@ def test_the_oracle_plan_moves_with_the_layout() -> None:
         assert np.linalg.norm(plan.target[:2] - mid[:2]) < 3.0, (layout.name, plan.target)
         targets.append(plan.target)
     assert np.linalg.norm(targets[0] - targets[1]) > 25.0
+
+
+def test_a_generated_name_gives_a_hall_of_the_systems_own_number_of_devices():
+    """A model of 6 devices evaluated in layout-unseen-0 gets a hall of 6 devices, the one the
+    generator of 6 devices draws; the paper's system gets the study's 4-device hall."""
+    from uavris.layouts import LayoutGenerator, resolve_layout
+
+    six = SystemConfig(users=tuple((5.0 + 5.0 * k, 5.0 + 6.0 * k, 1.0) for k in range(6)))
+    hall = resolve_layout("layout-unseen-0", six)
+    assert len(hall.users) == 6 and hall.users == LayoutGenerator(devices=6).layout("unseen", 0, six).users
+    assert resolve_layout("layout-unseen-0", SystemConfig()).users == LayoutGenerator().layout("unseen", 0).users

@@ -122,6 +122,13 @@ def test_deployment_numbers_and_verdicts_come_from_evaluation_files(smoke_run):
             assert len(per_episode) == 4 and abs(sum(per_episode) / 4 - summary["mean"]) < 1e-9
     check_deployment_report({s.name[len("deploy-evaluate-"):].rsplit("-", 1)[0]:
                              read_json(s / "stage.json")["result"] for s in stages}, report.read_text())
+    # the halls of another generator: zero-shot only, their own tables and claims after the study's
+    other = sorted((out / "stages").glob("deploy-evaluate-layout-other-*"))
+    assert len(other) == 2 and all("dt-finetuned" not in read_json(s / "stage.json")["result"] for s in other)
+    text = report.read_text()
+    check_deployment_report({s.name[len("deploy-evaluate-"):].rsplit("-", 1)[0]: read_json(s / "stage.json")["result"]
+                             for s in other}, text[text.index("### Halls of another generator"):],
+                            "deployment track, another generator's halls")
 
 
 @pytest.mark.slow
@@ -182,8 +189,9 @@ LEARNED = ("dt-zero-shot", "dt-ensemble", "dt-finetuned", "bc", "dt-zero-shot-sa
            "dt-finetuned-safe", "dt-level", "dt-ensemble-level", "dt-flat", "dt-mixed", "bc-mixed")
 
 
-def check_deployment_report(results: dict[str, dict], text: str) -> None:
-    """The deployment track's tables and claims in ``text`` against ``{layout: stage result}``."""
+def check_deployment_report(results: dict[str, dict], text: str, where: str = "deployment track") -> None:
+    """The deployment track's tables and claims in ``text`` against ``{layout: stage result}``;
+    ``where`` heads the claims of this group of halls."""
     scores = {}
     for layout, result in results.items():
         seeds: dict[str, list[float]] = {}
@@ -223,7 +231,7 @@ def check_deployment_report(results: dict[str, dict], text: str) -> None:
     table = _table(text, "| difference |")
     assert sorted(r[1:] for r in table) == sorted([*v[4], _num3(v[:3]), v[3]] for v in diffs.values())
 
-    claims = [line for line in text.splitlines() if line.startswith("- deployment track: **")]
+    claims = [line for line in text.splitlines() if line.startswith(f"- {where}: **")]
     expected = 0
     for key, what in (("dt-zero-shot", "zero-shot DT"), ("dt-ensemble", "zero-shot DT ensemble (one controller)"),
                       ("dt-zero-shot-safe", "zero-shot DT under the attitude safety layer"),
@@ -231,7 +239,7 @@ def check_deployment_report(results: dict[str, dict], text: str) -> None:
         if key not in keys:
             continue
         expected += 1
-        [claim] = [c for c in claims if c.startswith(f"- deployment track: **{what} >= ")]
+        [claim] = [c for c in claims if c.startswith(f"- {where}: **{what} >= ")]
         target = int(re.search(r">= (\d+)% of the oracle", claim).group(1)) / 100
         hover, near = diffs[(key, "hover-optimizer")], diffs[(key, "nearest")]
         holds = stat[key][0] >= target and hover[1] > 0 and near[1] > 0
@@ -240,7 +248,7 @@ def check_deployment_report(results: dict[str, dict], text: str) -> None:
                 f"nearest {_num3(near[:3])} bps/Hz, {near[3]})." in claim), claim
     if "dt-finetuned" in keys:
         expected += 1
-        [claim] = [c for c in claims if c.startswith("- deployment track: **fine-tuned DT >= ")]
+        [claim] = [c for c in claims if c.startswith(f"- {where}: **fine-tuned DT >= ")]
         target = int(re.search(r">= (\d+)% of the oracle", claim).group(1)) / 100
         holds = stat["dt-finetuned"][0] >= target and stat["dt-finetuned"][0] >= stat["dt-zero-shot"][0]
         gain = diffs[("dt-finetuned", "dt-zero-shot")]
@@ -252,7 +260,7 @@ def check_deployment_report(results: dict[str, dict], text: str) -> None:
                        (("dt-zero-shot", "dt-flat"), "**the device-set encoder")):
         if pair in diffs:
             expected += 1
-            [claim] = [c for c in claims if c.startswith(f"- deployment track: {what}")]
+            [claim] = [c for c in claims if c.startswith(f"- {where}: {what}")]
             assert claim.endswith(f"**: {_num3(diffs[pair][:3])} bps/Hz per layout, {diffs[pair][3]}."), claim
     # blocking: every learned row's share of slots with a device behind the RIS, its seeds averaged per layout
     blocked = {}
@@ -261,7 +269,7 @@ def check_deployment_report(results: dict[str, dict], text: str) -> None:
             blocked.setdefault(key.split("@s")[0], {}).setdefault(layout, []).append(s["behind_share"])
     share = {k: np.mean([np.mean(v) for v in by.values()]) for k, by in blocked.items() if k in LEARNED}
     expected += 1
-    [claim] = [c for c in claims if c.startswith("- deployment track: **no learned row blocks a device")]
+    [claim] = [c for c in claims if c.startswith(f"- {where}: **no learned row blocks a device")]
     assert f"**: {'holds' if max(share.values()) <= 0.01 else 'does not hold'} (" in claim, claim
     assert len(claims) == expected >= 5
 
@@ -316,9 +324,10 @@ def test_changed_parameter_invalidates_exactly_its_dependents(tmp_path):
     dt = {"dataset", "pretrain", "finetune-unseen1", "finetune-unseen2", "evaluate-unseen1", "evaluate-unseen2"}
     deploy = {n for n in base.stages if n.startswith("deploy-")}
     models = {"pretrain", "bc", "pretrain-n1", "flat", "mixed-dt", "mixed-bc"}  # each for 2 seeds at smoke
+    evaluations = {f"deploy-evaluate-layout-{split}-{j}" for split in ("unseen", "other") for j in (0, 1)}
     assert deploy == {"deploy-dataset", "deploy-dataset-mixed", "deploy-finetune-layout-unseen-0",
-                      "deploy-finetune-layout-unseen-1", "deploy-evaluate-layout-unseen-0",
-                      "deploy-evaluate-layout-unseen-1"} | {f"deploy-{m}{s}" for m in models for s in ("", "-s1")}
+                      "deploy-finetune-layout-unseen-1"} | evaluations | {
+                          f"deploy-{m}{s}" for m in models for s in ("", "-s1")}
     assert changed(trajectories=3) == dt | {f"strong-{n}" for n in dt}
     assert changed(layout_trajectories=3) == deploy
     # the paper track's experts follow the comparison (they are its winner's)
@@ -327,13 +336,10 @@ def test_changed_parameter_invalidates_exactly_its_dependents(tmp_path):
     assert changed(system=SystemConfig(noise_dbm=-90.0)) == set(base.stages)
     # other layouts: only the deployment track's stages
     assert changed(layout_seed=1) == deploy
-    assert changed(scaling=()) == {"deploy-pretrain-n1", "deploy-pretrain-n1-s1", "deploy-evaluate-layout-unseen-0",
-                                   "deploy-evaluate-layout-unseen-1"}
-    assert changed(dt_seeds=1) == {n for n in deploy if n.endswith("-s1")} | {
-        "deploy-evaluate-layout-unseen-0", "deploy-evaluate-layout-unseen-1"}
+    assert changed(scaling=()) == {"deploy-pretrain-n1", "deploy-pretrain-n1-s1"} | evaluations
+    assert changed(dt_seeds=1) == {n for n in deploy if n.endswith("-s1")} | evaluations
     assert changed(mixed_layouts=1) == {"deploy-dataset-mixed", "deploy-mixed-dt", "deploy-mixed-dt-s1",
-                                        "deploy-mixed-bc", "deploy-mixed-bc-s1", "deploy-evaluate-layout-unseen-0",
-                                        "deploy-evaluate-layout-unseen-1"}
+                                        "deploy-mixed-bc", "deploy-mixed-bc-s1"} | evaluations
     assert set(build_pipeline(dataclasses.replace(RC, track="strong"), tmp_path, ctx).stages) == {
         n for n in base.stages if n.startswith("strong-")}
     assert set(build_pipeline(dataclasses.replace(RC, track="deployment"), tmp_path, ctx).stages) == deploy
@@ -554,8 +560,8 @@ def test_the_ablation_runs_on_demand_only(tmp_path):
     ctx = StudyContext(1, "local", None)
     plain = build_pipeline(dataclasses.replace(RC, ablation=False), tmp_path, ctx).stages
     full = build_pipeline(RC, tmp_path, ctx).stages
-    ablation = {"deploy-dataset-mixed"} | {f"deploy-{m}{s}" for m in ("pretrain-n1", "flat", "mixed-dt", "mixed-bc")
-                                           for s in ("", "-s1")}
+    ablation = {"deploy-dataset-mixed", "deploy-evaluate-layout-other-0", "deploy-evaluate-layout-other-1"} | {
+        f"deploy-{m}{s}" for m in ("pretrain-n1", "flat", "mixed-dt", "mixed-bc") for s in ("", "-s1")}
     assert set(full) - set(plain) == ablation and set(plain) <= set(full)
     assert not any(m in n for n in plain for m in ("-flat", "-mixed", "-pretrain-n"))
     # the main rows are the same stages with the same keys: DT and BC over both seeds, fine-tuning
@@ -564,3 +570,4 @@ def test_the_ablation_runs_on_demand_only(tmp_path):
     evaluations = {n for n in plain if "-evaluate-layout" in n}
     assert all(plain[n].key != full[n].key for n in evaluations)
     assert {n for n in plain if plain[n].key != full[n].key} == evaluations
+    assert not any("-other-" in n for n in plain)  # the other generator's halls: with the ablation only

@@ -39,8 +39,12 @@ from scipy.optimize import linear_sum_assignment
 from uavris.config import PAPER_USERS, SCENARIOS, ConfigError, Scenario, SystemConfig, Vec3, float_tuple
 
 START_HEIGHT = 4.5  # m: the paper's starting altitude (every scenario of its Sec. V)
-SPLITS: tuple[str, ...] = ("train", "unseen")
-_GENERATED = re.compile(r"layout-(train|unseen)-(\d+)")
+SPLITS: tuple[str, ...] = ("train", "unseen", "other")
+# The "other" split: unseen halls of another generator, so that a result tuned to the study's
+# generator shows (issue 29): devices further from the walls and from each other, higher, and
+# a start anywhere over the floor instead of its middle half.
+OTHER_SPLIT = dict(wall_margin=5.0, spacing=9.0, heights=(0.6, 1.9), start_span=(0.1, 0.9))
+_GENERATED = re.compile(r"layout-(train|unseen|other)-(\d+)")
 _FILE_KEYS = {"name", "room", "devices", "users", "start"}
 
 
@@ -140,28 +144,33 @@ class LayoutGenerator:
         base = base or SystemConfig()
         rng = np.random.default_rng([self.seed, SPLITS.index(split), index])
         room = np.asarray(base.room)
-        lo_xy, hi_xy = np.full(2, self.wall_margin), room[:2] - self.wall_margin
-        top = min(self.heights[1], np.nextafter(base.z_min, -np.inf))  # devices stay below the UAV's floor
-        if np.any(hi_xy <= lo_xy) or top < self.heights[0]:
-            raise ConfigError(f"the room {base.room} leaves no floor for devices with wall_margin {self.wall_margin} "
-                              f"and heights {self.heights}")
-        users = self._devices(rng, lo_xy, hi_xy, top, base.min_device_spacing)
+        other = split == "other"
+        margin = OTHER_SPLIT["wall_margin"] if other else self.wall_margin
+        heights = OTHER_SPLIT["heights"] if other else self.heights
+        spacing = max(base.min_device_spacing, OTHER_SPLIT["spacing"]) if other else base.min_device_spacing
+        span = OTHER_SPLIT["start_span"] if other else (0.25, 0.75)
+        lo_xy, hi_xy = np.full(2, margin), room[:2] - margin
+        top = min(heights[1], np.nextafter(base.z_min, -np.inf))  # devices stay below the UAV's floor
+        if np.any(hi_xy <= lo_xy) or top < heights[0]:
+            raise ConfigError(f"the room {base.room} leaves no floor for devices with wall_margin {margin} "
+                              f"and heights {heights}")
+        users = self._devices(rng, lo_xy, hi_xy, (heights[0], top), spacing)
         name = f"layout-{split}-{index}"
         z = float(np.clip(START_HEIGHT, base.z_min, base.z_max))
         for _ in range(1000):
-            start = (*(float(v) for v in rng.uniform(0.25 * room[:2], 0.75 * room[:2])), z)
+            start = (*(float(v) for v in rng.uniform(span[0] * room[:2], span[1] * room[:2])), z)
             if min(np.linalg.norm(np.asarray(users) - start, axis=1)) >= base.safety_distance:
                 return Layout(name, users, start)
         raise ConfigError(f"could not place a start outside the safety balls of {name}")
 
-    def _devices(self, rng: np.random.Generator, lo_xy: np.ndarray, hi_xy: np.ndarray, top: float,
+    def _devices(self, rng: np.random.Generator, lo_xy: np.ndarray, hi_xy: np.ndarray, heights: tuple[float, float],
                  spacing: float) -> tuple[Vec3, ...]:
         for _ in range(1000):
             placed: list[np.ndarray] = []
             for _ in range(100 * self.devices):
                 xy = rng.uniform(lo_xy, hi_xy)
                 if all(np.linalg.norm(xy - p[:2]) >= spacing for p in placed):
-                    placed.append(np.array([*xy, rng.uniform(self.heights[0], top)]))
+                    placed.append(np.array([*xy, rng.uniform(*heights)]))
                     if len(placed) == self.devices:
                         return tuple(tuple(float(c) for c in p) for p in placed)
         raise ConfigError(f"cannot place {self.devices} devices {spacing:g} m apart in this room")
@@ -241,7 +250,9 @@ def write_layout(path: str | Path, layout: Layout) -> Path:
 def resolve_layout(ref: str | Layout, base: SystemConfig | None = None,
                    generator: LayoutGenerator | None = None) -> Layout:
     """What a user names a layout by: ``paper``, a generated name ``layout-train-N`` /
-    ``layout-unseen-N`` (of ``generator``, default the study's), or a YAML layout file."""
+    ``layout-unseen-N`` (of ``generator``; default the study's generator with as many devices
+    as ``base`` has, so that a model of K devices is put in halls of K devices), or a YAML
+    layout file."""
     if isinstance(ref, Layout):
         ref.resolve(base or SystemConfig())
         return ref
@@ -249,7 +260,8 @@ def resolve_layout(ref: str | Layout, base: SystemConfig | None = None,
         return PAPER_LAYOUT
     m = _GENERATED.fullmatch(ref)
     if m:
-        return (generator or LayoutGenerator()).layout(m.group(1), int(m.group(2)), base)
+        generator = generator or LayoutGenerator(devices=base.num_users if base is not None else 4)
+        return generator.layout(m.group(1), int(m.group(2)), base)
     path = Path(ref)
     if path.suffix.lower() in (".yaml", ".yml") or path.exists():
         return read_layout(path, base)

@@ -85,4 +85,7 @@ class ReproduceConfig(DictConfig):
         return tuple(TRACK_SPECS[t] for t in TRACK_SETS.get(self.track, (self.track,)))
 
     def deployments(self, track: Track) -> tuple[list[Deployment], list[Deployment]]:
-        return deployments(track, self.system, self.train_layouts, self.unseen_layouts, self.layout_seed)
+        """The training and unseen deployments of ``track``; with the ablation, the unseen ones
+        include as many halls of another generator (zero-shot only)."""
+        other = self.unseen_layouts if self.ablation and track.ablation and track.layouts else 0
+        return deployments(track, self.system, self.train_layouts, self.unseen_layouts, self.layout_seed, other)

@@ -57,6 +57,7 @@ from uavris.experiments.study.tracks import (
     Deployment,
     Track,
     evaluated_policies,
+    is_other_hall,
     pretraining_stages,
     strong_expert_config,
     transfer_sources,
@@ -192,7 +193,7 @@ class TrackStages:
             cfg = self._pretrain_config("<dataset>", overrides)
             stages.append(Stage(self.t(name), cfg.to_dict(), partial(self._run_pretrain, name, data, overrides),
                                 (self.t(data),), (pretrain_cost(cfg),)))
-        for w in self.unseen:
+        for w in (w for w in self.unseen if not is_other_hall(w.name)):
             ft = self._finetune_config("<pretrain>", w)
             stages.append(Stage(self.t(f"finetune-{w.name}"), ft.to_dict(), partial(self._run_finetune, w),
                                 (self.t("pretrain"),), (finetune_cost(ft, self.horizon, self.control, self.context),)))
@@ -283,7 +284,7 @@ class TrackStages:
 
     def _evaluate_stage(self, where: Deployment, inputs: list[str]) -> Stage:
         sources = transfer_sources(self.track, where, self.train)
-        keys = [*inputs, f"finetune-{where.name}"]
+        keys = [*inputs, *([] if is_other_hall(where.name) else [f"finetune-{where.name}"])]
         policies = evaluated_policies(self.track, where, sources, {k: Path() for k in keys}, self.train,
                                       self.rc.ablation)
         cost = evaluate_cost(len(policies), self.rc.eval_episodes, self.horizon, self.control)

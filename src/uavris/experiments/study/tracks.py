@@ -119,9 +119,11 @@ class Deployment(DictConfig):
 
 
 def deployments(track: Track, system: SystemConfig, train_layouts: int, unseen_layouts: int,
-                layout_seed: int = 0) -> tuple[list[Deployment], list[Deployment]]:
+                layout_seed: int = 0, other_layouts: int = 0) -> tuple[list[Deployment], list[Deployment]]:
     """The training and the unseen deployments of ``track`` on ``system``: the paper's eight
-    training and two unseen scenarios, or generated layouts (the devices observed)."""
+    training and two unseen scenarios, or generated layouts (the devices observed), the unseen
+    ones followed by ``other_layouts`` halls of another generator (the ``other`` split of
+    :class:`uavris.layouts.LayoutGenerator`: a result tuned to the study's generator shows)."""
     if not track.layouts:
         return ([Deployment(s, system) for s in TRAINING_SCENARIOS], [Deployment(s, system) for s in UNSEEN_SCENARIOS])
     base = system.replace(observe_devices=True)
@@ -134,7 +136,12 @@ def deployments(track: Track, system: SystemConfig, train_layouts: int, unseen_l
             out.append(Deployment(layout.name, hall, where.start))
         return out
 
-    return made("train", train_layouts), made("unseen", unseen_layouts)
+    return made("train", train_layouts), made("unseen", unseen_layouts) + made("other", other_layouts)
+
+
+def is_other_hall(name: str) -> bool:
+    """A hall of the other generator (evaluated zero-shot only: no fine-tuning there)."""
+    return name.startswith("layout-other-")
 
 
 def strong_expert_config(scenario: str, seed: int, preset: str, eval_episodes: int, system: SystemConfig,
@@ -201,7 +208,8 @@ def _learned_policies(track: Track, where: Deployment, sources: list[tuple[str, 
     if track.unseen_experts:
         policies["expert"] = ("expert trained in the scenario", "expert",
                               str(dirs["experts-unseen"] / "runs" / where.name))
-    policies["dt-finetuned"] = ("fine-tuned DT", "dt", str(dirs[f"finetune-{where.name}"] / "model"))
+    if f"finetune-{where.name}" in dirs:
+        policies["dt-finetuned"] = ("fine-tuned DT", "dt", str(dirs[f"finetune-{where.name}"] / "model"))
     for name, stage_dir in dirs.items():
         made = stage_policy(name)
         if made is not None:

@@ -30,7 +30,7 @@ from uavris.experiments.study.report.deployment import (
 )
 from uavris.experiments.study.report.figures import fig3, interactions_figure, trajectory_figure
 from uavris.experiments.study.report.schedule import schedule_figure, stage_table
-from uavris.experiments.study.tracks import Track
+from uavris.experiments.study.tracks import Track, is_other_hall
 from uavris.experiments.training.compare import fig2_table
 from uavris.io import atomic_write_text, read_json
 from uavris.presets import EVAL_SEED
@@ -160,15 +160,28 @@ class _Report:
         if missing:
             self.add(f"Not available for {len(missing)} of {len(unseen)} unseen layouts (their evaluation stage did "
                      f"not finish): {', '.join(missing)}.", "")
-        if not results:
-            return
+        study = {lay: res for lay, res in results.items() if not is_other_hall(lay)}
+        other = {lay: res for lay, res in results.items() if is_other_hall(lay)}
+        if study:
+            self._deployment_group(track, study)
+        if other:
+            self.add("", "### Halls of another generator", "",
+                     "The same models and rows, zero-shot, in unseen halls drawn by another generator (devices further "
+                     "from the walls and from each other, higher, starts anywhere over the floor: "
+                     "`uavris.layouts.OTHER_SPLIT`): a result tuned to the study's generator would show here.", "")
+            self._deployment_group(track, other, "deployment track, another generator's halls")
+
+    def _deployment_group(self, track: Track, results: dict[str, dict[str, Any]],
+                          where: str = "deployment track") -> None:
+        """One group of unseen halls: its tables, figures, decomposition and claims."""
         scores = layout_scores(results)
+        suffix = "" if where == "deployment track" else "-other"
         first = next(iter(results.values()))
         curve_keys = [k for k in first if k.startswith("dt-zero-shot-n") and SEED_MARK not in k]
         labels = {k: first[k]["label"] for k in curve_keys}
         if any(v["label"].startswith("oracle plan of") for k, v in first.items() if k.startswith("transfer-")):
             labels[NEAREST] = "oracle plan of the nearest training layout, flown here"
-        stem = f"{track.prefix}layouts"
+        stem = f"{track.prefix}layouts{suffix}"
         layouts_figure(scores, labels, self.figs / stem)
         curve = {int(k.rsplit("n", 1)[1]): [scores[lay][k] / scores[lay][ORACLE] for lay in scores]
                  for k in curve_keys}
@@ -179,13 +192,13 @@ class _Report:
                     for k, label in ((HOVER_OPTIMIZER, "hover, optimiser's phases"),
                                      (NEAREST, labels.get(NEAREST, "nearest layout's expert")))
                     if all(k in scores[lay] for lay in scores)}
-            scaling = f"{track.prefix}scaling"
+            scaling = f"{track.prefix}scaling{suffix}"
             scaling_figure(curve, refs, self.figs / scaling)
         lines, claims = deployment_section(scores, labels, f"figures/{stem}.png",
-                                           f"figures/{scaling}.png" if scaling else None)
+                                           f"figures/{scaling}.png" if scaling else None, where)
         self.add(*lines)
         self.claims += claims
-        lines, claims = decomposition_section(results, labels)
+        lines, claims = decomposition_section(results, labels, where)
         self.add(*lines)
         self.claims += claims
 

@@ -34,9 +34,10 @@ LEARNED = ("dt-zero-shot", "dt-ensemble", "dt-finetuned", "bc", "dt-zero-shot-sa
            "dt-finetuned-safe", "dt-level", "dt-ensemble-level", "dt-flat", "dt-mixed", "bc-mixed")
 
 
-def decomposition_section(results: dict[str, dict[str, Any]], labels: dict[str, str]) -> tuple[list[str], list[str]]:
-    """The decomposition's lines and its claim, from the evaluation stages' ``results``
-    (``{layout: {policy: summary}}``); nothing when the summaries hold no decomposition."""
+def decomposition_section(results: dict[str, dict[str, Any]], labels: dict[str, str],
+                          where: str = "deployment track") -> tuple[list[str], list[str]]:
+    """The decomposition's lines and its claim (headed ``where``), from the evaluation stages'
+    ``results`` (``{layout: {policy: summary}}``); nothing when the summaries hold no decomposition."""
     layouts = list(results)
     if not layouts or "end_rate_level" not in next(iter(results.values()))[ORACLE]:
         return [], []
@@ -68,7 +69,7 @@ def decomposition_section(results: dict[str, dict[str, Any]], labels: dict[str, 
     if worst is None:
         return lines, []
     over = [k for k in learned if float(np.mean(block[k])) > BLOCKING_LIMIT]
-    claim = (f"- deployment track: **no learned row blocks a device in more than {BLOCKING_LIMIT:.0%} of its slots**: "
+    claim = (f"- {where}: **no learned row blocks a device in more than {BLOCKING_LIMIT:.0%} of its slots**: "
              f"{'holds' if not over else 'does not hold'} (most: {labels.get(worst, worst)}, "
              f"{pct(float(np.mean(block[worst])))} of its slots on average"
              + (f"; above the limit: {', '.join(labels.get(k, k) for k in over)}" if over else "") + ").")

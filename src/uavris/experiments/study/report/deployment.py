@@ -88,8 +88,8 @@ def _excludes_zero(s: dict[str, float]) -> str:
 
 
 def deployment_section(scores: dict[str, dict[str, float]], labels: dict[str, str], figure: str | None,
-                       scaling: str | None) -> tuple[list[str], list[str]]:
-    """The report's lines for the deployment track and its claims (each a bullet)."""
+                       scaling: str | None, where: str = "deployment track") -> tuple[list[str], list[str]]:
+    """The report's lines for the deployment track and its claims (each a bullet, headed ``where``)."""
     layouts = list(scores)
     labels = {**dict(ROWS), **labels}
     rows = [(k, labels[k]) for k, _ in ROWS if all(k in scores[lay] for lay in layouts)]
@@ -131,7 +131,7 @@ def deployment_section(scores: dict[str, dict[str, float]], labels: dict[str, st
                             "l" + "r" * len(layouts) + "ll")
     if scaling:
         lines += ["", f"![zero-shot score against the number of training layouts]({scaling})"]
-    return lines, _claims(summary, diffs, labels)
+    return lines, [c.replace("- deployment track: ", f"- {where}: ", 1) for c in _claims(summary, diffs, labels)]
 
 
 def _claims(summary: dict[str, dict[str, float]], diffs: dict[tuple[str, str], dict[str, float]],
