@@ -149,6 +149,21 @@ def test_paired_finetune_counts_candidates_and_elites(dataset_dir, tmp_path, mon
     with pytest.raises(ConfigError, match="rollouts_per_seed"):
         FinetuneConfig(model=model, scenario="unseen1", preset="smoke", seed=0, candidates=6, rollouts_per_seed=4)
 
+    # the alternative to tilting: one of each seed's 3 rollouts flown with the attitude held level
+    rounds.clear()
+    cfg = FinetuneConfig(model=model, scenario="unseen1", preset="smoke", seed=0, candidates=6, elites=4,
+                         rollouts_per_seed=3, level_rollouts=1, rounds=1)
+    finetune(cfg, tmp_path / "ft-level", progress=False)
+    [(cands, _)] = rounds
+    level = [c for c in cands if c.expert == "dt-finetune-level"]
+    assert sorted(Counter(c.seed for c in level).values()) == [1, 1]  # one per seed, beside two noisy ones
+    assert all(np.all(c.actions[:, -3:] == 0.0) for c in level)  # recorded as flown: no attitude increment
+    assert not all(np.all(c.actions[:, -3:] == 0.0) for c in cands if c.expert == "dt-finetune")
+    for bad in (3, -1):
+        with pytest.raises(ConfigError, match="level_rollouts"):
+            FinetuneConfig(model=model, scenario="unseen1", preset="smoke", candidates=6, rollouts_per_seed=3,
+                           level_rollouts=bad)
+
 
 def test_optimizer_within_half_a_percent_of_release_0_1_0():
     """The compiled optimiser against the frozen numpy optimiser of 0.1.0 on 512 fixed seeded

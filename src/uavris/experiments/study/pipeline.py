@@ -272,7 +272,8 @@ class TrackStages:
                                 d / "job.log", pretrain_cost(cfg))
 
     def _finetune_config(self, model: Path | str, where: Deployment) -> FinetuneConfig:
-        own = {} if not self.track.layouts else {"system": where.system, "start": where.start}
+        own = {**dict(self.track.finetune),
+               **({} if not self.track.layouts else {"system": where.system, "start": where.start})}
         return FinetuneConfig(model=model, scenario=where.name, preset=self.rc.preset, seed=self.rc.seed,
                               eval_episodes=self.rc.eval_episodes, **own)
 

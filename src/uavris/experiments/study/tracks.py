@@ -73,6 +73,7 @@ class Track:
     unseen_experts: bool = True  # an expert trained in each unseen deployment, beside the DT
     behaviour_cloning: bool = False  # BC on the same dataset with the DT's model and budget, beside the DT
     pretrain: tuple[tuple[str, Any], ...] = ()  # PretrainConfig fields this track sets otherwise than the preset
+    finetune: tuple[tuple[str, Any], ...] = ()  # FinetuneConfig fields this track sets otherwise than the preset
     demonstrations: bool = False  # the dataset: the planning oracle in generated halls, not trained experts
     seeded: bool = False  # every learned row over several pre-training seeds (ReproduceConfig.dt_seeds)
     ablation: bool = False  # an ablation on demand (--ablation): the data curve, the flat encoder, mixed-quality data

@@ -105,6 +105,7 @@ class FinetuneConfig(DictConfig):
     noise_sigma: float = 0.1  # standard deviation sigma of the exploration noise on the actions
     selection: EliteRule = "paired"  # "return": eq. (18); "paired": within-seed ranking (docs/model.md)
     rollouts_per_seed: int = PRESET  # paired: candidates = seeds x rollouts_per_seed
+    level_rollouts: int = 0  # paired: of each seed's rollouts, this many hold the attitude level (an alternative)
     epochs_per_round: int = PRESET  # passes over the elites per round
     batch_size: int = PRESET  # windows per gradient step
     learning_rate: float = 5e-5  # AdamW's rate after the warm-up
@@ -140,6 +141,11 @@ class FinetuneConfig(DictConfig):
                               f"({self.candidates}) for paired selection, got {self.rollouts_per_seed!r}")
         check_non_negative("FinetuneConfig", self, ("noise_sigma", "seed", "weight_decay", "eval_seed",
                                                     "collect_seed"))
+        if not (isinstance(self.level_rollouts, int) and 0 <= self.level_rollouts
+                and (self.level_rollouts == 0 or (self.selection == "paired"
+                                                  and self.level_rollouts < self.rollouts_per_seed))):
+            raise ConfigError(f"FinetuneConfig.level_rollouts must be 0, or (paired selection) an integer below "
+                              f"rollouts_per_seed ({self.rollouts_per_seed}), got {self.level_rollouts!r}")
         if self.target_return is not None and not math.isfinite(self.target_return):
             raise ConfigError(f"FinetuneConfig.target_return must be finite, got {self.target_return}")
 
@@ -148,13 +154,26 @@ def _candidates(cfg: FinetuneConfig, h: int, dt_policy: Callable[..., DTBatchPol
                 scenario: Scenario, phase_control: str) -> list[Trajectory]:
     """Round ``h``'s noisy rollouts: ``candidates / rollouts_per_seed`` episode seeds with
     ``rollouts_per_seed`` rollouts each (paired selection; one each for plain top-K), the
-    noise seeded by (seed, round), so that a resumed run explores as an uninterrupted one."""
+    noise seeded by (seed, round), so that a resumed run explores as an uninterrupted one.
+    ``level_rollouts`` of each seed's rollouts hold the attitude level
+    (:class:`~uavris.agents.policy.LevelAttitude`): not only noise around the model's own path
+    but the alternative to its tilts, recorded as flown, which the paired elites keep where it
+    pays (issue 29: a tilt that puts a device behind the RIS)."""
+    from uavris.agents.policy import LevelAttitude
+
     noise_seed = int(np.random.SeedSequence([cfg.seed, h]).generate_state(1)[0])
     per_seed = cfg.rollouts_per_seed if cfg.selection == "paired" else 1
     distinct = cfg.candidates // per_seed
-    seeds = np.repeat(cfg.collect_seed + (h - 1) * cfg.candidates + np.arange(distinct), per_seed)
-    return record_episodes(dt_policy(cfg.noise_sigma, noise_seed), system, scenario, seeds,
-                           expert="dt-finetune", expert_algo="dt", phase_control=phase_control)
+    first = cfg.collect_seed + (h - 1) * cfg.candidates + np.arange(distinct)
+    out = record_episodes(dt_policy(cfg.noise_sigma, noise_seed), system, scenario,
+                          np.repeat(first, per_seed - cfg.level_rollouts), expert="dt-finetune", expert_algo="dt",
+                          phase_control=phase_control)
+    if cfg.level_rollouts:
+        level_seed = int(np.random.SeedSequence([cfg.seed, h, 1]).generate_state(1)[0])
+        out += record_episodes(LevelAttitude(dt_policy(cfg.noise_sigma, level_seed)), system, scenario,
+                               np.repeat(first, cfg.level_rollouts), expert="dt-finetune-level", expert_algo="dt",
+                               phase_control=phase_control)
+    return out
 
 
 def _round_row(h: int, interactions: int, steps: int, cands: list[Trajectory], elites: list[Trajectory],
