@@ -318,3 +318,22 @@ def test_planning_oracle_reaches_the_best_region_from_unseen2(config):
     np.testing.assert_allclose(sim.pos, np.broadcast_to(plan.target, sim.pos.shape), atol=0.05)
     greedy_stop = expected_optimised_rate(config, np.array([[28.0, 18.0, 2.0]]), np.zeros(3), seed=0)[0]
     assert plan.rate > greedy_stop + 2.0
+
+
+def test_many_devices_sample_the_pairings_stratified_by_the_number_of_active_pairs():
+    """K = 6 has 330 pairings: 24 are drawn, an equal share for each number m of active pairs,
+    each m keeping its probability 1/3; every drawn pairing is a valid one (disjoint links,
+    exactly m of them). K = 4's 24 are enumerated, as before."""
+    from uavris.agents.oracle.planner import pairing_distribution
+    from uavris.config import SystemConfig
+
+    six = SystemConfig(users=tuple((4.0 + 6.0 * k, 4.0 + 5.0 * k, 1.0) for k in range(6)))
+    probs, mats = pairing_distribution(six, seed=3)
+    assert len(probs) == 24 and probs.sum() == pytest.approx(1.0)
+    m = mats.sum(axis=(1, 2)).astype(int)
+    for pairs in (1, 2, 3):
+        assert (m == pairs).sum() == 8 and probs[m == pairs].sum() == pytest.approx(1 / 3)
+    assert np.all(mats.sum(axis=2) <= 1) and np.all(mats.sum(axis=1) <= 1)  # each device in one link at most
+    assert np.all(mats.sum(axis=2) + mats.sum(axis=1) <= 1)  # never both transmitting and receiving
+    probs4, mats4 = pairing_distribution(SystemConfig())
+    assert len(probs4) == 24 and len({m.tobytes() for m in mats4}) == 24  # every K = 4 pairing, once

@@ -15,7 +15,8 @@
   (the DT's two stages), :mod:`~.training.dt_runs` (their run directories).
 - :mod:`.tools`: what a user calls on a policy or a hall: :mod:`~.tools.targets` (what a
   name on the command line names), :mod:`~.tools.evaluate`, :mod:`~.tools.user_policy`,
-  :mod:`~.tools.benchmark` (the study's protocol), :mod:`~.tools.plan` (the oracle's plan and
+  :mod:`~.tools.benchmark` (the study's protocol), :mod:`~.tools.sweep` (a grid of system
+  parameters), :mod:`~.tools.plan` (the oracle's plan and
   rate map), :mod:`~.tools.run_curves` (learning curves), :mod:`~.tools.demo`.
 - :mod:`.study`: ``uavris reproduce``: :mod:`~.study.config`, :mod:`~.study.tracks`,
   :mod:`~.study.pipeline`, :mod:`~.study.workers`, :mod:`~.study.reproduce` and

@@ -57,7 +57,11 @@ from uavris.config import SystemConfig
 from uavris.physics import streams
 from uavris.physics.phase_opt import optimize_slot_phases
 
-MAX_ENUMERATED_PAIRINGS = 256  # above this, pairings are sampled (CRN) instead of enumerated
+# Above this many pairings (K = 4 has 24) the expectation samples this many (stratified by the
+# number of active pairs, common random numbers) instead of enumerating them: the cost of a
+# pose then grows with K only through the optimiser's cost per slot (measured in
+# benchmarks/oracle_throughput.py, with the sampled value's error against 256 samples).
+MAX_ENUMERATED_PAIRINGS = 24
 ARRIVAL_TOLERANCE = 0.05  # m: the trip is over within this distance of the target, at rest
 
 
@@ -100,21 +104,27 @@ class Plan:
     candidates: tuple[tuple[tuple[float, ...], float, float], ...]  # (position, R, value) of each candidate
 
 
-def pairing_distribution(config: SystemConfig, seed: int = 0) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+def pairing_distribution(config: SystemConfig, seed: int = 0, limit: int = MAX_ENUMERATED_PAIRINGS
+                         ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Every pairing the model draws, with its probability: ``(C,)`` and ``(C, K, K)``.
 
     The model (docs/model.md section 10) draws ``m`` uniformly in ``{1, ..., m_max}`` and then a
     uniformly random set of ``m`` disjoint ordered links (a random permutation, paired in
-    order). When there are more than ``MAX_ENUMERATED_PAIRINGS`` sets, that many pairings are
-    drawn from the model instead (counter-based, ``seed``), each with weight ``1/C``.
+    order). When there are more than ``limit`` sets, ``limit`` pairings are drawn from the
+    model instead (counter-based, ``seed``), stratified by ``m``: an equal share of the draws
+    for each ``m``, weighted ``1 / (m_max x its draws)``, so every ``m`` keeps its probability.
     """
     k, m_max = config.num_users, config.pairs_upper
     counts = [math.perm(k, 2 * m) // math.factorial(m) for m in range(1, m_max + 1)]
-    if sum(counts) > MAX_ENUMERATED_PAIRINGS:
-        bits = streams.raw_bits(streams.seed_key(seed), MAX_ENUMERATED_PAIRINGS * (1 + k))
-        u = streams.uniforms(bits).reshape(MAX_ENUMERATED_PAIRINGS, 1 + k)
-        pairing = ph.pairing_from_uniforms(u[:, 0], u[:, 1:], m_max)
-        return np.full(len(pairing), 1.0 / len(pairing)), pairing
+    if sum(counts) > limit:
+        per = np.full(m_max, limit // m_max)
+        per[:limit % m_max] += 1  # the remainder to the smallest m
+        bits = streams.raw_bits(streams.seed_key(seed), limit * k)
+        u = streams.uniforms(bits).reshape(limit, k)
+        m = np.repeat(np.arange(1, m_max + 1), per)
+        # u_count in the middle of m's bin of pairing_from_uniforms: exactly m pairs
+        pairing = ph.pairing_from_uniforms((m - 0.5) / m_max, u, m_max)
+        return 1.0 / (m_max * per[m - 1]), pairing
     probs, mats = [], []
     for m, count in zip(range(1, m_max + 1), counts):
         sets = sorted({frozenset(zip(p[0::2], p[1::2])) for p in itertools.permutations(range(k), 2 * m)}, key=sorted)

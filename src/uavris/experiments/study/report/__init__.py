@@ -1,7 +1,9 @@
 """``report.md`` of ``uavris reproduce``: both tracks side by side, every number read from stage files.
 
 Lives here: :func:`write_report`, the report's text (tables, the paper's claims checked on
-each track). Not here: its figures (:mod:`.figures`) and the stage files it reads (written by
+each track). Not here: its figures (:mod:`.figures`, :mod:`.schedule`), the deployment
+track's section (:mod:`.deployment`) and its decomposition (:mod:`.decomposition`), and the
+stage files it reads (written by
 :mod:`uavris.experiments.training.compare` and :mod:`uavris.experiments.study.tracks`).
 """
 
