@@ -19,3 +19,12 @@ def cpu_model() -> str:
     from uavris.experiments.engine.jobs import machine
 
     return machine()
+
+
+def table(rows: list[tuple[str, ...]]) -> str:
+    """A Markdown table with padded columns (readable in a terminal too); ``rows[0]`` is the header."""
+    widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
+    lines = ["| " + " | ".join(c.ljust(w) for c, w in zip(rows[0], widths)) + " |",
+             "|" + "|".join("-" * (w + 2) for w in widths) + "|"]
+    lines += ["| " + " | ".join(c.ljust(w) for c, w in zip(r, widths)) + " |" for r in rows[1:]]
+    return "\n".join(lines)

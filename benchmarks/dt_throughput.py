@@ -68,7 +68,7 @@ from typing import Any, Callable  # noqa: E402
 import numpy as np  # noqa: E402
 import torch  # noqa: E402
 from _dt_step_v020 import as_v020, make_optimizer_v020, train_steps_v020  # noqa: E402  (benchmarks/)
-from _machine import cpu_model, pin_to_one_core  # noqa: E402  (benchmarks/_machine.py)
+from _machine import cpu_model, pin_to_one_core, table  # noqa: E402  (benchmarks/_machine.py)
 
 from uavris.agents.dt.config import ATTENTION_LAYOUTS, DTConfig  # noqa: E402
 from uavris.agents.dt.model import DecisionTransformer, masked_action_loss  # noqa: E402
@@ -281,14 +281,6 @@ def measure_rollouts(system: SystemConfig, episodes: int, repeats: int, attentio
 
 
 # ------------------------------------------------------------------------------ report
-def table(rows: list[tuple[str, ...]]) -> str:
-    widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
-    lines = ["| " + " | ".join(c.ljust(w) for c, w in zip(rows[0], widths)) + " |",
-             "|" + "|".join("-" * (w + 2) for w in widths) + "|"]
-    lines += ["| " + " | ".join(c.ljust(w) for c, w in zip(r, widths)) + " |" for r in rows[1:]]
-    return "\n".join(lines)
-
-
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--quick", action="store_true",

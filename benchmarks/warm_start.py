@@ -56,7 +56,7 @@ from dataclasses import dataclass  # noqa: E402
 from typing import Any  # noqa: E402
 
 import numpy as np  # noqa: E402
-from _machine import cpu_model, pin_to_one_core  # noqa: E402  (benchmarks/_machine.py)
+from _machine import cpu_model, pin_to_one_core, table  # noqa: E402  (benchmarks/_machine.py)
 from numpy.typing import NDArray  # noqa: E402
 
 import uavris  # noqa: E402
@@ -211,14 +211,6 @@ def solve(slots: Slots, config: SystemConfig, variant: Variant | None, best_warm
         for i, e in enumerate(rows):
             last[e][slots.pairing[e, t].tobytes()] = sol.phases[i]
     return phases, rates, seconds
-
-
-def table(rows: list[tuple[str, ...]]) -> str:
-    widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
-    lines = ["| " + " | ".join(c.ljust(w) for c, w in zip(rows[0], widths)) + " |",
-             "|" + "|".join("-" * (w + 2) for w in widths) + "|"]
-    lines += ["| " + " | ".join(c.ljust(w) for c, w in zip(r, widths)) + " |" for r in rows[1:]]
-    return "\n".join(lines)
 
 
 def main(argv: list[str] | None = None) -> int:
