@@ -22,7 +22,7 @@ demo: $(STAMP)
 test: $(STAMP)
 	$(VENV)/bin/ruff check src tests benchmarks
 	$(VENV)/bin/mkdocs build --strict --quiet
-	$(PY) -m pytest -q
+	$(PY) -m pytest -q -n 2 --dist loadfile
 
 docs: $(STAMP)
 	$(VENV)/bin/mkdocs build --strict
@@ -31,6 +31,7 @@ bench: $(STAMP)
 	$(PY) -m pip install --quiet -e '.[bench]'
 	$(PY) benchmarks/env_throughput.py
 	$(PY) benchmarks/train_throughput.py
+	$(PY) benchmarks/sb3_share.py
 	$(PY) benchmarks/dt_throughput.py
 	$(PY) benchmarks/oracle_throughput.py
 	$(PY) benchmarks/paper_wallclock.py

@@ -18,7 +18,7 @@ import pytest
 from uavris.cli import COMMANDS, main
 from uavris.cli import evaluation as cli_evaluation
 from uavris.cli import training as cli_training
-from uavris.cli.evaluation import BenchmarkArgs, CollectArgs, DemoArgs, EvaluateArgs, PlanArgs, PlotArgs
+from uavris.cli.evaluation import BenchmarkArgs, CollectArgs, DemoArgs, EvaluateArgs, PlanArgs, PlotArgs, SweepArgs
 from uavris.cli.training import CompareArgs, FinetuneArgs, PretrainArgs, ReproduceArgs, TrainArgs
 
 # Arguments that make each command parse up to its numeric flags (paths that exist are
@@ -35,10 +35,11 @@ BASE = {
     "plan": ["plan", "paper"],
     "benchmark": ["benchmark", "hover", "--cells", "scenarios"],
     "plot": ["plot"],
+    "sweep": ["sweep", "hover", "--param", "system.nx", "2,4"],
 }
 ARGS = {"train": TrainArgs, "evaluate": EvaluateArgs, "compare-algorithms": CompareArgs, "collect": CollectArgs,
         "pretrain-dt": PretrainArgs, "finetune-dt": FinetuneArgs, "reproduce": ReproduceArgs, "demo": DemoArgs,
-        "plan": PlanArgs, "benchmark": BenchmarkArgs, "plot": PlotArgs}
+        "plan": PlanArgs, "benchmark": BenchmarkArgs, "plot": PlotArgs, "sweep": SweepArgs}
 BAD_INT = ["-1", "abc", "1.5"]
 BAD_FLOAT = ["nan", "inf", "-inf", "abc"]
 # Float fields for which a negative value is meaningful (so only nan/inf/text are wrong).

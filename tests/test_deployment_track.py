@@ -6,6 +6,7 @@ from __future__ import annotations
 import dataclasses
 import re
 import shutil
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -16,7 +17,13 @@ from uavris.experiments.study.config import ReproduceConfig
 from uavris.experiments.study.pipeline import build_pipeline
 from uavris.experiments.study.report.deployment import ZERO_SHOT_TARGET
 from uavris.experiments.study.reproduce import reproduce
-from uavris.experiments.study.tracks import TRACK_SPECS, pretraining_stages, stage_policy
+from uavris.experiments.study.tracks import (
+    TRACK_SPECS,
+    evaluated_policies,
+    pretraining_stages,
+    stage_policy,
+    transfer_sources,
+)
 from uavris.io import read_json
 from uavris.layouts import LayoutGenerator, layout_distance
 
@@ -48,6 +55,29 @@ def test_stage_names_map_to_policies_and_seeds():
     assert rows["bc-s1"][1]["condition_on_return"] is False
 
 
+def test_the_main_rows_are_the_controllers_under_the_safety_layer():
+    """Without --ablation every learned row (the DT's seeds, their ensemble, the fine-tuned DT,
+    behaviour cloning's seeds) is scored under the attitude safety layer only; the ablation adds
+    the same models without the layer and held level, reading the same model files."""
+    track = TRACK_SPECS["deployment"]
+    train, unseen = ReproduceConfig("smoke").deployments(track)
+    where = unseen[0]
+    dirs = {k: Path("/models") / k for k in ("pretrain", "pretrain-s1", "bc", "bc-s1", f"finetune-{where.name}")}
+    sources = transfer_sources(track, where, train)
+    main = evaluated_policies(track, where, sources, dirs, train)
+    full = evaluated_policies(track, where, sources, dirs, train, ablation=True)
+    plain = {"dt-zero-shot", "dt-zero-shot@s1", "dt-ensemble", "dt-finetuned", "bc", "bc@s1"}
+    safe = {"dt-zero-shot-safe", "dt-zero-shot-safe@s1", "dt-ensemble-safe", "dt-finetuned-safe", "bc-safe",
+            "bc-safe@s1"}
+    [transfer] = [k for k in main if k.startswith("transfer-")]
+    assert set(main) == safe | {"oracle-safe", transfer}
+    assert set(full) == set(main) | plain | {"dt-level", "dt-level@s1", "dt-ensemble-level"}
+    for key in ("dt-zero-shot@s1", "bc", "dt-finetuned"):
+        name, _, seed = key.partition("@")
+        assert full[key][2] == main[f"{name}-safe" + (f"@{seed}" if seed else "")][2]  # the same model
+    assert main["bc-safe@s1"][2] == str(Path("/models/bc-s1/model"))
+
+
 def test_demonstrations_cover_every_training_hall(deployment_run):
     out, records = deployment_run
     by = {r.name: r for r in records}
@@ -67,12 +97,14 @@ def test_the_nearest_training_halls_plan_is_the_one_at_the_smallest_distance(dep
     for r in records:
         if not r.name.startswith("deploy-evaluate-"):
             continue
-        unseen = gen.layout("unseen", int(r.name.rsplit("-", 1)[1]))
+        other = "-other-" in r.name  # the ablation's halls of another generator: zero-shot only
+        unseen = gen.layout("other" if other else "unseen", int(r.name.rsplit("-", 1)[1]))
         nearest = min(train, key=lambda t: layout_distance(unseen, t))  # independent of transfer_sources
         [key] = [k for k in r.result if k.startswith("transfer-")]
         assert key == f"transfer-{nearest.name}" and "(nearest)" in r.result[key]["label"]
-        assert {"dt-zero-shot", "bc", "dt-flat", "dt-mixed", "bc-mixed", "dt-zero-shot-n1", "dt-finetuned",
-                "hover-optimizer", "oracle"} <= set(r.result)
+        assert {"dt-zero-shot", "bc", "dt-flat", "dt-mixed", "bc-mixed", "dt-zero-shot-n1", "hover-optimizer",
+                "oracle", "dt-zero-shot-safe", "bc-safe", "oracle-safe"} <= set(r.result)
+        assert other != ("dt-finetuned" in r.result and "dt-finetuned-safe" in r.result)
 
 
 def test_the_curve_reuses_finished_points_and_parts_on_a_rerun(deployment_run, tmp_path):
@@ -99,7 +131,7 @@ def test_the_report_averages_seeds_and_states_the_claims(deployment_run):
     report = (out / "report.md").read_text()
     section = report[report.index("## Deployment track"):]
     assert "mean over 2 pre-training seeds" in section
-    evals = sorted((out / "stages").glob("deploy-evaluate-*/stage.json"))
+    evals = sorted((out / "stages").glob("deploy-evaluate-layout-unseen-*/stage.json"))  # not the other generator's
     per_hall = []
     for path in evals:
         res = read_json(path)["result"]

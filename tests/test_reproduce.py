@@ -184,9 +184,10 @@ DEPLOYMENT_PAIRS = (("dt-zero-shot", "hover-optimizer"), ("dt-zero-shot", "neare
                     ("dt-finetuned", "dt-zero-shot"), ("dt-zero-shot-safe", "hover-optimizer"),
                     ("dt-zero-shot-safe", "nearest"), ("dt-zero-shot-safe", "dt-zero-shot"),
                     ("dt-ensemble-safe", "hover-optimizer"), ("dt-ensemble-safe", "nearest"),
-                    ("dt-finetuned-safe", "dt-zero-shot-safe"), ("dt-zero-shot-safe", "dt-level"))
+                    ("dt-finetuned-safe", "dt-zero-shot-safe"), ("dt-zero-shot-safe", "dt-level"),
+                    ("dt-zero-shot-safe", "bc-safe"))
 LEARNED = ("dt-zero-shot", "dt-ensemble", "dt-finetuned", "bc", "dt-zero-shot-safe", "dt-ensemble-safe",
-           "dt-finetuned-safe", "dt-level", "dt-ensemble-level", "dt-flat", "dt-mixed", "bc-mixed")
+           "dt-finetuned-safe", "bc-safe", "dt-level", "dt-ensemble-level", "dt-flat", "dt-mixed", "bc-mixed")
 
 
 def check_deployment_report(results: dict[str, dict], text: str, where: str = "deployment track") -> None:
@@ -232,6 +233,22 @@ def check_deployment_report(results: dict[str, dict], text: str, where: str = "d
     assert sorted(r[1:] for r in table) == sorted([*v[4], _num3(v[:3]), v[3]] for v in diffs.values())
 
     claims = [line for line in text.splitlines() if line.startswith(f"- {where}: **")]
+    expected = _check_score_claims(claims, where, keys, stat, diffs)
+    # blocking: every learned row's share of slots with a device behind the RIS, its seeds averaged per layout
+    blocked = {}
+    for layout, result in results.items():
+        for key, s in result.items():
+            blocked.setdefault(key.split("@s")[0], {}).setdefault(layout, []).append(s["behind_share"])
+    share = {k: np.mean([np.mean(v) for v in by.values()]) for k, by in blocked.items() if k in LEARNED}
+    expected += 1
+    [claim] = [c for c in claims if c.startswith(f"- {where}: **no learned row blocks a device")]
+    assert f"**: {'holds' if max(share.values()) <= 0.01 else 'does not hold'} (" in claim, claim
+    assert len(claims) == expected >= 5
+
+
+def _check_score_claims(claims: list[str], where: str, keys: list[str], stat: dict, diffs: dict) -> int:
+    """The deployment claims about scores (targets, fine-tuning, paired differences) against the
+    recomputed statistics; how many there are."""
     expected = 0
     for key, what in (("dt-zero-shot", "zero-shot DT"), ("dt-ensemble", "zero-shot DT ensemble (one controller)"),
                       ("dt-zero-shot-safe", "zero-shot DT under the attitude safety layer"),
@@ -246,32 +263,26 @@ def check_deployment_report(results: dict[str, dict], text: str, where: str = "d
         assert f"**: {'holds' if holds else 'does not hold'} (" in claim, claim
         assert (f"({_pct3(stat[key])} of the oracle; minus hovering {_num3(hover[:3])} bps/Hz, {hover[3]}; minus "
                 f"nearest {_num3(near[:3])} bps/Hz, {near[3]})." in claim), claim
-    if "dt-finetuned" in keys:
+    for ft, zs, what in (("dt-finetuned", "dt-zero-shot", "fine-tuned DT"),
+                         ("dt-finetuned-safe", "dt-zero-shot-safe", "fine-tuned DT under the attitude safety layer")):
+        if ft not in keys:
+            continue
         expected += 1
-        [claim] = [c for c in claims if c.startswith(f"- {where}: **fine-tuned DT >= ")]
+        [claim] = [c for c in claims if c.startswith(f"- {where}: **{what} >= ")]
         target = int(re.search(r">= (\d+)% of the oracle", claim).group(1)) / 100
-        holds = stat["dt-finetuned"][0] >= target and stat["dt-finetuned"][0] >= stat["dt-zero-shot"][0]
-        gain = diffs[("dt-finetuned", "dt-zero-shot")]
+        holds = stat[ft][0] >= target and stat[ft][0] >= stat[zs][0]
+        gain = diffs[(ft, zs)]
         assert f"**: {'holds' if holds else 'does not hold'} (" in claim, claim
-        assert (f"(fine-tuned {_pct3(stat['dt-finetuned'])}; fine-tuned minus zero-shot {_num3(gain[:3])} bps/Hz)."
-                in claim), claim
+        assert f"(fine-tuned {_pct3(stat[ft])}; fine-tuned minus zero-shot {_num3(gain[:3])} bps/Hz)." in claim, claim
     for pair, what in ((("dt-zero-shot", "bc"), "**return conditioning on demonstrations of one quality"),
+                       (("dt-zero-shot-safe", "bc-safe"), "**return conditioning under the attitude safety layer"),
                        (("dt-mixed", "bc-mixed"), "**return conditioning on mixed-quality data"),
                        (("dt-zero-shot", "dt-flat"), "**the device-set encoder")):
         if pair in diffs:
             expected += 1
             [claim] = [c for c in claims if c.startswith(f"- {where}: {what}")]
             assert claim.endswith(f"**: {_num3(diffs[pair][:3])} bps/Hz per layout, {diffs[pair][3]}."), claim
-    # blocking: every learned row's share of slots with a device behind the RIS, its seeds averaged per layout
-    blocked = {}
-    for layout, result in results.items():
-        for key, s in result.items():
-            blocked.setdefault(key.split("@s")[0], {}).setdefault(layout, []).append(s["behind_share"])
-    share = {k: np.mean([np.mean(v) for v in by.values()]) for k, by in blocked.items() if k in LEARNED}
-    expected += 1
-    [claim] = [c for c in claims if c.startswith(f"- {where}: **no learned row blocks a device")]
-    assert f"**: {'holds' if max(share.values()) <= 0.01 else 'does not hold'} (" in claim, claim
-    assert len(claims) == expected >= 5
+    return expected
 
 
 def check_track_claims(results: dict[tuple[str, str], dict], compare_rows: list[dict], text: str) -> None:
@@ -571,3 +582,22 @@ def test_the_ablation_runs_on_demand_only(tmp_path):
     assert all(plain[n].key != full[n].key for n in evaluations)
     assert {n for n in plain if plain[n].key != full[n].key} == evaluations
     assert not any("-other-" in n for n in plain)  # the other generator's halls: with the ablation only
+
+
+def test_the_comparison_runs_for_the_studys_number_of_steps(tmp_path):
+    """--compare-steps sets every run of the comparison (and only the comparison): its stage is
+    keyed by it and its expected cost follows it; the experts of the paper track keep the
+    preset's training length."""
+    from uavris.experiments.training.compare import comparison_configs
+    from uavris.presets import TRAIN
+
+    ctx = StudyContext(1, "local", None)
+    short = build_pipeline(dataclasses.replace(RC, compare_steps=320), tmp_path, ctx).stages
+    long = build_pipeline(dataclasses.replace(RC, compare_steps=1280), tmp_path, ctx).stages
+    assert short["compare"].config["steps"] == 320 and short["compare"].key != long["compare"].key
+    assert sum(long["compare"].costs) > 2 * sum(short["compare"].costs)
+    assert short["experts-train"].config == long["experts-train"].config  # its key follows the comparison's choice
+    cfgs = comparison_configs("smoke", 2, ("sac", "ppo"), "fig2", 4, RC.system, steps=320)
+    assert {c.total_steps for c in cfgs.values()} == {320} and len(cfgs) == 4
+    assert {c.total_steps for c in comparison_configs("smoke", 1, ("sac",), "fig2", 4, RC.system).values()} == {
+        TRAIN["smoke"]["total_steps"]}

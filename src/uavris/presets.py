@@ -70,10 +70,12 @@ STRONG_IMITATION: dict[str, dict[str, Any]] = {
 STRONG_RL_STEPS = {"smoke": 0, "quick": 0, "paper": 0}
 
 # The study (``uavris reproduce``, uavris.experiments.study.config.ReproduceConfig):
-# evaluation episodes per policy, comparison seeds per algorithm, expert trajectories per
-# training scenario (the paper: 500). quick: 3 seeds (5 before the strong track): both
-# tracks must fit 60 minutes on 2 cores, and the comparison alone took 37.8 min with 5 seeds
-# on the project machine; paper keeps 5.
+# evaluation episodes per policy, comparison seeds per algorithm and environment steps per run,
+# expert trajectories per training scenario (the paper: 500). quick: 3 seeds (5 before the
+# strong track) and 25,000 steps (250 episodes; 50,000 before 2026-11-25): the study must fit
+# 30 minutes on 2 cores, the comparison took 31 of its 86 core-minutes at 50,000 steps, and its
+# learning curves are flat from episode 250 on (docs/timings.md); paper keeps 5 seeds and the
+# paper's ~25,000 episodes.
 # The deployment track (docs/study.md section 21): generated training halls with the planning
 # oracle's demonstrations (episodes per hall: layout_trajectories), unseen halls, the smaller
 # training sets of the data curve (zero-shot score against the number of training halls; the
@@ -83,12 +85,13 @@ STRONG_RL_STEPS = {"smoke": 0, "quick": 0, "paper": 0}
 # the paper track's dataset (8 scenarios x 100), spread over many halls (docs/study.md
 # section 21 measures the split).
 STUDY: dict[str, dict[str, Any]] = {
-    "smoke": dict(compare_seeds=2, eval_episodes=8, trajectories=4, layout_trajectories=2, train_layouts=3,
-                  unseen_layouts=2, scaling=(1,), dt_seeds=2, mixed_layouts=2),
-    "quick": dict(compare_seeds=3, eval_episodes=32, trajectories=100, layout_trajectories=2, train_layouts=512,
-                  unseen_layouts=16, scaling=(32, 128), dt_seeds=3, mixed_layouts=64),
-    "paper": dict(compare_seeds=5, eval_episodes=100, trajectories=500, layout_trajectories=2, train_layouts=4096,
-                  unseen_layouts=32, scaling=(32, 128, 512, 1024, 2048), dt_seeds=3, mixed_layouts=1024),
+    "smoke": dict(compare_seeds=2, compare_steps=640, eval_episodes=8, trajectories=4, layout_trajectories=2,
+                  train_layouts=3, unseen_layouts=2, scaling=(1,), dt_seeds=2, mixed_layouts=2),
+    "quick": dict(compare_seeds=3, compare_steps=25_000, eval_episodes=32, trajectories=100, layout_trajectories=2,
+                  train_layouts=512, unseen_layouts=16, scaling=(32, 128), dt_seeds=3, mixed_layouts=64),
+    "paper": dict(compare_seeds=5, compare_steps=2_500_000, eval_episodes=100, trajectories=500,
+                  layout_trajectories=2, train_layouts=4096, unseen_layouts=32, scaling=(32, 128, 512, 1024, 2048),
+                  dt_seeds=3, mixed_layouts=1024),
 }
 DEMONSTRATION_CHUNK = 64  # halls per demonstration job (a job writes its part of the dataset)
 

@@ -45,17 +45,18 @@ class EpisodeResults:
 MAX_EPISODES = 100_000  # a typo's bound (a recorded batch of 10^9 episodes would not fit memory)
 
 
-def check_episodes(episodes: int, seed: int) -> None:
+def check_episodes(episodes: int, seed: int, prefix: str = "") -> None:
     """Episodes ``seed .. seed + episodes - 1`` must be at least one and at most
-    :data:`MAX_EPISODES`, with non-negative seeds.
+    :data:`MAX_EPISODES`, with non-negative seeds; the message names them with ``prefix``
+    ("--" where they are command-line flags).
 
     Callers that do work before :func:`evaluate` (load a model, open a progress bar, print a
     header) call it first, so bad input fails before anything is shown or loaded.
     """
     if not 1 <= episodes <= MAX_EPISODES:
-        raise ConfigError(f"episodes must be in [1, {MAX_EPISODES:,}], got {episodes}")
+        raise ConfigError(f"{prefix}episodes must be in [1, {MAX_EPISODES:,}], got {episodes}")
     if seed < 0:
-        raise ConfigError(f"seed must be >= 0, got {seed}")
+        raise ConfigError(f"{prefix}seed must be >= 0, got {seed}")
 
 
 def evaluate(policy: Any, config: SystemConfig, scenario: str | Scenario, episodes: int, seed: int,

@@ -121,6 +121,9 @@ class CompareArgs:
     """budgets: smoke (seconds), quick (minutes per run), paper (hours per run)"""
     seeds: Unset[int] = None
     """seeds per algorithm (default: the preset's, as in the study: 2 smoke, 3 quick, 5 paper)"""
+    steps: Unset[int] = None
+    """environment steps per run (default: the preset's, as in the study: 640 smoke, 25,000 quick,
+    2,500,000 paper)"""
     workers: int = 2
     """parallel training processes"""
     out: Unset[Path] = None
@@ -157,10 +160,11 @@ def compare_command(args: list[str]) -> None:
     output_dir(a.out)
     start = hall.start if hall is not None and a.scenario == hall.name else None
     seeds = STUDY[a.preset]["compare_seeds"] if a.seeds is None else a.seeds
+    steps = STUDY[a.preset]["compare_steps"] if a.steps is None else a.steps
     report = compare_algorithms(preset=a.preset, seeds=seeds, workers=a.workers, out=a.out, algos=a.algos,
                                 scenario=a.scenario, eval_episodes=a.eval_episodes, backend=a.backend,
                                 ray_address=a.ray_address, device=resolve_device(a.device), system=a.system,
-                                start=start)
+                                start=start, steps=steps)
     print(f"report: {report}")
 
 

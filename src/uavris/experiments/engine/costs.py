@@ -7,8 +7,8 @@ them, the order in which the job runner starts jobs (:mod:`.jobs`, :mod:`.stages
 longest chain first) and the progress bar of ``reproduce`` (each job weighs its cost).
 
 The unit costs were measured on the project machine (2-core AMD EPYC, one job per core,
-quick preset, 2026-11; recalibrated from the job times of a whole quick study, its
-``schedule.json``): an SB3 env step with the quick networks (64 x 64) from the 50,000-
+quick preset, 2026-11; recalibrated on 2026-11-25 from the job times of a whole quick
+study on a fresh clone, its ``schedule.json``): an SB3 env step with the quick networks (64 x 64) from the 50,000-
 step comparison jobs, the paper preset's 256 x 256 networks from
 ``benchmarks/paper_wallclock.py``; a simulated slot with a learned policy, with and
 without the per-slot phase optimiser; a DT gradient step at the DT paper's size (batch 64
@@ -22,23 +22,23 @@ from typing import Any
 
 # SB3 training, seconds per env step (networks of the preset; smoke uses quick's rates).
 SB3_STEP_S: dict[str, dict[str, float]] = {
-    "quick": {"ddpg": 2.6e-3, "td3": 2.7e-3, "sac": 5.1e-3, "ppo": 0.11e-3},
+    "quick": {"ddpg": 3.1e-3, "td3": 3.2e-3, "sac": 5.8e-3, "ppo": 0.13e-3},
     "paper": {"ddpg": 10.3e-3, "td3": 11.4e-3, "sac": 17.8e-3, "ppo": 0.34e-3},
 }
 # A simulated slot of one episode with a learned policy, by who sets the phases, and with the
 # planning oracle as the teacher of imitation (its motion only, no phases).
-SLOT_S = {"agent": 0.15e-3, "optimizer": 0.45e-3}
-IMITATION_SLOT_S = 0.45e-3  # a DAgger slot: the rollout, the oracle's label and its share of the fitting
+SLOT_S = {"agent": 0.2e-3, "optimizer": 0.6e-3}
+IMITATION_SLOT_S = 1.0e-3  # a DAgger slot: the rollout, the oracle's label and its share of the fitting
 PLAN_S = 1.05  # the planning oracle's plan of one hall (the screening grid and the valued candidates)
 PLAN_FAST_S = PLAN_S / 7.7  # the same with the planner's cheap ranking (PlanSettings(exact=False), measured 7.7-11x)
 # A DT gradient step at the DT paper's size: batch 64 windows of 20 slots, width 128, 3 layers;
 # other sizes scale with the slots read times width^2 times depth (the matrix products).
-DT_STEP_S = 0.17
+DT_STEP_S = 0.2
 DT_REFERENCE = 64 * 20 * 128 * 128 * 3
 # What a gradient step costs whatever the model's size (the sampling of windows, the optimiser,
 # the autograd bookkeeping): small models are dominated by it. And the device-set encoder's
 # per-device and pair networks, per state it reads (docs/study.md, section 21).
-DT_STEP_OVERHEAD_S = 0.03
+DT_STEP_OVERHEAD_S = 0.015
 DEVICE_ENCODER_STATE_S = 2.5e-5
 
 

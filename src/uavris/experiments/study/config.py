@@ -23,7 +23,7 @@ TRACK_CHOICES: tuple[str, ...] = get_args(TrackChoice)
 AUTO = "auto"
 ExpertAlgo = Literal["auto", "ddpg", "ppo", "sac", "td3"]
 TRACK_SETS = {"all": TRACKS, "both": ("paper", "strong")}
-SIZE_BOUNDS = {"compare_seeds": 100, "eval_episodes": 100_000, "trajectories": 100_000,
+SIZE_BOUNDS = {"compare_seeds": 100, "compare_steps": 100_000_000, "eval_episodes": 100_000, "trajectories": 100_000,
                "layout_trajectories": 100_000, "train_layouts": 100_000, "unseen_layouts": 10_000, "dt_seeds": 100,
                "mixed_layouts": 100_000}
 assert set(TRACK_CHOICES) == set(TRACK_SETS) | set(TRACKS) and set(get_args(ExpertAlgo)) == {AUTO, *ALGORITHMS}
@@ -37,6 +37,7 @@ class ReproduceConfig(DictConfig):
     preset: Preset = "quick"  # smoke (seconds, for tests), quick (under an hour on 2 cores) or paper (days)
     seed: int = 0  # seed of every training run (experts, DT); evaluation episodes have their own
     compare_seeds: int = PRESET  # paper track: seeds per algorithm in the comparison
+    compare_steps: int = PRESET  # paper track: environment steps per run of the comparison
     eval_episodes: int = PRESET  # evaluation episodes per policy and scenario
     trajectories: int = PRESET  # paper and strong tracks: expert trajectories per training scenario
     track: TrackChoice = "all"  # all, both (paper and strong), paper, strong or deployment

@@ -98,9 +98,11 @@ def _compare_stage(rc: ReproduceConfig, ctx: StudyContext) -> Stage:
     from uavris.experiments.training.compare import comparison_configs
 
     costs = tuple(train_cost(c) for c in comparison_configs(rc.preset, rc.compare_seeds, ALGORITHMS, "fig2",
-                                                            rc.eval_episodes, rc.system).values())
-    return Stage("compare", {"preset": rc.preset, "seeds": rc.compare_seeds, "eval_episodes": rc.eval_episodes,
-                             "system": rc.system.to_dict()}, partial(_run_compare, rc, ctx), costs=costs)
+                                                            rc.eval_episodes, rc.system,
+                                                            steps=rc.compare_steps).values())
+    return Stage("compare", {"preset": rc.preset, "seeds": rc.compare_seeds, "steps": rc.compare_steps,
+                             "eval_episodes": rc.eval_episodes, "system": rc.system.to_dict()},
+                 partial(_run_compare, rc, ctx), costs=costs)
 
 
 def _run_compare(rc: ReproduceConfig, ctx: StudyContext, d: Path, deps: dict[str, Path]) -> dict[str, Any]:
@@ -108,7 +110,7 @@ def _run_compare(rc: ReproduceConfig, ctx: StudyContext, d: Path, deps: dict[str
 
     compare_algorithms(preset=rc.preset, seeds=rc.compare_seeds, workers=ctx.workers, out=d,
                        eval_episodes=rc.eval_episodes, progress=False, device=ctx.device, system=rc.system,
-                       submit=lambda jobs: ctx.submit("compare", jobs))
+                       submit=lambda jobs: ctx.submit("compare", jobs), steps=rc.compare_steps)
     summary = read_json(d / "summary.json")
     return {"rows": summary["rows"], "expert": summary["expert"], "expert_choice": summary["expert_choice"]}
 
@@ -127,7 +129,9 @@ class TrackStages:
         self.train, self.unseen = rc.deployments(track)
         self.horizon, self.control = rc.system.horizon, track.phase_control
         self.schedule = self._pretrain_schedule()
-        self.context = self.schedule.get("context", self._preset_pretrain().context)  # what the models read
+        preset_cfg = self._preset_pretrain()
+        # what the track's models read and their size (context, width, depth): the cost model's
+        self.model_size = tuple(self.schedule.get(k, getattr(preset_cfg, k)) for k in ("context", "width", "depth"))
 
     # ------------------------------------------------------------------ experts
     def experts(self) -> list[Stage]:
@@ -196,7 +200,8 @@ class TrackStages:
         for w in (w for w in self.unseen if not is_other_hall(w.name)):
             ft = self._finetune_config("<pretrain>", w)
             stages.append(Stage(self.t(f"finetune-{w.name}"), ft.to_dict(), partial(self._run_finetune, w),
-                                (self.t("pretrain"),), (finetune_cost(ft, self.horizon, self.control, self.context),)))
+                                (self.t("pretrain"),),
+                                (finetune_cost(ft, self.horizon, self.control, *self.model_size),)))
         inputs = [*(["experts-train"] if not self.track.demonstrations else []),
                   *(["experts-unseen"] if self.track.unseen_experts else []), *models]
         for w in self.unseen:
@@ -272,16 +277,15 @@ class TrackStages:
                                 d / "job.log", pretrain_cost(cfg))
 
     def _finetune_config(self, model: Path | str, where: Deployment) -> FinetuneConfig:
-        own = {**dict(self.track.finetune),
+        own = {"eval_episodes": self.rc.eval_episodes, **dict(self.track.finetune),
                **({} if not self.track.layouts else {"system": where.system, "start": where.start})}
-        return FinetuneConfig(model=model, scenario=where.name, preset=self.rc.preset, seed=self.rc.seed,
-                              eval_episodes=self.rc.eval_episodes, **own)
+        return FinetuneConfig(model=model, scenario=where.name, preset=self.rc.preset, seed=self.rc.seed, **own)
 
     def _run_finetune(self, where: Deployment, d: Path, deps: dict[str, Path]) -> dict[str, Any]:
         cfg = self._finetune_config(deps[self.t("pretrain")] / "model", where)
         return self.ctx.run_one(self.t(f"finetune-{where.name}"), finetune_job,
                                 (cfg.to_dict(), str(d / "model"), self.ctx.device), d / "job.log",
-                                finetune_cost(cfg, self.horizon, self.control, self.context))
+                                finetune_cost(cfg, self.horizon, self.control, *self.model_size))
 
     def _evaluate_stage(self, where: Deployment, inputs: list[str]) -> Stage:
         sources = transfer_sources(self.track, where, self.train)

@@ -102,7 +102,13 @@ TRACK_SPECS: dict[str, Track] = {
                         # The device-set encoder reads a hall as a set of devices (the ablation sets the
                         # flat one beside it).
                         pretrain=(("learning_rate", 3e-4), ("context", 10), ("width", 64), ("depth", 2),
-                                  ("state_encoder", "devices"))),
+                                  ("state_encoder", "devices")),
+                        # Fine-tuning in each of the 16 unseen halls: 40 candidates (8 seeds x 5) and 25
+                        # elites instead of 80 and 50, and 8 episodes for the per-round curve (the
+                        # evaluation stage scores the result on the study's episodes): at 80/50 it added
+                        # +0.3 points [-0.7, +1.4] over the zero-shot DT under the safety layer in the
+                        # quick run of 2026-11-25, for a quarter of the study's time (docs/halls.md).
+                        finetune=(("candidates", 40), ("elites", 25), ("eval_episodes", 8))),
 }
 
 
@@ -181,19 +187,26 @@ def evaluated_policies(track: Track, where: Deployment, sources: list[tuple[str,
     """What a track's evaluation stage scores in ``where`` beside the references:
     ``{key: (label, kind, path)}`` (:func:`~.workers.evaluate_policies`); ``dirs`` holds the
     directories of the stages it reads (experts, pre-training stages by name,
-    ``finetune-<where>``). With the track's safety margin, every zero-shot and fine-tuned DT
-    again under the attitude safety layer (key + :data:`SAFE`), and the oracle under it; with
-    the ``ablation`` too, every zero-shot DT with its attitude held level (``dt-level``)."""
+    ``finetune-<where>``).
+
+    With the track's safety margin the learned controller is the policy under the attitude
+    safety layer: every zero-shot and fine-tuned DT and behaviour cloning (the DT's baseline,
+    so it gets the same layer) is scored under it (key + :data:`SAFE`), and the oracle under it
+    too (what the margin costs). The same policies without the layer, and every zero-shot DT
+    with its attitude held level (``dt-level``), are the ``ablation``'s rows (what the layer
+    adds, and the alternative of never tilting)."""
     policies = _learned_policies(track, where, sources, dirs, train)
     if track.front_margin_deg is None:
         return policies
-    zero_shot = {key: spec for key, spec in policies.items()
-                 if key.split(SEED_MARK)[0] in ("dt-zero-shot", "dt-ensemble", "dt-finetuned")}
-    safe = {_safe_key(key): (f"{label}, safety layer", kind, path) for key, (label, kind, path) in zero_shot.items()}
+    protected = {key: spec for key, spec in policies.items()
+                 if key.split(SEED_MARK)[0] in ("dt-zero-shot", "dt-ensemble", "dt-finetuned", "bc")}
+    safe = {_safe_key(key): (f"{label}, safety layer", kind, path) for key, (label, kind, path) in protected.items()}
     safe["oracle" + SAFE] = ("oracle (planning), safety layer", "oracle", "")
+    if not ablation:
+        return {key: spec for key, spec in policies.items() if key not in protected} | safe
     level = {key.replace("dt-zero-shot", "dt-level").replace("dt-ensemble", "dt-ensemble-level"):
-             (f"{label}, attitude held level", kind + LEVEL, path) for key, (label, kind, path) in zero_shot.items()
-             if ablation and key.split(SEED_MARK)[0] in ("dt-zero-shot", "dt-ensemble")}
+             (f"{label}, attitude held level", kind + LEVEL, path) for key, (label, kind, path) in protected.items()
+             if key.split(SEED_MARK)[0] in ("dt-zero-shot", "dt-ensemble")}
     return policies | safe | level
 
 

@@ -33,7 +33,7 @@ def run_demo(episodes: int = 32, seed: int = 0, scenario: str | Scenario = "fig2
              system: SystemConfig | None = None) -> dict[str, float]:
     """Print and return each demo policy's mean average sum rate over ``episodes`` seeded episodes
     of ``system`` (default: the paper's)."""
-    check_episodes(episodes, seed)
+    check_episodes(episodes, seed, "--")  # the command's flags
     cfg = system or SystemConfig()
     where = get_scenario(scenario)
     where.validate_for(cfg)

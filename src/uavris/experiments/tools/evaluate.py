@@ -56,7 +56,7 @@ def evaluate_target(target: str | Target, scenario: str | Scenario | None, episo
     one. With ``progress`` a bar counts the simulated slots (the optimiser and the oracle
     take milliseconds per slot, so a long evaluation is visibly alive). A user's policy gets the
     zero action and the oracle beside it (``references=False``: not)."""
-    check_episodes(episodes, seed)
+    check_episodes(episodes, seed, "--")  # the command's flags
     if phase_control is not None:
         check_phase_control(phase_control)
     target = target if isinstance(target, Target) else resolve_target(target)

@@ -157,9 +157,11 @@ def sweep(targets: Sequence[str], axes: Sequence[Axis], out: Path, *, base: Syst
         raise ConfigError("a sweep takes one or two different --param")
     if not targets:
         raise ConfigError("name at least one policy to sweep (e.g. hover-optimizer oracle)")
-    check_episodes(episodes, EVAL_SEED)
+    check_episodes(episodes, EVAL_SEED, "--")  # the command's flags
     if not 2 <= halls <= 1000:
         raise ConfigError(f"--halls must be in [2, 1000] (an interval over halls needs two), got {halls}")
+    if workers < 1:
+        raise ConfigError(f"--workers must be >= 1, got {workers}")
     base = base or SystemConfig()
     for t in targets:
         resolve_target(t)  # a name that names nothing: one line before anything runs

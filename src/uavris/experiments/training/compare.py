@@ -114,14 +114,17 @@ def compare_algorithms(preset: str = "quick", seeds: int = 5, workers: int = 2, 
                        ray_address: str | None = None, progress: bool = True,
                        device: str = "cpu", system: SystemConfig | None = None,
                        start: tuple[float, float, float] | None = None,
-                       submit: Callable[[list[Job]], list[JobResult]] | None = None) -> Path:
+                       submit: Callable[[list[Job]], list[JobResult]] | None = None,
+                       steps: int | None = None) -> Path:
     """Train ``algos`` x ``seeds`` in ``scenario`` (starting at ``start``, a layout's, when
-    given) of ``system`` (default the paper's) and write the comparison into ``out``; returns
+    given) of ``system`` (default the paper's) for ``steps`` environment steps each (default
+    the preset's training length) and write the comparison into ``out``; returns
     the report path. Jobs go to ``submit`` when given (a study's shared job runner), else to
     a pool of ``workers`` of their own."""
     if preset not in PRESETS:
         raise UavrisError(f"unknown preset {preset!r}; choose one of {', '.join(PRESETS)}")
-    for flag, value in (("--seeds", seeds), ("--workers", workers), ("--eval-episodes", eval_episodes)):
+    for flag, value in (("--seeds", seeds), ("--workers", workers), ("--eval-episodes", eval_episodes),
+                        ("--steps", steps)):
         if value is not None and value < 1:
             raise UavrisError(f"{flag} must be >= 1, got {value}")
     for a in algos:
@@ -131,7 +134,7 @@ def compare_algorithms(preset: str = "quick", seeds: int = 5, workers: int = 2, 
     configure_threads()
     out = Path(out or f"runs/compare-{preset}")
     n_eval = eval_episodes or (100 if preset == "paper" else 32)
-    cfgs = comparison_configs(preset, seeds, algos, scenario, n_eval, system, start)
+    cfgs = comparison_configs(preset, seeds, algos, scenario, n_eval, system, start, steps)
     jobs = [Job(f"{a}-s{s}", train_job, (cfg.to_dict(), str(out / "runs" / f"{a}-s{s}"), device),
                 out / "logs" / f"{a}-s{s}.log", train_cost(cfg)) for (a, s), cfg in cfgs.items()]
     t0 = time.perf_counter()
@@ -158,11 +161,13 @@ def compare_algorithms(preset: str = "quick", seeds: int = 5, workers: int = 2, 
 
 
 def comparison_configs(preset: str, seeds: int, algos: Sequence[str], scenario: str, eval_episodes: int,
-                       system: SystemConfig, start: tuple[float, float, float] | None = None
-                       ) -> dict[tuple[str, int], TrainConfig]:
-    """The training run of every (algorithm, seed) of a comparison."""
+                       system: SystemConfig, start: tuple[float, float, float] | None = None,
+                       steps: int | None = None) -> dict[tuple[str, int], TrainConfig]:
+    """The training run of every (algorithm, seed) of a comparison, ``steps`` environment steps
+    each (None: the preset's)."""
+    length = {} if steps is None else {"total_steps": steps}
     return {(a, s): TrainConfig(algo=a, scenario=scenario, seed=s, preset=preset, eval_episodes=eval_episodes,
-                                system=system, start=start)
+                                system=system, start=start, **length)
             for a in algos for s in range(seeds)}
 
 

@@ -31,7 +31,7 @@ from uavris.experiments.study.report.deployment import ROWS, layout_scores
 
 BLOCKING_LIMIT = 0.01  # no learned row blocks a device in more than this share of its slots (issue 29)
 LEARNED = ("dt-zero-shot", "dt-ensemble", "dt-finetuned", "bc", "dt-zero-shot-safe", "dt-ensemble-safe",
-           "dt-finetuned-safe", "dt-level", "dt-ensemble-level", "dt-flat", "dt-mixed", "bc-mixed")
+           "dt-finetuned-safe", "bc-safe", "dt-level", "dt-ensemble-level", "dt-flat", "dt-mixed", "bc-mixed")
 
 
 def decomposition_section(results: dict[str, dict[str, Any]], labels: dict[str, str],

@@ -36,7 +36,8 @@ ROWS: tuple[tuple[str, str], ...] = (
     ("dt-zero-shot-safe", "zero-shot DT, attitude safety layer"),
     ("dt-ensemble-safe", "zero-shot DT ensemble, attitude safety layer"),
     ("dt-finetuned-safe", "fine-tuned DT, attitude safety layer"),
-    ("bc", "behaviour cloning (same data, model and budget)"), ("dt-flat", "zero-shot DT, flat encoder (same data)"),
+    ("bc", "behaviour cloning (same data, model and budget)"),
+    ("bc-safe", "behaviour cloning, attitude safety layer"), ("dt-flat", "zero-shot DT, flat encoder (same data)"),
     ("dt-mixed", "zero-shot DT, mixed-quality data"), ("bc-mixed", "behaviour cloning, mixed-quality data"),
     (NEAREST, "expert of the nearest training layout"),
     (MEAN_TRANSFER, "transferred experts, mean"), (BEST_TRANSFER, "transferred experts, best (chosen afterwards)"),
@@ -51,6 +52,7 @@ PAIRS: tuple[tuple[str, str], ...] = (("dt-zero-shot", HOVER_OPTIMIZER), ("dt-ze
                                       ("dt-ensemble-safe", NEAREST), ("dt-finetuned-safe", "dt-zero-shot-safe"),
                                       ("dt-zero-shot-safe", "dt-level"),
                                       ("dt-zero-shot", MEAN_TRANSFER), ("dt-zero-shot", "bc"),
+                                      ("dt-zero-shot-safe", "bc-safe"),
                                       ("dt-zero-shot", "dt-flat"), ("dt-mixed", "bc-mixed"),
                                       ("dt-finetuned", "dt-zero-shot"))
 
@@ -137,7 +139,6 @@ def deployment_section(scores: dict[str, dict[str, float]], labels: dict[str, st
 def _claims(summary: dict[str, dict[str, float]], diffs: dict[tuple[str, str], dict[str, float]],
             labels: dict[str, str]) -> list[str]:
     out = []
-    zs, ft = summary.get("dt-zero-shot"), summary.get("dt-finetuned")
     for key, what in (("dt-zero-shot", "zero-shot DT"), ("dt-ensemble", "zero-shot DT ensemble (one controller)"),
                       ("dt-zero-shot-safe", "zero-shot DT under the attitude safety layer"),
                       ("dt-ensemble-safe", "zero-shot DT ensemble under the attitude safety layer")):
@@ -150,15 +151,21 @@ def _claims(summary: dict[str, dict[str, float]], diffs: dict[tuple[str, str], d
                    f"excluding zero)**: {'holds' if holds else 'does not hold'} ({with_ci(own, pct)} of the oracle; "
                    f"minus hovering {with_ci(hover, signed)} bps/Hz, {_excludes_zero(hover)}; minus nearest "
                    f"{with_ci(near, signed)} bps/Hz, {_excludes_zero(near)}).")
-    if ft is not None and zs is not None:
-        gain = diffs.get(("dt-finetuned", "dt-zero-shot"))
+    for ft_key, zs_key, what in (("dt-finetuned", "dt-zero-shot", "fine-tuned DT"),
+                                 ("dt-finetuned-safe", "dt-zero-shot-safe",
+                                  "fine-tuned DT under the attitude safety layer")):
+        ft, zs, gain = summary.get(ft_key), summary.get(zs_key), diffs.get((ft_key, zs_key))
+        if ft is None or zs is None:
+            continue
         holds = ft["mean"] >= FINETUNED_TARGET and ft["mean"] >= zs["mean"]
-        out.append(f"- deployment track: **fine-tuned DT >= {FINETUNED_TARGET:.0%} of the oracle and not below "
+        out.append(f"- deployment track: **{what} >= {FINETUNED_TARGET:.0%} of the oracle and not below "
                    f"zero-shot**: {'holds' if holds else 'does not hold'} (fine-tuned {with_ci(ft, pct)}; "
                    "fine-tuned minus "
                    f"zero-shot {with_ci(gain, signed) if gain else 'n/a'} bps/Hz).")
     for (a, b), what in ((("dt-zero-shot", "bc"), "return conditioning on demonstrations of one quality (DT minus "
                                                     "behaviour cloning on the same data, model and budget)"),
+                         (("dt-zero-shot-safe", "bc-safe"), "return conditioning under the attitude safety layer "
+                                                            "(DT minus behaviour cloning, both under the layer)"),
                          (("dt-mixed", "bc-mixed"), "return conditioning on mixed-quality data (DT minus behaviour "
                                                     "cloning, both on the mixed dataset)"),
                          (("dt-zero-shot", "dt-flat"), "the device-set encoder (DT minus the flat encoder, same "
