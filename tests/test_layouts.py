@@ -166,6 +166,27 @@ def test_unknown_layout_names() -> None:
         resolve_layout("missing.yaml")
 
 
+def test_a_generated_name_may_carry_its_device_count() -> None:
+    """layout-unseen-N-kK is hall N of the generator with K devices, whatever the base system
+    has; a base of K devices makes the plain name the same hall (named with its K); the
+    default count keeps the plain name; a count that names nothing new is one line."""
+    six = resolve_layout("layout-unseen-3-k6")
+    assert six.name == "layout-unseen-3-k6" and len(six.users) == 6
+    assert six == LayoutGenerator(devices=6).layout("unseen", 3)
+    base6 = SystemConfig(users=six.users)
+    assert resolve_layout("layout-unseen-3", base6) == six
+    assert resolve_layout("layout-unseen-3-k6", SystemConfig()) == six  # the name's count wins over the base's
+    four = resolve_layout("layout-unseen-3")
+    assert four.name == "layout-unseen-3" and len(four.users) == 4
+    system, _ = six.resolve(SystemConfig())
+    assert system.num_users == 6
+    for bad, says in (("layout-unseen-3-k4", "other than 4"), ("layout-unseen-3-k1", ">= 2")):
+        with pytest.raises(ConfigError, match=says):
+            resolve_layout(bad)
+    with pytest.raises(ConfigError, match="has 6 devices; this generator makes 5"):
+        resolve_layout("layout-unseen-3-k6", generator=LayoutGenerator(devices=5))
+
+
 def test_the_oracle_plan_moves_with_the_layout() -> None:
     """Two hand-made halls, one mirrored into the other's opposite corner: in each, two devices
     stand 6 m apart and two far from them and from each other. The double path loss makes the

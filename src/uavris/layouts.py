@@ -44,7 +44,10 @@ SPLITS: tuple[str, ...] = ("train", "unseen", "other")
 # generator shows (issue 29): devices further from the walls and from each other, higher, and
 # a start anywhere over the floor instead of its middle half.
 OTHER_SPLIT = dict(wall_margin=5.0, spacing=9.0, heights=(0.6, 1.9), start_span=(0.1, 0.9))
-_GENERATED = re.compile(r"layout-(train|unseen|other)-(\d+)")
+# A generated hall's name: its split and index, and its number of devices where that is not
+# the default (layout-unseen-3-k6: unseen hall 3 of the generator with 6 devices).
+_GENERATED = re.compile(r"layout-(train|unseen|other)-(\d+)(?:-k(\d+))?")
+DEFAULT_DEVICES = 4  # the paper's device count, the generator's default
 _FILE_KEYS = {"name", "room", "devices", "users", "start"}
 
 
@@ -119,7 +122,7 @@ class LayoutGenerator:
     at :data:`START_HEIGHT`, redrawn until it keeps the safety distance.
     """
 
-    devices: int = 4
+    devices: int = DEFAULT_DEVICES
     heights: tuple[float, float] = (0.0, 1.5)
     wall_margin: float = 2.0
     seed: int = 0
@@ -155,7 +158,7 @@ class LayoutGenerator:
             raise ConfigError(f"the room {base.room} leaves no floor for devices with wall_margin {margin} "
                               f"and heights {heights}")
         users = self._devices(rng, lo_xy, hi_xy, (heights[0], top), spacing)
-        name = f"layout-{split}-{index}"
+        name = f"layout-{split}-{index}" + (f"-k{self.devices}" if self.devices != DEFAULT_DEVICES else "")
         z = float(np.clip(START_HEIGHT, base.z_min, base.z_max))
         for _ in range(1000):
             start = (*(float(v) for v in rng.uniform(span[0] * room[:2], span[1] * room[:2])), z)
@@ -251,7 +254,8 @@ def resolve_layout(ref: str | Layout, base: SystemConfig | None = None,
                    generator: LayoutGenerator | None = None) -> Layout:
     """What a user names a layout by: ``paper``, a generated name ``layout-train-N`` /
     ``layout-unseen-N`` (of ``generator``; default the study's generator with as many devices
-    as ``base`` has, so that a model of K devices is put in halls of K devices), or a YAML
+    as ``base`` has, so that a model of K devices is put in halls of K devices), the same with
+    its device count, ``layout-unseen-N-kK`` (K devices whatever ``base`` has), or a YAML
     layout file."""
     if isinstance(ref, Layout):
         ref.resolve(base or SystemConfig())
@@ -260,9 +264,18 @@ def resolve_layout(ref: str | Layout, base: SystemConfig | None = None,
         return PAPER_LAYOUT
     m = _GENERATED.fullmatch(ref)
     if m:
-        generator = generator or LayoutGenerator(devices=base.num_users if base is not None else 4)
+        count = int(m.group(3)) if m.group(3) else None
+        if count is not None and (count < 2 or count == DEFAULT_DEVICES):
+            raise ConfigError(f"layout {ref!r}: -kK takes a device count >= 2 other than {DEFAULT_DEVICES} "
+                              f"(layout-{m.group(1)}-{m.group(2)} has {DEFAULT_DEVICES})")
+        if generator is None:
+            own = count or (base.num_users if base is not None else DEFAULT_DEVICES)
+            generator = LayoutGenerator(devices=own)
+        elif count is not None and count != generator.devices:
+            raise ConfigError(f"layout {ref!r} has {count} devices; this generator makes {generator.devices}")
         return generator.layout(m.group(1), int(m.group(2)), base)
     path = Path(ref)
     if path.suffix.lower() in (".yaml", ".yml") or path.exists():
         return read_layout(path, base)
-    raise ConfigError(f"unknown layout {ref!r}; give paper, layout-train-N, layout-unseen-N or a YAML layout file")
+    raise ConfigError(f"unknown layout {ref!r}; give paper, layout-train-N, layout-unseen-N (-kK: K devices) or a "
+                      "YAML layout file")

@@ -34,8 +34,8 @@ class EvaluateArgs:
     """scenario to evaluate in (default: the run's own, or the layout's start; required for references, user
     policies and pre-trained DTs without --layout)"""
     layout: Unset[str] = None
-    """the hall: paper, layout-train-N / layout-unseen-N, or a YAML layout file (devices, optionally start and
-    room; --system.* flags apply first) (default: the target's own)"""
+    """the hall: paper, layout-train-N / layout-unseen-N (-kK: K devices), or a YAML layout file (devices,
+    optionally start and room; --system.* flags apply first) (default: the target's own)"""
     episodes: int = STUDY["quick"]["eval_episodes"]
     """evaluation episodes (seeds SEED .. SEED+EPISODES-1); the default is the quick report's (the paper
     preset's report uses 100)"""
@@ -203,9 +203,9 @@ def sweep_command(args: list[str]) -> None:
 @dataclass(frozen=True)
 class PlanArgs:
     layout: Annotated[Unset[str], tyro.conf.Positional, tyro.conf.arg(metavar="LAYOUT")] = None
-    """the hall: paper, layout-train-N / layout-unseen-N (generated), or a YAML layout file (devices, optionally
-    start and room); default: the devices of --system.users (the paper's unless given), starting above the
-    middle of the floor"""
+    """the hall: paper, layout-train-N / layout-unseen-N (generated; -kK: K devices), or a YAML layout file
+    (devices, optionally start and room); default: the devices of --system.users (the paper's unless given),
+    starting above the middle of the floor"""
     out: Unset[Path] = None
     """output file stem: writes OUT.json, OUT.png and OUT.pdf (default: runs/plans/LAYOUT)"""
     grid_step: float = 2.0
@@ -292,8 +292,9 @@ class DemoArgs:
     scenario: Unset[ScenarioName] = None
     """start position (default: fig2, or the layout's start)"""
     layout: Unset[str] = None
-    """the hall: paper, layout-train-N / layout-unseen-N, or a YAML layout file (devices, optionally start and
-    room; --system.* flags apply first) (default: the devices of --system.users, the paper's unless given)"""
+    """the hall: paper, layout-train-N / layout-unseen-N (-kK: K devices), or a YAML layout file (devices,
+    optionally start and room; --system.* flags apply first) (default: the devices of --system.users, the paper's
+    unless given)"""
     system: SystemConfig = SystemConfig()
     """the system (the paper's, with these fields changed)"""
 

@@ -57,9 +57,10 @@ def check_run_options(opts: RunOptions, run_dir: Path) -> str:
     return resolve_device(opts.device)
 
 
-LAYOUT_HELP = ("the hall: paper (the paper's devices), layout-train-N / layout-unseen-N (generated, docs/model.md "
-               "section 21) or a YAML layout file (devices, optionally start and room); it sets --system.users (and "
-               "--system.room) and the start (unless --scenario is given); default: the devices of --system.users")
+LAYOUT_HELP = ("the hall: paper (the paper's devices), layout-train-N / layout-unseen-N (generated; -kK: K "
+               "devices, docs/model.md section 21) or a YAML layout file (devices, optionally start and room); it "
+               "sets --system.users (and --system.room) and the start (unless --scenario is given); default: the "
+               "devices of --system.users")
 
 
 class _DevicesLater(SystemConfig):

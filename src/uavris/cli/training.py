@@ -253,9 +253,9 @@ def finetune_command(args: list[str]) -> None:
 class ReproduceArgs:
     study: Annotated[ReproduceConfig, Flat]
     layout: Annotated[Unset[str], tyro.conf.arg(help="the hall of the paper and strong tracks (their scenarios "
-                                                "start in it): paper, layout-train-N / layout-unseen-N, or a YAML "
-                                                "layout file; it sets --system.users (and --system.room); default: "
-                                                "the devices of --system.users")] = None
+                                                "start in it): paper, layout-train-N / layout-unseen-N "
+                                                "(-kK: K devices), or a YAML layout file; it sets --system.users "
+                                                "(and --system.room); default: the devices of --system.users")] = None
     out: Unset[Path] = None
     """output directory (default: runs/PRESET); a rerun skips finished stages and resumes the rest"""
     workers: int = 2
