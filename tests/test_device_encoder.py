@@ -15,6 +15,7 @@ from uavris.agents.references import reference_policy
 from uavris.config import SystemConfig
 from uavris.env import observation_layout
 from uavris.env.rollout import rollout
+from uavris.env.simulator import observation_slices
 from uavris.errors import ConfigError
 from uavris.layouts import LayoutGenerator
 
@@ -193,3 +194,122 @@ def test_an_ensemble_acts_with_the_mean_of_its_models_actions():
             m.record(got, rewards)
     with pytest.raises(ValueError, match="at least one"):
         DTEnsemble([])
+
+
+def doubled_hall(states: np.ndarray) -> np.ndarray:
+    """The same slots in a hall of 2K devices: every device twice, every pair twice (device
+    k + K is device k's twin and pairs with the twin of k's partner), the UAV's own entries
+    unchanged. Built from the observation's layout for 2K devices, independently of the model."""
+    lay, big = observation_layout(HALL), observation_slices(2 * K, N, True)
+    lead = states.shape[:-1]
+    out = np.zeros((*lead, big["devices"].stop), dtype=states.dtype)
+    for name, sl in big.items():
+        if name in ("channel_real", "channel_imag", "devices"):
+            rows = states[..., lay[name]].reshape(*lead, K, -1)
+            out[..., sl] = np.concatenate([rows, rows], axis=-2).reshape(*lead, -1)
+        elif name == "pairing":
+            p = states[..., lay[name]].reshape(*lead, K, K)
+            block = np.zeros((*lead, 2 * K, 2 * K), dtype=states.dtype)
+            block[..., :K, :K], block[..., K:, K:] = p, p
+            out[..., sl] = block.reshape(*lead, -1)
+        else:
+            out[..., sl] = states[..., lay[name]]
+    return out
+
+
+@pytest.mark.parametrize("ris_frame", [False, True])
+def test_a_model_reads_a_hall_of_another_device_count_with_the_same_weights(ris_frame):
+    """Every device twice is the same set for the encoder's maximum and mean: a model made for
+    2K devices (``for_devices``) gives, on the doubled hall, the actions it gives on the hall."""
+    states = hall_states(3)[:, :4]
+    m = model("devices", seed=5, ris_frame=ris_frame)
+    big = m.for_devices(2 * K)
+    assert big.cfg.devices == 2 * K and big.cfg.state_dim == observation_slices(2 * K, N, True)["devices"].stop
+    torch.testing.assert_close(actions(big, doubled_hall(states)), actions(m, states), rtol=1e-5, atol=1e-6)
+    assert m.for_devices(K) is m
+    # a third device count runs too, and its actions differ from the hall's (it reads the devices)
+    three = m.for_devices(3)
+    lay3, lay = observation_slices(3, N, True), observation_layout(HALL)
+    first3 = np.concatenate([states[..., lay[s]].reshape(*states.shape[:-1], K, -1)[..., :3, :]
+                             .reshape(*states.shape[:-1], -1) if s in ("channel_real", "channel_imag", "devices")
+                             else states[..., lay[s]].reshape(*states.shape[:-1], K, K)[..., :3, :3]
+                             .reshape(*states.shape[:-1], -1) if s == "pairing" else states[..., lay[s]]
+                             for s in lay3], axis=-1)
+    a3 = actions(three, first3)
+    assert torch.isfinite(a3).all() and not torch.allclose(a3, actions(m, states))
+
+
+def test_a_flat_model_cannot_read_another_device_count():
+    with pytest.raises(ConfigError, match="only a DT with the device-set encoder"):
+        model("flat").for_devices(6)
+
+
+def test_a_dt_policy_is_evaluated_in_a_hall_of_six_devices():
+    """evaluate() fits a device-encoder DT to the hall it is given; a flat one is refused in one line."""
+    from uavris.agents.dt.policy import DTBatchPolicy
+    from uavris.agents.evaluation import evaluate
+
+    hall6, where6 = LayoutGenerator(devices=6).layout("unseen", 1).resolve(SEEN)
+    policy = DTBatchPolicy(model("devices", seed=6), 50.0, phase_control="optimizer")
+    res = evaluate(policy, hall6, where6, 2, 0)
+    assert res.avg_sum_rate.shape == (2,) and np.all(np.isfinite(res.avg_sum_rate)) and res.avg_sum_rate.min() > 0
+    flat = DTBatchPolicy(model("flat"), 50.0, phase_control="optimizer")
+    with pytest.raises(ConfigError, match="reads observations of"):
+        evaluate(flat, hall6, where6, 2, 0)
+
+
+def centroid_motion(obs: np.ndarray) -> np.ndarray:
+    """A teacher any count can follow: fly towards the devices' centroid (the devices' offsets
+    are the observation's last 3 K entries), attitude unchanged."""
+    from uavris.agents.dt.encoders import devices_of_width
+
+    k = devices_of_width(obs.shape[-1], N)
+    centre = obs[:, -3 * k:].reshape(len(obs), k, 3).mean(axis=1)
+    out = np.zeros((len(obs), 6), dtype=np.float32)
+    out[:, :3] = np.clip(centre / 5.0, -1.0, 1.0)
+    return out
+
+
+def test_one_model_learns_halls_of_two_device_counts_together():
+    """MixedWindows draws each batch from one count, each set in proportion to its slots, and
+    one device-set model trained on both fits the teacher in both (the loss falls by more than
+    half on fixed windows of each count)."""
+    from uavris.agents.dt.model import masked_action_loss
+    from uavris.agents.dt.trainer import make_optimizer, train_steps
+    from uavris.agents.dt.trajectories import MixedWindows, TrainingWindows, record_episodes
+
+    sets = []
+    for k, hall in ((4, 2), (6, 3)):
+        system, where = LayoutGenerator(devices=k).layout("train", hall).resolve(SEEN)
+        sets.append(record_episodes(centroid_motion, system, where, np.arange(6) + 10 * k, phase_control="optimizer"))
+    torch.manual_seed(0)
+    cfg = DTConfig(SEEN.observation_dim, 6, context=4, width=32, depth=1, heads=1, dropout=0.0,
+                   max_timestep=SEEN.horizon, state_encoder="devices", devices=K, elements=N)
+    m = DecisionTransformer(cfg, return_scale=40.0)
+    parts = [TrainingWindows.for_model(s, cfg) for s in sets]
+    mixed = MixedWindows(parts)
+    rng = np.random.default_rng(0)
+    widths = [mixed.sample(2, rng)["states"].shape[-1] for _ in range(2000)]
+    share = widths.count(SEEN.observation_dim) / len(widths)
+    p = parts[0].num_slots / mixed.num_slots
+    assert abs(share - p) < 4 * np.sqrt(p * (1 - p) / len(widths))
+    fixed = [part.sample(64, np.random.default_rng(1)) for part in parts]
+
+    def losses() -> list[float]:
+        with torch.no_grad():
+            return [float(masked_action_loss(m(b["returns_to_go"], b["states"], b["actions"], b["timesteps"],
+                                                 b["valid"]), b["actions"], b["valid"])) for b in fixed]
+    before = losses()
+    train_steps(m, make_optimizer(m, 1e-3, 0.0), mixed, rng, 0, 200, 32, 1e-3, 10, 1.0)
+    after = losses()
+    assert all(a < 0.5 * b for a, b in zip(after, before)), (before, after)
+
+
+def test_more_datasets_need_the_device_encoder_and_every_episode():
+    from uavris.experiments.training.pretrain import PretrainConfig
+
+    with pytest.raises(ConfigError, match="more_datasets needs state_encoder 'devices'"):
+        PretrainConfig(dataset="a", more_datasets=("b",))
+    with pytest.raises(ConfigError, match="not with more_datasets"):
+        PretrainConfig(dataset="a", more_datasets=("b",), state_encoder="devices", scenarios=("x",))
+    assert PretrainConfig(dataset="a", more_datasets=["b"], state_encoder="devices").more_datasets == ("b",)

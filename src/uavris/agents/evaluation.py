@@ -16,7 +16,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from uavris import stats
-from uavris.agents.policy import check_policy_fits
+from uavris.agents.policy import fit_policy
 from uavris.config import Scenario, SystemConfig
 from uavris.env.rollout import SlotHook, rollout
 from uavris.errors import ConfigError
@@ -69,7 +69,7 @@ def evaluate(policy: Any, config: SystemConfig, scenario: str | Scenario, episod
     :func:`~uavris.env.rollout.rollout` (progress bars use it).
     """
     check_episodes(episodes, seed)
-    check_policy_fits(policy, config)
+    policy = fit_policy(policy, config)
     parts = [rollout(policy, config, scenario, seed + start + np.arange(min(batch_size, episodes - start)),
                      phase_control=phase_control, on_slot=on_slot)
              for start in range(0, episodes, batch_size)]

@@ -33,6 +33,9 @@ The contract (README, "Your own controller"):
   ``policy(obs, sim)``. Everything a learned policy may use is in ``obs``.
 - ``observation_dim`` (optional attribute): the observation size the policy was made for;
   evaluating it in a system that gives another size is one :class:`ConfigError` line.
+- ``for_system(system)`` (optional method): the policy made to read ``system``'s
+  observations, if it can (a Decision Transformer with the device-set encoder reads any
+  number of devices); :func:`fit_policy` calls it before the size check.
 """
 
 from __future__ import annotations
@@ -119,6 +122,11 @@ class LevelAttitude:
         if callable(getattr(self.policy, "record", None)):
             self.policy.record(np.clip(self._chosen, -1.0, 1.0), rewards)  # type: ignore[attr-defined]
 
+    def for_system(self, system: SystemConfig) -> LevelAttitude:
+        """The wrapped policy in ``system`` (its own ``for_system``), still held level."""
+        inner = fit_policy(self.policy, system)
+        return self if inner is self.policy else LevelAttitude(inner)
+
 
 def check_policy_fits(policy: object, system: SystemConfig, what: str = "the policy") -> None:
     """A policy that declares the observation size it was trained on (``observation_dim``: the
@@ -130,3 +138,14 @@ def check_policy_fits(policy: object, system: SystemConfig, what: str = "the pol
         raise ConfigError(f"{what} reads observations of {want} entries, but this system ({system.num_users} devices"
                           f"{seen}) gives {system.observation_dim}: it was trained for another number of devices "
                           "or observation")
+
+
+def fit_policy(policy: object, system: SystemConfig, what: str = "the policy") -> object:
+    """``policy`` made to read ``system``'s observations where it can (``for_system``: a
+    Decision Transformer with the device-set encoder in a hall of another number of
+    devices), then checked (:func:`check_policy_fits`)."""
+    adapt = getattr(policy, "for_system", None)
+    if callable(adapt):
+        policy = adapt(system)
+    check_policy_fits(policy, system, what)
+    return policy

@@ -2,7 +2,8 @@
 
 Lives here: the two state encoders (:class:`FlatEncoder`, :class:`DeviceSetEncoder`), the
 choice between them (:data:`StateEncoder`, :func:`make_state_encoder`) and the state
-normalisation the device encoder needs (:func:`pooled_over_devices`). Not here: the model
+normalisation the device encoder needs (:func:`pooled_over_devices`, laid out for another
+number of devices by :func:`stats_for_devices`). Not here: the model
 that reads the tokens (:mod:`.model`), the observation itself
 (:mod:`uavris.env.simulator`, docs/model.md section 15 and docs/study.md section 21).
 
@@ -26,6 +27,13 @@ Normalisation: the flat encoder standardises every entry by its own mean and std
 dataset. For the device encoder these statistics must not depend on the device's index,
 or the order would come back through them: :func:`pooled_over_devices` replaces them by
 statistics pooled over the devices (per RIS element, per axis, over the whole pairing).
+
+Any number of devices: no weight of the device encoder has the number of devices K in its
+shape (the networks are per device and per pair, the pooling is a maximum and a mean), and
+pooled statistics are the same for every device. A model trained on halls of K devices
+therefore reads halls of K' devices with the same weights (:meth:`DecisionTransformer.for_devices
+<uavris.agents.dt.model.DecisionTransformer.for_devices>`): zero-shot across the count, which
+docs/halls.md measures.
 """
 
 from __future__ import annotations
@@ -60,6 +68,22 @@ def device_layout(state_dim: int, devices: int, elements: int) -> dict[str, slic
                           f"(SystemConfig.observe_devices): {lay['devices'].stop} entries for {devices} devices, "
                           f"got state_dim {state_dim}")
     return lay
+
+
+def devices_of_width(width: int, elements: int) -> int:
+    """The number of devices whose deployment observation (devices observed, ``elements`` RIS
+    elements) has ``width`` entries; one :class:`ConfigError` line where none has."""
+    k = 2
+    while observation_slices(k, elements, True)["devices"].stop < width:
+        k += 1
+    if observation_slices(k, elements, True)["devices"].stop != width:
+        raise ConfigError(f"an observation of {width} entries is no hall's with {elements} RIS elements and the "
+                          "devices observed")
+    return k
+
+
+def _uav_index(lay: dict[str, slice]) -> torch.Tensor:
+    return torch.cat([torch.arange(lay[s].start, lay[s].stop) for s in UAV_SLICES])
 
 
 class FlatEncoder(nn.Linear):
@@ -114,7 +138,8 @@ class DeviceSetEncoder(nn.Module):
         super().__init__()
         self.k, self.n, self.ris_frame = devices, elements, ris_frame
         self.layout = device_layout(state_dim, devices, elements)
-        self.uav_index = torch.cat([torch.arange(self.layout[s].start, self.layout[s].stop) for s in UAV_SLICES])
+        self.uav_index = _uav_index(self.layout)
+        self._counts: dict[int, tuple[int, dict[str, slice], torch.Tensor]] = {}  # other widths: other counts
         own = 3 + 2 * elements + (1 if ris_frame else 0)
         per_device = own + 2 + own
         self.pair_net = nn.Sequential(nn.Linear(2 * per_device, width), nn.ReLU(), nn.Linear(width, width), nn.ReLU())
@@ -122,9 +147,21 @@ class DeviceSetEncoder(nn.Module):
                                         nn.ReLU())
         self.combine = nn.Linear(2 * width + len(self.uav_index), width)
 
+    def geometry(self, width: int) -> tuple[int, dict[str, slice], torch.Tensor]:
+        """(devices, observation slices, the UAV's entries) of an observation of ``width``
+        entries: the model's own count, or any other (no weight depends on it)."""
+        if width == self.layout["devices"].stop:
+            return self.k, self.layout, self.uav_index
+        if width not in self._counts:
+            k = devices_of_width(width, self.n)
+            lay = observation_slices(k, self.n, True)
+            self._counts[width] = (k, lay, _uav_index(lay))
+        return self._counts[width]
+
     def device_features(self, raw: torch.Tensor, normalised: torch.Tensor) -> torch.Tensor:
         """``(..., K, F)``: each device's features, in the layout's order."""
-        lay, k, n = self.layout, self.k, self.n
+        k, lay, _ = self.geometry(raw.shape[-1])
+        n = self.n
         lead = raw.shape[:-1]
         offset = normalised[..., lay["devices"]].reshape(*lead, k, 3)
         channel = torch.cat([normalised[..., lay["channel_real"]].reshape(*lead, k, n),
@@ -154,7 +191,7 @@ class DeviceSetEncoder(nn.Module):
         the RIS plane (negative: behind it, docs/model.md section 3), from the raw observation:
         the device's offset from the UAV and the attitude's sines and cosines give the plane's
         normal ``n = R(zeta) e_z`` (eq. 10) and ``cos(theta_k) = <q_U - q_k, n> / |q_U - q_k|``."""
-        lay, k = self.layout, self.k
+        k, lay, _ = self.geometry(raw.shape[-1])
         offset = raw[..., lay["devices"]].reshape(*raw.shape[:-1], k, 3)  # (q_k - q_U) / scale
         s, c = raw[..., lay["attitude_sin"]], raw[..., lay["attitude_cos"]]  # yaw, pitch, roll
         sy, sp, sr, cy, cp, cr = s[..., 0], s[..., 1], s[..., 2], c[..., 0], c[..., 1], c[..., 2]
@@ -164,10 +201,10 @@ class DeviceSetEncoder(nn.Module):
 
     def forward(self, raw: torch.Tensor, normalised: torch.Tensor) -> torch.Tensor:
         f = self.device_features(raw, normalised)  # (..., K, F)
-        k = self.k
+        k, _, uav_index = self.geometry(raw.shape[-1])
         relations = _pool(self.pair_features(f), k)  # (..., K, 2W): device k's view of every j
         per_device = self.device_net(torch.cat([f, relations], dim=-1))
-        uav = normalised[..., self.uav_index.to(normalised.device)]
+        uav = normalised[..., uav_index.to(normalised.device)]
         return self.combine(torch.cat([_pool(per_device, k), uav], dim=-1))
 
 
@@ -200,3 +237,23 @@ def pooled_over_devices(mean: NDArray[np.float64], std: NDArray[np.float64], dev
         mean[sl] = np.broadcast_to(pooled_m, m.shape).reshape(-1)
         std[sl] = np.broadcast_to(np.sqrt(np.maximum(pooled_v, 0.0)), m.shape).reshape(-1)
     return mean, std
+
+
+def stats_for_devices(mean: NDArray[np.float64], std: NDArray[np.float64], devices: int, elements: int,
+                      to: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Pooled state statistics (:func:`pooled_over_devices`: every device's entries the same)
+    of observations with ``devices`` devices, laid out for ``to`` devices: the first device's
+    entries repeated ``to`` times, the pairing's first entry filling its ``to x to`` entries,
+    the UAV's own entries unchanged (only their place in the observation moves)."""
+    src, dst = observation_slices(devices, elements, True), observation_slices(to, elements, True)
+    out_mean, out_std = np.zeros(dst["devices"].stop), np.ones(dst["devices"].stop)
+    for name in src:
+        a, b = src[name], dst[name]
+        if name in PER_DEVICE_SLICES:
+            one = slice(a.start, a.start + (a.stop - a.start) // devices)  # the first device's entries
+            out_mean[b], out_std[b] = np.tile(mean[one], to), np.tile(std[one], to)
+        elif name == "pairing":
+            out_mean[b], out_std[b] = mean[a.start], std[a.start]
+        else:
+            out_mean[b], out_std[b] = mean[a], std[a]
+    return out_mean, out_std

@@ -55,6 +55,7 @@ deployment (:mod:`.policy`).
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -64,7 +65,8 @@ from torch import nn
 
 from uavris.agents.dt.cache import KVCache
 from uavris.agents.dt.config import DTConfig
-from uavris.agents.dt.encoders import make_state_encoder
+from uavris.agents.dt.encoders import devices_of_width, make_state_encoder, stats_for_devices
+from uavris.env.simulator import observation_slices
 from uavris.errors import ConfigError
 
 
@@ -184,7 +186,8 @@ class DecisionTransformer(nn.Module):
             returns_to_go = torch.zeros_like(returns_to_go)
         act_time = time_emb if action_timesteps is None else self.embed_timestep(action_timesteps.clamp(0, top))
         r = self.embed_return((returns_to_go / self.return_scale).unsqueeze(-1)) + time_emb
-        s = self.embed_state(states, (states - self.state_mean) / self.state_std) + time_emb
+        mean, std = self.state_statistics(states.shape[-1])
+        s = self.embed_state(states, (states - mean) / std) + time_emb
         return r, s, self.embed_action(actions) + act_time
 
     def new_cache(self, batch: int) -> KVCache:
@@ -224,6 +227,47 @@ class DecisionTransformer(nn.Module):
             last = i == len(self.blocks) - 1
             x = block.forward_cached(x, mask, cache, i, slots, readout if last else None)
         return torch.tanh(self.action_head(self.final_norm(x)))[:, -1]
+
+    def state_statistics(self, width: int) -> tuple[torch.Tensor, torch.Tensor]:
+        """The state's mean and std for observations of ``width`` entries: the model's own,
+        or, for the device encoder, laid out for the count whose observation has that width
+        (:func:`~.encoders.stats_for_devices`), so one model trains on halls of mixed counts."""
+        if width == self.cfg.state_dim:
+            return self.state_mean, self.state_std
+        if self.cfg.state_encoder != "devices":
+            raise ConfigError(f"this DT reads {self.cfg.state_dim} observation entries, got {width}")
+        to = devices_of_width(width, self.cfg.elements)  # a few hundred entries: not worth a cache to keep in sync
+        mean, std = stats_for_devices(self.state_mean.double().cpu().numpy(), self.state_std.double().cpu().numpy(),
+                                      self.cfg.devices, self.cfg.elements, to)
+        where = self.state_mean.device
+        return (torch.as_tensor(mean, dtype=torch.float32, device=where),
+                torch.as_tensor(std, dtype=torch.float32, device=where))
+
+    def for_devices(self, devices: int) -> DecisionTransformer:
+        """This model reading observations of ``devices`` devices: the same weights (the
+        device-set encoder has none whose shape depends on the count, :mod:`.encoders`), the
+        state statistics laid out for the new count (:func:`~.encoders.stats_for_devices`).
+        Only a model with the device encoder can; ``self`` where the count is its own."""
+        cfg = self.cfg
+        if devices == cfg.devices:
+            return self
+        if cfg.state_encoder != "devices":
+            raise ConfigError(f"this DT reads {cfg.state_dim} observation entries (state encoder "
+                              f"{cfg.state_encoder!r}); "
+                              "only a DT with the device-set encoder (--state-encoder devices) reads another number "
+                              "of devices")
+        if not isinstance(devices, int) or devices < 2:
+            raise ConfigError(f"a hall has at least 2 devices, got {devices!r}")
+        state_dim = observation_slices(devices, cfg.elements, True)["devices"].stop
+        mean, std = stats_for_devices(self.state_mean.double().cpu().numpy(), self.state_std.double().cpu().numpy(),
+                                      cfg.devices, cfg.elements, devices)
+        other = DecisionTransformer(replace(cfg, state_dim=state_dim, devices=devices), mean, std,
+                                    float(self.return_scale))
+        weights = {k: v for k, v in self.state_dict().items() if k not in ("state_mean", "state_std")}
+        missing, unexpected = other.load_state_dict(weights, strict=False)
+        assert set(missing) == {"state_mean", "state_std"} and not unexpected, (missing, unexpected)
+        other.train(self.training)
+        return other.to(self.return_scale.device)
 
     @property
     def normalisation(self) -> dict[str, Any]:

@@ -39,6 +39,7 @@ from numpy.typing import NDArray
 
 from uavris.agents.dt.checkpoint import load_dt
 from uavris.agents.dt.model import DecisionTransformer
+from uavris.config import SystemConfig
 from uavris.env.wrappers import MOTION_DIM, check_phase_control
 from uavris.errors import CheckpointError
 
@@ -69,12 +70,25 @@ class DTBatchPolicy:
         self.model = model
         self.target_return = float(target_return)
         self.noise_sigma = float(noise_sigma)
+        self._seed = seed
         self._rng = np.random.default_rng(seed)
 
     @property
     def observation_dim(self) -> int:
         """Entries of the observation the model reads (:func:`uavris.agents.policy.check_policy_fits`)."""
         return self.model.cfg.state_dim
+
+    def for_system(self, system: SystemConfig) -> DTBatchPolicy:
+        """This policy in a system of another number of devices (the same RIS, device positions
+        observed): the same weights read it if the model has the device-set encoder
+        (:meth:`~uavris.agents.dt.model.DecisionTransformer.for_devices`); ``self`` where
+        nothing differs or the model cannot (the caller's fit check then says why)."""
+        cfg = self.model.cfg
+        if (system.observation_dim == cfg.state_dim or cfg.state_encoder != "devices" or not system.observe_devices
+                or system.num_elements != cfg.elements):
+            return self
+        return DTBatchPolicy(self.model.for_devices(system.num_users), self.target_return, self.noise_sigma,
+                             self._seed, self.phase_control)
 
     # ------------------------------------------------------------------ history
     def begin(self, n: int) -> None:
@@ -121,6 +135,10 @@ class DTEnsemble:
     @property
     def observation_dim(self) -> int:
         return self.members[0].observation_dim
+
+    def for_system(self, system: SystemConfig) -> DTEnsemble:
+        """Every member in ``system`` (:meth:`DTBatchPolicy.for_system`)."""
+        return DTEnsemble([m.for_system(system) for m in self.members])
 
     def begin(self, n: int) -> None:
         for m in self.members:

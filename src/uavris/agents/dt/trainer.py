@@ -17,7 +17,7 @@ import numpy as np
 import torch
 
 from uavris.agents.dt.model import DecisionTransformer, masked_action_loss
-from uavris.agents.dt.trajectories import TrainingWindows
+from uavris.agents.dt.trajectories import MixedWindows, TrainingWindows
 from uavris.errors import CheckpointError
 from uavris.io import atomic_write_bytes, read_json, write_json
 
@@ -41,7 +41,7 @@ def warmup_schedule(opt: torch.optim.Optimizer, lr: float, warmup: int, step: in
     return torch.optim.lr_scheduler.LambdaLR(opt, lambda s: min(1.0, (s + 1) / warmup), last_epoch=step - 1)
 
 
-def train_steps(model: DecisionTransformer, opt: torch.optim.Optimizer, windows: TrainingWindows,
+def train_steps(model: DecisionTransformer, opt: torch.optim.Optimizer, windows: TrainingWindows | MixedWindows,
                 rng: np.random.Generator, first_step: int, count: int, batch_size: int, lr: float, warmup: int,
                 grad_clip: float, on_step: Callable[[int, float], None] | None = None) -> list[float]:
     """``count`` gradient steps from global step ``first_step``; returns the losses.

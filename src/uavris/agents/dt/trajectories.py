@@ -2,7 +2,8 @@
 
 Lives here: :class:`Trajectory` (paper eq. 14), returns-to-go (eq. 15), the elite selection
 of fine-tuning (eq. 18 and its paired variant), the recording of episodes, the state
-normalisation and the context windows of L_OFF (eq. 16) and L_FT (eq. 19). Not here: the
+normalisation and the context windows of L_OFF (eq. 16) and L_FT (eq. 19), of one set or of
+sets of several device counts (:class:`MixedWindows`). Not here: the
 Minari files (:mod:`.dataset`).
 
 - :func:`record_episodes` rolls any policy out on seeded episodes with the one rollout loop
@@ -209,3 +210,29 @@ class TrainingWindows:
                 "valid": torch.from_numpy(valid)}
 
 
+
+
+class MixedWindows:
+    """The windows of several sets of trajectories whose observations differ in width (halls
+    of different numbers of devices, read by one device-set encoder): each batch is drawn
+    from one set, chosen with probability proportional to its slots, so every slot is as
+    likely to be trained on as in one set, and a batch stacks observations of one width."""
+
+    def __init__(self, parts: Sequence[TrainingWindows]) -> None:
+        if not parts:
+            raise DatasetError("no trajectories to train on")
+        self.parts = list(parts)
+        slots = np.array([p.num_slots for p in self.parts], dtype=np.float64)
+        self._weights = slots / slots.sum()
+
+    @property
+    def num_slots(self) -> int:
+        return sum(p.num_slots for p in self.parts)
+
+    @property
+    def samples_per_epoch(self) -> int:
+        return sum(p.samples_per_epoch for p in self.parts)
+
+    def sample(self, batch_size: int, rng: np.random.Generator) -> dict[str, torch.Tensor]:
+        """``batch_size`` windows of one set (:meth:`TrainingWindows.sample`)."""
+        return self.parts[int(rng.choice(len(self.parts), p=self._weights))].sample(batch_size, rng)

@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from uavris.agents.evaluation import EpisodeResults, check_episodes, evaluate
-from uavris.agents.policy import check_policy_fits
+from uavris.agents.policy import fit_policy
 from uavris.agents.references import ORACLE, REFERENCE_SEED, ZERO_ACTION, reference_policy
 from uavris.config import Scenario, SystemConfig, get_scenario
 from uavris.env.rollout import policy_phase_control
@@ -66,8 +66,8 @@ def evaluate_target(target: str | Target, scenario: str | Scenario | None, episo
         system, own = hall.resolve(system)
         scenario = scenario or own
     loaded = target.load(system, device)
-    check_policy_fits(loaded.policy, system, target.name)
-    if phase_control == "agent" and policy_phase_control(loaded.policy) == "optimizer":
+    policy = fit_policy(loaded.policy, system, target.name)
+    if phase_control == "agent" and policy_phase_control(policy) == "optimizer":
         raise UavrisError(f"{target.name} acts on the motion only (trained with the optimiser setting the phases, "
                           "the strong track); it cannot be evaluated with --phase-control agent")
     scenario = scenario or loaded.scenario
@@ -83,7 +83,7 @@ def evaluate_target(target: str | Target, scenario: str | Scenario | None, episo
             return evaluate(policy, system, where, episodes, seed, phase_control=mode,
                             on_slot=lambda sim, obs, executed, alive: bar.update(int(alive.sum())))
 
-        res = run(loaded.policy, phase_control)
+        res = run(policy, phase_control)
         # A user's policy: the references on the same episodes, so its number reads at once.
         refs = {name: run(reference_policy(name, system, REFERENCE_SEED), None) for name in beside}
     summary = {"target": target.name, "scenario": where.name, "start": list(where.start), "seed": seed,

@@ -17,6 +17,11 @@ elements, the number of users, the Rician factor. A parameter is any numeric fie
   (:class:`~uavris.layouts.LayoutGenerator`, unseen split, layout seed 0), each from its own
   start; the interval is then over halls (each hall one sample), not over episodes.
 
+A model (a run or a DT) that reads the devices' positions is given them in every cell, and a
+DT with the device-set encoder reads the cell's number of devices whatever it was trained
+on (:meth:`~uavris.agents.dt.model.DecisionTransformer.for_devices`): a devices sweep of a
+deployment DT is its zero-shot transfer across the count.
+
 Every policy is scored on the same seeded episodes in every cell (``EVAL_SEED ..``): the
 curves differ by the parameter and the policy, never by the draws. A cell's result is a
 JSON file under ``OUT/cells/`` named by a hash of everything that determines it (a rerun
@@ -133,14 +138,19 @@ def sweep_cell(target: str, system: dict[str, Any], scenario: dict[str, Any], ep
     """A job: ``target`` in one hall of one cell on episodes ``EVAL_SEED ..``; its mean and its
     per-episode rates to the JSON file ``out``."""
     from uavris.agents.evaluation import evaluate
-    from uavris.agents.policy import check_policy_fits
+    from uavris.agents.policy import fit_policy
     from uavris.config import Scenario
     from uavris.experiments.tools.targets import resolve_target
 
     cfg = SystemConfig.from_stored(system)
-    loaded = resolve_target(target).load(cfg)
-    check_policy_fits(loaded.policy, cfg, target)
-    res = evaluate(loaded.policy, cfg, Scenario(scenario["name"], tuple(scenario["start"])), episodes, EVAL_SEED)
+    resolved = resolve_target(target)
+    if resolved.kind in ("dt", "expert") and resolved.own_system().observe_devices:
+        # A model that reads the devices' positions is given them: they add entries to the
+        # observation and change nothing in the physics (the references' numbers stay).
+        cfg = cfg.replace(observe_devices=True)
+    loaded = resolved.load(cfg)
+    policy = fit_policy(loaded.policy, cfg, target)
+    res = evaluate(policy, cfg, Scenario(scenario["name"], tuple(scenario["start"])), episodes, EVAL_SEED)
     write_json(Path(out), {"target": target, "mean": float(res.avg_sum_rate.mean()),
                            "rates": res.avg_sum_rate.tolist()})
 

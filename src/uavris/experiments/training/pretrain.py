@@ -29,7 +29,7 @@ from uavris.agents.dt.dataset import ExpertDataset, load_dataset
 from uavris.agents.dt.encoders import STATE_ENCODERS, StateEncoder, pooled_over_devices
 from uavris.agents.dt.model import DecisionTransformer
 from uavris.agents.dt.trainer import load_trainer_state, make_optimizer, train_steps
-from uavris.agents.dt.trajectories import TrainingWindows, default_target_return, normalisation_from
+from uavris.agents.dt.trajectories import MixedWindows, TrainingWindows, default_target_return, normalisation_from
 from uavris.config import PRESET, DictConfig, SystemConfig, check_non_negative, check_positive, fill_from_preset
 from uavris.env.simulator import layout_as_lists
 from uavris.env.wrappers import action_dim_for
@@ -78,6 +78,7 @@ class PretrainConfig(DictConfig):
     state_encoder: StateEncoder = "flat"  # flat (the DT paper's) or devices (a hall as a set; needs observed devices)
     ris_frame: bool = False  # the device encoder also reads each device's elevation above the RIS plane
     scenarios: tuple[str, ...] | None = None  # train on the episodes of these scenarios (layouts) only; None: all
+    more_datasets: tuple[str, ...] = ()  # datasets of halls of other device counts, trained on too (device encoder)
     target_quantile: float = TARGET_QUANTILE  # the default target return: this quantile of the dataset's returns
 
     def __post_init__(self) -> None:
@@ -91,6 +92,12 @@ class PretrainConfig(DictConfig):
             object.__setattr__(self, "scenarios", tuple(str(x) for x in self.scenarios))
             if not self.scenarios:
                 raise ConfigError("PretrainConfig.scenarios must name at least one scenario (or be None: all)")
+        object.__setattr__(self, "more_datasets", tuple(str(x) for x in self.more_datasets))
+        if self.more_datasets and self.state_encoder != "devices":
+            raise ConfigError("PretrainConfig.more_datasets needs state_encoder 'devices' (only it reads halls of "
+                              "several device counts)")
+        if self.more_datasets and self.scenarios is not None:
+            raise ConfigError("PretrainConfig.scenarios selects episodes of one dataset: not with more_datasets")
         if not 0 < self.target_quantile <= 1:
             raise ConfigError(f"PretrainConfig.target_quantile must be in (0, 1], got {self.target_quantile}")
         if self.ris_frame and self.state_encoder != "devices":
@@ -123,6 +130,17 @@ def training_subset(ds: ExpertDataset, scenarios: Sequence[str] | None) -> Exper
     return dataclasses.replace(ds, trajectories=[tr for tr in ds.trajectories if tr.scenario in set(scenarios)])
 
 
+def check_mixable(ds: ExpertDataset, more: Sequence[ExpertDataset]) -> None:
+    """Datasets trained on together (``more_datasets``): the same RIS, actions and observation
+    kind, only the number of devices may differ; one line naming the first that does not fit."""
+    def kind(d: ExpertDataset) -> tuple:
+        return d.system.num_elements, d.system.observe_devices, d.phase_control, d.system.horizon
+    for d in more:
+        if kind(d) != kind(ds):
+            raise ConfigError(f"PretrainConfig.more_datasets: {d.path} (RIS elements, devices observed, phase "
+                              f"control, horizon {kind(d)}) does not fit {ds.path} ({kind(ds)})")
+
+
 def default_pretrain_dir(cfg: PretrainConfig, root: str | Path = "runs/dt") -> Path:
     layout = "" if cfg.attention == "window" else f"-{cfg.attention}"
     return Path(root) / f"pretrain-{Path(cfg.dataset).name}-s{cfg.seed}-{cfg.preset}{layout}"
@@ -140,6 +158,8 @@ def pretrain(cfg: PretrainConfig, run_dir: str | Path, *, resume: bool = False, 
     configure_threads()
     run_dir = Path(run_dir)
     ds = training_subset(load_dataset(cfg.dataset), cfg.scenarios)
+    more = [load_dataset(path) for path in cfg.more_datasets]
+    check_mixable(ds, more)
     resuming = prepare_run_dir(run_dir, PRETRAIN_KIND, cfg.to_dict(), resume, force)
     system = ds.system
     torch.manual_seed(cfg.seed)
@@ -151,11 +171,14 @@ def pretrain(cfg: PretrainConfig, run_dir: str | Path, *, resume: bool = False, 
         mean, std = pooled_over_devices(mean, std, model_cfg.devices, model_cfg.elements)
     model = DecisionTransformer(model_cfg, mean, std, norm.return_scale).to(device)
     opt = make_optimizer(model, cfg.learning_rate, cfg.weight_decay)
-    windows = TrainingWindows.for_model(ds.trajectories, model.cfg)
+    windows: TrainingWindows | MixedWindows = TrainingWindows.for_model(ds.trajectories, model.cfg)
+    if more:  # halls of several device counts: one set of windows per dataset, one model (.encoders)
+        windows = MixedWindows([windows] + [TrainingWindows.for_model(d.trajectories, model.cfg) for d in more])
+    everything = [tr for d in [ds, *more] for tr in d.trajectories]
     model_meta = {
         "stage": "pretrain", "scenario": None, "scenarios": ds.scenarios, "dataset": str(cfg.dataset),
         "dataset_id": ds.dataset_id, "system": system.to_dict(), "observation_layout": layout_as_lists(system),
-        "target_return": default_target_return(ds.trajectories, cfg.target_quantile),
+        "target_return": default_target_return(everything, cfg.target_quantile),
         "target_return_rule": f"{cfg.target_quantile} quantile of the dataset's episode returns",
         "env_interactions": 0, "phase_control": ds.phase_control,
     }
