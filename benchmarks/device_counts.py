@@ -151,7 +151,7 @@ def train(args: argparse.Namespace, four: Path, datasets: dict[int, Path]) -> di
     mixed, jobs = {}, []
     for s in range(args.seeds):
         d = args.out / f"pretrain-mixed-s{s}"
-        mixed[s] = d / "model"
+        mixed[s] = d  # the run directory holds the model (model.json, its weights)
         cfg = {"dataset": str(four), "more_datasets": [str(datasets[k]) for k in args.counts], "preset": "quick",
                "seed": s, **track}
         if not (mixed[s] / "model.json").exists():

@@ -197,7 +197,7 @@ class _Report:
             scaling = f"{track.prefix}scaling{suffix}"
             scaling_figure(curve, refs, self.figs / scaling)
         lines, claims = deployment_section(scores, labels, f"figures/{stem}.png",
-                                           f"figures/{scaling}.png" if scaling else None, where)
+                                           f"figures/{scaling}.png" if scaling else None, where, self.rc.seed)
         self.add(*lines)
         self.claims += claims
         lines, claims = decomposition_section(results, labels, where)

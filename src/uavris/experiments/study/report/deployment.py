@@ -90,8 +90,10 @@ def _excludes_zero(s: dict[str, float]) -> str:
 
 
 def deployment_section(scores: dict[str, dict[str, float]], labels: dict[str, str], figure: str | None,
-                       scaling: str | None, where: str = "deployment track") -> tuple[list[str], list[str]]:
-    """The report's lines for the deployment track and its claims (each a bullet, headed ``where``)."""
+                       scaling: str | None, where: str = "deployment track", first_seed: int = 0
+                       ) -> tuple[list[str], list[str]]:
+    """The report's lines for the deployment track and its claims (each a bullet, headed ``where``);
+    the seed table names the pre-training seeds from the study's ``first_seed``."""
     layouts = list(scores)
     labels = {**dict(ROWS), **labels}
     rows = [(k, labels[k]) for k, _ in ROWS if all(k in scores[lay] for lay in layouts)]
@@ -113,7 +115,7 @@ def deployment_section(scores: dict[str, dict[str, float]], labels: dict[str, st
         n_seeds = max(int(k.rsplit(SEED_MARK, 1)[1]) for k in scores[layouts[0]] if SEED_MARK in k) + 1
         lines += ["", f"A learned row is the mean over {n_seeds} pre-training seeds in each layout; each seed's own "
                   "model (fraction of the oracle, mean [95% CI over layouts]):", ""]
-        lines += markdown_table(("policy", *(f"seed {i}" for i in range(n_seeds))), [
+        lines += markdown_table(("policy", *(f"seed {first_seed + i}" for i in range(n_seeds))), [
             (label, *(with_ci(over_units([scores[lay][f"{k}{SEED_MARK}{i}"] / scores[lay][ORACLE] for lay in layouts]),
                               pct) if f"{k}{SEED_MARK}{i}" in scores[layouts[0]] else MISSING for i in range(n_seeds)))
             for k, label in seeded])
