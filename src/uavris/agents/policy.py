@@ -124,7 +124,7 @@ class LevelAttitude:
 
     def for_system(self, system: SystemConfig) -> LevelAttitude:
         """The wrapped policy in ``system`` (its own ``for_system``), still held level."""
-        inner = fit_policy(self.policy, system)
+        inner = _for_system(self.policy, system)
         return self if inner is self.policy else LevelAttitude(inner)
 
 
@@ -144,8 +144,11 @@ def fit_policy(policy: object, system: SystemConfig, what: str = "the policy") -
     """``policy`` made to read ``system``'s observations where it can (``for_system``: a
     Decision Transformer with the device-set encoder in a hall of another number of
     devices), then checked (:func:`check_policy_fits`)."""
-    adapt = getattr(policy, "for_system", None)
-    if callable(adapt):
-        policy = adapt(system)
+    policy = _for_system(policy, system)
     check_policy_fits(policy, system, what)
     return policy
+
+
+def _for_system(policy: object, system: SystemConfig) -> object:
+    adapt = getattr(policy, "for_system", None)
+    return adapt(system) if callable(adapt) else policy

@@ -259,10 +259,9 @@ class DecisionTransformer(nn.Module):
         if not isinstance(devices, int) or devices < 2:
             raise ConfigError(f"a hall has at least 2 devices, got {devices!r}")
         state_dim = observation_slices(devices, cfg.elements, True)["devices"].stop
-        mean, std = stats_for_devices(self.state_mean.double().cpu().numpy(), self.state_std.double().cpu().numpy(),
-                                      cfg.devices, cfg.elements, devices)
-        other = DecisionTransformer(replace(cfg, state_dim=state_dim, devices=devices), mean, std,
-                                    float(self.return_scale))
+        mean, std = self.state_statistics(state_dim)
+        other = DecisionTransformer(replace(cfg, state_dim=state_dim, devices=devices), mean.cpu().numpy(),
+                                    std.cpu().numpy(), float(self.return_scale))
         weights = {k: v for k, v in self.state_dict().items() if k not in ("state_mean", "state_std")}
         missing, unexpected = other.load_state_dict(weights, strict=False)
         assert set(missing) == {"state_mean", "state_std"} and not unexpected, (missing, unexpected)

@@ -210,8 +210,6 @@ class TrainingWindows:
                 "valid": torch.from_numpy(valid)}
 
 
-
-
 class MixedWindows:
     """The windows of several sets of trajectories whose observations differ in width (halls
     of different numbers of devices, read by one device-set encoder): each batch is drawn
