@@ -15,7 +15,7 @@ measures both, on the deployment track's protocol:
 3. in ``--unseen`` unseen halls of each count (unseen split, never trained on), the same
    seeded episodes for every policy: the run's 4-device DTs (the same seeds), the mixed-count
    DTs, hovering with optimised phases and the oracle, the DTs under the attitude safety
-   layer as in the report's main rows.
+   layer as in the report's main rows, beside the zero action (hover, level, equal phases).
 
 Prints per count the fraction of the oracle (mean of the seeds per hall, then mean and 95%
 CI over halls) and the paired difference mixed - 4-only over halls; writes the table to
@@ -82,7 +82,7 @@ def evaluate_job(devices: int, hall: int, models: dict[str, list[str]], margin: 
                  out: str) -> None:
     """Every policy in unseen hall ``hall`` of ``devices`` devices: the episodes' mean sum rates."""
     from uavris.agents.evaluation import evaluate
-    from uavris.agents.references import HOVER_OPTIMIZER, ORACLE, REFERENCE_SEED, reference_policy
+    from uavris.agents.references import HOVER_OPTIMIZER, ORACLE, REFERENCE_SEED, ZERO_ACTION, reference_policy
     from uavris.experiments.training.dt_runs import load_dt_policy
     from uavris.layouts import LayoutGenerator
 
@@ -90,7 +90,7 @@ def evaluate_job(devices: int, hall: int, models: dict[str, list[str]], margin: 
     system, where = layout.resolve(base_system(devices))
     safe = system.replace(front_margin_deg=margin)
     rates = {}
-    for name in (HOVER_OPTIMIZER, ORACLE):
+    for name in (ZERO_ACTION, HOVER_OPTIMIZER, ORACLE):
         rates[name] = evaluate(reference_policy(name, system, REFERENCE_SEED), system, where, episodes,
                                EPISODE_SEED).avg_sum_rate.tolist()
     for name, paths in models.items():
@@ -183,16 +183,17 @@ def summary_row(k: int, results: list[dict]) -> tuple[str, ...]:
     """One count: each policy's fraction of the oracle over halls, and the paired difference."""
     import numpy as np
 
-    from uavris.agents.references import HOVER_OPTIMIZER, ORACLE
+    from uavris.agents.references import HOVER_OPTIMIZER, ORACLE, ZERO_ACTION
     from uavris.stats import over_units
 
-    fractions: dict[str, list[float]] = {"dt-4": [], "dt-mixed": [], HOVER_OPTIMIZER: []}
+    fractions: dict[str, list[float]] = {ZERO_ACTION: [], "dt-4": [], "dt-mixed": [], HOVER_OPTIMIZER: []}
     for r in results:
         oracle = float(np.mean(r[ORACLE]))
-        fractions[HOVER_OPTIMIZER].append(float(np.mean(r[HOVER_OPTIMIZER])) / oracle)
+        for name in (ZERO_ACTION, HOVER_OPTIMIZER):
+            fractions[name].append(float(np.mean(r[name])) / oracle)
         for name in ("dt-4", "dt-mixed"):
             fractions[name].append(float(np.mean([np.mean(seed) for seed in r[name]])) / oracle)
-    cells = []
+    cells = [f"{np.mean([np.mean(r[ORACLE]) for r in results]):.2f}"]
     for values in fractions.values():
         s = over_units(values)
         cells.append(f"{s['mean']:.1%} [{s['ci_low']:.1%}, {s['ci_high']:.1%}] (worst {min(values):.1%})")
@@ -227,7 +228,7 @@ def main() -> None:
     t_eval = time.perf_counter() - t0 - t_data - t_train
     rows = [summary_row(k, [json.loads(files[k, j].read_text())["rates"] for j in range(args.unseen)])
             for k in counts]
-    header = ("devices K", "DT trained on K = 4, safety layer",
+    header = ("devices K", "oracle (bps/Hz)", "zero action", "DT trained on K = 4, safety layer",
               f"DT trained on K = {', '.join(map(str, counts))}, safety layer", "hovering, optimised phases",
               "mixed - 4-only (points)")
     text = (f"Fraction of the oracle in {args.unseen} unseen halls per count ({args.episodes} episodes each, mean of "
