@@ -65,7 +65,7 @@ def main(argv: list[str] | None = None) -> int:
     print(f"- evaluation: {args.episodes} seeded episodes from seed {EVAL_SEED}, the same for every policy")
     print(flush=True)
     refs = {name: evaluate(reference_policy(name), config, "fig2", args.episodes, EVAL_SEED).summary()
-            for name in ("hover", "random", "hover-optimizer", "oracle")}
+            for name in ("zero-action", "random", "hover-optimizer", "oracle")}
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         def run(name: str, cfg, baseline: str) -> None:
@@ -79,7 +79,7 @@ def main(argv: list[str] | None = None) -> int:
         for steps in args.ppo_steps:
             run(f"paper track: PPO, {steps:,} env steps", TrainConfig(algo="ppo", scenario="fig2", seed=0,
                                                                       preset="quick", total_steps=steps,
-                                                                         eval_episodes=args.episodes), "hover")
+                                                                         eval_episodes=args.episodes), "zero-action")
         run("strong track: imitation of the oracle (6 rounds x 32 episodes)",
             TrainConfig(algo="ppo", scenario="fig2", seed=0, preset="quick", total_steps=0, eval_episodes=args.episodes,
                           phase_control="optimizer", imitation=ImitationConfig()), "hover-optimizer")

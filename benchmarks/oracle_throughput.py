@@ -339,7 +339,7 @@ def main(argv: list[str] | None = None) -> int:
     eval_times = []
     for scenario in ("fig2", "unseen2"):
         for name, policy in (("planning oracle", PlanningOracle()), ("greedy oracle", greedy_oracle_policy()),
-                             ("hover (zero action)", reference_policy("hover", config))):
+                             ("hover (zero action)", reference_policy("zero-action", config))):
             print(f"evaluating {name} on {episodes} {scenario} episodes ...", file=sys.stderr, flush=True)
             start = time.perf_counter()
             res = evaluate(policy, config, scenario, episodes, EVAL_SEED)

@@ -37,8 +37,8 @@ from _machine import cpu_model, pin_to_one_core  # noqa: E402  (benchmarks/_mach
 from stable_baselines3.common.callbacks import BaseCallback  # noqa: E402
 
 from uavris.agents.dt.model import DecisionTransformer  # noqa: E402
-from uavris.agents.dt.trainer import make_optimizer, train_steps  # noqa: E402
-from uavris.agents.dt.trajectories import TrainingWindows, Trajectory  # noqa: E402
+from uavris.agents.dt.training import TrainingWindows, make_optimizer, train_steps  # noqa: E402
+from uavris.agents.dt.trajectories import Trajectory  # noqa: E402
 from uavris.agents.experts import ALGORITHMS, default_hyperparams  # noqa: E402
 from uavris.agents.experts.sb3 import build_model  # noqa: E402
 from uavris.agents.experts.vec_env import UavRisVecEnv  # noqa: E402
@@ -81,8 +81,8 @@ def seconds_per_pretrain_step(steps: int) -> float:
     trajs = [Trajectory(rng.standard_normal((system.horizon + 1, system.observation_dim)).astype(np.float32),
                         rng.uniform(-1, 1, (system.horizon, system.action_dim)).astype(np.float32),
                         rng.uniform(0, 30, system.horizon), False, True, "fig2", i) for i in range(32)]
-    windows = TrainingWindows(trajs, cfg.context)
-    model = DecisionTransformer(cfg.model_config(system, system.action_dim))
+    windows = TrainingWindows(trajs, cfg.model.context)
+    model = DecisionTransformer(cfg.model.for_data(system, system.action_dim))
     opt = make_optimizer(model, cfg.learning_rate, cfg.weight_decay)
 
     def train(first: int, count: int) -> None:

@@ -2,10 +2,11 @@
 
 - The command-line page (``cli.md``): each ``<!-- uavris-help: COMMAND -->`` becomes that
   command's ``--help`` as printed by the installed package, so the page cannot drift from it.
-- The quick run's report (``results/quick-report.md``, a verbatim copy of
-  ``runs/quick/report.md``): its figures are ``figures/NAME`` of the run directory; where the
-  repository keeps one (``docs/figures/quick_NAME``) the link points there, otherwise the
-  image becomes a line naming the figure, so the copy stays verbatim and the build strict.
+- The reports under ``results/`` (verbatim copies of a run's ``report.md``): their figures
+  are ``figures/NAME`` of the run directory; where the repository keeps the quick run's
+  (``docs/figures/quick_NAME``, for ``results/quick-report.md``) the link points there,
+  otherwise the image becomes a line naming the figure, so the copy stays verbatim and the
+  build strict.
 - API pages: docstrings are prose with Sphinx roles (``:class:`X```); the role's prefix is
   dropped from the HTML, leaving the name as code.
 """
@@ -44,9 +45,9 @@ def command_help(name: str) -> str:
     return text
 
 
-def _report_figure(match: re.Match) -> str:
+def _report_figure(match: re.Match, kept: bool) -> str:
     alt, name = match.group(1), match.group(2)
-    if (DOCS / "figures" / f"quick_{name}").is_file():
+    if kept and (DOCS / "figures" / f"quick_{name}").is_file():
         return f"![{alt}](../figures/quick_{name})"
     return f"*({alt}: `figures/{name}` of the run directory, not kept in the repository.)*"
 
@@ -55,8 +56,8 @@ def on_page_markdown(markdown: str, page, config, files) -> str:
     src = page.file.src_uri
     if src == "cli.md":
         return HELP_MARK.sub(lambda m: f"```text\n{command_help(m.group(1))}\n```", markdown)
-    if src == "results/quick-report.md":
-        return REPORT_FIGURE.sub(_report_figure, markdown)
+    if src.startswith("results/"):
+        return REPORT_FIGURE.sub(lambda m: _report_figure(m, src == "results/quick-report.md"), markdown)
     return markdown
 
 

@@ -25,7 +25,7 @@ from uavris.cli.training import CompareArgs, FinetuneArgs, PretrainArgs, Reprodu
 # added per test); the fuzzed flag comes last, so it is the one that fails.
 BASE = {
     "train": ["train", "--preset", "smoke"],
-    "evaluate": ["evaluate", "hover", "--scenario", "fig2"],
+    "evaluate": ["evaluate", "zero-action", "--scenario", "fig2"],
     "compare-algorithms": ["compare-algorithms", "--preset", "smoke"],
     "collect": ["collect"],
     "pretrain-dt": ["pretrain-dt", "--preset", "smoke"],
@@ -33,9 +33,9 @@ BASE = {
     "reproduce": ["reproduce", "--preset", "smoke"],
     "demo": ["demo"],
     "plan": ["plan", "paper"],
-    "benchmark": ["benchmark", "hover", "--cells", "scenarios"],
+    "benchmark": ["benchmark", "zero-action", "--cells", "scenarios"],
     "plot": ["plot"],
-    "sweep": ["sweep", "hover", "--param", "system.nx", "2,4"],
+    "sweep": ["sweep", "zero-action", "--param", "system.nx", "2,4"],
 }
 ARGS = {"train": TrainArgs, "evaluate": EvaluateArgs, "compare-algorithms": CompareArgs, "collect": CollectArgs,
         "pretrain-dt": PretrainArgs, "finetune-dt": FinetuneArgs, "reproduce": ReproduceArgs, "demo": DemoArgs,
@@ -152,7 +152,7 @@ def test_bad_numbers_fail_in_one_line(cmd: str, existing_run: Path, capsys: pyte
 
 @pytest.mark.parametrize("args", [
     ["evaluate", "/no/such/run"],
-    ["evaluate", "hover", "--scenario", "fig2", "--out", "FILE"],
+    ["evaluate", "zero-action", "--scenario", "fig2", "--out", "FILE"],
     ["collect", "--experts", "/no/such/run"],
     ["collect", "--experts", "FILE"],
     ["pretrain-dt", "--dataset", "/no/such/dataset"],
@@ -169,7 +169,7 @@ def test_bad_numbers_fail_in_one_line(cmd: str, existing_run: Path, capsys: pyte
     ["train", "--algo"],
     ["train", "--no-such-flag"],
     ["nonsense"],
-    ["evaluate", "hover", "--scenario", "mars"],
+    ["evaluate", "zero-action", "--scenario", "mars"],
     ["train", "--preset", "huge"],
     ["reproduce", "--track", "fast"],
 ])
@@ -226,7 +226,7 @@ FIXED_SET_OPTIONS = {
                   "--device": _DEVICES},
     "compare-algorithms": {"--algos": ("ddpg", "ppo", "sac", "td3"), "--preset": _PRESETS, "--scenario": _SCENARIOS,
                            "--backend": ("local", "ray"), "--device": _DEVICES},
-    "pretrain-dt": {"--preset": _PRESETS, "--attention": ("window", "banded"), "--device": _DEVICES},
+    "pretrain-dt": {"--preset": _PRESETS, "--model.attention": ("window", "banded"), "--device": _DEVICES},
     "finetune-dt": {"--scenario": _SCENARIOS, "--preset": _PRESETS, "--selection": ("return", "paired"),
                     "--device": _DEVICES},
     "reproduce": {"--preset": _PRESETS, "--track": ("all", "both", "paper", "strong", "deployment"),
@@ -295,12 +295,12 @@ def test_device_flag(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None
     assert resolve_device("auto") == ("cuda" if torch.cuda.is_available() else "cpu")
     if not torch.cuda.is_available():
         for cmd in (["train", "--preset", "smoke", "--out", str(tmp_path / "r")],
-                    ["evaluate", "hover", "--scenario", "fig2", "--episodes", "1"],
+                    ["evaluate", "zero-action", "--scenario", "fig2", "--episodes", "1"],
                     ["reproduce", "--preset", "smoke", "--out", str(tmp_path / "s")]):
             line = _check_one_line(capsys, main(cmd + ["--device", "cuda"]), "cuda")
             assert "CUDA" in line
         assert not (tmp_path / "r").exists() and not (tmp_path / "s").exists()
-    line = _check_one_line(capsys, main(["evaluate", "hover", "--scenario", "fig2", "--device", "tpu"]), "tpu")
+    line = _check_one_line(capsys, main(["evaluate", "zero-action", "--scenario", "fig2", "--device", "tpu"]), "tpu")
     assert "invalid choice 'tpu'" in line and "'cpu', 'cuda', 'auto'" in line
 
 
@@ -310,7 +310,7 @@ def test_evaluate_writes_what_it_prints(tmp_path: Path, capsys: pytest.CaptureFi
 
     from uavris.io import read_csv
 
-    assert main(["evaluate", "hover", "--scenario", "fig2", "--episodes", "3", "--out", str(tmp_path),
+    assert main(["evaluate", "zero-action", "--scenario", "fig2", "--episodes", "3", "--out", str(tmp_path),
                  "--no-progress"]) == 0
     printed = capsys.readouterr().out
     (path,) = tmp_path.glob("fig2-seed1000000-n3-*.json")  # -KEY: the system evaluated

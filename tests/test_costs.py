@@ -60,9 +60,9 @@ def test_data_costs_are_their_slots_and_plans():
 
 
 def _pretrain(**over):
-    cfg = dict(steps=1_000, batch_size=64, context=20, width=128, depth=3, state_encoder="flat")
-    cfg.update(over)
-    return SimpleNamespace(**cfg)
+    model = dict(context=20, width=128, depth=3, state_encoder="flat")
+    model.update(over)
+    return SimpleNamespace(steps=1_000, batch_size=64, model=SimpleNamespace(**model))
 
 
 def test_a_dt_step_is_an_overhead_plus_its_matrix_products():
@@ -86,7 +86,8 @@ def test_finetuning_and_evaluation_worked_by_hand():
     # per round: 14 episodes of 50 slots acting; 2 epochs over ceil(3 x 50 / 64) = 3 batches
     per_round = 14 * 50 * (slot + act) + 2 * 3 * step
     expected = 4 * 50 * slot + 2 * per_round
-    assert finetune_cost(ft, horizon, "optimizer", context, width, depth) == pytest.approx(expected)
+    model = SimpleNamespace(context=context, width=width, depth=depth)
+    assert finetune_cost(ft, horizon, "optimizer", model) == pytest.approx(expected)
     # evaluation: the learned policies' episodes, and the references (a plan; hovering and the
     # oracle with the optimiser)
     assert evaluate_cost(3, 8, 50, "agent") == pytest.approx(

@@ -16,9 +16,8 @@ from uavris.agents.oracle.planner import expected_optimised_rate
 from uavris.agents.oracle.policy import PlannedFlight
 from uavris.config import SystemConfig
 from uavris.experiments.study.report.decomposition import decomposition_section
-from uavris.experiments.study.tracks import Deployment
 from uavris.experiments.study.workers import _decomposition, _Whereabouts, oracle_target
-from uavris.layouts import Layout
+from uavris.layouts import Layout, Site
 
 HALL = Layout("mine", ((6.0, 6.0, 1.0), (16.0, 8.0, 1.2), (30.0, 28.0, 0.5), (10.0, 32.0, 0.8)), (20.0, 20.0, 4.5))
 EPISODES = 4
@@ -42,7 +41,7 @@ def test_flying_to_the_target_level_has_no_place_and_no_attitude_gap(hall):
     system, where, plan = hall
     _, rec = _flown(system, where, plan, np.zeros(3))
     d = _decomposition(system, rec)
-    target = oracle_target(Deployment("mine", system, where.start))
+    target = oracle_target(Site("mine", system, where.start))
     assert np.linalg.norm(np.asarray(d["end_position"]) - plan.target) < 0.2  # it arrived (within a slot's creep)
     assert abs(target["plan_rate_level"] - d["end_rate_level"]) < 0.05 * target["plan_rate_level"] / 10
     assert d["end_rate_own"] == d["end_rate_level"] and d["behind_share"] == 0.0  # level: no device behind
@@ -61,7 +60,7 @@ def test_a_tilt_that_puts_a_device_behind_costs_what_the_evaluator_says(hall):
     assert d["end_rate_level"] - d["end_rate_own"] > 1.0  # a lost device costs bps/Hz, not a rounding
     assert d["behind_share"] > 0.0
     # the report's table and claim: the tilted row blocks, the level one does not
-    oracle = {"mean": 40.0, **oracle_target(Deployment("mine", system, where.start)), **d, "behind_share": 0.0}
+    oracle = {"mean": 40.0, **oracle_target(Site("mine", system, where.start)), **d, "behind_share": 0.0}
     results = {"mine": {"oracle": oracle, "dt-zero-shot": {"mean": 30.0, **d}}}
     lines, [claim] = decomposition_section(results, {})
     row = next(line for line in lines if line.startswith("| zero-shot DT |"))

@@ -14,12 +14,12 @@ import torch
 
 from uavris.agents.dt.checkpoint import load_dt
 from uavris.agents.dt.dataset import load_dataset, write_dataset
+from uavris.agents.dt.policy import load_dt_policy
 from uavris.agents.dt.trajectories import record_episodes
 from uavris.agents.evaluation import evaluate
 from uavris.agents.references import reference_policy
 from uavris.cli import main as cli_main
 from uavris.config import SystemConfig
-from uavris.experiments.training.dt_runs import load_dt_policy
 from uavris.experiments.training.finetune import FinetuneConfig, finetune
 from uavris.experiments.training.pretrain import PretrainConfig, pretrain
 from uavris.layouts import LayoutGenerator, write_layout
@@ -84,14 +84,15 @@ def test_checkpoint_round_trip_keeps_the_observation(layouts_dataset, tmp_path):
     pre = pretrain(PretrainConfig(dataset=path, preset="smoke"), tmp_path / "pre", progress=False)
     model, meta = load_dt(pre)
     assert model.cfg.state_dim == BASE.observation_dim == 170 and model.cfg.act_dim == 6
-    policy, system, scenario = load_dt_policy(pre)
-    assert system == TRAIN[0][0] and scenario is None and policy.observation_dim == 170
+    loaded = load_dt_policy(pre)
+    policy = loaded.policy
+    assert loaded.system == TRAIN[0][0] and loaded.scenario is None and policy.observation_dim == 170
     # the same weights give the same actions after a reload
-    again, _, _ = load_dt_policy(pre)
+    again = load_dt_policy(pre).policy
     a = evaluate(policy, *UNSEEN, 2, 5).episode_return
     b = evaluate(again, *UNSEEN, 2, 5).episode_return
     np.testing.assert_array_equal(a, b)
-    bc = pretrain(PretrainConfig(dataset=path, preset="smoke", condition_on_return=False), tmp_path / "bc",
+    bc = pretrain(PretrainConfig(dataset=path, preset="smoke", model={"condition_on_return": False}), tmp_path / "bc",
                   progress=False)
     assert load_dt(bc)[0].cfg.condition_on_return is False
     only = pretrain(PretrainConfig(dataset=path, preset="smoke", scenarios=("layout-train-1",)), tmp_path / "one",
@@ -159,7 +160,7 @@ def test_a_bad_layout_is_one_line_exit_2_and_nothing_changes(case, command, tmp_
     out.mkdir()
     (out / "keep.txt").write_text("untouched")
     before = _tree(tmp_path)
-    args = {"evaluate": ["evaluate", "hover", "--layout", str(path), "--episodes", "1", "--out", str(out)],
+    args = {"evaluate": ["evaluate", "zero-action", "--layout", str(path), "--episodes", "1", "--out", str(out)],
             "plan": ["plan", str(path), "--out", str(out / "plan")],
             "train": ["train", "--preset", "smoke", "--layout", str(path), "--out", str(out / "run")]}[command]
     assert cli_main(args) == 2
@@ -178,7 +179,7 @@ def test_system_users_on_the_command_line_give_a_hall(tmp_path, capsys):
     assert got["system"]["users"] == [list(u) for u in hall.users]
     want = evaluate(reference_policy("hover-optimizer", hall), hall, "fig2", 2, 1_000_000).summary()["mean"]
     assert got["mean"] == pytest.approx(want, abs=1e-12)
-    assert cli_main(["evaluate", "hover", *users, "--layout", "layout-unseen-0", "--scenario", "fig2"]) == 2
+    assert cli_main(["evaluate", "zero-action", *users, "--layout", "layout-unseen-0", "--scenario", "fig2"]) == 2
     assert "--layout and --system.users" in capsys.readouterr().err
 
 

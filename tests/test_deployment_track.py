@@ -17,13 +17,7 @@ from uavris.experiments.study.config import ReproduceConfig
 from uavris.experiments.study.pipeline import build_pipeline
 from uavris.experiments.study.report.deployment import ZERO_SHOT_TARGET
 from uavris.experiments.study.reproduce import reproduce
-from uavris.experiments.study.tracks import (
-    TRACK_SPECS,
-    evaluated_policies,
-    pretraining_stages,
-    stage_policy,
-    transfer_sources,
-)
+from uavris.experiments.study.tracks import TRACK_SPECS, track_rows, trained_models, transfer_sources
 from uavris.io import read_json
 from uavris.layouts import LayoutGenerator, layout_distance
 
@@ -38,21 +32,21 @@ def deployment_run(tmp_path_factory):
     return out, records
 
 
-def test_stage_names_map_to_policies_and_seeds():
-    assert stage_policy("pretrain") == ("dt-zero-shot", "zero-shot DT")
-    assert stage_policy("pretrain-s2") == ("dt-zero-shot@s2", "zero-shot DT, seed 2")
-    assert stage_policy("pretrain-n32-s1")[0] == "dt-zero-shot-n32@s1"
-    assert stage_policy("mixed-bc")[0] == "bc-mixed" and stage_policy("flat-s1")[0] == "dt-flat@s1"
-    for other in ("dataset", "dataset-mixed", "finetune-layout-unseen-0", "experts-train", "experts-unseen"):
-        assert stage_policy(other) is None
-    main = pretraining_stages(TRACK_SPECS["deployment"], {"state_encoder": "devices"}, ["a", "b", "c"], (1, 2), 3)
-    assert set(main) == {f"{m}{s}" for m in ("pretrain", "bc") for s in ("", "-s1", "-s2")}  # no ablation: DT and BC
-    rows = pretraining_stages(TRACK_SPECS["deployment"], {"state_encoder": "devices"}, ["a", "b", "c"], (1, 2), 3,
-                              ablation=True)
-    assert len(rows) == (1 + 1 + 2 + 1 + 2) * 3  # DT, BC, two curve points, flat, mixed DT and BC; 3 seeds each
-    assert rows["pretrain-n2-s2"] == ("dataset", {"state_encoder": "devices", "scenarios": ("a", "b"), "seed": 2})
-    assert rows["flat"][1]["state_encoder"] == "flat" and rows["mixed-bc-s1"][0] == "dataset-mixed"
-    assert rows["bc-s1"][1]["condition_on_return"] is False
+def test_the_trained_models_are_the_rows_over_seeds():
+    track = TRACK_SPECS["deployment"]
+    main = trained_models(track, ["a", "b", "c"], (1, 2), 3)
+    assert [m.stage for m in main] == [f"{m}{s}" for m in ("pretrain", "bc") for s in ("", "-s1", "-s2")]
+    assert [(m.row, m.seed) for m in main[:3]] == [("dt-zero-shot", 0), ("dt-zero-shot", 1), ("dt-zero-shot", 2)]
+    models = {m.stage: m for m in trained_models(track, ["a", "b", "c"], (1, 2), 3, ablation=True)}
+    assert len(models) == (1 + 1 + 2 + 1 + 2) * 3  # DT, BC, two curve points, flat, mixed DT and BC; 3 seeds each
+    track_fields = {"learning_rate": 3e-4, "model": {"width": 64}}
+    assert models["pretrain-n2-s2"].pretrain_fields(track_fields) == {**track_fields, "scenarios": ("a", "b")}
+    assert models["pretrain-n2-s2"].row == "dt-zero-shot-n2" and models["pretrain-n2-s2"].seed == 2
+    assert models["pretrain-n2-s2"].dataset == "dataset" and models["mixed-bc-s1"].dataset == "dataset-mixed"
+    assert models["flat"].pretrain_fields(track_fields)["model"] == {"width": 64, "state_encoder": "flat"}
+    assert models["bc-s1"].pretrain_fields({})["model"] == {"condition_on_return": False}
+    assert models["mixed-bc-s1"].row == "bc-mixed"
+    assert [m.stage for m in trained_models(TRACK_SPECS["paper"], [], (), 1, ablation=True)] == ["pretrain"]
 
 
 def test_the_main_rows_are_the_controllers_under_the_safety_layer():
@@ -60,22 +54,32 @@ def test_the_main_rows_are_the_controllers_under_the_safety_layer():
     behaviour cloning's seeds) is scored under the attitude safety layer only; the ablation adds
     the same models without the layer and held level, reading the same model files."""
     track = TRACK_SPECS["deployment"]
-    train, unseen = ReproduceConfig("smoke").deployments(track)
+    train, unseen = ReproduceConfig("smoke").sites(track)
     where = unseen[0]
+    models = trained_models(track, [t.name for t in train], (1,), 2)
     dirs = {k: Path("/models") / k for k in ("pretrain", "pretrain-s1", "bc", "bc-s1", f"finetune-{where.name}")}
     sources = transfer_sources(track, where, train)
-    main = evaluated_policies(track, where, sources, dirs, train)
-    full = evaluated_policies(track, where, sources, dirs, train, ablation=True)
+    main = {r.key: r for r in track_rows(track, where, sources, dirs, models, train)}
+    full = {r.key: r for r in track_rows(track, where, sources, dirs, models, train, ablation=True)}
     plain = {"dt-zero-shot", "dt-zero-shot@s1", "dt-ensemble", "dt-finetuned", "bc", "bc@s1"}
     safe = {"dt-zero-shot-safe", "dt-zero-shot-safe@s1", "dt-ensemble-safe", "dt-finetuned-safe", "bc-safe",
             "bc-safe@s1"}
     [transfer] = [k for k in main if k.startswith("transfer-")]
-    assert set(main) == safe | {"oracle-safe", transfer}
-    assert set(full) == set(main) | plain | {"dt-level", "dt-level@s1", "dt-ensemble-level"}
+    refs = {"zero-action", "hover-optimizer", "oracle"}
+    assert set(main) == safe | refs | {"oracle-safe", transfer}
+    assert set(full) == set(main) | plain | {"dt-zero-shot-level", "dt-zero-shot-level@s1", "dt-ensemble-level"}
+    assert list(main)[-3:] == ["zero-action", "hover-optimizer", "oracle"]  # the references last
     for key in ("dt-zero-shot@s1", "bc", "dt-finetuned"):
         name, _, seed = key.partition("@")
-        assert full[key][2] == main[f"{name}-safe" + (f"@{seed}" if seed else "")][2]  # the same model
-    assert main["bc-safe@s1"][2] == str(Path("/models/bc-s1/model"))
+        safe_row = main[f"{name}-safe" + (f"@{seed}" if seed else "")]
+        assert full[key].target == safe_row.target and safe_row.front_margin_deg == track.front_margin_deg
+        assert full[key].front_margin_deg is None and not full[key].level
+    assert main["bc-safe@s1"].target.path == Path("/models/bc-s1/model") and main["bc-safe@s1"].seed == 1
+    ensemble = full["dt-ensemble-level"]
+    assert ensemble.level and [m.path for m in ensemble.members] == [Path("/models/pretrain/model"),
+                                                                     Path("/models/pretrain-s1/model")]
+    assert main[transfer].plan_of == {t.name: t for t in train}[transfer[len("transfer-"):]]
+    assert main["dt-zero-shot-safe@s1"].label_for() == "zero-shot DT, seed 1, safety layer"
 
 
 def test_demonstrations_cover_every_training_hall(deployment_run):
@@ -140,3 +144,42 @@ def test_the_report_averages_seeds_and_states_the_claims(deployment_run):
     row = next(line for line in section.splitlines() if line.startswith("| zero-shot DT |"))
     assert row.split("|")[2].strip().startswith(f"{mean:.1%}")  # the row is the mean over seeds, then over halls
     assert f"**zero-shot DT >= {ZERO_SHOT_TARGET:.0%} of the oracle" in report and "**the device-set encoder" in report
+
+
+@pytest.mark.parametrize("key", ["dt-ensemble-safe", "dt-zero-shot-level@s1", "dt-finetuned-safe", "bc-safe@s1",
+                                 "oracle-safe", "zero-action", "transfer"])
+def test_uavris_evaluate_reproduces_a_row_of_the_report_by_name(deployment_run, tmp_path, key):
+    """``uavris evaluate OUT --row KEY --layout HALL``: the report's number for that row, on the
+    same episodes, whatever the row is (an ensemble, held level, another hall's plan, ...)."""
+    from uavris.cli import main
+
+    out, _ = deployment_run
+    [stage] = (out / "stages").glob("deploy-evaluate-layout-unseen-0-*")
+    result = read_json(stage / "stage.json")["result"]
+    if key == "transfer":
+        [key] = [k for k in result if k.startswith("transfer-")]
+    assert main(["evaluate", str(out), "--row", key, "--layout", "layout-unseen-0", "--out", str(tmp_path),
+                 "--no-progress"]) == 0
+    [path] = tmp_path.glob(f"{key}-layout-unseen-0-seed1000000-n2-*.json")
+    got = read_json(path)
+    assert got["mean"] == result[key]["mean"] and got["label"] == result[key]["label"]
+
+
+def test_a_row_of_the_study_in_a_hall_of_ones_own(deployment_run, tmp_path, capsys):
+    from uavris.cli import main
+    from uavris.layouts import Layout, write_layout
+
+    out, _ = deployment_run
+    mine = Layout("mine", ((6.0, 6.0, 1.0), (16.0, 8.0, 1.2), (30.0, 28.0, 0.5), (10.0, 32.0, 0.8)), (20.0, 20.0, 4.5))
+    hall = write_layout(tmp_path / "mine.yaml", mine)
+    args = ["evaluate", str(out), "--layout", str(hall), "--episodes", "1", "--out", str(tmp_path / "e"),
+            "--no-progress"]
+    nearest = min(LayoutGenerator().layouts("train", 3), key=lambda t: layout_distance(mine, t))
+    assert main([*args, "--row", f"transfer-{nearest.name}"]) == 0  # the nearest training hall's plan, flown here
+    assert main([*args, "--row", "dt-ensemble-safe"]) == 0
+    got = read_json(next((tmp_path / "e").glob("dt-ensemble-safe-mine-*.json")))
+    assert got["system"]["front_margin_deg"] == 1.0 and got["system"]["users"][0] == [6.0, 6.0, 1.0]
+    capsys.readouterr()
+    assert main([*args, "--row", "dt-finetuned-safe"]) == 2  # fine-tuned only in the study's unseen halls
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and "no such row" in err and "dt-ensemble-safe" in err

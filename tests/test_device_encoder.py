@@ -274,9 +274,8 @@ def test_one_model_learns_halls_of_two_device_counts_together():
     """MixedWindows draws each batch from one count, each set in proportion to its slots, and
     one device-set model trained on both fits the teacher in both (the loss falls by more than
     half on fixed windows of each count)."""
-    from uavris.agents.dt.model import masked_action_loss
-    from uavris.agents.dt.trainer import make_optimizer, train_steps
-    from uavris.agents.dt.trajectories import MixedWindows, TrainingWindows, record_episodes
+    from uavris.agents.dt.training import MixedWindows, TrainingWindows, make_optimizer, masked_action_loss, train_steps
+    from uavris.agents.dt.trajectories import record_episodes
 
     sets = []
     for k, hall in ((4, 2), (6, 3)):
@@ -308,8 +307,8 @@ def test_one_model_learns_halls_of_two_device_counts_together():
 def test_more_datasets_need_the_device_encoder_and_every_episode():
     from uavris.experiments.training.pretrain import PretrainConfig
 
-    with pytest.raises(ConfigError, match="more_datasets needs state_encoder 'devices'"):
+    with pytest.raises(ConfigError, match="more_datasets needs the model's state_encoder 'devices'"):
         PretrainConfig(dataset="a", more_datasets=("b",))
     with pytest.raises(ConfigError, match="not with more_datasets"):
-        PretrainConfig(dataset="a", more_datasets=("b",), state_encoder="devices", scenarios=("x",))
-    assert PretrainConfig(dataset="a", more_datasets=["b"], state_encoder="devices").more_datasets == ("b",)
+        PretrainConfig(dataset="a", more_datasets=("b",), model={"state_encoder": "devices"}, scenarios=("x",))
+    assert PretrainConfig(dataset="a", more_datasets=["b"], model={"state_encoder": "devices"}).more_datasets == ("b",)

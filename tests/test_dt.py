@@ -13,9 +13,10 @@ from tests.conftest import SHORT
 from uavris.agents.dt.checkpoint import load_dt, save_dt
 from uavris.agents.dt.config import DTConfig
 from uavris.agents.dt.dataset import load_dataset, write_dataset
-from uavris.agents.dt.model import DecisionTransformer, masked_action_loss
+from uavris.agents.dt.model import DecisionTransformer
 from uavris.agents.dt.policy import DTBatchPolicy
-from uavris.agents.dt.trajectories import TrainingWindows, Trajectory, record_episodes, returns_to_go, select_elites
+from uavris.agents.dt.training import TrainingWindows, masked_action_loss
+from uavris.agents.dt.trajectories import Trajectory, record_episodes, returns_to_go, select_elites
 from uavris.agents.evaluation import evaluate
 from uavris.cli import main as cli_main
 from uavris.errors import CheckpointError, DatasetError, UavrisError

@@ -13,7 +13,8 @@ from uavris.agents.dt.checkpoint import load_dt, save_dt
 from uavris.agents.dt.config import DTConfig
 from uavris.agents.dt.model import DecisionTransformer
 from uavris.agents.dt.policy import DTBatchPolicy
-from uavris.agents.dt.trajectories import TrainingWindows, Trajectory, record_episodes
+from uavris.agents.dt.training import TrainingWindows
+from uavris.agents.dt.trajectories import Trajectory, record_episodes
 from uavris.agents.evaluation import evaluate
 from uavris.config import ConfigError
 from uavris.experiments.training.finetune import FinetuneConfig, finetune
@@ -129,7 +130,7 @@ def test_policy_actions_equal_the_models_prediction_on_the_whole_episode():
 
 
 def test_banded_pipeline_pretrains_finetunes_and_round_trips(dataset_dir, tmp_path):
-    pre = pretrain(PretrainConfig(dataset=dataset_dir, preset="smoke", attention="banded"), tmp_path / "pre",
+    pre = pretrain(PretrainConfig(dataset=dataset_dir, preset="smoke", model={"attention": "banded"}), tmp_path / "pre",
                    progress=False)
     model, meta = load_dt(pre)
     assert model.cfg.attention == "banded"
@@ -168,7 +169,7 @@ def test_banded_pipeline_pretrains_finetunes_and_round_trips(dataset_dir, tmp_pa
 def test_unknown_attention_layout_on_the_cli_is_one_line_exit_2(tmp_path, capsys):
     from uavris.cli import main as cli_main
 
-    code = cli_main(["pretrain-dt", "--dataset", str(tmp_path), "--attention", "sliding", "--out",
+    code = cli_main(["pretrain-dt", "--dataset", str(tmp_path), "--model.attention", "sliding", "--out",
                      str(tmp_path / "run"), "--no-progress"])
     err = capsys.readouterr().err.strip()
     assert code == 2 and len(err.splitlines()) == 1 and "attention" in err and "sliding" in err

@@ -86,11 +86,11 @@ def test_the_nearest_training_hall_worked_by_hand() -> None:
     assert nearest_layout(unseen, halls) is halls[2]
     assert [layout_distance(unseen, h) for h in halls] == pytest.approx([2.0, 14 * math.sqrt(2) / 4, 1.0])
 
-    from uavris.experiments.study.tracks import TRACK_SPECS, Deployment, transfer_sources
+    from uavris.experiments.study.tracks import TRACK_SPECS, transfer_sources
+    from uavris.layouts import Site
 
-    def deployment(layout: Layout) -> Deployment:
-        system, where = layout.resolve(base)
-        return Deployment(layout.name, system, where.start)
+    def deployment(layout: Layout) -> Site:
+        return Site.of(layout, base)
 
     track = TRACK_SPECS["deployment"]  # demonstrations: the nearest training hall's plan only
     train = [deployment(h) for h in halls]

@@ -92,7 +92,7 @@ def test_report_numbers_come_from_evaluation_files(smoke_run):
     for stage in stages:
         scenario = stage.name.split("-")[-2]
         result = read_json(stage / "stage.json")["result"]
-        assert set(result) == {"expert", "dt-zero-shot", "dt-finetuned", "hover", "hover-optimizer", "oracle"} | {
+        assert set(result) == {"expert", "dt-zero-shot", "dt-finetuned", "zero-action", "hover-optimizer", "oracle"} | {
             f"transfer-{s}" for s in nearest_training_scenarios(scenario)}
         for summary in result.values():
             per_episode = [float(x) for x in re.findall(r"^\d+,([^,]+),", (stage / f"{summary['policy']}.csv")
@@ -141,6 +141,20 @@ def test_paper_and_strong_verdicts_come_from_evaluation_files(smoke_run):
     check_track_claims(results, compare["rows"], report.read_text())
 
 
+@pytest.mark.slow
+@pytest.mark.parametrize("track, key", [("paper", "dt-finetuned"), ("strong", "expert"), ("strong", "transfer-train3")])
+def test_uavris_evaluate_reproduces_a_scenario_tracks_row(smoke_run, tmp_path, track, key):
+    from uavris.cli import main
+
+    out, _, _ = smoke_run
+    [stage] = (out / "stages").glob(f"{'strong-' if track == 'strong' else ''}evaluate-unseen1-*")
+    want = read_json(stage / "stage.json")["result"][key]
+    assert main(["evaluate", str(out), "--row", key, "--track", track, "--scenario", "unseen1", "--out",
+                 str(tmp_path), "--no-progress"]) == 0
+    got = read_json(next(tmp_path.glob(f"{key}-unseen1-*.json")))
+    assert got["mean"] == want["mean"] and got["label"] == want["label"] and got["episodes"] == RC.eval_episodes
+
+
 # ---------------------------------------------------------------------- the report against its stage files
 # Recomputed here from the stages' results with SciPy, by the rules the report states, not by the
 # report's own functions.
@@ -184,10 +198,10 @@ DEPLOYMENT_PAIRS = (("dt-zero-shot", "hover-optimizer"), ("dt-zero-shot", "neare
                     ("dt-finetuned", "dt-zero-shot"), ("dt-zero-shot-safe", "hover-optimizer"),
                     ("dt-zero-shot-safe", "nearest"), ("dt-zero-shot-safe", "dt-zero-shot"),
                     ("dt-ensemble-safe", "hover-optimizer"), ("dt-ensemble-safe", "nearest"),
-                    ("dt-finetuned-safe", "dt-zero-shot-safe"), ("dt-zero-shot-safe", "dt-level"),
+                    ("dt-finetuned-safe", "dt-zero-shot-safe"), ("dt-zero-shot-safe", "dt-zero-shot-level"),
                     ("dt-zero-shot-safe", "bc-safe"))
 LEARNED = ("dt-zero-shot", "dt-ensemble", "dt-finetuned", "bc", "dt-zero-shot-safe", "dt-ensemble-safe",
-           "dt-finetuned-safe", "bc-safe", "dt-level", "dt-ensemble-level", "dt-flat", "dt-mixed", "bc-mixed")
+           "dt-finetuned-safe", "bc-safe", "dt-zero-shot-level", "dt-ensemble-level", "dt-flat", "dt-mixed", "bc-mixed")
 
 
 def check_deployment_report(results: dict[str, dict], text: str, where: str = "deployment track") -> None:

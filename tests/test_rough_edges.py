@@ -73,7 +73,7 @@ def test_system_room_applies_before_the_layout(hall_run: Path, tmp_path: Path) -
 
 def test_a_generated_layout_is_drawn_in_the_room_of_the_flag(tmp_path: Path) -> None:
     out = tmp_path / "e"
-    assert main(["evaluate", "hover", "--layout", "layout-unseen-0", "--system.room", "60", "60", "8",
+    assert main(["evaluate", "zero-action", "--layout", "layout-unseen-0", "--system.room", "60", "60", "8",
                  "--episodes", "1", "--out", str(out), "--no-progress"]) == 0
     got = _only_json(out)
     big = SystemConfig(room=(60.0, 60.0, 8.0))
@@ -89,7 +89,7 @@ def test_a_layout_file_with_a_room_and_system_room_is_one_line(command: str, tmp
     hall = tmp_path / "hall.yaml"
     hall.write_text(HALL_30)
     before = _tree(tmp_path)
-    args = {"evaluate": ["evaluate", "hover", "--episodes", "1", "--out", str(tmp_path / "e")],
+    args = {"evaluate": ["evaluate", "zero-action", "--episodes", "1", "--out", str(tmp_path / "e")],
             "demo": ["demo", "--episodes", "1"],
             "train": ["train", "--preset", "smoke", "--out", str(tmp_path / "run")]}[command]
     err = _one_line(capsys, main([*args, "--layout", str(hall), "--system.room", "50", "50", "8"]))
@@ -115,7 +115,7 @@ def test_benchmark_checks_the_layout_cells_too(tmp_path: Path, capsys: pytest.Ca
     """A safety distance no start in the 40 m hall keeps: one line naming the layout cell, nothing
     written (this held before issue 31 too: the generator refuses such a hall; a guard)."""
     out = tmp_path / "bench"
-    err = _one_line(capsys, main(["benchmark", "hover", "--preset", "smoke", "--cells", "layouts",
+    err = _one_line(capsys, main(["benchmark", "zero-action", "--preset", "smoke", "--cells", "layouts",
                                   "--system.safety-distance", "30", "--out", str(out), "--no-progress"]))
     assert "layout-unseen-0" in err and "safety" in err, err
     assert not out.exists()
@@ -127,7 +127,7 @@ def test_evaluations_of_two_systems_into_one_folder_keep_both(tmp_path: Path,
     """Two transmit powers into one --out: two result files, each with its own system and the
     mean of its own evaluation; the same evaluation again names the same file."""
     out = tmp_path / "e"
-    base = ["evaluate", "hover", "--scenario", "fig2", "--episodes", "2", "--out", str(out), "--no-progress"]
+    base = ["evaluate", "zero-action", "--scenario", "fig2", "--episodes", "2", "--out", str(out), "--no-progress"]
     names = {}
     for power in ("1", "2"):
         assert main([*base, "--system.tx-power-w", power]) == 0
@@ -141,7 +141,7 @@ def test_evaluations_of_two_systems_into_one_folder_keep_both(tmp_path: Path,
         summary = json.loads(path.read_text())
         system = SystemConfig(tx_power_w=float(power))
         assert summary["system"]["tx_power_w"] == float(power)
-        want = evaluate(reference_policy("hover", system), system, "fig2", 2, EVAL_SEED).summary()["mean"]
+        want = evaluate(reference_policy("zero-action", system), system, "fig2", 2, EVAL_SEED).summary()["mean"]
         assert summary["mean"] == pytest.approx(want, abs=1e-12)
     assert main([*base, "--system.tx-power-w", "2"]) == 0  # the same evaluation: the same name, replaced
     assert sorted(out.glob("*.json")) == sorted(names.values())
@@ -153,14 +153,14 @@ def test_evaluations_of_two_systems_into_one_folder_keep_both(tmp_path: Path,
 def test_a_layout_device_with_two_coordinates_says_so(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     hall = tmp_path / "hall.yaml"
     hall.write_text("devices:\n  - [15, 5, 1]\n  - [5, 5]\n  - [30, 20, 0.1]\n")
-    err = _one_line(capsys, main(["evaluate", "hover", "--layout", str(hall), "--episodes", "1",
+    err = _one_line(capsys, main(["evaluate", "zero-action", "--layout", str(hall), "--episodes", "1",
                                   "--out", str(tmp_path / "e")]))
     assert err.endswith(f"device D2 of {hall}: expected [x, y, z], got [5, 5]"), err
     assert not (tmp_path / "e").exists()
 
 
 def test_system_users_not_in_threes_says_so(capsys: pytest.CaptureFixture[str]) -> None:
-    err = _one_line(capsys, main(["evaluate", "hover", "--scenario", "fig2", "--system.users", "5", "5", "1",
+    err = _one_line(capsys, main(["evaluate", "zero-action", "--scenario", "fig2", "--system.users", "5", "5", "1",
                                   "15", "5"]))
     assert "--system.users takes x y z per device: a multiple of 3 numbers, got 5 values: 5 5 1 15 5" in err, err
 
@@ -193,7 +193,7 @@ def test_python_evaluate_names_its_own_argument() -> None:
     system = SystemConfig()
     for kwargs, name in ((dict(episodes=0, seed=0), "episodes"), (dict(episodes=1, seed=-1), "seed")):
         with pytest.raises(ConfigError) as e:
-            evaluate(reference_policy("hover", system), system, "fig2", **kwargs)
+            evaluate(reference_policy("zero-action", system), system, "fig2", **kwargs)
         assert str(e.value).startswith(f"{name} must be") and "--" not in str(e.value), str(e.value)
 
 
@@ -234,7 +234,7 @@ def test_demo_prints_intervals_in_brackets_never_below_zero(capsys: pytest.Captu
     assert main(["demo", "--episodes", "2"]) == 0
     out = capsys.readouterr().out
     system = SystemConfig()
-    for name in ("hover", "random", "hover-aligned"):
+    for name in ("zero-action", "random", "hover-aligned"):
         x = evaluate(reference_policy(name, system), system, "fig2", 2, 0).avg_sum_rate
         half = stats.t.ppf(0.975, 1) * stats.sem(x)
         want = f"95% CI [{max(0.0, x.mean() - half):.2f}, {x.mean() + half:.2f}]"
@@ -257,7 +257,7 @@ def test_evaluate_prints_intervals_in_brackets_never_below_zero(tmp_path: Path,
     half = stats.t.ppf(0.975, 1) * stats.sem(x)
     assert x.mean() - half < 0  # the interval the printout bounds
     assert f"(95% CI [0.00, {x.mean() + half:.2f}], IQM" in out, out
-    assert main(["evaluate", "hover", "--scenario", "fig2", "--episodes", "1", "--out", str(tmp_path / "h"),
+    assert main(["evaluate", "zero-action", "--scenario", "fig2", "--episodes", "1", "--out", str(tmp_path / "h"),
                  "--no-progress"]) == 0
     assert "(95% CI n/a, IQM" in capsys.readouterr().out  # one episode: no interval, not "nan-nan"
 
@@ -271,7 +271,7 @@ def test_demo_header_says_when_the_energy_budget_ends_an_episode(budget: str | N
     assert main(["demo", "--episodes", "1", *flags]) == 0
     header = capsys.readouterr().out.splitlines()[0]
     system = SystemConfig() if budget is None else SystemConfig(energy_budget_j=float(budget))
-    slots = int(evaluate(reference_policy("hover", system), system, "fig2", 1, 0).length[0])
+    slots = int(evaluate(reference_policy("zero-action", system), system, "fig2", 1, 0).length[0])
     assert slots < 100
     assert (f"T = 100 slots of 0.5 s, or until the {label} J energy budget is spent (hovering: slot {slots})"
             in header), header

@@ -29,7 +29,7 @@ def test_the_grid_bound_counts_the_poses_of_the_map():
 
 @pytest.mark.parametrize("args, names", [
     (["plan", "paper", "--grid-step", "0.01", "--out", "out/x"], "--grid-step 0.01"),
-    (["evaluate", "hover", "--episodes", "1000000000", "--out", "out"], "--episodes"),
+    (["evaluate", "zero-action", "--episodes", "1000000000", "--out", "out"], "--episodes"),
     (["reproduce", "--preset", "smoke", "--train-layouts", "10000000", "--out", "out"], "--train-layouts"),
     (["reproduce", "--preset", "smoke", "--eval-episodes", "1000000000", "--out", "out"], "--eval-episodes"),
     (["reproduce", "--preset", "smoke", "--dt-seeds", "1000", "--out", "out"], "--dt-seeds"),

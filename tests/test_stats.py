@@ -17,6 +17,7 @@ from uavris.experiments.study.report.deployment import (
     _excludes_zero,
     deployment_section,
     layout_scores,
+    seed_scores,
 )
 from uavris.stats import bootstrap_band, bootstrap_ci, iqm, over_units, summarize, t_interval, versus
 
@@ -103,13 +104,18 @@ def _result(**means):
     return {k: {"mean": v, "label": k} for k, v in means.items()}
 
 
+def _seeded(variant, *means):
+    return {f"{variant}@s{s}" if s else variant: {"mean": m, "label": variant, "variant": variant, "seed": s}
+            for s, m in enumerate(means)}
+
+
 def test_layout_scores_average_seeds_per_layout_and_summarise_transfers():
-    res = {"h0": {**_result(**{"dt-zero-shot": 30.0, "dt-zero-shot@s1": 34.0, "dt-zero-shot@s2": 35.0, "oracle": 40.0}),
+    res = {"h0": {**_seeded("dt-zero-shot", 30.0, 34.0, 35.0), **_result(oracle=40.0),
                   "transfer-a": {"mean": 20.0, "label": "oracle plan of a (nearest), 3.0 m"},
                   "transfer-b": {"mean": 28.0, "label": "transferred from b"}}}
     row = layout_scores(res)["h0"]
     assert row["dt-zero-shot"] == pytest.approx(33.0)  # (30 + 34 + 35) / 3
-    assert row["dt-zero-shot@s0"] == 30.0 and row["dt-zero-shot@s2"] == 35.0
+    assert seed_scores(res)["h0"]["dt-zero-shot"] == {0: 30.0, 1: 34.0, 2: 35.0}
     assert row[NEAREST] == 20.0 and row["transfer-mean"] == 24.0 and row["transfer-best"] == 28.0
     one = {"h0": {**_result(oracle=40.0), "transfer-a": {"mean": 20.0, "label": "x (nearest)"}}}
     assert "transfer-mean" not in layout_scores(one)["h0"]  # one transferred policy is its own mean
@@ -215,7 +221,7 @@ HALLS = {
     "dt-ensemble": ([39.2, 49.0, 19.8],), "dt-finetuned": ([39.6, 49.5, 19.9],),
     "bc": ([37.0, 46.0, 19.0], [37.5, 46.5, 18.0]), "dt-flat": ([30.0, 40.0, 15.0], [31.0, 41.0, 16.0]),
     "dt-mixed": ([35.0, 44.0, 17.0], [36.0, 45.0, 18.0]), "bc-mixed": ([34.0, 44.5, 16.0], [35.0, 44.0, 17.0]),
-    "hover": ([12.0, 13.0, 6.0],), "hover-optimizer": ([34.0, 43.0, 17.0],), "oracle": (ORACLES,)}
+    "zero-action": ([12.0, 13.0, 6.0],), "hover-optimizer": ([34.0, 43.0, 17.0],), "oracle": (ORACLES,)}
 TRANSFERS = {"transfer-a": [33.0, 20.0, 18.0], "transfer-b": [36.0, 45.0, 10.0]}  # a is the nearest
 
 
@@ -224,8 +230,10 @@ def _results():
     for j in range(3):
         res = {}
         for key, seeds in HALLS.items():
-            for i, values in enumerate(seeds):
-                res[key if i == 0 else f"{key}@s{i}"] = {"mean": values[j], "label": key}
+            if len(seeds) == 1:
+                res[key] = {"mean": seeds[0][j], "label": key}
+            else:
+                res.update(_seeded(key, *(values[j] for values in seeds)))
         res["transfer-a"] = {"mean": TRANSFERS["transfer-a"][j], "label": "oracle plan of a (nearest), 2.0 m"}
         res["transfer-b"] = {"mean": TRANSFERS["transfer-b"][j], "label": "oracle plan of b"}
         out[f"hall-{j}"] = res
@@ -241,7 +249,7 @@ def _by_hand():
 
 
 def test_the_deployment_section_against_numbers_worked_here():
-    lines, claims = deployment_section(layout_scores(_results()), {}, None, None)
+    lines, claims = deployment_section(layout_scores(_results()), {}, None, None, seeds=seed_scores(_results()))
     rows, labels = _by_hand(), dict(ROWS)
     oracle = np.array(ORACLES)
     assert rows["dt-zero-shot"].tolist() == [38.5, 47.5, 19.25]

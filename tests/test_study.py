@@ -1,9 +1,7 @@
 """The references everywhere, the expert chosen as the paper does, the strong track's pieces."""
 
 import json
-import sys
 from collections import Counter
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -25,7 +23,7 @@ def test_hover_is_exactly_the_zero_action():
     sim = BatchedSimulator(SystemConfig(), "fig2", 3)
     sim.seed(np.arange(3))
     sim.reset()
-    policy = reference_policy("hover")
+    policy = reference_policy("zero-action")
     for _ in range(5):
         a = policy(sim.observe())
         assert a.shape == (3, 22) and a.dtype == np.float32
@@ -33,7 +31,7 @@ def test_hover_is_exactly_the_zero_action():
         sim.step(a)
 
 
-@pytest.mark.parametrize("name", [pytest.param("oracle", marks=pytest.mark.slow), "hover-optimizer", "hover"])
+@pytest.mark.parametrize("name", [pytest.param("oracle", marks=pytest.mark.slow), "hover-optimizer", "zero-action"])
 def test_references_evaluate_from_the_cli_as_from_python(name, tmp_path, capsys):
     """``uavris evaluate NAME`` (and ``baseline:NAME``) give the per-episode numbers of the
     Python API on the same seeds."""
@@ -165,24 +163,37 @@ def test_paired_finetune_counts_candidates_and_elites(dataset_dir, tmp_path, mon
                            level_rollouts=bad)
 
 
-def test_optimizer_within_half_a_percent_of_release_0_1_0():
-    """The compiled optimiser against the frozen numpy optimiser of 0.1.0 on 512 fixed seeded
-    slots at random poses (default pairing draw): mean sum rate within 0.5% (measured on four
-    such sets: -0.07% to -0.21%; a smaller set is dominated by the few slots where a
-    non-concave problem lands in another local optimum)."""
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
-    try:
-        import _phase_optimizer_v010 as v010
-        from oracle_throughput import make_slots
-    finally:
-        sys.path.pop(0)
+def test_optimizer_at_least_as_good_as_scipy_on_random_slots():
+    """The per-slot optimiser against an independent one: SciPy's L-BFGS-B with its own
+    finite-difference gradient on the sum rate as the physics API computes it (ph.sum_rate of
+    the phases' effective reflection), from 4 random starts per slot, best kept; 12 seeded
+    slots with two active pairs at random poses. The optimiser's mean sum rate is within
+    0.5% of SciPy's or above it (measured 2026-11-25: 36.1 against 31.2 bps/Hz)."""
+    from scipy.optimize import minimize
+
+    from uavris import physics as ph
+    from uavris.env.simulator import BatchedSimulator
     from uavris.physics.phase_opt import optimize_slot_phases
 
-    config = SystemConfig()
-    h, cos, pairing = make_slots(config, 512, 1)
-    new = optimize_slot_phases(config, h, cos, pairing).sum_rate.mean()
-    old = v010.optimize_slot_phases(config, h, cos, pairing).sum_rate.mean()
-    assert abs(new / old - 1) < 0.005, (new, old)
+    config, n = SystemConfig(), 64
+    sim = BatchedSimulator(config.replace(safety_distance=0.0), "fig2", n)
+    sim.seed(7 + np.arange(n))
+    sim.reset()
+    rng = np.random.default_rng(7)
+    sim.place(np.c_[rng.uniform(0, 40, (n, 2)), rng.uniform(config.z_min, config.z_max, n)],
+              rng.uniform(-0.4, 0.4, (n, 3)))
+    two = np.flatnonzero(sim.pairing.sum(axis=(1, 2)) == 2)[:12]
+    h, cos, pairing = sim.channels[two], sim.cos_theta[two], sim.pairing[two]
+    ours = optimize_slot_phases(config, h, cos, pairing).sum_rate
+
+    def rate(phi: np.ndarray, b: int) -> float:
+        r = ph.effective_reflection_from_phases(phi, cos[b], config.angle_dependent_reflection)
+        return float(ph.sum_rate(ph.cascaded_gains(h[b], r), pairing[b], config.tx_power_w, config.noise_w))
+
+    theirs = np.array([max(-minimize(lambda x, b=b: -rate(x, b), x0, method="L-BFGS-B").fun
+                           for x0 in rng.uniform(0, 2 * np.pi, (4, config.num_elements))) for b in range(len(two))])
+    assert len(two) == 12
+    assert ours.mean() >= 0.995 * theirs.mean(), (ours.mean(), theirs.mean())
 
 
 # ------------------------------------------------------------------------------ strong track pieces

@@ -60,12 +60,12 @@ def test_each_cell_is_the_policy_evaluated_in_that_system(tmp_path):
 
 
 def test_a_devices_sweep_is_over_generated_halls(tmp_path):
-    paths = sweep(["hover"], [parse_axis("system.devices", "3")], tmp_path, base=SHORT, episodes=2, halls=2)
+    paths = sweep(["zero-action"], [parse_axis("system.devices", "3")], tmp_path, base=SHORT, episodes=2, halls=2)
     [row] = _rows(paths[0])
     means = []
     for layout in LayoutGenerator(devices=3, seed=0).layouts("unseen", 2, SHORT):
         system, where = layout.resolve(SHORT)
-        means.append(evaluate(reference_policy("hover", system), system, where, 2, 1_000_000).avg_sum_rate.mean())
+        means.append(evaluate(reference_policy("zero-action", system), system, where, 2, 1_000_000).avg_sum_rate.mean())
     assert row["unit"] == "halls" and int(row["samples"]) == 2
     assert float(row["mean"]) == pytest.approx(np.mean(means), rel=1e-12)
     lo, hi = sps.t.interval(0.95, 1, loc=np.mean(means), scale=sps.sem(means))
@@ -74,13 +74,13 @@ def test_a_devices_sweep_is_over_generated_halls(tmp_path):
 
 def test_the_command_writes_the_csv_and_a_bad_grid_is_one_line(tmp_path, capsys):
     out = tmp_path / "s"
-    assert cli_main(["sweep", "hover", "--param", "system.rician-factor", "0,8", "--param", "system.nx", "2,4",
+    assert cli_main(["sweep", "zero-action", "--param", "system.rician-factor", "0,8", "--param", "system.nx", "2,4",
                      "--episodes", "2", "--system.horizon", "10", "--workers", "1", "--out", str(out),
                      "--no-progress"]) == 0
     rows = _rows(out / "sweep.csv")
     assert len(rows) == 4 and {(r["x"], r["y"]) for r in rows} == {("0.0", "2.0"), ("0.0", "4.0"), ("8.0", "2.0"),
                                                                     ("8.0", "4.0")}
-    assert cli_main(["sweep", "hover", "--param", "system.nx", "0:4:0", "--out", str(tmp_path / "t")]) == 2
+    assert cli_main(["sweep", "zero-action", "--param", "system.nx", "0:4:0", "--out", str(tmp_path / "t")]) == 2
     assert "start:stop:step" in capsys.readouterr().err
     assert not (tmp_path / "t").exists()
     assert cli_main(["sweep", "nothing-at-all", "--param", "system.nx", "2", "--out", str(tmp_path / "u")]) == 2

@@ -114,14 +114,15 @@ def test_module_and_file_score_as_the_python_api(controller: Path, tmp_path: Pat
     assert by_module["mean"] == pytest.approx(direct, abs=1e-12)
     assert by_file["mean"] == pytest.approx(direct, abs=1e-12)
     # The references beside it are what `uavris evaluate` gives them on the same episodes.
-    for name in ("oracle", "baseline:hover"):
+    for name in ("oracle", "baseline:zero-action"):
         assert main(["evaluate", name, *args, "--out", str(tmp_path / name.replace(":", "_"))]) == 0
     assert by_module["references"]["oracle"]["mean"] == pytest.approx(_summary(tmp_path / "oracle")["mean"])
-    assert by_module["references"]["hover"]["mean"] == pytest.approx(_summary(tmp_path / "baseline_hover")["mean"])
+    zero = _summary(tmp_path / "baseline_zero-action")["mean"]
+    assert by_module["references"]["zero-action"]["mean"] == pytest.approx(zero)
     oracle = by_module["references"]["oracle"]["mean"]
     assert by_module["fraction_of_oracle"] == pytest.approx(by_module["mean"] / oracle)
     # Flying toward the middle beats hovering where the paper's unseen1 starts.
-    assert by_module["mean"] > by_module["references"]["hover"]["mean"]
+    assert by_module["mean"] > by_module["references"]["zero-action"]["mean"]
     out = capsys.readouterr().out
     assert "of the oracle" in out and "beside it on the same episodes: oracle" in out
 
@@ -137,7 +138,7 @@ def test_a_factory_whose_one_required_parameter_is_the_system(controller: Path, 
                  "--system.nx", "2", "--system.ny", "2", "--no-progress", "--out", str(tmp_path / "s")]) == 0
     small = SystemConfig(nx=2, ny=2)
     assert small.action_dim == 10
-    want = evaluate(reference_policy("hover", small), small, "fig2", 2, 1_000_000).summary()["mean"]
+    want = evaluate(reference_policy("zero-action", small), small, "fig2", 2, 1_000_000).summary()["mean"]
     assert _summary(tmp_path / "s")["mean"] == pytest.approx(want, abs=1e-12)
 
 
@@ -174,14 +175,14 @@ def test_benchmark_cells_are_the_reports_and_uavris_evaluates(controller: Path, 
     """Every cell's numbers equal `uavris evaluate` of the target and the references there, on
     the report's episodes; the layout cells are the study's unseen deployments."""
     from uavris.config import SystemConfig
-    from uavris.experiments.study.tracks import TRACK_SPECS, deployments
+    from uavris.experiments.study.tracks import TRACK_SPECS, sites
     from uavris.experiments.tools.benchmark import protocol_cells
     from uavris.layouts import resolve_layout
     from uavris.presets import STUDY
 
     cells = protocol_cells("smoke")
     assert [c.name for c in cells] == ["unseen1", "unseen2", "layout-unseen-0", "layout-unseen-1"]
-    _, unseen = deployments(TRACK_SPECS["deployment"], SystemConfig(), 1, STUDY["smoke"]["unseen_layouts"])
+    _, unseen = sites(TRACK_SPECS["deployment"], SystemConfig(), 1, STUDY["smoke"]["unseen_layouts"])
     for cell, dep in zip(cells[2:], unseen):
         hall, where = resolve_layout(cell.name).resolve(SystemConfig())
         assert dep.name == cell.name and dep.system.users == hall.users and dep.start == where.start
@@ -194,7 +195,8 @@ def test_benchmark_cells_are_the_reports_and_uavris_evaluates(controller: Path, 
     rows = {r["cell"]: r for r in summary["cells"]}
     n = str(STUDY["smoke"]["eval_episodes"])
     for cell, place in (("unseen2", ["--scenario", "unseen2"]), ("layout-unseen-1", ["--layout", "layout-unseen-1"])):
-        for target, key in (("mypkg.control:toward_centre", "mean"), ("oracle", "oracle"), ("hover", "zero_action")):
+        for target, key in (("mypkg.control:toward_centre", "mean"), ("oracle", "oracle"),
+                            ("zero-action", "zero_action")):
             ev = tmp_path / "ev" / cell / target.replace(":", "_")
             assert main(["evaluate", target, *place, "--episodes", n, "--no-progress", "--out", str(ev)]) == 0
             assert rows[cell][key] == pytest.approx(_summary(ev)["mean"], abs=1e-12), (cell, target)

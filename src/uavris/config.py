@@ -35,8 +35,9 @@ class DictConfig:
     dicts): what run directories, stage keys and job arguments store. :meth:`from_dict`
     is its inverse: a partial dict takes the defaults for what it leaves out, an unknown
     field is one :class:`~uavris.errors.ConfigError` line naming it, a nested config field
-    is rebuilt from its dict (a stored :class:`SystemConfig` by :meth:`SystemConfig.from_stored`),
-    and the class's own validation runs as on any construction.
+    is rebuilt from its dict (a stored :class:`SystemConfig` by :meth:`SystemConfig.from_stored`;
+    one the class names in ``partial_fields`` is left a mapping, of the fields that differ from
+    its preset's), and the class's own validation runs as on any construction.
     """
 
     def to_dict(self) -> dict[str, Any]:
@@ -54,7 +55,7 @@ class DictConfig:
         values = {}
         for name, value in d.items():
             nested = _nested_config(hints.get(name))
-            if nested is not None and isinstance(value, Mapping):
+            if nested is not None and isinstance(value, Mapping) and name not in getattr(cls, "partial_fields", ()):
                 value = getattr(nested, "from_stored", nested.from_dict)(value)
             elif isinstance(value, list) and _holds_tuple(hints.get(name)):
                 value = tuple(value)  # JSON and YAML have lists only; the configs hold tuples (hashable)

@@ -6,7 +6,8 @@ best pose: the setting in which a policy that memorised one deployment fails and
 generalises pays (docs/study.md, section 21).
 
 Lives here: :class:`Layout` (devices, start and optionally the room, with what it makes of
-a base system), the paper's layout (:data:`PAPER_LAYOUT`), the seeded generator
+a base system), :class:`Site` (a resolved layout or a scenario: a system and a start under a
+name, where a policy flies), the paper's layout (:data:`PAPER_LAYOUT`), the seeded generator
 (:class:`LayoutGenerator`: training and unseen sets disjoint by construction), the layout
 distance (:func:`layout_distance`, :func:`nearest_layout`), layout files (:func:`read_layout`,
 :func:`write_layout`) and :func:`resolve_layout`, which turns what a user types (``paper``,
@@ -36,7 +37,17 @@ from typing import Any, Sequence
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from uavris.config import PAPER_USERS, SCENARIOS, ConfigError, Scenario, SystemConfig, Vec3, float_tuple
+from uavris.config import (
+    PAPER_USERS,
+    SCENARIOS,
+    ConfigError,
+    DictConfig,
+    Scenario,
+    SystemConfig,
+    Vec3,
+    float_tuple,
+    scenario_at,
+)
 
 START_HEIGHT = 4.5  # m: the paper's starting altitude (every scenario of its Sec. V)
 SPLITS: tuple[str, ...] = ("train", "unseen", "other")
@@ -100,6 +111,27 @@ class Layout:
 
 
 PAPER_LAYOUT = Layout("paper", PAPER_USERS, SCENARIOS["fig2"].start)
+
+
+@dataclass(frozen=True)
+class Site(DictConfig):
+    """Where a policy flies: a system (the hall and its devices) and the UAV's start, under a
+    name: a scenario of the paper's hall (``unseen1``: a start), a generated hall
+    (``layout-unseen-3``: devices and start) or a user's (a resolved :class:`Layout`)."""
+
+    name: str
+    system: SystemConfig
+    start: Vec3 | None = None  # None: the named scenario's start (uavris.config.SCENARIOS)
+
+    @property
+    def scenario(self) -> Scenario:
+        return scenario_at(self.name, self.start)
+
+    @classmethod
+    def of(cls, layout: Layout, base: SystemConfig) -> Site:
+        """The site of ``layout`` on ``base`` (checked as :meth:`Layout.resolve` checks it)."""
+        system, where = layout.resolve(base)
+        return cls(layout.name, system, where.start)
 
 
 def default_start(system: SystemConfig, room: Sequence[float] | None = None) -> Vec3:

@@ -3,7 +3,7 @@
 Lives here: the registry :data:`REFERENCES` and :func:`reference_policy`. Not here: the
 policies themselves (:mod:`.baselines`, :mod:`.oracle`).
 
-A result is only interesting next to doing nothing (``hover``, the zero action) and the
+A result is only interesting next to doing nothing (``zero-action``: hovering level with equal phases) and the
 oracle; the others place it in between. Each entry makes a batch policy for a system
 from a seed for its own randomness (random actions, the optimiser's random starts);
 reports and the CLI use seed 0, so the same reference gives the same numbers everywhere.
@@ -35,7 +35,7 @@ class Reference:
 
 
 REFERENCES: dict[str, Reference] = {
-    "hover": Reference("zero action (hover, level, equal phases)", lambda c, seed: hover(c)),
+    "zero-action": Reference("zero action (hover, level, equal phases)", lambda c, seed: hover(c)),
     "random": Reference("random actions", random_policy),
     "hover-random-phases": Reference("hover, random phases", hover_random_phases),
     "hover-aligned": Reference("hover, co-phased for the strongest pair", lambda c, seed: hover_aligned()),
@@ -46,7 +46,7 @@ REFERENCES: dict[str, Reference] = {
 }
 
 # The two a result is always read against, and the ceiling for the motion of the strong track.
-ZERO_ACTION, ORACLE, HOVER_OPTIMIZER = "hover", "oracle", "hover-optimizer"
+ZERO_ACTION, ORACLE, HOVER_OPTIMIZER = "zero-action", "oracle", "hover-optimizer"
 
 
 def reference_policy(name: str, config: SystemConfig | None = None, seed: int = REFERENCE_SEED) -> Any:

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Literal
 
 import tyro
 
@@ -20,13 +20,16 @@ from uavris.experiments.engine.jobs import Backend
 from uavris.experiments.tools.benchmark import Cells
 from uavris.presets import COLLECT_SEED, EVAL_SEED, STUDY, Preset
 
+DEFAULT_EPISODES = STUDY["quick"]["eval_episodes"]  # uavris evaluate's: the quick report's
+TrackName = Literal["paper", "strong", "deployment"]
+
 
 # ---------------------------------------------------------------------------------------- evaluate
 @dataclass(frozen=True)
 class EvaluateArgs:
     target: Annotated[str, tyro.conf.Positional, tyro.conf.arg(metavar="RUN|MODEL|REFERENCE|MODULE:NAME")]
     """a run directory (train, pretrain-dt, finetune-dt), a DT model directory, a reference:
-    hover (the zero action), random, hover-random-phases, hover-aligned, hover-optimizer,
+    zero-action (hover, level, equal phases), random, hover-random-phases, hover-aligned, hover-optimizer,
     oracle, oracle-greedy (also written baseline:NAME), or your own policy: pkg.module:NAME or
     path/to/file.py:NAME (a policy obs -> actions, or a factory that takes no argument or system and
     returns one; docs/controller.md)"""
@@ -36,9 +39,9 @@ class EvaluateArgs:
     layout: Unset[str] = None
     """the hall: paper, layout-train-N / layout-unseen-N (-kK: K devices), or a YAML layout file (devices,
     optionally start and room; --system.* flags apply first) (default: the target's own)"""
-    episodes: int = STUDY["quick"]["eval_episodes"]
-    """evaluation episodes (seeds SEED .. SEED+EPISODES-1); the default is the quick report's (the paper
-    preset's report uses 100)"""
+    episodes: Unset[int] = None
+    """evaluation episodes (seeds SEED .. SEED+EPISODES-1) (default: 32, the quick report's; with --row the
+    study's)"""
     seed: int = EVAL_SEED
     """seed of the first evaluation episode"""
     out: Unset[Path] = None
@@ -51,6 +54,13 @@ class EvaluateArgs:
     """show a progress bar"""
     system: SystemConfig = SystemConfig()
     """the system evaluated in: the target's own, with these fields changed"""
+    row: Unset[str] = None
+    """a row of a study's report, TARGET being the study's output directory (uavris reproduce --out): its key in
+    the stage files, e.g. dt-zero-shot-safe, dt-zero-shot-safe@s1, dt-ensemble-safe, dt-zero-shot-level,
+    transfer-layout-train-5, oracle-safe, expert; evaluated as the report does, in the hall of --layout (its
+    start) or at --scenario, on the study's episodes unless --episodes is given"""
+    track: Unset[TrackName] = None
+    """the track of --row (default: deployment where the study ran it, else its last track)"""
 
 
 def evaluate_command(args: list[str]) -> None:
@@ -65,31 +75,69 @@ def evaluate_command(args: list[str]) -> None:
     Your own policy (MODULE:NAME or FILE.py:NAME) is scored with the zero action and the
     oracle beside it on the same episodes (in the JSON under "references"; default OUT
     runs/policies/TARGET/eval). For the study's whole protocol use `uavris benchmark`.
+    A row of a study's report (--row, TARGET the study's OUT) is evaluated as the report
+    evaluates it, here or in a hall of your own (default OUT runs/rows/ROW).
     """
     from uavris.agents.torch_device import resolve_device
     from uavris.cli.options import layout_defaults
-    from uavris.experiments.display.tables import rate_interval
     from uavris.experiments.tools.evaluate import evaluate_target
     from uavris.experiments.tools.targets import resolve_target
 
     doc = evaluate_command.__doc__ or ""
     # Two passes: the first finds the target, whose own system is the default the flags change.
     first = parse(EvaluateArgs, args, "uavris evaluate", doc)
+    if first.row is not None:
+        return _evaluate_row(first, args, doc)
     target = resolve_target(first.target)
     system, hall = layout_defaults(args, target.own_system(), "uavris evaluate")
     a = parse(EvaluateArgs, args, "uavris evaluate", doc, default=EvaluateArgs(first.target, system=system))
     output_dir(a.out)
-    summary, path = evaluate_target(target, scenario=a.scenario or hall, episodes=a.episodes, seed=a.seed,
-                                    out=a.out, phase_control=a.phase_control, device=resolve_device(a.device),
+    episodes = DEFAULT_EPISODES if a.episodes is None else a.episodes
+    summary, path = evaluate_target(target, scenario=a.scenario or hall, episodes=episodes, seed=a.seed, out=a.out,
+                                    phase_control=a.phase_control, device=resolve_device(a.device),
                                     progress=a.progress, system=a.system)
-    print(f"{a.target} in {summary['scenario']}: average sum rate {summary['mean']:.2f} bps/Hz "
+    _print_evaluation(a.target, summary, path)
+
+
+def _evaluate_row(first: EvaluateArgs, args: list[str], doc: str) -> None:
+    """``uavris evaluate OUT --row KEY``: a row of the study in OUT, in the site the flags name."""
+    from uavris.agents.torch_device import resolve_device
+    from uavris.cli.options import layout_defaults
+    from uavris.experiments.study.rows import read_study, study_row
+    from uavris.experiments.study.tracks import TRACK_SPECS
+    from uavris.experiments.tools.evaluate import evaluate_target
+    from uavris.layouts import Site
+
+    rc = read_study(first.target)
+    ran = [t.name for t in rc.tracks]
+    track = first.track or ("deployment" if "deployment" in ran else ran[-1])
+    base = rc.system.replace(observe_devices=True) if TRACK_SPECS[track].layouts else rc.system
+    system, hall = layout_defaults(args, base, "uavris evaluate")
+    a = parse(EvaluateArgs, args, "uavris evaluate", doc, default=EvaluateArgs(first.target, system=system))
+    output_dir(a.out)
+    if hall is None and a.scenario is None:
+        raise UsageError("--row: name where to evaluate it: --layout HALL (its devices and start) or --scenario NAME")
+    site = Site(a.scenario or hall.name, a.system, None if a.scenario else hall.start)
+    site.scenario.validate_for(site.system)
+    row = study_row(first.target, str(a.row), track, site)
+    episodes = rc.eval_episodes if a.episodes is None else a.episodes
+    summary, path = evaluate_target(row, scenario=site.scenario, episodes=episodes, seed=a.seed, out=a.out,
+                                    phase_control=a.phase_control, device=resolve_device(a.device),
+                                    progress=a.progress, system=site.system)
+    _print_evaluation(f"{row.key} ({summary['label']}, {track} track)", summary, path)
+
+
+def _print_evaluation(what: str, summary: dict, path: Path) -> None:
+    from uavris.experiments.display.tables import rate_interval
+
+    print(f"{what} in {summary['scenario']}: average sum rate {summary['mean']:.2f} bps/Hz "
           f"(95% CI {rate_interval(summary['ci_low'], summary['ci_high'])}, IQM {summary['iqm']:.2f}, "
           f"{summary['episodes']} episodes) -> {path}")
     for name, ref in summary.get("references", {}).items():
         print(f"  beside it on the same episodes: {name} {ref['mean']:.2f} bps/Hz "
               f"(95% CI {rate_interval(ref['ci_low'], ref['ci_high'])})")
     if summary.get("fraction_of_oracle") is not None:
-        print(f"  {a.target} reaches {100 * summary['fraction_of_oracle']:.1f}% of the oracle")
+        print(f"  {what} reaches {100 * summary['fraction_of_oracle']:.1f}% of the oracle")
 
 
 # --------------------------------------------------------------------------------------- benchmark

@@ -223,7 +223,7 @@ def finetune_command(args: list[str]) -> None:
     finetune.csv (with the environment interactions used), TensorBoard logs, checkpoints/
     and model/.
     """
-    from uavris.experiments.training.dt_runs import dt_system
+    from uavris.agents.dt.checkpoint import dt_system
     from uavris.experiments.training.finetune import FinetuneConfig, default_finetune_dir, finetune
     from uavris.runs import read_done
 

@@ -1,10 +1,13 @@
 """Decision Transformer checkpoints: safetensors weights plus JSON metadata, no pickle.
 
-Lives here: :func:`save_dt`, :func:`load_dt` and :func:`read_dt_metadata`. Format: a
-directory with ``model.safetensors`` (every parameter and buffer) and ``model.json``
-(``kind``, ``format_version``, the :class:`~uavris.agents.dt.model.DTConfig` and
-caller-supplied metadata), both written atomically. Not here: the trainer's state (its
-optimiser and random streams, :mod:`.trainer`).
+Lives here: :func:`save_dt`, :func:`load_dt` and :func:`read_dt_metadata`; :func:`dt_model_dir`
+(the model a DT run directory stands for) and :func:`checkpoint_system` (the system a model
+was trained on). Format: a directory with ``model.safetensors`` (every parameter and buffer)
+and ``model.json`` (``kind``, ``format_version``, the :class:`~uavris.agents.dt.config.DTConfig`
+and caller-supplied metadata), both written atomically. Not here: the trainer's state (its
+optimiser and random streams, :mod:`.training`), the policy a model deploys as and the one
+loader of it (:func:`uavris.agents.dt.policy.load_dt_policy`), writing run directories
+(:mod:`uavris.experiments.training.dt_runs`).
 """
 
 from __future__ import annotations
@@ -15,11 +18,16 @@ from typing import Any
 
 import torch
 
+from uavris import runs
 from uavris.agents.dt.config import DTConfig
 from uavris.agents.dt.model import DecisionTransformer
-from uavris.errors import CheckpointError, ConfigError
+from uavris.config import SystemConfig
+from uavris.env.simulator import stored_system
+from uavris.errors import CheckpointError, ConfigError, UavrisError
 from uavris.io import atomic_write_bytes, write_json
 
+PRETRAIN_KIND = "uavris-dt-pretrain"  # the "kind" of a DT run directory's config.yaml
+FINETUNE_KIND = "uavris-dt-finetune"
 MODEL_KIND = "uavris-decision-transformer"
 MODEL_FORMAT_VERSION = 1
 WEIGHTS_FILE = "model.safetensors"
@@ -94,3 +102,44 @@ def load_dt(directory: str | Path, device: str = "cpu") -> tuple[DecisionTransfo
         raise CheckpointError(f"{weights} has invalid normalisation (non-positive scale)")
     model.to(device).eval()
     return model, meta
+
+
+def latest_checkpoint(run_dir: Path) -> tuple[int, Path] | None:
+    """(step or round, directory) of a DT run's newest checkpoint, or None."""
+    info = runs.read_pointer(run_dir, "step", "dir")
+    if info is None:
+        return None
+    try:
+        return int(info["step"]), run_dir / "checkpoints" / str(info["dir"])
+    except (TypeError, ValueError):
+        raise UavrisError(f"{run_dir / runs.POINTER} is corrupt") from None
+
+
+def dt_model_dir(path: str | Path) -> Path | None:
+    """The model directory of a DT target: the directory itself when it holds model.json,
+    the latest checkpoint of an unfinished DT run, or None when ``path`` is not a DT target."""
+    path = Path(path)
+    if (path / META_FILE).exists():
+        return path
+    saved = runs.read_config(path)
+    if isinstance(saved, dict) and saved.get("kind") in (PRETRAIN_KIND, FINETUNE_KIND):
+        latest = latest_checkpoint(path)
+        if latest is None:
+            raise UavrisError(f"{path} has no model yet (no {META_FILE} and no checkpoint)")
+        return latest[1]
+    return None
+
+
+def checkpoint_system(meta: dict[str, Any], where: Path) -> SystemConfig:
+    """The system a checkpoint was trained on, checked against today's observation layout."""
+    if "system" not in meta:
+        raise CheckpointError(f"{where} stores no system configuration")
+    return stored_system(meta["system"], meta.get("observation_layout"), str(where), CheckpointError)
+
+
+def dt_system(path: str | Path) -> SystemConfig:
+    """The system of a DT target (run or model directory), read from its metadata alone."""
+    model_dir = dt_model_dir(path)
+    if model_dir is None:
+        raise UavrisError(f"{path} is not a DT model directory (no {META_FILE})")
+    return checkpoint_system(read_dt_metadata(model_dir), model_dir)

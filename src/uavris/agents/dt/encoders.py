@@ -49,7 +49,7 @@ from torch import nn
 from uavris.env.simulator import observation_slices
 from uavris.errors import ConfigError
 
-StateEncoder = Literal["flat", "devices"]  # the DT's state encoder (--state-encoder)
+StateEncoder = Literal["flat", "devices"]  # the DT's state encoder (--model.state-encoder)
 STATE_ENCODERS: tuple[str, ...] = get_args(StateEncoder)
 UAV_SLICES = ("position", "velocity", "attitude_sin", "attitude_cos", "energy_remaining", "time_fraction")
 PER_DEVICE_SLICES = ("channel_real", "channel_imag", "devices")

@@ -25,7 +25,7 @@ Two attention layouts (``DTConfig.attention``):
   tokens instead of ``3 context - 1``: exact, not an approximation. The first token of a
   slot sees the same ``3 context - 1`` tokens as the window layout at its first layer, but
   deeper blocks reach further back (``depth`` bands). The model is trained on whole
-  episodes (:class:`uavris.agents.dt.trajectories.TrainingWindows` with ``whole_episodes``).
+  episodes (:class:`uavris.agents.dt.training.TrainingWindows` with ``whole_episodes``).
   For histories of at most ``context`` slots both layouts compute the same function.
 
 Two exact savings, both invisible in the outputs:
@@ -45,11 +45,11 @@ R_hat replaced by 0, trained and deployed alike. It has the DT's parameters, com
 data, so the difference between the two is what return conditioning does (Chen et al.
 compare the DT with behaviour cloning the same way, on the same data).
 
-Lives here: the model (:class:`DecisionTransformer`), its configuration (:class:`DTConfig`),
-the attention masks (:func:`attention_mask`) and the action loss (:func:`masked_action_loss`).
-Not here: the key/value cache of the banded layout (:mod:`.cache`), the training windows
-(:mod:`.trajectories`), checkpoints (:mod:`.checkpoint`), training (:mod:`.trainer`) and
-deployment (:mod:`.policy`).
+Lives here: the model (:class:`DecisionTransformer`) and the attention masks
+(:func:`attention_mask`). Not here: its configuration (:class:`~.config.DTConfig`, in
+:mod:`.config`), its state encoders (:mod:`.encoders`), the key/value cache of the banded
+layout (:mod:`.cache`), checkpoints (:mod:`.checkpoint`), training: the windows, the loss and
+the steps (:mod:`.training`), and deployment (:mod:`.policy`).
 """
 
 from __future__ import annotations
@@ -121,6 +121,8 @@ class DecisionTransformer(nn.Module):
     def __init__(self, cfg: DTConfig, state_mean: np.ndarray | None = None, state_std: np.ndarray | None = None,
                  return_scale: float = 1.0) -> None:
         super().__init__()
+        if not cfg.sized:
+            raise ConfigError("a DT is built for data of known sizes: DTConfig.for_data(system, act_dim) sets them")
         self.cfg = cfg
         w = cfg.width
         self.embed_return = nn.Linear(1, w)
@@ -254,8 +256,8 @@ class DecisionTransformer(nn.Module):
         if cfg.state_encoder != "devices":
             raise ConfigError(f"this DT reads {cfg.state_dim} observation entries (state encoder "
                               f"{cfg.state_encoder!r}); "
-                              "only a DT with the device-set encoder (--state-encoder devices) reads another number "
-                              "of devices")
+                              "only a DT with the device-set encoder (--model.state-encoder devices) reads another "
+                              "number of devices")
         if not isinstance(devices, int) or devices < 2:
             raise ConfigError(f"a hall has at least 2 devices, got {devices!r}")
         state_dim = observation_slices(devices, cfg.elements, True)["devices"].stop
@@ -300,11 +302,3 @@ def _init_weights(module: nn.Module) -> None:
     elif isinstance(module, nn.LayerNorm):
         nn.init.ones_(module.weight)
         nn.init.zeros_(module.bias)
-
-
-def masked_action_loss(pred: torch.Tensor, target: torch.Tensor, valid: torch.Tensor) -> torch.Tensor:
-    """Mean squared action error over the real slots: the paper's L_OFF (eq. 16) and L_FT
-    (eq. 19), E ||A - A_hat||^2, divided by ``act_dim`` (a per-component MSE)."""
-    err = (pred - target).pow(2).mean(dim=-1)
-    w = valid.to(err.dtype)
-    return (err * w).sum() / w.sum().clamp_min(1.0)

@@ -1,7 +1,7 @@
 """Deploying a Decision Transformer: a stateful batch policy conditioned on a target return.
 
 Lives here: :class:`DTBatchPolicy`, :class:`DTEnsemble` (several DTs, one mean action) and
-:func:`dt_policy_from_checkpoint`. Not here: the
+:func:`load_dt_policy`, the one way a DT is loaded to act. Not here: the
 model (:mod:`.model`) and the rollout loop that drives it (:func:`uavris.env.rollout.rollout`).
 
 Zero-shot deployment (paper Sec. IV-D): the first action of an episode is predicted from
@@ -30,6 +30,7 @@ far above anything in the data asks the model to extrapolate). Callers may overr
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -37,11 +38,11 @@ import numpy as np
 import torch
 from numpy.typing import NDArray
 
-from uavris.agents.dt.checkpoint import load_dt
+from uavris.agents.dt.checkpoint import checkpoint_system, dt_model_dir, load_dt
 from uavris.agents.dt.model import DecisionTransformer
-from uavris.config import SystemConfig
+from uavris.config import Scenario, SystemConfig, scenario_at
 from uavris.env.wrappers import MOTION_DIM, check_phase_control
-from uavris.errors import CheckpointError
+from uavris.errors import CheckpointError, ConfigError, UavrisError
 
 
 class DTBatchPolicy:
@@ -220,12 +221,34 @@ class _CachedHistory:
         self.t += 1
 
 
-def dt_policy_from_checkpoint(directory: str | Path, target_return: float | None = None, noise_sigma: float = 0.0,
-                              seed: int | None = None, device: str = "cpu") -> tuple[DTBatchPolicy, dict[str, Any]]:
-    """Load a checkpoint directory as a deterministic (or noisy) batch policy; returns it and
-    the checkpoint's metadata. ``target_return`` defaults to the checkpoint's."""
-    model, meta = load_dt(directory, device)
+@dataclass(frozen=True)
+class LoadedDT:
+    """A DT model directory as a policy, with where it comes from."""
+
+    policy: DTBatchPolicy
+    system: SystemConfig  # the system it was trained (fine-tuned) on
+    scenario: Scenario | None  # a fine-tuned model's scenario; None for a pre-trained one
+    meta: dict[str, Any]  # its model.json
+    directory: Path  # the model directory (a run directory stands for its final or latest model)
+
+
+def load_dt_policy(path: str | Path, target_return: float | None = None, noise_sigma: float = 0.0,
+                   seed: int | None = None, device: str = "cpu") -> LoadedDT:
+    """The one loader of a Decision Transformer: a DT run or model directory
+    (:func:`~.checkpoint.dt_model_dir`) as a deterministic (or, with ``noise_sigma``, noisy)
+    batch policy on the torch ``device``, conditioned on ``target_return`` (default: the
+    checkpoint's), with the system and scenario it was made for."""
+    model_dir = dt_model_dir(path)
+    if model_dir is None:
+        raise UavrisError(f"{path} is not a DT model directory (no model.json)")
+    model, meta = load_dt(model_dir, device)
     target = meta.get("target_return") if target_return is None else target_return
     if target is None:
-        raise CheckpointError(f"{directory} stores no target return; pass one (--target-return)")
-    return DTBatchPolicy(model, float(target), noise_sigma, seed, meta.get("phase_control", "agent")), meta
+        raise CheckpointError(f"{model_dir} stores no target return; pass one (--target-return)")
+    policy = DTBatchPolicy(model, float(target), noise_sigma, seed, meta.get("phase_control", "agent"))
+    name = meta.get("scenario")
+    try:
+        scenario = None if name is None else scenario_at(str(name), meta.get("start"))
+    except ConfigError as e:
+        raise CheckpointError(f"{model_dir}: stored scenario is invalid ({e})") from None
+    return LoadedDT(policy, checkpoint_system(meta, model_dir), scenario, meta, model_dir)

@@ -39,7 +39,7 @@ def save_figure(fig: plt.Figure, stem: Path) -> list[Path]:
     return out
 
 
-REFERENCE_STYLE = {"hover": ("0.35", "--"), "hover-optimizer": ("#9467bd", "-."), "oracle": ("k", ":")}
+REFERENCE_STYLE = {"zero-action": ("0.35", "--"), "hover-optimizer": ("#9467bd", "-."), "oracle": ("k", ":")}
 
 
 def reference_lines(ax: plt.Axes, references: Mapping[str, tuple[str, float]]) -> None:

@@ -73,14 +73,16 @@ def demonstration_cost(halls: int, episodes_per_hall: int, horizon: int, exact_p
 
 def pretrain_cost(cfg: Any) -> float:
     """A DT pre-training run (a :class:`~uavris.experiments.training.pretrain.PretrainConfig`)."""
-    encoder = DEVICE_ENCODER_STATE_S * cfg.batch_size * cfg.context if cfg.state_encoder == "devices" else 0.0
-    return cfg.steps * (DT_STEP_OVERHEAD_S + _dt_step(cfg.batch_size, cfg.context, cfg.width, cfg.depth) + encoder)
+    m = cfg.model
+    encoder = DEVICE_ENCODER_STATE_S * cfg.batch_size * m.context if m.state_encoder == "devices" else 0.0
+    return cfg.steps * (DT_STEP_OVERHEAD_S + _dt_step(cfg.batch_size, m.context, m.width, m.depth) + encoder)
 
 
-def finetune_cost(cfg: Any, horizon: int, phase_control: str, context: int = 20, width: int = 128,
-                  depth: int = 3) -> float:
-    """A DT fine-tuning run (a :class:`~uavris.experiments.training.finetune.FinetuneConfig`): per round,
-    the noisy candidates, the gradient steps on the elites and an evaluation."""
+def finetune_cost(cfg: Any, horizon: int, phase_control: str, model: Any) -> float:
+    """A DT fine-tuning run (a :class:`~uavris.experiments.training.finetune.FinetuneConfig`) of a
+    ``model`` (a :class:`~uavris.agents.dt.config.DTConfig`: its context, width and depth): per
+    round, the noisy candidates, the gradient steps on the elites and an evaluation."""
+    context, width, depth = model.context, model.width, model.depth
     slots = (cfg.candidates + cfg.eval_episodes) * horizon
     steps = cfg.epochs_per_round * -(-cfg.elites * horizon // cfg.batch_size)
     per_round = slots * (SLOT_S[phase_control] + _dt_step(1, context, width, depth) / 4) + steps * _dt_step(

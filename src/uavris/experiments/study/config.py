@@ -14,7 +14,8 @@ from typing import Literal, get_args
 from uavris.agents.experts import ALGORITHMS
 from uavris.config import PRESET, DictConfig, SystemConfig, fill_from_preset
 from uavris.errors import UavrisError
-from uavris.experiments.study.tracks import TRACK_SPECS, TRACKS, Deployment, Track, deployments
+from uavris.experiments.study.tracks import TRACK_SPECS, TRACKS, Track, sites
+from uavris.layouts import Site
 from uavris.presets import STUDY, Preset, check_preset
 
 # "all": the three tracks; "both": the paper and the strong track (the study before layouts).
@@ -85,8 +86,8 @@ class ReproduceConfig(DictConfig):
     def tracks(self) -> tuple[Track, ...]:
         return tuple(TRACK_SPECS[t] for t in TRACK_SETS.get(self.track, (self.track,)))
 
-    def deployments(self, track: Track) -> tuple[list[Deployment], list[Deployment]]:
-        """The training and unseen deployments of ``track``; with the ablation, the unseen ones
+    def sites(self, track: Track) -> tuple[list[Site], list[Site]]:
+        """The training and unseen sites of ``track``; with the ablation, the unseen ones
         include as many halls of another generator (zero-shot only)."""
         other = self.unseen_layouts if self.ablation and track.ablation and track.layouts else 0
-        return deployments(track, self.system, self.train_layouts, self.unseen_layouts, self.layout_seed, other)
+        return sites(track, self.system, self.train_layouts, self.unseen_layouts, self.layout_seed, other)

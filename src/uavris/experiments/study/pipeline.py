@@ -54,12 +54,13 @@ from uavris.experiments.engine.scheduling import StudyContext
 from uavris.experiments.engine.stages import Pipeline, Stage
 from uavris.experiments.study.config import AUTO, ReproduceConfig
 from uavris.experiments.study.tracks import (
-    Deployment,
+    REFERENCE_ROWS,
     Track,
-    evaluated_policies,
+    TrainedModel,
     is_other_hall,
-    pretraining_stages,
     strong_expert_config,
+    track_rows,
+    trained_models,
     transfer_sources,
 )
 from uavris.experiments.study.workers import (
@@ -70,14 +71,14 @@ from uavris.experiments.study.workers import (
     merge_demonstrations,
     pretrain_job,
 )
+from uavris.experiments.tools.targets import Row
 from uavris.experiments.training.demonstrations import DemonstrationConfig
 from uavris.experiments.training.finetune import FinetuneConfig
 from uavris.experiments.training.pretrain import PretrainConfig
 from uavris.experiments.training.train_expert import TrainConfig, train_job
 from uavris.io import read_json
-from uavris.presets import COLLECT_SEED, DEMONSTRATION_CHUNK, EVAL_SEED
-
-REFERENCE_ROWS = ["hover", "hover-optimizer", "oracle"]  # what every evaluation stage scores beside its policies
+from uavris.layouts import Site
+from uavris.presets import COLLECT_SEED, DEMONSTRATION_CHUNK, EVAL_SEED, TRACK_FINETUNE, TRACK_PRETRAIN
 
 
 def build_pipeline(rc: ReproduceConfig, out: Path, ctx: StudyContext) -> Pipeline:
@@ -86,12 +87,16 @@ def build_pipeline(rc: ReproduceConfig, out: Path, ctx: StudyContext) -> Pipelin
     stages = []
     if any(t.name == "paper" for t in rc.tracks):
         stages.append(_compare_stage(rc, ctx))
-    tracks = [TrackStages(rc, track, ctx) for track in rc.tracks]
+    tracks = track_stages(rc, ctx)
     for t in tracks:
         stages += t.experts()
     for t in tracks:
         stages += t.dt()
     return Pipeline(out, stages)
+
+
+def track_stages(rc: ReproduceConfig, ctx: StudyContext) -> list[TrackStages]:
+    return [TrackStages(rc, track, ctx) for track in rc.tracks]
 
 
 def _compare_stage(rc: ReproduceConfig, ctx: StudyContext) -> Stage:
@@ -126,12 +131,15 @@ class TrackStages:
     def __init__(self, rc: ReproduceConfig, track: Track, ctx: StudyContext) -> None:
         self.rc, self.track, self.ctx = rc, track, ctx
         self.t = track.stage  # a stage's name in this track
-        self.train, self.unseen = rc.deployments(track)
+        self.train, self.unseen = rc.sites(track)
         self.horizon, self.control = rc.system.horizon, track.phase_control
-        self.schedule = self._pretrain_schedule()
-        preset_cfg = self._preset_pretrain()
-        # what the track's models read and their size (context, width, depth): the cost model's
-        self.model_size = tuple(self.schedule.get(k, getattr(preset_cfg, k)) for k in ("context", "width", "depth"))
+        self.pretrain_fields = TRACK_PRETRAIN[track.name][rc.preset]  # the track's DT (one home: uavris.presets)
+        self.model = self._pretrain_config("<dataset>", None).model  # what fine-tuning's cost scales with
+        self.models = trained_models(track, [w.name for w in self.train], rc.scaling,
+                                     rc.dt_seeds if track.seeded else 1, rc.ablation)
+        # the stages the evaluation reads beside each site's fine-tuning
+        self.inputs = [*(["experts-train"] if not track.demonstrations else []),
+                       *(["experts-unseen"] if track.unseen_experts else []), *(m.stage for m in self.models)]
 
     # ------------------------------------------------------------------ experts
     def experts(self) -> list[Stage]:
@@ -151,11 +159,11 @@ class TrackStages:
                 stages.append(self._paper_experts_stage(name, where))
         return stages
 
-    def _expert_configs(self, algo: str, where: Sequence[Deployment]) -> dict[str, TrainConfig]:
+    def _expert_configs(self, algo: str, where: Sequence[Site]) -> dict[str, TrainConfig]:
         return {w.name: TrainConfig(algo=algo, scenario=w.name, seed=self.rc.seed, preset=self.rc.preset,
                                     eval_episodes=self.rc.eval_episodes, system=w.system) for w in where}
 
-    def _paper_experts_stage(self, name: str, where: Sequence[Deployment]) -> Stage:
+    def _paper_experts_stage(self, name: str, where: Sequence[Site]) -> Stage:
         """The paper track's experts, of the comparison's algorithm (or ``--expert-algo``).
         Before the comparison has chosen, their cost is the dearest algorithm's for the order
         (the chain through the comparison is then sure to go first) and the mean over the
@@ -169,7 +177,7 @@ class TrackStages:
                      ("compare",) if rc.expert_algo == AUTO else (), max(by_algo, key=sum),
                      sum(map(sum, by_algo)) / len(by_algo))
 
-    def _run_paper_experts(self, stage: str, where: Sequence[Deployment], d: Path,
+    def _run_paper_experts(self, stage: str, where: Sequence[Site], d: Path,
                            deps: dict[str, Path]) -> dict[str, Any]:
         algo = self.rc.expert_algo
         if algo == AUTO:
@@ -191,21 +199,17 @@ class TrackStages:
         """Dataset, pre-training (the DT, behaviour cloning, the data curve and, with the
         ablation, its rows over several seeds), fine-tuning and evaluation."""
         stages = self.datasets()
-        models = pretraining_stages(self.track, self.schedule, [w.name for w in self.train], self.rc.scaling,
-                                    self.rc.dt_seeds if self.track.seeded else 1, self.rc.ablation)
-        for name, (data, overrides) in models.items():
-            cfg = self._pretrain_config("<dataset>", overrides)
-            stages.append(Stage(self.t(name), cfg.to_dict(), partial(self._run_pretrain, name, data, overrides),
-                                (self.t(data),), (pretrain_cost(cfg),)))
+        for m in self.models:
+            cfg = self._pretrain_config("<dataset>", m)
+            stages.append(Stage(self.t(m.stage), cfg.to_dict(), partial(self._run_pretrain, m),
+                                (self.t(m.dataset),), (pretrain_cost(cfg),)))
         for w in (w for w in self.unseen if not is_other_hall(w.name)):
             ft = self._finetune_config("<pretrain>", w)
             stages.append(Stage(self.t(f"finetune-{w.name}"), ft.to_dict(), partial(self._run_finetune, w),
                                 (self.t("pretrain"),),
-                                (finetune_cost(ft, self.horizon, self.control, *self.model_size),)))
-        inputs = [*(["experts-train"] if not self.track.demonstrations else []),
-                  *(["experts-unseen"] if self.track.unseen_experts else []), *models]
+                                (finetune_cost(ft, self.horizon, self.control, self.model),)))
         for w in self.unseen:
-            stages.append(self._evaluate_stage(w, inputs))
+            stages.append(self._evaluate_stage(w))
         return stages
 
     def datasets(self) -> list[Stage]:
@@ -252,57 +256,52 @@ class TrackStages:
         return self.ctx.run_one(self.t(name), merge_demonstrations, (cfg.to_dict(), [str(p) for p in parts],
                                                                         str(d / "dataset")), d / "merge.log", 1.0)
 
-    def _preset_pretrain(self) -> PretrainConfig:
-        return PretrainConfig(dataset="<dataset>", preset=self.rc.preset, seed=self.rc.seed)
+    def _pretrain_config(self, data: Path | str, model: TrainedModel | None) -> PretrainConfig:
+        fields = self.pretrain_fields if model is None else model.pretrain_fields(self.pretrain_fields)
+        return PretrainConfig(dataset=data, preset=self.rc.preset, seed=self.rc.seed + (model.seed if model else 0),
+                              **fields)
 
-    def _pretrain_schedule(self) -> dict[str, Any]:
-        """The track's PretrainConfig overrides; a track's smaller model never grows a
-        preset's (smoke's is tiny)."""
-        schedule = dict(self.track.pretrain)
-        preset_cfg = self._preset_pretrain()
-        for size in ("context", "width", "depth"):
-            if size in schedule:
-                schedule[size] = min(schedule[size], getattr(preset_cfg, size))
-        return schedule
-
-    def _pretrain_config(self, data: Path | str, overrides: dict[str, Any]) -> PretrainConfig:
-        seed = self.rc.seed + overrides.get("seed", 0)
-        return PretrainConfig(dataset=data, preset=self.rc.preset, seed=seed,
-                              **{k: v for k, v in overrides.items() if k != "seed"})
-
-    def _run_pretrain(self, name: str, data: str, overrides: dict[str, Any], d: Path,
-                      deps: dict[str, Path]) -> dict[str, Any]:
-        cfg = self._pretrain_config(deps[self.t(data)] / "dataset", overrides)
-        return self.ctx.run_one(self.t(name), pretrain_job, (cfg.to_dict(), str(d / "model"), self.ctx.device),
+    def _run_pretrain(self, model: TrainedModel, d: Path, deps: dict[str, Path]) -> dict[str, Any]:
+        cfg = self._pretrain_config(deps[self.t(model.dataset)] / "dataset", model)
+        return self.ctx.run_one(self.t(model.stage), pretrain_job, (cfg.to_dict(), str(d / "model"), self.ctx.device),
                                 d / "job.log", pretrain_cost(cfg))
 
-    def _finetune_config(self, model: Path | str, where: Deployment) -> FinetuneConfig:
-        own = {"eval_episodes": self.rc.eval_episodes, **dict(self.track.finetune),
+    def _finetune_config(self, model: Path | str, where: Site) -> FinetuneConfig:
+        # fine-tuning evaluates each round on the study's episodes unless the track's table says otherwise
+        own = {"eval_episodes": self.rc.eval_episodes, **TRACK_FINETUNE[self.track.name][self.rc.preset],
                **({} if not self.track.layouts else {"system": where.system, "start": where.start})}
         return FinetuneConfig(model=model, scenario=where.name, preset=self.rc.preset, seed=self.rc.seed, **own)
 
-    def _run_finetune(self, where: Deployment, d: Path, deps: dict[str, Path]) -> dict[str, Any]:
+    def _run_finetune(self, where: Site, d: Path, deps: dict[str, Path]) -> dict[str, Any]:
         cfg = self._finetune_config(deps[self.t("pretrain")] / "model", where)
         return self.ctx.run_one(self.t(f"finetune-{where.name}"), finetune_job,
                                 (cfg.to_dict(), str(d / "model"), self.ctx.device), d / "job.log",
-                                finetune_cost(cfg, self.horizon, self.control, *self.model_size))
+                                finetune_cost(cfg, self.horizon, self.control, self.model))
 
-    def _evaluate_stage(self, where: Deployment, inputs: list[str]) -> Stage:
+    def _evaluate_stage(self, where: Site) -> Stage:
         sources = transfer_sources(self.track, where, self.train)
-        keys = [*inputs, *([] if is_other_hall(where.name) else [f"finetune-{where.name}"])]
-        policies = evaluated_policies(self.track, where, sources, {k: Path() for k in keys}, self.train,
-                                      self.rc.ablation)
-        cost = evaluate_cost(len(policies), self.rc.eval_episodes, self.horizon, self.control)
+        keys = [*self.inputs, *([] if is_other_hall(where.name) else [f"finetune-{where.name}"])]
+        rows = self._rows(where, sources, {k: Path() for k in keys})
+        cost = evaluate_cost(len(rows) - len(REFERENCE_ROWS), self.rc.eval_episodes, self.horizon, self.control)
         config = {"episodes": self.rc.eval_episodes, "seed": EVAL_SEED, "track": self.track.name,
-                  "references": REFERENCE_ROWS, "transfer_from": [s for s, _ in sources],
+                  "rows": [r.key for r in rows], "transfer_from": [s for s, _ in sources],
                   **({"front_margin_deg": self.track.front_margin_deg} if self.track.front_margin_deg else {})}
         return Stage(self.t(f"evaluate-{where.name}"), config, partial(self._run_evaluate, where, sources, keys, cost),
                      tuple(self.t(k) for k in keys), (cost,))
 
-    def _run_evaluate(self, where: Deployment, sources: list[tuple[str, float]], keys: list[str], cost: float,
+    def _rows(self, where: Site, sources: list[tuple[str, float]], dirs: dict[str, Path]) -> list[Row]:
+        return track_rows(self.track, where, sources, dirs, self.models, self.train, self.rc.ablation)
+
+    def rows_in(self, site: Site, pipeline: Pipeline) -> list[Row]:
+        """The rows of this track in any ``site`` (a user's hall included), reading the models of
+        ``pipeline``'s stage directories; a fine-tuned row only where the study fine-tuned."""
+        keys = [*self.inputs, *([f"finetune-{site.name}"] if self.t(f"finetune-{site.name}") in pipeline.stages
+                                else [])]
+        return self._rows(site, transfer_sources(self.track, site, self.train),
+                          {k: pipeline.directory(self.t(k)) for k in keys})
+
+    def _run_evaluate(self, where: Site, sources: list[tuple[str, float]], keys: list[str], cost: float,
                       d: Path, deps: dict[str, Path]) -> dict[str, Any]:
-        policies = evaluated_policies(self.track, where, sources, {k: deps[self.t(k)] for k in keys}, self.train,
-                                      self.rc.ablation)
+        rows = self._rows(where, sources, {k: deps[self.t(k)] for k in keys})
         return self.ctx.run_one(self.t(f"evaluate-{where.name}"), evaluate_job,
-                                (str(d), where.to_dict(), self.track.name, self.rc.eval_episodes, policies),
-                                d / "job.log", cost)
+                                (str(d), where, self.track.name, self.rc.eval_episodes, rows), d / "job.log", cost)

@@ -21,7 +21,8 @@ from uavris.experiments.engine.jobs import BACKENDS, configure_threads
 from uavris.experiments.engine.scheduling import StudyContext
 from uavris.experiments.study.config import AUTO, ReproduceConfig
 from uavris.experiments.study.pipeline import build_pipeline
-from uavris.io import write_json
+from uavris.experiments.study.rows import STUDY_FILE
+from uavris.io import write_json, write_yaml
 
 
 # ------------------------------------------------------------------------------------------ entry point
@@ -68,6 +69,7 @@ def reproduce(rc: ReproduceConfig, out: str | Path, *, workers: int = 2, backend
     if unknown:
         bar.close()
         raise UavrisError(f"--force names unknown stage(s) {unknown}; stages: {list(pipeline.stages) + ['report']}")
+    write_yaml(out / STUDY_FILE, rc.to_dict())  # what `uavris evaluate OUT --row KEY` reads (.rows)
     ctx.plan(pipeline)
     t0, origin = time.perf_counter(), time.time()
     try:

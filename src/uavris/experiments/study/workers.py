@@ -3,22 +3,24 @@
 Lives here: one picklable function per kind of job (:func:`dataset_job`,
 :func:`demonstrations_job`, :func:`merge_demonstrations`, :func:`pretrain_job`,
 :func:`finetune_job`, :func:`evaluate_job`; an expert's is
-:func:`uavris.experiments.training.train_expert.train_job`) and the evaluation of every policy
-of a track in one unseen deployment (:func:`evaluate_policies`). Each takes plain values (a
-config as a dict, paths as strings), so that a process pool or Ray can ship it. Not here:
+:func:`uavris.experiments.training.train_expert.train_job`) and the evaluation of every row
+of a track in one unseen site (:func:`evaluate_rows`). Each takes plain values or frozen
+dataclasses (a config as a dict, paths as strings, sites and rows), so that a process pool
+or Ray can ship it. Not here:
 which jobs a stage submits (:mod:`.pipeline`), the job runner (:mod:`uavris.experiments.engine`).
 """
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import Any, Sequence
 
 import numpy as np
 
 from uavris.experiments.engine.jobs import configure_threads
-from uavris.experiments.study.tracks import LEVEL, SAFE, TRACK_SPECS, Deployment, Track
+from uavris.experiments.study.tracks import TRACK_SPECS, Track
+from uavris.experiments.tools.targets import Row
+from uavris.layouts import Site
 from uavris.presets import EVAL_SEED
 from uavris.runs import read_done
 
@@ -75,43 +77,13 @@ def finetune_job(cfg_dict: dict[str, Any], out: str, device: str = "cpu") -> dic
     return read_done(model_dir)
 
 
-def evaluate_job(out: str, deployment: dict[str, Any], track: str, episodes: int,
-                 policies: dict[str, tuple[str, str, str]]) -> dict[str, Any]:
-    """Every policy of a track in one unseen deployment on the same seeded episodes (see :func:`evaluate_policies`)."""
-    return evaluate_policies(Path(out), Deployment.from_dict(deployment), TRACK_SPECS[track], episodes, policies)
-
-
-def _load(label: str, kind: str, path: str) -> tuple[str, Any]:
-    """A policy of :func:`evaluate_policies` and its label."""
-    from uavris.experiments.training.dt_runs import load_dt_policy
-
-    if kind.endswith(LEVEL):  # the policy of the kind before the mark, its attitude held level
-        from uavris.agents.policy import LevelAttitude
-
-        label, policy = _load(label, kind[:-len(LEVEL)], path)
-        return label, LevelAttitude(policy)
-    if kind == "dt-ensemble":  # path: the models' directories as a JSON list
-        from uavris.agents.dt.policy import DTEnsemble
-
-        return label, DTEnsemble([load_dt_policy(p)[0] for p in json.loads(path)])
-    if kind == "plan":  # another hall's oracle plan flown here (path: that hall's Deployment as JSON)
-        from uavris.agents.oracle import PlanningOracle
-        from uavris.agents.oracle.policy import PlannedFlight
-
-        there = Deployment.from_dict(json.loads(path))
-        return label, PlannedFlight(PlanningOracle().plan(there.system, there.scenario.start))
-    if kind == "oracle":
-        from uavris.agents.references import reference_policy
-
-        return label, reference_policy("oracle")
-    from uavris.experiments.tools.targets import resolve_target
-
-    loaded = resolve_target(path).load()  # a DT model or an expert's run
-    return (label if loaded.expert_kind is None else f"{loaded.expert_kind} {label}"), loaded.policy
+def evaluate_job(out: str, site: Site, track: str, episodes: int, rows: Sequence[Row]) -> dict[str, Any]:
+    """Every row of a track in one unseen site on the same seeded episodes (see :func:`evaluate_rows`)."""
+    return evaluate_rows(Path(out), site, TRACK_SPECS[track], episodes, rows)
 
 
 class _Whereabouts:
-    """What :func:`evaluate_policies` records of an evaluation besides the rates, slot by slot:
+    """What :func:`evaluate_rows` records of an evaluation besides the rates, slot by slot:
     the share of slots in which a device is behind the RIS plane (docs/model.md section 3), and
     each episode's last pose."""
 
@@ -145,48 +117,37 @@ def _decomposition(system: Any, rec: _Whereabouts) -> dict[str, Any]:
             "behind_share": rec.behind / max(rec.slots, 1)}
 
 
-def evaluate_policies(out: Path, where: Deployment, track: Track, episodes: int,
-                      policies: dict[str, tuple[str, str, str]]) -> dict[str, Any]:
-    """The learned ``policies`` and the references (zero action, hover with the optimiser's
-    phases, oracle), all in ``where`` on episodes ``EVAL_SEED ..``; per-episode CSVs in ``out``.
-
-    ``policies[key] = (label, kind, path)``: ``kind`` "expert" (a training run directory,
-    whose label gets what the expert is prefixed: its algorithm, or "oracle imitation"), "dt" (a
-    DT model directory), "dt-ensemble" (``path``: DT model directories as a JSON list, acting as
-    one: :class:`uavris.agents.dt.policy.DTEnsemble`), "plan" (``path``: a training hall's
-    :class:`Deployment` as JSON, whose oracle plan is flown here:
-    :class:`uavris.agents.oracle.policy.PlannedFlight`) or "oracle". A key marked
-    :data:`~.tracks.SAFE` is evaluated under the attitude safety layer (the track's margin); a
-    kind ending in :data:`~.tracks.LEVEL` is that kind's policy with its attitude held level.
-    In the deployment track every summary also holds the decomposition of
-    :func:`_decomposition`, and the oracle's its plan's target (:func:`oracle_target`).
+def evaluate_rows(out: Path, site: Site, track: Track, episodes: int, rows: Sequence[Row]) -> dict[str, Any]:
+    """Every row (:func:`~.tracks.track_rows`: the learned rows and the references) in ``site``,
+    each in its own system (:meth:`~uavris.experiments.tools.targets.Row.system`: under the
+    safety layer where the row says so), on episodes ``EVAL_SEED ..``; per-episode CSVs in
+    ``out``, named by the rows' keys. In the deployment track every summary also holds the
+    decomposition of :func:`_decomposition`, and the oracle's its plan's target
+    (:func:`oracle_target`).
     """
     from uavris.agents.evaluation import evaluate
-    from uavris.agents.references import HOVER_OPTIMIZER, ORACLE, REFERENCES, ZERO_ACTION, reference_policy
+    from uavris.agents.references import ORACLE
     from uavris.experiments.tools.evaluate import write_results
     from uavris.stats import summarize
 
-    configure_threads()
-    loaded = {key: _load(*spec) for key, spec in policies.items()}
-    for name in (ZERO_ACTION, HOVER_OPTIMIZER, ORACLE):
-        loaded[name] = (REFERENCES[name].label, reference_policy(name, where.system))
-    safe = where.system.replace(front_margin_deg=track.front_margin_deg)
     result: dict[str, Any] = {}
-    for key, (label, policy) in loaded.items():
-        system = safe if SAFE in key else where.system
+    for row in rows:
+        system = row.system(site.system)
+        loaded = row.load(system)
         rec = _Whereabouts(system, episodes)
-        res = evaluate(policy, system, where.scenario, episodes, EVAL_SEED, on_slot=rec)
-        summary = {"policy": key, "label": label, "scenario": where.name, "track": track.name, **res.summary(),
+        res = evaluate(loaded.policy, system, site.scenario, episodes, EVAL_SEED, on_slot=rec)
+        summary = {"policy": row.key, "label": row.label_for(loaded.expert_kind), "variant": row.variant,
+                   "seed": row.seed, "scenario": site.name, "track": track.name, **res.summary(),
                    **{f"boot_{k}": v for k, v in summarize(res.avg_sum_rate).items()},
                    **(_decomposition(system, rec) if track.layouts else {})}
-        write_results(res, summary, out / key)
-        result[key] = summary
+        write_results(res, summary, out / row.key)
+        result[row.key] = summary
     if track.layouts:
-        result[ORACLE].update(oracle_target(where))
+        result[ORACLE].update(oracle_target(site))
     return result
 
 
-def oracle_target(where: Deployment) -> dict[str, Any]:
+def oracle_target(where: Site) -> dict[str, Any]:
     """The planning oracle's target in ``where``: its pose, R there with its attitude
     (``plan_rate``) and level (``plan_rate_level``, what :func:`_decomposition`'s place gap
     compares an end position with)."""

@@ -15,7 +15,7 @@ from uavris.config import Scenario, SystemConfig, get_scenario
 from uavris.experiments.display.tables import rate_interval
 from uavris.physics import propulsion_power
 
-DEMO_POLICIES = ("hover", "random", "hover-aligned")
+DEMO_POLICIES = ("zero-action", "random", "hover-aligned")
 
 
 def horizon_text(cfg: SystemConfig) -> str:

@@ -23,7 +23,7 @@ from uavris.env.rollout import policy_phase_control
 from uavris.env.wrappers import check_phase_control
 from uavris.errors import UavrisError
 from uavris.experiments.display.progress import progress_bar
-from uavris.experiments.tools.targets import Target, resolve_target
+from uavris.experiments.tools.targets import Row, Target, as_row
 from uavris.io import write_csv, write_json
 from uavris.layouts import Layout, resolve_layout
 
@@ -43,12 +43,14 @@ def write_results(res: EpisodeResults, summary: dict[str, Any], stem: Path) -> N
     write_json(stem.with_suffix(".json"), summary)
 
 
-def evaluate_target(target: str | Target, scenario: str | Scenario | None, episodes: int, seed: int,
+def evaluate_target(target: str | Target | Row, scenario: str | Scenario | None, episodes: int, seed: int,
                     out: Path | None = None, phase_control: str | None = None, device: str = "cpu",
                     progress: bool = False, system: SystemConfig | None = None,
                     layout: str | Layout | None = None, references: bool = True) -> tuple[dict[str, Any], Path]:
-    """Evaluate ``target`` (a name :func:`~.targets.resolve_target` reads, or a resolved
-    :class:`~.targets.Target`); ``phase_control="optimizer"`` replaces its phases by the optimiser's.
+    """Evaluate ``target`` (a name :func:`~.targets.resolve_target` reads, a resolved
+    :class:`~.targets.Target`, or a report's :class:`~.targets.Row`, evaluated as the report
+    does: under the safety layer, held level, an ensemble, another hall's plan);
+    ``phase_control="optimizer"`` replaces its phases by the optimiser's.
 
     ``system`` replaces the target's own system (the CLI's ``--system.*``); ``layout`` (a
     :class:`~uavris.layouts.Layout` or what :func:`~uavris.layouts.resolve_layout` reads)
@@ -59,40 +61,46 @@ def evaluate_target(target: str | Target, scenario: str | Scenario | None, episo
     check_episodes(episodes, seed, "--")  # the command's flags
     if phase_control is not None:
         check_phase_control(phase_control)
-    target = target if isinstance(target, Target) else resolve_target(target)
-    system = system or target.own_system()
+    study_row = isinstance(target, Row)
+    row = as_row(target)
+    system = system or row.own_system()
     if layout is not None:
         hall = resolve_layout(layout, system)
         system, own = hall.resolve(system)
         scenario = scenario or own
-    loaded = target.load(system, device)
-    policy = fit_policy(loaded.policy, system, target.name)
+    evaluated = row.system(system)
+    loaded = row.load(evaluated, device)
+    policy = fit_policy(loaded.policy, evaluated, row.key)
     if phase_control == "agent" and policy_phase_control(policy) == "optimizer":
-        raise UavrisError(f"{target.name} acts on the motion only (trained with the optimiser setting the phases, "
+        raise UavrisError(f"{row.key} acts on the motion only (trained with the optimiser setting the phases, "
                           "the strong track); it cannot be evaluated with --phase-control agent")
     scenario = scenario or loaded.scenario
     if scenario is None:
         raise UavrisError("--scenario (or --layout) is required for a baseline or a pre-trained DT (it has no "
                           "scenario of its own)")
     where = get_scenario(scenario)
-    where.validate_for(system)
-    beside = [ZERO_ACTION, ORACLE] if target.kind == "user" and references else []
+    where.validate_for(evaluated)
+    user = row.target is not None and row.target.kind == "user"
+    beside = [ZERO_ACTION, ORACLE] if user and references else []
     with progress_bar((1 + len(beside)) * episodes * system.horizon, f"evaluate {where.name}", "slot", progress,
                       leave=False) as bar:
-        def run(policy: Any, mode: str | None) -> EpisodeResults:
-            return evaluate(policy, system, where, episodes, seed, phase_control=mode,
+        def run(policy: Any, mode: str | None, in_system: SystemConfig) -> EpisodeResults:
+            return evaluate(policy, in_system, where, episodes, seed, phase_control=mode,
                             on_slot=lambda sim, obs, executed, alive: bar.update(int(alive.sum())))
 
-        res = run(policy, phase_control)
+        res = run(policy, phase_control, evaluated)
         # A user's policy: the references on the same episodes, so its number reads at once.
-        refs = {name: run(reference_policy(name, system, REFERENCE_SEED), None) for name in beside}
-    summary = {"target": target.name, "scenario": where.name, "start": list(where.start), "seed": seed,
-               "phase_control": phase_control or "as trained", **res.summary(), "system": system.to_dict()}
+        refs = {name: run(reference_policy(name, system, REFERENCE_SEED), None, system) for name in beside}
+    summary = {"target": row.key, **({"label": row.label_for(loaded.expert_kind)} if study_row else {}),
+               "scenario": where.name, "start": list(where.start), "seed": seed,
+               "phase_control": phase_control or "as trained", **res.summary(), "system": evaluated.to_dict()}
     if refs:
         summary["references"] = {name: r.summary() for name, r in refs.items()}
         oracle = summary["references"][ORACLE]["mean"]
         summary["fraction_of_oracle"] = summary["mean"] / oracle if oracle > 0 else None
     suffix = "-optimizer-phases" if phase_control == "optimizer" else ""
-    stem = Path(out or target.default_out()) / f"{where.name}-seed{seed}-n{episodes}{suffix}-{evaluated_key(summary)}"
+    default = Path("runs/rows") / row.key if study_row or row.target is None else row.target.default_out()
+    name = f"{row.key}-" if study_row else ""
+    stem = Path(out or default) / f"{name}{where.name}-seed{seed}-n{episodes}{suffix}-{evaluated_key(summary)}"
     write_results(res, summary, stem)
     return summary, stem.with_suffix(".json")

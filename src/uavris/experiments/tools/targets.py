@@ -1,10 +1,14 @@
-"""What a user names as a policy (``uavris evaluate TARGET``, ``benchmark``, the study's rows), resolved once.
+"""What a user names as a policy (``uavris evaluate TARGET``, ``benchmark``), resolved once, and
+a row of a report: a policy as the study evaluates it.
 
-Lives here: :func:`resolve_target`, which reads the name once into a :class:`Target` that
-knows its kind (a reference, a user's policy, a DT model or run, an expert's run), the
-system it was made for (read from its files, nothing loaded) and how to load its policy
-(:meth:`Target.load`). Not here: importing a user's module (:mod:`.user_policy`), the
-evaluation itself (:mod:`.evaluate`), the references (:mod:`uavris.agents.references`).
+Lives here: the one policy registry: :func:`resolve_target`, which reads the name once into
+a :class:`Target` that knows its kind (a reference, a user's policy, a DT model or run, an
+expert's run), the system it was made for (read from its files, nothing loaded) and how to
+load its policy (:meth:`Target.load`); and :class:`Row`, a target (or an ensemble of them,
+or another hall's plan) with how a report evaluates it (the attitude safety layer, the
+attitude held level) and what the report calls it. Not here: importing a user's module
+(:mod:`.user_policy`), the evaluation itself (:mod:`.evaluate`), the references
+(:mod:`uavris.agents.references`), which rows a study has (:mod:`uavris.experiments.study.tracks`).
 
 The kinds, in the order a name is tried:
 
@@ -17,6 +21,7 @@ The kinds, in the order a name is tried:
 
 from __future__ import annotations
 
+import dataclasses
 import re
 from dataclasses import dataclass
 from pathlib import Path
@@ -24,7 +29,8 @@ from typing import Any, Literal
 
 from uavris.agents.references import REFERENCE_SEED, REFERENCES, reference_policy
 from uavris.config import Scenario, SystemConfig
-from uavris.errors import UavrisError
+from uavris.errors import ConfigError, UavrisError
+from uavris.layouts import Site
 
 TargetKind = Literal["reference", "user", "dt", "expert"]
 BASELINE_PREFIX = "baseline:"
@@ -55,7 +61,7 @@ class Target:
         """The system the target was made for, read from its configuration only: a run's, a DT
         checkpoint's, or the paper's for a reference or a user's policy."""
         if self.kind == "dt":
-            from uavris.experiments.training.dt_runs import dt_system
+            from uavris.agents.dt.checkpoint import dt_system
 
             return dt_system(self.path)
         if self.kind == "expert":
@@ -77,18 +83,24 @@ class Target:
 
             system = system or SystemConfig()
             return Loaded(load_user_policy(self.name, system), system, None, None)
-        from uavris.experiments.engine.jobs import configure_threads
-
-        configure_threads()
         if self.kind == "dt":
-            from uavris.experiments.training.dt_runs import load_dt_policy
+            from uavris.agents.dt.policy import load_dt_policy
 
-            policy, own, scenario = load_dt_policy(self.path, device=device)
-            return Loaded(policy, own, scenario, self.path)
+            dt = load_dt_policy(self.path, device=device)
+            return Loaded(dt.policy, dt.system, dt.scenario, self.path)
         from uavris.experiments.training.train_expert import load_run_policy
 
         cfg, policy = load_run_policy(self.path, device)
         return Loaded(policy, cfg.system, cfg.resolved_scenario, self.path, cfg.expert_kind)
+
+    @classmethod
+    def of_reference(cls, name: str) -> Target:
+        return cls(name, "reference", reference=name)
+
+    @classmethod
+    def of_model(cls, path: Path, kind: TargetKind = "dt") -> Target:
+        """A DT model or an expert's run of a study, named by its directory (which may not exist yet)."""
+        return cls(str(path), kind, path=Path(path))
 
     def default_out(self) -> Path:
         """Where ``uavris evaluate`` writes when no ``--out`` is given."""
@@ -118,7 +130,7 @@ def resolve_target(name: str | Path) -> Target:
             raise UavrisError(f"unknown baseline {ref!r}; choose one of {', '.join(REFERENCES)}")
         return Target(name, "reference", reference=ref)
     if path.is_dir():
-        from uavris.experiments.training.dt_runs import dt_model_dir
+        from uavris.agents.dt.checkpoint import dt_model_dir
 
         return Target(name, "dt" if dt_model_dir(path) is not None else "expert", path=path)
     if name in REFERENCES:
@@ -127,3 +139,97 @@ def resolve_target(name: str | Path) -> Target:
         return Target(name, "user")
     raise UavrisError(f"{path} is not a directory (expected a run directory, a model directory, one of the "
                       f"references {', '.join(REFERENCES)} or MODULE:NAME / FILE.py:NAME)")
+
+
+@dataclass(frozen=True)
+class Row:
+    """One row of a report: a policy as the study evaluates it, and what the report calls it.
+
+    The policy is one :class:`Target`, or an ensemble of DT models acting as one
+    (``members``: the mean of their actions, :class:`uavris.agents.dt.policy.DTEnsemble`), or
+    the planning oracle's plan of another hall flown here (``plan_of``:
+    :class:`uavris.agents.oracle.policy.PlannedFlight`). How it is evaluated: under the
+    attitude safety layer (``front_margin_deg``: the system's margin, docs/model.md section
+    3), with its attitude held level (``level``: :class:`uavris.agents.policy.LevelAttitude`).
+    ``seed`` is the pre-training seed of its model where the study trains a row over several
+    (the report averages a row over its seeds). Its :attr:`key`, ``NAME[-level][-safe][@sK]``,
+    names it in a stage's results, its files and ``uavris evaluate --row``.
+    """
+
+    name: str  # the row without its variants: "dt-zero-shot", "bc", "transfer-layout-train-5", "oracle"
+    label: str  # what the report calls it, without its variants and seed (label_for adds them)
+    target: Target | None = None
+    members: tuple[Target, ...] = ()
+    plan_of: Site | None = None
+    seed: int | None = None
+    front_margin_deg: float | None = None
+    level: bool = False
+
+    def __post_init__(self) -> None:
+        if sum((self.target is not None, bool(self.members), self.plan_of is not None)) != 1:
+            raise ConfigError(f"row {self.name!r}: give exactly one of a target, ensemble members or a plan's hall")
+
+    @classmethod
+    def reference(cls, name: str, **how: Any) -> Row:
+        """The reference ``name`` (:data:`uavris.agents.references.REFERENCES`) as a row."""
+        return cls(name, REFERENCES[name].label, Target.of_reference(name), **how)
+
+    @property
+    def variant(self) -> str:
+        """The row over all its seeds: its name with how it is evaluated."""
+        return self.name + "-level" * self.level + "-safe" * (self.front_margin_deg is not None)
+
+    @property
+    def key(self) -> str:
+        return self.variant + (f"@s{self.seed}" if self.seed else "")
+
+    def label_for(self, expert_kind: str | None = None) -> str:
+        """The report's label: an expert's algorithm first, then the seed and how it is evaluated."""
+        return ((f"{expert_kind} " if expert_kind else "") + self.label + (f", seed {self.seed}" if self.seed else "")
+                + (", safety layer" if self.front_margin_deg is not None else "")
+                + (", attitude held level" if self.level else ""))
+
+    def replace(self, **changes: Any) -> Row:
+        return dataclasses.replace(self, **changes)
+
+    def system(self, base: SystemConfig) -> SystemConfig:
+        """The system this row is evaluated in: ``base``, under the safety layer where the row says so."""
+        return base if self.front_margin_deg is None else base.replace(front_margin_deg=self.front_margin_deg)
+
+    def own_system(self) -> SystemConfig:
+        """The system the row's policy was made for (:meth:`Target.own_system`; a plan's hall's own)."""
+        if self.plan_of is not None:
+            return self.plan_of.system
+        return (self.target or self.members[0]).own_system()
+
+    def load(self, system: SystemConfig | None = None, device: str = "cpu") -> Loaded:
+        """The row's policy (:meth:`Target.load` for a single target), its attitude held level
+        where the row says so; the system it is evaluated in is :meth:`system`'s."""
+        if self.target is not None:
+            loaded = self.target.load(system, device)
+        elif self.members:
+            from uavris.agents.dt.policy import DTEnsemble
+
+            parts = [m.load(system, device) for m in self.members]
+            loaded = Loaded(DTEnsemble([p.policy for p in parts]), parts[0].system, None, None)
+        else:
+            from uavris.agents.oracle import PlanningOracle
+            from uavris.agents.oracle.policy import PlannedFlight
+
+            there = self.plan_of
+            assert there is not None
+            loaded = Loaded(PlannedFlight(PlanningOracle().plan(there.system, there.scenario.start)), there.system,
+                            None, None)
+        if self.level:
+            from uavris.agents.policy import LevelAttitude
+
+            loaded = dataclasses.replace(loaded, policy=LevelAttitude(loaded.policy))
+        return loaded
+
+
+def as_row(target: str | Path | Target | Row) -> Row:
+    """A row for what ``uavris evaluate`` takes: a row as it is, a target (or its name) as a row of its own."""
+    if isinstance(target, Row):
+        return target
+    t = target if isinstance(target, Target) else resolve_target(target)
+    return Row(t.name, t.name, target=t)

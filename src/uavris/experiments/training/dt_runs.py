@@ -1,9 +1,10 @@
-"""Decision Transformer run directories: checkpoints, resume, and loading a DT for deployment.
+"""Decision Transformer run directories: the guard, checkpoints and resume.
 
-Lives here: what DT pre-training and fine-tuning share about their run directories (the
-guard, checkpoints of model plus trainer state, the latest-checkpoint pointer) and how a
-DT target (a run directory or any model directory) becomes a policy. Not here: the training itself (:mod:`.pretrain`,
-:mod:`.finetune`, :mod:`uavris.agents.dt.trainer`).
+Lives here: what DT pre-training and fine-tuning share about writing their run directories
+(the guard, checkpoints of model plus trainer state, the latest-checkpoint pointer). Not
+here: the training itself (:mod:`.pretrain`, :mod:`.finetune`, :mod:`uavris.agents.dt.training`),
+reading a run or model directory back (:func:`uavris.agents.dt.checkpoint.dt_model_dir`,
+:func:`uavris.agents.dt.policy.load_dt_policy`).
 
 Run directories (every file written atomically; ``--resume`` continues from the last
 checkpoint with identical results; a finished run is never redone without ``--force``)::
@@ -20,7 +21,8 @@ checkpoint with identical results; a finished run is never redone without ``--fo
     model.safetensors, model.json, done.json   the final model and the completion record
 
 A model directory (the run directory, or any ``checkpoints/step_N`` / ``round_N``) is what
-``uavris evaluate``, ``uavris finetune-dt --model`` and :func:`load_dt_policy` accept.
+``uavris evaluate``, ``uavris finetune-dt --model`` and
+:func:`uavris.agents.dt.policy.load_dt_policy` accept.
 """
 
 from __future__ import annotations
@@ -31,17 +33,13 @@ from typing import Any
 import numpy as np
 
 from uavris import runs
-from uavris.agents.dt.checkpoint import load_dt, read_dt_metadata, save_dt
+from uavris.agents.dt.checkpoint import FINETUNE_KIND, PRETRAIN_KIND, latest_checkpoint, load_dt, save_dt
 from uavris.agents.dt.model import DecisionTransformer
-from uavris.agents.dt.policy import DTBatchPolicy, dt_policy_from_checkpoint
-from uavris.agents.dt.trainer import save_trainer_state
-from uavris.config import ConfigError, Scenario, SystemConfig, scenario_at
-from uavris.env.simulator import stored_system
-from uavris.errors import CheckpointError, UavrisError
+from uavris.agents.dt.training import save_trainer_state
 
-PRETRAIN_KIND = "uavris-dt-pretrain"
-FINETUNE_KIND = "uavris-dt-finetune"
 INT_COLUMNS = {"step", "round", "env_interactions", "gradient_steps"}
+__all__ = ["FINETUNE_KIND", "INT_COLUMNS", "PRETRAIN_KIND", "latest_checkpoint", "prepare_run_dir",
+           "restore_weights", "write_checkpoint"]
 
 
 def prepare_run_dir(run_dir: Path, kind: str, cfg_dict: dict[str, Any], resume: bool, force: bool) -> bool:
@@ -68,68 +66,6 @@ def write_checkpoint(run_dir: Path, step: int, model: DecisionTransformer, model
     return ck
 
 
-def latest_checkpoint(run_dir: Path) -> tuple[int, Path] | None:
-    """(step or round, directory) of the newest checkpoint, or None."""
-    info = runs.read_pointer(run_dir, "step", "dir")
-    if info is None:
-        return None
-    try:
-        return int(info["step"]), run_dir / "checkpoints" / str(info["dir"])
-    except (TypeError, ValueError):
-        raise UavrisError(f"{run_dir / runs.POINTER} is corrupt") from None
-
-
 def restore_weights(model: DecisionTransformer, ck: Path) -> None:
     saved, _ = load_dt(ck)
     model.load_state_dict(saved.state_dict())
-
-
-def checkpoint_system(meta: dict[str, Any], where: Path) -> SystemConfig:
-    """The system a checkpoint was trained on, checked against today's observation layout."""
-    if "system" not in meta:
-        raise CheckpointError(f"{where} stores no system configuration")
-    return stored_system(meta["system"], meta.get("observation_layout"), str(where), CheckpointError)
-
-
-def dt_model_dir(path: str | Path) -> Path | None:
-    """The model directory of a DT target: the directory itself when it holds model.json,
-    the latest checkpoint of an unfinished DT run, or None when ``path`` is not a DT target."""
-    path = Path(path)
-    if (path / "model.json").exists():
-        return path
-    saved = runs.read_config(path)
-    if saved is not None:
-        if isinstance(saved, dict) and saved.get("kind") in (PRETRAIN_KIND, FINETUNE_KIND):
-            latest = latest_checkpoint(path)
-            if latest is None:
-                raise UavrisError(f"{path} has no model yet (no model.json and no checkpoint)")
-            return latest[1]
-    return None
-
-
-def dt_system(path: str | Path) -> SystemConfig:
-    """The system of a DT target (run or model directory), read from its metadata alone."""
-    model_dir = dt_model_dir(path)
-    if model_dir is None:
-        raise UavrisError(f"{path} is not a DT model directory (no model.json)")
-    return checkpoint_system(read_dt_metadata(model_dir), model_dir)
-
-
-def load_dt_policy(path: str | Path, target_return: float | None = None,
-                   device: str = "cpu") -> tuple[DTBatchPolicy, SystemConfig, Scenario | None]:
-    """(deterministic batch policy, its system config, its own scenario or None) of a DT target:
-    a fine-tuned model's system and scenario are those it was fine-tuned in, a pre-trained
-    model has no scenario of its own."""
-    from uavris.experiments.engine.jobs import configure_threads
-
-    configure_threads()
-    model_dir = dt_model_dir(path)
-    if model_dir is None:
-        raise UavrisError(f"{path} is not a DT model directory (no model.json)")
-    policy, meta = dt_policy_from_checkpoint(model_dir, target_return, device=device)
-    name = meta.get("scenario")
-    try:
-        scenario = None if name is None else scenario_at(str(name), meta.get("start"))
-    except ConfigError as e:
-        raise CheckpointError(f"{model_dir}: stored scenario is invalid ({e})") from None
-    return policy, checkpoint_system(meta, model_dir), scenario

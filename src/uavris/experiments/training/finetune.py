@@ -1,7 +1,8 @@
 """Fine-tuning (paper Algorithm 1, stage 2): the pre-trained DT online in one scenario, from elites.
 
 Lives here: :class:`FinetuneConfig` and :func:`finetune`. Not here: the model and its
-training step (:mod:`uavris.agents.dt`), the run directory's machinery (:mod:`.dt_runs`).
+training, the windows, loss and steps (:mod:`uavris.agents.dt.training`), the run
+directory's machinery (:mod:`.dt_runs`).
 
 In one scenario, for H rounds:
 collect N trajectories with Gaussian noise sigma on the DT's actions, keep K elites,
@@ -42,16 +43,9 @@ from typing import Any, Callable, Sequence
 import numpy as np
 
 from uavris.agents.dt.checkpoint import save_dt
-from uavris.agents.dt.policy import DTBatchPolicy, dt_policy_from_checkpoint
-from uavris.agents.dt.trainer import load_trainer_state, make_optimizer, train_steps
-from uavris.agents.dt.trajectories import (
-    ELITE_RULES,
-    EliteRule,
-    TrainingWindows,
-    Trajectory,
-    record_episodes,
-    select_elites,
-)
+from uavris.agents.dt.policy import DTBatchPolicy, load_dt_policy
+from uavris.agents.dt.training import TrainingWindows, load_trainer_state, make_optimizer, train_steps
+from uavris.agents.dt.trajectories import ELITE_RULES, EliteRule, Trajectory, record_episodes, select_elites
 from uavris.agents.evaluation import evaluate
 from uavris.agents.policy import check_policy_fits
 from uavris.config import (
@@ -69,12 +63,9 @@ from uavris.config import (
 from uavris.env.simulator import layout_as_lists
 from uavris.errors import ConfigError
 from uavris.experiments.display.progress import progress_bar, tb_writer
-from uavris.experiments.engine.jobs import configure_threads
 from uavris.experiments.training.dt_runs import (
     FINETUNE_KIND,
     INT_COLUMNS,
-    checkpoint_system,
-    dt_model_dir,
     latest_checkpoint,
     prepare_run_dir,
     restore_weights,
@@ -205,12 +196,11 @@ def finetune(cfg: FinetuneConfig, run_dir: str | Path, *, resume: bool = False, 
     model directory. ``interrupt_after_round`` is a test hook."""
     import torch
 
-    configure_threads()
     run_dir = Path(run_dir)
-    model_dir = dt_model_dir(cfg.model) or Path(cfg.model)  # a run directory stands for its final model
-    base, pre_meta = dt_policy_from_checkpoint(model_dir, cfg.target_return, device=device)
+    pre = load_dt_policy(cfg.model, cfg.target_return, device=device)  # a run directory stands for its final model
+    base, pre_meta, model_dir = pre.policy, pre.meta, pre.directory
     model, target, phase_control = base.model, base.target_return, base.phase_control
-    system = cfg.system or checkpoint_system(pre_meta, model_dir)
+    system = cfg.system or pre.system
     check_policy_fits(base, system, str(model_dir))
     scenario = scenario_at(cfg.scenario, cfg.start)
     scenario.validate_for(system)

@@ -1,7 +1,9 @@
 """Pre-training (paper Algorithm 1, stage 1): the Decision Transformer offline on an expert dataset.
 
-Lives here: :class:`PretrainConfig` and :func:`pretrain`. Not here: the model and its
-training step (:mod:`uavris.agents.dt`), the run directory's machinery (:mod:`.dt_runs`).
+Lives here: :class:`PretrainConfig` and :func:`pretrain`, the run: its data, its directory,
+logs and checkpoints. Not here: the model (:mod:`uavris.agents.dt.model`, sized by
+:class:`~uavris.agents.dt.config.DTConfig`) and its training, the windows, loss and steps
+(:mod:`uavris.agents.dt.training`), the run directory's machinery (:mod:`.dt_runs`).
 
 The loss L_OFF (eq. 16) on
 context windows of the dataset, AdamW with decoupled weight decay on the weight matrices,
@@ -19,23 +21,27 @@ import dataclasses
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Sequence
+from typing import Mapping, Sequence
 
 import numpy as np
 
 from uavris.agents.dt.checkpoint import save_dt
-from uavris.agents.dt.config import Attention, DTConfig
+from uavris.agents.dt.config import DTConfig
 from uavris.agents.dt.dataset import ExpertDataset, load_dataset
-from uavris.agents.dt.encoders import STATE_ENCODERS, StateEncoder, pooled_over_devices
-from uavris.agents.dt.model import DecisionTransformer
-from uavris.agents.dt.trainer import load_trainer_state, make_optimizer, train_steps
-from uavris.agents.dt.trajectories import MixedWindows, TrainingWindows, default_target_return, normalisation_from
-from uavris.config import PRESET, DictConfig, SystemConfig, check_non_negative, check_positive, fill_from_preset
+from uavris.agents.dt.training import (
+    MixedWindows,
+    TrainingWindows,
+    load_trainer_state,
+    make_optimizer,
+    model_for_data,
+    train_steps,
+)
+from uavris.agents.dt.trajectories import default_target_return
+from uavris.config import PRESET, DictConfig, check_non_negative, check_positive, fill_from_preset
 from uavris.env.simulator import layout_as_lists
 from uavris.env.wrappers import action_dim_for
 from uavris.errors import ConfigError
 from uavris.experiments.display.progress import progress_bar, tb_writer
-from uavris.experiments.engine.jobs import configure_threads
 from uavris.experiments.training.dt_runs import (
     INT_COLUMNS,
     PRETRAIN_KIND,
@@ -54,12 +60,15 @@ LOG_HEADER = ("step", "loss", "learning_rate")  # throughput: TensorBoard (perf/
 
 @dataclass(frozen=True)
 class PretrainConfig(DictConfig):
-    """Everything that determines a pre-training run (dumped as config.json). Fields left at
-    ``PRESET`` take the preset's values (:data:`uavris.presets.PRETRAIN`)."""
+    """Everything that determines a pre-training run (dumped as config.yaml). Fields left at
+    ``PRESET`` take the preset's values (:data:`uavris.presets.PRETRAIN`); ``model`` may be
+    given as a mapping of the :class:`~uavris.agents.dt.config.DTConfig` fields that differ
+    from the preset's model."""
 
     dataset: str  # a dataset directory written by `uavris collect`
     preset: Preset = "quick"  # the schedule's defaults: smoke (seconds), quick (minutes), paper (the DT paper's)
     seed: int = 0  # seed of the weights and of the sampled windows
+    model: DTConfig = PRESET  # the model: its size, attention layout, state encoder, return conditioning
     steps: int = PRESET  # gradient steps
     batch_size: int = PRESET  # windows (banded attention: episodes) per step
     learning_rate: float = PRESET  # AdamW's rate after the warm-up
@@ -68,22 +77,21 @@ class PretrainConfig(DictConfig):
     grad_clip: float = 0.25  # gradient-norm clipping
     checkpoint_every: int = PRESET  # steps between checkpoints
     log_every: int = PRESET  # steps between train_log.csv rows
-    context: int = PRESET  # slots the model reads (3 tokens each)
-    width: int = PRESET  # embedding width
-    depth: int = PRESET  # transformer blocks
-    heads: int = PRESET  # attention heads
-    dropout: float = 0.1  # dropout rate in training
-    attention: Attention = "window"  # window (the DT paper's) or banded (cached deployment)
-    condition_on_return: bool = True  # False: behaviour cloning with the same model and budget
-    state_encoder: StateEncoder = "flat"  # flat (the DT paper's) or devices (a hall as a set; needs observed devices)
-    ris_frame: bool = False  # the device encoder also reads each device's elevation above the RIS plane
     scenarios: tuple[str, ...] | None = None  # train on the episodes of these scenarios (layouts) only; None: all
     more_datasets: tuple[str, ...] = ()  # datasets of halls of other device counts, trained on too (device encoder)
     target_quantile: float = TARGET_QUANTILE  # the default target return: this quantile of the dataset's returns
 
+    partial_fields = ("model",)  # DictConfig.from_dict: a mapping there changes the preset's model
+
     def __post_init__(self) -> None:
         check_preset(self.preset)
-        fill_from_preset(self, PRETRAIN[self.preset])
+        table = PRETRAIN[self.preset]
+        if isinstance(self.model, Mapping):  # the preset's model with these fields changed
+            object.__setattr__(self, "model", DTConfig.from_dict({**table["model"], **self.model}))
+        fill_from_preset(self, {**table, "model": DTConfig.from_dict(table["model"])})
+        if not isinstance(self.model, DTConfig) or self.model.sized:
+            raise ConfigError("PretrainConfig.model must be a DTConfig (or a mapping of its fields) without the "
+                              f"data's sizes, which the dataset gives; got {self.model!r}")
         object.__setattr__(self, "dataset", str(self.dataset))
         check_positive("PretrainConfig", self, ("steps", "batch_size", "learning_rate", "warmup_steps", "grad_clip",
                                                  "checkpoint_every", "log_every"))
@@ -93,31 +101,13 @@ class PretrainConfig(DictConfig):
             if not self.scenarios:
                 raise ConfigError("PretrainConfig.scenarios must name at least one scenario (or be None: all)")
         object.__setattr__(self, "more_datasets", tuple(str(x) for x in self.more_datasets))
-        if self.more_datasets and self.state_encoder != "devices":
-            raise ConfigError("PretrainConfig.more_datasets needs state_encoder 'devices' (only it reads halls of "
-                              "several device counts)")
+        if self.more_datasets and self.model.state_encoder != "devices":
+            raise ConfigError("PretrainConfig.more_datasets needs the model's state_encoder 'devices' (only it reads "
+                              "halls of several device counts)")
         if self.more_datasets and self.scenarios is not None:
             raise ConfigError("PretrainConfig.scenarios selects episodes of one dataset: not with more_datasets")
         if not 0 < self.target_quantile <= 1:
             raise ConfigError(f"PretrainConfig.target_quantile must be in (0, 1], got {self.target_quantile}")
-        if self.ris_frame and self.state_encoder != "devices":
-            raise ConfigError("PretrainConfig.ris_frame needs state_encoder 'devices' (a feature of each device)")
-        if self.state_encoder not in STATE_ENCODERS:
-            raise ConfigError(f"PretrainConfig.state_encoder must be one of {', '.join(STATE_ENCODERS)}, "
-                              f"got {self.state_encoder!r}")
-        DTConfig(1, 1, context=self.context, width=self.width, depth=self.depth, heads=self.heads, dropout=self.dropout,
-                 attention=self.attention, condition_on_return=self.condition_on_return)  # validates the model size
-
-    def model_config(self, system: SystemConfig, act_dim: int) -> DTConfig:
-        """The model of this run for a dataset of ``system``; the device encoder needs its devices observed."""
-        if self.state_encoder == "devices" and not system.observe_devices:
-            raise ConfigError("PretrainConfig.state_encoder 'devices' needs a dataset whose observations hold the "
-                              "devices (SystemConfig.observe_devices, the deployment track's)")
-        sized = dict(devices=system.num_users, elements=system.num_elements) if self.state_encoder == "devices" else {}
-        return DTConfig(system.observation_dim, act_dim, context=self.context, width=self.width, depth=self.depth,
-                        heads=self.heads, dropout=self.dropout, max_timestep=system.horizon, attention=self.attention,
-                        condition_on_return=self.condition_on_return, state_encoder=self.state_encoder,
-                        ris_frame=self.ris_frame, **sized)
 
 
 def training_subset(ds: ExpertDataset, scenarios: Sequence[str] | None) -> ExpertDataset:
@@ -142,7 +132,7 @@ def check_mixable(ds: ExpertDataset, more: Sequence[ExpertDataset]) -> None:
 
 
 def default_pretrain_dir(cfg: PretrainConfig, root: str | Path = "runs/dt") -> Path:
-    layout = "" if cfg.attention == "window" else f"-{cfg.attention}"
+    layout = "" if cfg.model.attention == "window" else f"-{cfg.model.attention}"
     return Path(root) / f"pretrain-{Path(cfg.dataset).name}-s{cfg.seed}-{cfg.preset}{layout}"
 
 
@@ -155,7 +145,6 @@ def pretrain(cfg: PretrainConfig, run_dir: str | Path, *, resume: bool = False, 
     """
     import torch
 
-    configure_threads()
     run_dir = Path(run_dir)
     ds = training_subset(load_dataset(cfg.dataset), cfg.scenarios)
     more = [load_dataset(path) for path in cfg.more_datasets]
@@ -164,12 +153,8 @@ def pretrain(cfg: PretrainConfig, run_dir: str | Path, *, resume: bool = False, 
     system = ds.system
     torch.manual_seed(cfg.seed)
     rng = np.random.default_rng(cfg.seed)
-    model_cfg = cfg.model_config(system, action_dim_for(system, ds.phase_control))
-    norm = normalisation_from(ds.trajectories)
-    mean, std = norm.state_mean, norm.state_std
-    if model_cfg.state_encoder == "devices":  # statistics that do not depend on a device's index (.encoders)
-        mean, std = pooled_over_devices(mean, std, model_cfg.devices, model_cfg.elements)
-    model = DecisionTransformer(model_cfg, mean, std, norm.return_scale).to(device)
+    model = model_for_data(cfg.model.for_data(system, action_dim_for(system, ds.phase_control)),
+                           ds.trajectories).to(device)
     opt = make_optimizer(model, cfg.learning_rate, cfg.weight_decay)
     windows: TrainingWindows | MixedWindows = TrainingWindows.for_model(ds.trajectories, model.cfg)
     if more:  # halls of several device counts: one set of windows per dataset, one model (.encoders)

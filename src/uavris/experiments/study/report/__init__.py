@@ -24,11 +24,11 @@ from uavris.experiments.engine.stages import Pipeline, StageRecord
 from uavris.experiments.study.report.decomposition import decomposition_section
 from uavris.experiments.study.report.deployment import (
     NEAREST,
-    SEED_MARK,
     deployment_section,
     layout_scores,
     layouts_figure,
     scaling_figure,
+    seed_scores,
 )
 from uavris.experiments.study.report.figures import fig3, interactions_figure, trajectory_figure
 from uavris.experiments.study.report.schedule import schedule_figure, stage_table
@@ -40,7 +40,6 @@ from uavris.runs import is_finished
 from uavris.stats import versus
 
 WITHIN_EXPERT = 0.05  # "nearly the same performance": within 5% of the expert's mean
-REFERENCE_KEYS = (ZERO_ACTION, HOVER_OPTIMIZER, ORACLE)
 
 
 class _Report:
@@ -152,7 +151,7 @@ class _Report:
     def deployment(self, track: Track) -> None:
         """Unseen layouts as the unit of generalisation (:mod:`.deployment`)."""
         self.add("", f"## {track.title[0].upper() + track.title[1:]}", "")
-        _, unseen = self.rc.deployments(track)
+        _, unseen = self.rc.sites(track)
         results = {}
         for w in unseen:
             name = track.stage(f"evaluate-{w.name}")
@@ -179,7 +178,7 @@ class _Report:
         scores = layout_scores(results)
         suffix = "" if where == "deployment track" else "-other"
         first = next(iter(results.values()))
-        curve_keys = [k for k in first if k.startswith("dt-zero-shot-n") and SEED_MARK not in k]
+        curve_keys = [k for k, v in first.items() if v["variant"].startswith("dt-zero-shot-n") and not v["seed"]]
         labels = {k: first[k]["label"] for k in curve_keys}
         if any(v["label"].startswith("oracle plan of") for k, v in first.items() if k.startswith("transfer-")):
             labels[NEAREST] = "oracle plan of the nearest training layout, flown here"
@@ -197,7 +196,8 @@ class _Report:
             scaling = f"{track.prefix}scaling{suffix}"
             scaling_figure(curve, refs, self.figs / scaling)
         lines, claims = deployment_section(scores, labels, f"figures/{stem}.png",
-                                           f"figures/{scaling}.png" if scaling else None, where, self.rc.seed)
+                                           f"figures/{scaling}.png" if scaling else None, where, self.rc.seed,
+                                           seed_scores(results))
         self.add(*lines)
         self.claims += claims
         lines, claims = decomposition_section(results, labels, where)

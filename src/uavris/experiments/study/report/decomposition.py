@@ -4,7 +4,7 @@ Lives here: :func:`decomposition_section`, the deployment report's table of ever
 the oracle split into place and attitude, with the share of its slots in which a device is
 behind the RIS plane, over halls and per hall, and the claim that no learned row blocks a
 device. Not here: the numbers, which the evaluation stages record
-(:func:`uavris.experiments.study.workers.evaluate_policies`), and the rest of the deployment
+(:func:`uavris.experiments.study.workers.evaluate_rows`), and the rest of the deployment
 section (:mod:`.deployment`).
 
 Definitions (docs/study.md section 21), with R the planner's expected sum rate with
@@ -31,7 +31,7 @@ from uavris.experiments.study.report.deployment import ROWS, layout_scores
 
 BLOCKING_LIMIT = 0.01  # no learned row blocks a device in more than this share of its slots (issue 29)
 LEARNED = ("dt-zero-shot", "dt-ensemble", "dt-finetuned", "bc", "dt-zero-shot-safe", "dt-ensemble-safe",
-           "dt-finetuned-safe", "bc-safe", "dt-level", "dt-ensemble-level", "dt-flat", "dt-mixed", "bc-mixed")
+           "dt-finetuned-safe", "bc-safe", "dt-zero-shot-level", "dt-ensemble-level", "dt-flat", "dt-mixed", "bc-mixed")
 
 
 def decomposition_section(results: dict[str, dict[str, Any]], labels: dict[str, str],

@@ -1,10 +1,11 @@
 """The deployment track's part of the report: unseen layouts as the unit of generalisation.
 
 Lives here: :func:`layout_scores` (every policy's score in every unseen layout, from the
-evaluation stages), the means with 95% CIs over layouts (:func:`uavris.stats.over_units`) and paired
-differences, :func:`deployment_section` (the tables and verdicts) and the two figures
-(:func:`layouts_figure`, :func:`scaling_figure`). Not here: the evaluations (written by
-:func:`uavris.experiments.study.tracks.evaluate_policies`) and the other tracks' report.
+evaluation stages; :func:`seed_scores`: each pre-training seed's), the means with 95% CIs
+over layouts (:func:`uavris.stats.over_units`) and paired differences,
+:func:`deployment_section` (the tables and verdicts) and the two figures (:func:`layouts_figure`,
+:func:`scaling_figure`). Not here: the evaluations (written by
+:func:`uavris.experiments.study.workers.evaluate_rows`) and the other tracks' report.
 
 Statistics (docs/study.md, section 21): a policy's score in a layout is its mean average sum
 rate over the evaluation episodes, and its fraction of the oracle there. Across layouts:
@@ -24,7 +25,6 @@ import numpy as np
 from uavris.agents.references import HOVER_OPTIMIZER, ORACLE, ZERO_ACTION
 from uavris.experiments.display.plots import REFERENCE_STYLE, plt, save_figure
 from uavris.experiments.display.tables import MISSING, markdown_table, pct, signed, with_ci
-from uavris.experiments.study.tracks import SEED_MARK
 from uavris.stats import over_units
 
 # Targets of the deployment track (issue 29; docs/study.md, section 21).
@@ -43,14 +43,14 @@ ROWS: tuple[tuple[str, str], ...] = (
     (MEAN_TRANSFER, "transferred experts, mean"), (BEST_TRANSFER, "transferred experts, best (chosen afterwards)"),
     (ZERO_ACTION, "zero action (hover)"), (HOVER_OPTIMIZER, "hover, optimiser's phases"), (ORACLE, "oracle"),
     ("oracle-safe", "oracle under the attitude safety layer"),
-    ("dt-level", "zero-shot DT, attitude held level"),
+    ("dt-zero-shot-level", "zero-shot DT, attitude held level"),
     ("dt-ensemble-level", "zero-shot DT ensemble, attitude held level"))
 PAIRS: tuple[tuple[str, str], ...] = (("dt-zero-shot", HOVER_OPTIMIZER), ("dt-zero-shot", NEAREST),
                                       ("dt-ensemble", HOVER_OPTIMIZER), ("dt-ensemble", NEAREST),
                                       ("dt-zero-shot-safe", HOVER_OPTIMIZER), ("dt-zero-shot-safe", NEAREST),
                                       ("dt-zero-shot-safe", "dt-zero-shot"), ("dt-ensemble-safe", HOVER_OPTIMIZER),
                                       ("dt-ensemble-safe", NEAREST), ("dt-finetuned-safe", "dt-zero-shot-safe"),
-                                      ("dt-zero-shot-safe", "dt-level"),
+                                      ("dt-zero-shot-safe", "dt-zero-shot-level"),
                                       ("dt-zero-shot", MEAN_TRANSFER), ("dt-zero-shot", "bc"),
                                       ("dt-zero-shot-safe", "bc-safe"),
                                       ("dt-zero-shot", "dt-flat"), ("dt-mixed", "bc-mixed"),
@@ -58,19 +58,17 @@ PAIRS: tuple[tuple[str, str], ...] = (("dt-zero-shot", HOVER_OPTIMIZER), ("dt-ze
 
 
 def layout_scores(results: dict[str, dict[str, Any]], field: str = "mean") -> dict[str, dict[str, float]]:
-    """``{layout: {policy: mean}}`` from the evaluation stages' results (or another ``field`` of
+    """``{layout: {row: mean}}`` from the evaluation stages' results (or another ``field`` of
     the summaries, e.g. the decomposition's), with the transferred experts summarised as the
-    nearest (its label says so), their mean and their best, and a learned row with several
-    pre-training seeds (``KEY`` for seed 0, ``KEY@sK`` for the others) as the mean over its
-    seeds in the layout under ``KEY`` (seed 0's own under ``KEY@s0``)."""
+    nearest (its label says so), their mean and their best, and a row trained over several
+    pre-training seeds (its summaries' ``seed``) as the mean over its seeds in the layout,
+    under its ``variant`` (:class:`uavris.experiments.tools.targets.Row`)."""
     out = {}
     for layout, res in results.items():
         res = {k: {**v, "mean": v[field]} for k, v in res.items() if field in v}
-        row = {k: float(v["mean"]) for k, v in res.items() if not k.startswith("transfer-")}
-        seeded = {k.split(SEED_MARK)[0] for k in row if SEED_MARK in k}
-        for key in seeded:
-            row[f"{key}{SEED_MARK}0"] = row[key]
-            row[key] = float(np.mean([v for k, v in row.items() if k.split(SEED_MARK)[0] == key and SEED_MARK in k]))
+        row = {k: float(v["mean"]) for k, v in res.items() if not k.startswith("transfer-") and v.get("seed") is None}
+        for variant, by_seed in _seeded(res).items():  # seed 0 last: the order the means were first taken in
+            row[variant] = float(np.mean([x for s, x in by_seed.items() if s] + [by_seed[0]]))
         transfers = {k: v for k, v in res.items() if k.startswith("transfer-")}
         if transfers:
             nearest = next((v for v in transfers.values() if "(nearest)" in v["label"]), None)
@@ -83,6 +81,19 @@ def layout_scores(results: dict[str, dict[str, Any]], field: str = "mean") -> di
     return out
 
 
+def seed_scores(results: dict[str, dict[str, Any]]) -> dict[str, dict[str, dict[int, float]]]:
+    """``{layout: {row: {seed: mean}}}`` of the rows trained over several pre-training seeds."""
+    return {layout: _seeded(res) for layout, res in results.items()}
+
+
+def _seeded(res: dict[str, dict[str, Any]]) -> dict[str, dict[int, float]]:
+    out: dict[str, dict[int, float]] = {}
+    for v in res.values():
+        if v.get("seed") is not None:
+            out.setdefault(v["variant"], {})[int(v["seed"])] = float(v["mean"])
+    return out
+
+
 def _excludes_zero(s: dict[str, float]) -> str:
     if math.isnan(s["ci_low"]):
         return "not resolved (one layout)"
@@ -90,14 +101,15 @@ def _excludes_zero(s: dict[str, float]) -> str:
 
 
 def deployment_section(scores: dict[str, dict[str, float]], labels: dict[str, str], figure: str | None,
-                       scaling: str | None, where: str = "deployment track", first_seed: int = 0
-                       ) -> tuple[list[str], list[str]]:
+                       scaling: str | None, where: str = "deployment track", first_seed: int = 0,
+                       seeds: dict[str, dict[str, dict[int, float]]] | None = None) -> tuple[list[str], list[str]]:
     """The report's lines for the deployment track and its claims (each a bullet, headed ``where``);
-    the seed table names the pre-training seeds from the study's ``first_seed``."""
+    the seed table (``seeds``: :func:`seed_scores`) names the pre-training seeds from the
+    study's ``first_seed``."""
     layouts = list(scores)
     labels = {**dict(ROWS), **labels}
     rows = [(k, labels[k]) for k, _ in ROWS if all(k in scores[lay] for lay in layouts)]
-    extra = sorted((k for k in scores[layouts[0]] if k.startswith("dt-zero-shot-n") and SEED_MARK not in k),
+    extra = sorted((k for k in scores[layouts[0]] if k.startswith("dt-zero-shot-n")),
                    key=lambda k: int(k.rsplit("n", 1)[1]))
     rows += [(k, labels.get(k, k)) for k in extra]
     frac = {k: [scores[lay][k] / scores[lay][ORACLE] for lay in layouts] for k, _ in rows}
@@ -110,14 +122,15 @@ def deployment_section(scores: dict[str, dict[str, float]], labels: dict[str, st
         ("policy", "fraction of oracle, mean [95% CI over layouts]", "mean (bps/Hz)", "worst layout"),
         [(label, with_ci(summary[k], pct), f"{np.mean([scores[lay][k] for lay in layouts]):.2f}", pct(min(frac[k])))
          for k, label in rows], "llrr")
-    seeded = [(k, label) for k, label in rows if f"{k}{SEED_MARK}0" in scores[layouts[0]]]
+    first = (seeds or {}).get(layouts[0], {})
+    seeded = [(k, label) for k, label in rows if k in first]
     if seeded:
-        n_seeds = max(int(k.rsplit(SEED_MARK, 1)[1]) for k in scores[layouts[0]] if SEED_MARK in k) + 1
+        n_seeds = max(max(by) for by in first.values()) + 1
         lines += ["", f"A learned row is the mean over {n_seeds} pre-training seeds in each layout; each seed's own "
                   "model (fraction of the oracle, mean [95% CI over layouts]):", ""]
         lines += markdown_table(("policy", *(f"seed {first_seed + i}" for i in range(n_seeds))), [
-            (label, *(with_ci(over_units([scores[lay][f"{k}{SEED_MARK}{i}"] / scores[lay][ORACLE] for lay in layouts]),
-                              pct) if f"{k}{SEED_MARK}{i}" in scores[layouts[0]] else MISSING for i in range(n_seeds)))
+            (label, *(with_ci(over_units([seeds[lay][k][i] / scores[lay][ORACLE] for lay in layouts]), pct)
+                      if i in first[k] else MISSING for i in range(n_seeds)))
             for k, label in seeded])
     lines += ["", "Per layout (bps/Hz; in brackets the fraction of the oracle):", ""]
     lines += markdown_table(("layout", *(label for _, label in rows)), [

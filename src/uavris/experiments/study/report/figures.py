@@ -12,10 +12,10 @@ from typing import Any
 
 import numpy as np
 
+from uavris.agents.dt.policy import load_dt_policy
 from uavris.agents.references import REFERENCES
 from uavris.config import get_scenario
 from uavris.experiments.display.plots import REFERENCE_STYLE, plt, reference_lines, save_figure
-from uavris.experiments.training.dt_runs import load_dt_policy
 from uavris.io import read_csv, read_json
 
 KIND_STYLE = {"expert": ("#1f77b4", "-"), "dt-finetuned": ("#2ca02c", "-"), "dt-zero-shot": ("#ff7f0e", "-"),
@@ -87,7 +87,7 @@ def trajectory_figure(scenario: str, model_dir: Path, system: Any, stem: Path, s
     from uavris import physics as ph
     from uavris.env.rollout import rollout
 
-    policy, _, _ = load_dt_policy(model_dir)
+    policy = load_dt_policy(model_dir).policy
     pos, normals, sims = [], [], []
 
     def pose(sim: Any) -> None:
