@@ -1,9 +1,9 @@
-"""Single-core throughput of the ``uavris/UavRisD2D-v0`` environments, in env-steps/s.
+"""Single-core throughput of the ``uavris/UavRisD2D-v1`` environments, in env-steps/s.
 
 Five configurations are measured, all in this one process pinned to a single CPU with
 BLAS/OpenMP limited to one thread:
 
-1. the single environment, ``gymnasium.make("uavris/UavRisD2D-v0")``;
+1. the single environment, ``gymnasium.make("uavris/UavRisD2D-v1")``;
 2. ``gymnasium.vector.SyncVectorEnv`` of 64 single environments;
 3. ``gymnasium.vector.SyncVectorEnv`` of 1024 single environments;
 4. the natively batched ``uavris.env.UavRisD2DVectorEnv`` with 64 environments;

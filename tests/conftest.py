@@ -10,6 +10,9 @@ if os.environ.get("CI"):
     settings.load_profile("ci")
 
 from uavris.config import SystemConfig  # noqa: E402 - after the hypothesis profile is registered
+from uavris.experiments.engine.jobs import configure_threads  # noqa: E402
+
+configure_threads()  # one thread per test process, as in every worker and the command line (engine.jobs)
 
 # Decision Transformer tests: short episodes keep rollouts cheap; the layout does not depend on T.
 SHORT = SystemConfig(horizon=16)

@@ -273,13 +273,15 @@ def test_config_file_unknown_field(tmp_path: Path, capsys: pytest.CaptureFixture
 
 def test_config_file_then_flags(tmp_path: Path) -> None:
     """A partial YAML fills from the preset; flags override the file; the result is validated."""
-    from uavris.cli.training import train_defaults
+    from uavris.cli.parsing import parse
+    from uavris.cli.training import TrainArgs, train_defaults
     from uavris.experiments.training.train_expert import TrainConfig
 
     cfg = tmp_path / "c.yaml"
     cfg.write_text("algo: ppo\npreset: smoke\ntotal_steps: 320\nhyperparams:\n  learning_rate: 0.001\n"
                    "system:\n  noise_dbm: -90\n")
-    got = train_defaults(["--config", str(cfg), "--seed", "3"])
+    args = ["--config", str(cfg), "--seed", "3"]
+    got = parse(TrainArgs, args, "uavris train", "", default=TrainArgs(train_defaults(args))).run
     want = TrainConfig(algo="ppo", scenario="fig2", seed=3, preset="smoke")
     assert got.total_steps == 320 and got.seed == 3 and got.hyperparams.learning_rate == 0.001
     assert got.system.noise_dbm == -90 and got.system.v_max == want.system.v_max

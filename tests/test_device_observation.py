@@ -104,6 +104,4 @@ def test_the_env_spec_rebuilds_the_layout():
 @pytest.mark.parametrize("flag", [True, False])
 def test_stored_configs_keep_the_flag(flag):
     cfg = HALL.replace(observe_devices=flag)
-    assert SystemConfig.from_stored(cfg.to_dict()) == cfg
-    old = {k: v for k, v in SystemConfig().to_dict().items() if k not in ("observe_devices", "min_device_spacing")}
-    assert SystemConfig.from_stored(old).observe_devices is False  # files from before the field: as they were
+    assert SystemConfig.from_dict(cfg.to_dict()) == cfg

@@ -205,9 +205,9 @@ def _run_cli(args, capsys):
 @pytest.mark.parametrize(
     "args, message",
     [
-        (["train", "--algo", "a2c", "--preset", "smoke"], "unknown algorithm 'a2c'"),
+        (["train", "--algo", "a2c", "--preset", "smoke"], "invalid choice 'a2c' for argument '--algo'"),
         (["train", "--scenario", "mars", "--preset", "smoke"], "unknown scenario 'mars'"),
-        (["train", "--preset", "huge"], "unknown preset 'huge'"),
+        (["train", "--preset", "huge"], "invalid choice 'huge' for argument '--preset'"),
         (["train", "--preset", "smoke", "--system.v-max", "-1"], "SystemConfig.v_max must be"),
         (["evaluate", "/nonexistent/run"], "is not a directory"),
         (["evaluate", "baseline:nothing", "--scenario", "fig2"], "unknown baseline 'nothing'"),

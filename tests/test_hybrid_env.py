@@ -16,7 +16,7 @@ from uavris.errors import ActionError
 from uavris.layouts import Layout, LayoutGenerator
 from uavris.physics.phase_opt import co_phasing_phases, optimize_slot_phases
 
-ID = "uavris/UavRisD2D-v0"
+ID = "uavris/UavRisD2D-v1"
 
 
 def test_hybrid_env_passes_gymnasiums_checker_with_six_action_entries():

@@ -163,12 +163,13 @@ def _as_before_env_spec(meta):
     meta["dataset_id"] = "old-v0"
 
 
-def test_dataset_written_before_env_spec_still_loads(collected, tmp_path):
+def test_a_dataset_without_an_environment_spec_is_one_line(collected, tmp_path):
+    """Minari cannot recover the environment of a dataset without its spec, so uavris refuses it."""
     old = shutil.copytree(collected / "uavris" / "experts-tiny-v0", tmp_path / "old-v0")
     _edit_metadata(old, _as_before_env_spec)
-    ds = load_dataset(old)
-    assert ds.dataset_id == "old-v0" and ds.system == SHORT
-    assert len(ds.trajectories) == len(EXPERTS) * EPISODES
+    with pytest.raises(DatasetError, match="no environment spec recorded") as err:
+        load_dataset(old)
+    assert len(str(err.value).splitlines()) == 1
     with pytest.raises(ValueError, match="env_spec is None"):  # Minari's own behaviour for such datasets
         minari.MinariDataset(old / "data").recover_environment()
 

@@ -91,6 +91,34 @@ def test_readme_results_are_the_reports() -> None:
         assert not _misplaced(section, report), page.name
 
 
+QUOTE = re.compile(r"<!-- quotes (results/[\w.-]+\.md) -->(.*?)<!-- /quotes -->", re.S)
+QUOTING = ("halls.md", "study.md")  # pages that quote the committed report in their prose
+
+
+def test_docs_quotes_are_the_reports() -> None:
+    """Every passage of a page that quotes a committed report (marked ``<!-- quotes
+    results/FILE.md -->`` ... ``<!-- /quotes -->``) has that report's numbers, in their rows:
+    a quote is copied, never retyped, and goes stale with the report it quotes. The pages
+    that quote the report in their prose mark their quotes (the results page's section and
+    the README are checked whole, above)."""
+    quotes = 0
+    for page in PAGES:
+        for m in QUOTE.finditer(page.read_text(encoding="utf-8")):
+            report = DOCS / m.group(1)
+            assert report.is_file(), f"{page.name} quotes {m.group(1)}, which is not committed"
+            assert not _misplaced(m.group(2), report.read_text(encoding="utf-8")), (page.name, m.group(2)[:80])
+            quotes += 1
+    for name in QUOTING:
+        assert QUOTE.search((DOCS / name).read_text(encoding="utf-8")), f"{name} quotes the report unmarked"
+    assert quotes >= len(QUOTING)
+
+
+def test_a_retyped_quote_is_caught() -> None:
+    bad = "<!-- quotes results/quick-report.md -->the zero-shot DT reaches 93.3% of the oracle<!-- /quotes -->"
+    m = QUOTE.search(bad)
+    assert m and _misplaced(m.group(2), QUICK_REPORT.read_text(encoding="utf-8"))
+
+
 def _numbers(line: str) -> list[str]:
     """The whole numbers of a line, in order, signs and percent signs kept ("unseen1" has none)."""
     return re.findall(r"(?<![\w.+-])[+-]?\d[\d,]*(?:\.\d+)?%?(?!\.?\d)", line)

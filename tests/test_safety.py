@@ -150,11 +150,10 @@ def test_bad_safety_distance_names_the_field(bad):
         SystemConfig(safety_distance=bad)
 
 
-def test_stored_configs_from_before_the_field_keep_their_physics():
-    old = {k: v for k, v in SystemConfig().to_dict().items() if k != "safety_distance"}
-    assert SystemConfig.from_stored(old).safety_distance == 0.0
-    assert SystemConfig.from_dict(old).safety_distance == 3.0  # a user's partial config: today's default
-    assert SystemConfig.from_stored(SystemConfig().to_dict()) == SystemConfig()
+def test_a_partial_config_takes_todays_defaults():
+    partial = {k: v for k, v in SystemConfig().to_dict().items() if k != "safety_distance"}
+    assert SystemConfig.from_dict(partial).safety_distance == 3.0
+    assert SystemConfig.from_dict(SystemConfig().to_dict()) == SystemConfig()
 
 
 def test_simulator_asserts_the_separation_in_debug_mode(monkeypatch):

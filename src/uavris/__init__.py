@@ -1,6 +1,6 @@
 """uavris: UAV-mounted RIS-assisted dynamic D2D communications (simulator, experts, DT).
 
-``import uavris`` registers the Gymnasium environment ``uavris/UavRisD2D-v0`` (in :mod:`uavris.env`).
+``import uavris`` registers the Gymnasium environment ``uavris/UavRisD2D-v1`` (in :mod:`uavris.env`).
 Lives here: the package's public names. Not here: anything else; the layers are
 ``physics`` -> ``env`` -> ``agents`` -> ``experiments`` -> ``cli`` (README, Layout).
 """
@@ -8,7 +8,7 @@ Lives here: the package's public names. Not here: anything else; the layers are
 from uavris.config import SCENARIOS, ConfigError, Scenario, SystemConfig, get_scenario
 from uavris.env import ENV_ID, UavRisD2DEnv, UavRisD2DVectorEnv
 
-__version__ = "0.2.0"
+__version__ = "0.3.0"
 
 __all__ = ["ENV_ID", "SCENARIOS", "ConfigError", "Scenario", "SystemConfig", "UavRisD2DEnv", "UavRisD2DVectorEnv",
            "get_scenario"]

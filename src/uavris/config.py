@@ -35,9 +35,9 @@ class DictConfig:
     dicts): what run directories, stage keys and job arguments store. :meth:`from_dict`
     is its inverse: a partial dict takes the defaults for what it leaves out, an unknown
     field is one :class:`~uavris.errors.ConfigError` line naming it, a nested config field
-    is rebuilt from its dict (a stored :class:`SystemConfig` by :meth:`SystemConfig.from_stored`;
-    one the class names in ``partial_fields`` is left a mapping, of the fields that differ from
-    its preset's), and the class's own validation runs as on any construction.
+    is rebuilt from its dict (one the class names in ``partial_fields`` is left a mapping, of
+    the fields that differ from its preset's), and the class's own validation runs as on any
+    construction.
     """
 
     def to_dict(self) -> dict[str, Any]:
@@ -56,7 +56,7 @@ class DictConfig:
         for name, value in d.items():
             nested = _nested_config(hints.get(name))
             if nested is not None and isinstance(value, Mapping) and name not in getattr(cls, "partial_fields", ()):
-                value = getattr(nested, "from_stored", nested.from_dict)(value)
+                value = nested.from_dict(value)
             elif isinstance(value, list) and _holds_tuple(hints.get(name)):
                 value = tuple(value)  # JSON and YAML have lists only; the configs hold tuples (hashable)
             values[name] = value
@@ -316,22 +316,12 @@ class SystemConfig(DictConfig):
     def replace(self, **changes: Any) -> SystemConfig:
         return dataclasses.replace(self, **changes)
 
-    @classmethod
-    def from_stored(cls, d: dict[str, Any]) -> SystemConfig:
-        """The config of a run, dataset or checkpoint written earlier: a field added after it
-        was written takes the value that reproduces the system it was made with (no
-        safety separation before ``safety_distance`` existed), not today's default."""
-        return cls.from_dict({**STORED_BEFORE_FIELD, **d})
-
     def nearest_device(self, position: Vec3) -> tuple[int, float]:
         """Index of the device closest to ``position`` and its distance, m."""
         dist = [math.dist(position, u) for u in self.users]
         k = min(range(len(dist)), key=dist.__getitem__)
         return k, dist[k]
 
-
-# Values of fields that did not exist when older run files were written (see from_stored).
-STORED_BEFORE_FIELD: dict[str, Any] = {"safety_distance": 0.0, "min_device_spacing": 0.0}
 
 
 @dataclass(frozen=True)

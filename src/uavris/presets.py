@@ -61,14 +61,15 @@ FINETUNE: dict[str, dict[str, Any]] = {
     "paper": dict(rounds=10, epochs_per_round=5, eval_episodes=100, **_FT_PAPER),
 }
 
-# The strong track's experts: imitation of the oracle (DAgger rounds, episodes per round,
-# epochs) and the PPO steps after it (docs/study.md section 20).
+# The strong track's experts: imitation of the oracle's motion (DAgger rounds, episodes per
+# round, epochs), nothing else: no RL steps after it at any preset, since PPO after imitation
+# lost ground and did not pass it (docs/study.md, "Strong track"). The policy network is
+# SB3's PPO actor-critic, trained by behaviour cloning only.
 STRONG_IMITATION: dict[str, dict[str, Any]] = {
     "smoke": dict(rounds=2, episodes=4, epochs=5),
     "quick": dict(rounds=6, episodes=32, epochs=30),
     "paper": dict(rounds=8, episodes=64, epochs=30),
 }
-STRONG_RL_STEPS = {"smoke": 0, "quick": 0, "paper": 0}
 
 # The study (``uavris reproduce``, uavris.experiments.study.config.ReproduceConfig):
 # evaluation episodes per policy, comparison seeds per algorithm and environment steps per run,

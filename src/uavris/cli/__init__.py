@@ -75,6 +75,9 @@ def _run(argv: list[str]) -> None:
     name, rest = argv[0], argv[1:]
     if name not in COMMANDS:
         raise UsageError(f"unknown command {name!r}; choose one of {', '.join(COMMANDS)} (see {PROG} --help)")
+    from uavris.experiments.engine.jobs import configure_threads
+
+    configure_threads(torch_now=False)  # one thread per process: the cores go to the jobs (engine.jobs)
     command(name)(rest)
 
 

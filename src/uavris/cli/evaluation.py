@@ -146,7 +146,7 @@ class BenchmarkArgs:
     target: Annotated[str, tyro.conf.Positional, tyro.conf.arg(metavar="RUN|MODEL|REFERENCE|MODULE:NAME")]
     """what `uavris evaluate` takes: a run or DT model directory, a reference, or your own policy"""
     preset: Preset = "quick"
-    """whose protocol: its report's evaluation episodes and number of unseen layouts (quick: 32 episodes, 8
+    """whose protocol: its report's evaluation episodes and number of unseen layouts (quick: 32 episodes, 16
     layouts)"""
     cells: Cells = "all"
     """scenarios: the paper's unseen scenarios; layouts: the deployment track's unseen layouts; all: both"""

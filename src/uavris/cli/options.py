@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from uavris.agents.torch_device import Device, resolve_device
-from uavris.cli.parsing import Unset, UsageError, output_dir, parse, peek
+from uavris.cli.parsing import Unset, UsageError, output_dir, read_first
 from uavris.config import Scenario, SystemConfig
 from uavris.runs import CONFIG_FILE, config_path
 
@@ -64,7 +64,8 @@ LAYOUT_HELP = ("the hall: paper (the paper's devices), layout-train-N / layout-u
 
 
 class _DevicesLater(SystemConfig):
-    """A system whose devices are checked once a layout has given them: the ``--system.*``
+    """A system whose devices are checked once a layout has given them, for the first pass of
+    a command with ``--layout`` (:func:`uavris.cli.parsing.read_first`): the ``--system.*``
     flags change the base system before ``--layout`` resolves (a generated hall is drawn in
     the room of ``--system.room``, the paper's devices fit a room the flag enlarges), and the
     base's own devices need not fit the changed room. Every other field is checked as always;
@@ -79,12 +80,11 @@ class _DevicesLater(SystemConfig):
 
 
 @dataclass(frozen=True)
-class _SystemFlags:
+class _HallFlags:
+    """The flags that make a command's hall: ``--layout`` and the system it changes."""
+
     system: _DevicesLater
-
-
-def _given(args: list[str], flag: str) -> bool:
-    return any(a == flag or a.startswith(flag + "=") for a in args)
+    layout: Unset[str] = None
 
 
 def layout_defaults(args: list[str], system: SystemConfig,
@@ -97,15 +97,14 @@ def layout_defaults(args: list[str], system: SystemConfig,
     room with ``--system.room``, gives them twice, which is one error line."""
     from uavris.layouts import resolve_layout
 
-    ref = peek(args, "--layout")
-    if ref is None:
-        return system, None
-    if _given(args, "--system.users"):
-        raise UsageError("--layout and --system.users both give the device positions; pass one of them")
     loose = _DevicesLater(**{f.name: getattr(system, f.name) for f in fields(SystemConfig)})
-    flags = [a for a in args if a not in ("-h", "--help")]  # only the command's own parse prints help
-    base = parse(_SystemFlags, flags, prog, "", default=_SystemFlags(loose), known_only=True).system
-    layout = resolve_layout(ref, base)
-    if layout.room is not None and _given(args, "--system.room"):
-        raise UsageError(f"--layout {ref} sets the room; drop --system.room or the file's room")
+    first = read_first(_HallFlags, args, prog, default=_HallFlags(loose))
+    if first.layout is None:
+        return system, None
+    base = first.system
+    if base.users != system.users:
+        raise UsageError("--layout and --system.users both give the device positions; pass one of them")
+    layout = resolve_layout(first.layout, base)
+    if layout.room is not None and base.room != system.room:
+        raise UsageError(f"--layout {first.layout} sets the room; drop --system.room or the file's room")
     return layout.resolve(base)

@@ -1,10 +1,17 @@
-"""Turning argv into config dataclasses with tyro, and argv mistakes into one line.
+"""Turning argv into config dataclasses with tyro, and a rejected command line into one line.
 
-Lives here: :func:`parse` (tyro over a dataclass whose defaults come from a preset or a
-file; tyro's boxed usage errors become one :class:`UsageError` line), :func:`peek` (the
-few flags that choose those defaults, read before tyro runs) and the checks of paths and
-devices that every command shares. Not here: the commands themselves (:mod:`.training`,
-:mod:`.evaluation`).
+Lives here: :func:`parse` (tyro over a command's dataclass, its defaults given; a rejected
+command line becomes one :class:`UsageError` line, built from tyro's parse-error event),
+:func:`read_first` (the one adapter, see below), the registry's rule for lists of points
+(``--system.users``) and the checks of paths every command shares. Not here: the commands
+themselves (:mod:`.training`, :mod:`.evaluation`).
+
+Why :func:`read_first`: tyro takes one default per field, fixed before it parses. A few
+flags choose the defaults of many others: a preset (``--preset``) every budget, a config
+file (``--config``) every field, a model (``--model``) or a target its system, a hall
+(``--layout``) the devices and the start. Those flags are read first, by tyro (a small
+dataclass of them, the rest of the line left alone), then the whole command with the
+defaults they choose.
 """
 
 from __future__ import annotations
@@ -12,14 +19,27 @@ from __future__ import annotations
 import contextlib
 import inspect
 import io
-import re
 import sys
 from pathlib import Path
-from typing import Annotated, Any, Optional, TypeVar
+from typing import Annotated, Any, Literal, Optional, TypeVar, get_args, get_origin
 
 import tyro
+from tyro.constructors import ConstructorRegistry, PrimitiveConstructorSpec, PrimitiveTypeInfo
 
 from uavris.errors import UavrisError
+
+try:  # tyro's parse-error events: private and experimental in tyro 1.0, whose version the project pins
+    from tyro._errors import (
+        BadValue,
+        InstantiationFailure,
+        InvalidChoice,
+        MissingArgs,
+        ParseErrorEvent,
+        UnrecognizedArgs,
+        on_parse_error,
+    )
+except ImportError:  # another tyro: its own boxed message, then exit 2 (still one failure, not a traceback)
+    on_parse_error = None
 
 T = TypeVar("T")
 
@@ -31,89 +51,99 @@ Unset = Annotated[Optional[T], tyro.conf.DisallowNone, tyro.conf.arg(help_behavi
 # an Optional nested config (TrainConfig.imitation) stays at its default instead of turning
 # into a subcommand.
 TYRO_CONFIG = (tyro.conf.AvoidSubcommands,)
-# tyro draws its errors in a box, with Unicode or ASCII lines depending on the terminal.
-_EDGES = re.compile(r"^[\s│|╭╮╰╯+]*(.*?)[\s│|╭╮╰╯+]*$")
-_RULE = re.compile(r"^[\s─\-│|╭╮╰╯+=]*$")
-# A list of points (--system.users) whose values do not come in threes: tyro only says it found no parse.
-_POINTS = re.compile(r"Error parsing (--[\w.-]*users): Could not find valid parse for arguments: \[(.*)\]")
+HELP = ("-h", "--help")
+POINTS = tuple[tuple[float, float, float], ...]  # SystemConfig.users: x y z per device
+REGISTRY = ConstructorRegistry()
 
 
 class UsageError(UavrisError):
     """A command line that does not parse: unknown flag, wrong type, missing argument."""
 
 
-def _first_message(text: str) -> str:
-    """tyro's boxed error as one line: the box's first section, re-joined where it wrapped."""
-    body: list[str] = []
-    for line in text.splitlines()[1:]:  # the first line is the box's top edge with its title
-        if _RULE.match(line):  # the box's separator: the first section is over
-            if body:
-                break
-            continue
-        body.append(_EDGES.match(line).group(1))  # type: ignore[union-attr]  # matches any string
-    if not body:
-        return "could not parse the command line"
-    if body[0].startswith("Missing from") and len(body) > 1:
-        return f"missing required argument {body[1]}"
-    message = " ".join(body).rstrip(".")
-    # The command's wrapper dataclass names its flattened config "run" or "study"; users never see it.
-    return re.sub(r"Error parsing (run|study|options)\.?", "Error parsing ", message).replace("parsing :", "parsing:")
+@REGISTRY.primitive_rule
+def _points(info: PrimitiveTypeInfo) -> PrimitiveConstructorSpec | None:
+    """A list of points is typed as its numbers, x y z per point (``--system.users 15 5 1 20 8 1.5``)."""
+    if info.type != POINTS:
+        return None
+
+    def points(values: list[str]) -> POINTS:
+        if len(values) % 3:
+            raise ValueError(f"takes x y z per device: a multiple of 3 numbers, got {len(values)} value"
+                             f"{'s' * (len(values) != 1)}: {' '.join(values)}")
+        try:
+            numbers = [float(v) for v in values]
+        except ValueError:
+            raise ValueError(f"takes numbers (x y z per device), got {' '.join(values)}") from None
+        return tuple((numbers[i], numbers[i + 1], numbers[i + 2]) for i in range(0, len(numbers), 3))
+
+    return PrimitiveConstructorSpec(nargs="*", metavar="X Y Z [X Y Z ...]", instance_from_str=points,
+                                    is_instance=lambda x: isinstance(x, tuple),
+                                    str_from_instance=lambda p: [str(c) for point in p for c in point])
+
+
+def _literals(hint: Any) -> list[str]:
+    """The values of the Literal types in ``hint`` (through Optional and unions), in their declared order."""
+    if get_origin(hint) is Literal:
+        return [str(v) for v in get_args(hint)]
+    return [v for arg in get_args(hint) for v in _literals(arg)]
+
+
+def _one_line(event: Any) -> str:
+    """What a parse-error event says, as one line naming the flag."""
+    if isinstance(event, MissingArgs):
+        names = [a.arg.display_name() for a in event.missing_arguments]
+        return f"missing required argument{'s' * (len(names) > 1)} {', '.join(names)}"
+    if isinstance(event, InvalidChoice):
+        declared = _literals(event.argument.field.type_stripped)
+        choices = sorted((c for c in (event.argument.lowered.choices or event.choices) if c != "None"),
+                         key=lambda c: declared.index(c) if c in declared else len(declared))
+        return (f"invalid choice {event.value!r} for argument '{event.argument.display_name()}'; expected one of "
+                f"{', '.join(repr(c) for c in choices)}")
+    if isinstance(event, UnrecognizedArgs):
+        return f"unrecognized option{'s' * (len(event.tokens) > 1)} {' '.join(event.tokens)}"
+    if isinstance(event, BadValue):
+        name = event.argument.display_name()
+        if event.reason == "too_few_values":
+            return f"{name} expects {event.argument.lowered.nargs} value(s)"
+        return f"{name} takes no value, got {event.offending_value!r}"
+    if isinstance(event, InstantiationFailure):
+        message = " ".join(event.message.split("\n\n")[0].split())  # tyro's own detail follows a blank line
+        if event.argument is None:
+            return message
+        name = event.argument.display_name()
+        return f"{name} {message}" if name.endswith("users") else f"{name}: {message}"
+    return f"the command line does not parse ({type(event).__name__})"
 
 
 def parse(cls: type[T], args: list[str], prog: str, description: str, default: T | None = None,
           known_only: bool = False) -> T:
-    """``tyro.cli(cls)`` on ``args``; a parse error raises one-line :class:`UsageError`.
+    """``tyro.cli(cls)`` on ``args``; a rejected command line raises one-line :class:`UsageError`.
 
     ``--help`` prints tyro's help on stdout and exits 0 as usual. ``known_only``: the
     arguments ``cls`` does not know are left alone (they belong to the rest of the command).
     """
+    def reject(event: ParseErrorEvent) -> None:
+        raise UsageError(f"{_one_line(event)} (see {prog} --help)")
+
+    hook = on_parse_error(reject) if on_parse_error is not None else contextlib.nullcontext()
     captured = io.StringIO()
     try:
-        with contextlib.redirect_stderr(captured):
+        with hook, contextlib.redirect_stderr(captured):
             got = tyro.cli(cls, args=args, prog=prog, description=inspect.cleandoc(description), default=default,
-                           config=TYRO_CONFIG, return_unknown_args=known_only)
-            return got[0] if known_only else got  # type: ignore[index,return-value]
+                           config=TYRO_CONFIG, return_unknown_args=known_only, registry=REGISTRY)
     except SystemExit as e:
+        sys.stderr.write(captured.getvalue())  # --help (exit 0), or another tyro's own message
         if e.code in (0, None):
-            sys.stderr.write(captured.getvalue())
             raise
-        message = _first_message(captured.getvalue())
-        points = _POINTS.fullmatch(message)
-        if points:
-            values = [v.strip(" '\"") for v in points.group(2).split(",") if v.strip()]
-            message = (f"{points.group(1)} takes x y z per device: a multiple of 3 numbers, got {len(values)} "
-                       f"value{'s' * (len(values) != 1)}: {' '.join(values)}")
-        raise UsageError(f"{message} (see {prog} --help)") from None
+        raise UsageError(f"the command line does not parse (see {prog} --help)") from None
+    return got[0] if known_only else got  # type: ignore[index,return-value]
 
 
-def peek(args: list[str], name: str, default: str | None = None) -> str | None:
-    """The value of ``--name VALUE`` or ``--name=VALUE`` in ``args`` (the last one wins)."""
-    value = default
-    for i, arg in enumerate(args):
-        if arg == name and i + 1 < len(args):
-            value = args[i + 1]
-        elif arg.startswith(name + "="):
-            value = arg.split("=", 1)[1]
-    return value
-
-
-def peek_int(args: list[str], name: str, default: int) -> int:
-    raw = peek(args, name)
-    if raw is None:
-        return default
-    try:
-        return int(raw)
-    except ValueError:
-        raise UsageError(f"{name} expects an integer, got {raw!r}") from None
-
-
-def peek_preset(args: list[str]) -> str:
-    """The ``--preset`` in ``args``, whose table gives every other field its default; an
-    unknown one reads as ``quick`` here, so that tyro then reports it with the choices."""
-    from uavris.presets import PRESETS
-
-    preset = peek(args, "--preset", "quick")
-    return preset if preset in PRESETS else "quick"
+def read_first(cls: type[T], args: list[str], prog: str, default: T | None = None) -> T:
+    """The flags of ``cls`` (a small dataclass of the flags that choose the defaults) among
+    ``args``, the rest of the line left alone: the first of a command's two passes (the module
+    docstring says why). ``--help`` is the command's own, not answered here."""
+    return parse(cls, [a for a in args if a not in HELP], prog, "", default=default, known_only=True)
 
 
 def output_dir(path: Path | None, flag: str = "--out") -> None:

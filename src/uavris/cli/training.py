@@ -18,7 +18,7 @@ import tyro
 from uavris.agents.experts import Algorithm
 from uavris.agents.torch_device import Device
 from uavris.cli.options import LAYOUT_HELP, RunOptions, check_run_options, layout_defaults
-from uavris.cli.parsing import Unset, UsageError, load_overrides, output_dir, parse, peek, peek_int, peek_preset
+from uavris.cli.parsing import Unset, UsageError, load_overrides, output_dir, parse, read_first
 from uavris.config import ScenarioName, SystemConfig
 from uavris.experiments.engine.jobs import Backend
 from uavris.experiments.study.config import ReproduceConfig
@@ -28,18 +28,26 @@ from uavris.experiments.training.train_expert import TrainConfig
 from uavris.presets import STUDY, Preset
 
 Flat = tyro.conf.arg(name="")  # the config's fields become the command's own flags
-HELP = ("-h", "--help")
 
 
-def _is_help(args: list[str]) -> bool:
-    return any(a in HELP for a in args)
-
-
-def _required_in_help(config: Any, field: str) -> Any:
-    """``config`` with ``field`` shown as "(required)" by --help: the placeholder the
-    defaults were computed from is not a default a user can rely on."""
-    object.__setattr__(config, field, tyro.MISSING)  # only ever for --help, which exits
+def _required(config: Any, field: str) -> Any:
+    """``config`` (the defaults of a command's second pass) with ``field`` required: the
+    placeholder its other defaults were computed with is no default a user can rely on, so
+    tyro asks for the flag (and --help says "required")."""
+    object.__setattr__(config, field, tyro.MISSING)
     return config
+
+
+@dataclass(frozen=True)
+class _Preset:
+    """The flag that chooses the budgets of every other (cli.parsing.read_first)."""
+
+    preset: Unset[Preset] = None
+
+
+def _given(**flags: Any) -> dict[str, Any]:
+    """The flags the first pass found, so that a config's own defaults stay its own."""
+    return {k: v for k, v in flags.items() if v is not None}
 
 
 # ------------------------------------------------------------------------------------------ train
@@ -65,30 +73,38 @@ def _nested_update(base: dict[str, Any], changes: dict[str, Any], where: str) ->
     return out
 
 
+@dataclass(frozen=True)
+class _TrainChoices:
+    """The flags of ``uavris train`` that choose the defaults of the others: the algorithm and
+    preset (budgets, hyperparameters), the scenario, a configuration file (or the run to resume)."""
+
+    algo: Unset[Algorithm] = None
+    preset: Unset[Preset] = None
+    scenario: Unset[str] = None
+    config: Unset[Path] = None
+    out: Unset[Path] = None
+    resume: bool = False
+
+
 def train_defaults(args: list[str]) -> TrainConfig:
-    """The preset chosen on the command line (or in ``--config``), with the file's fields on top.
-    ``--resume`` without ``--config`` continues with the run's own ``OUT/config.yaml``."""
+    """The defaults of ``uavris train``'s flags: the algorithm and preset chosen on the command line
+    (or in ``--config``), with the file's fields on top, in the hall of ``--layout``. ``--resume``
+    without ``--config`` continues with the run's own ``OUT/config.yaml``."""
     from uavris.experiments.training.train_expert import TrainConfig
 
-    file = peek(args, "--config")
-    out = peek(args, "--out")
-    if file is None and "--resume" in args and out is not None and (Path(out) / "config.yaml").is_file():
-        file = str(Path(out) / "config.yaml")  # the resumed run's configuration, not the preset's defaults
-    data = load_overrides(Path(file), "TrainConfig") if file else {}
-    pick = {k: peek(args, f"--{k}", data.get(k, d)) for k, d in (("algo", "ddpg"), ("scenario", "fig2"),
-                                                                  ("preset", "quick"))}
-    if not isinstance(data.get("seed", 0), int):
-        raise UsageError(f"--config {file}: seed must be an integer, got {data['seed']!r}")
-    seed = peek_int(args, "--seed", data.get("seed", 0))
+    c = read_first(_TrainChoices, args, "uavris train")
+    file = c.config
+    if file is None and c.resume and c.out is not None and (c.out / "config.yaml").is_file():
+        file = c.out / "config.yaml"  # the resumed run's configuration, not the preset's defaults
+    data = load_overrides(file, "TrainConfig") if file else {}
     system, hall = layout_defaults(args, TrainConfig().system, "uavris train")
-    named = hall is None or peek(args, "--scenario") is not None  # a named scenario's start, in the layout's hall
+    named = hall is None or c.scenario is not None  # a named scenario's start, in the layout's hall
     where = {} if hall is None else {"system": system, "start": None if named else hall.start}
-    pick["scenario"] = pick["scenario"] if named else hall.name
-    base = TrainConfig(algo=pick["algo"], scenario=pick["scenario"], seed=seed, preset=pick["preset"], **where)
+    chosen = _given(algo=c.algo, preset=c.preset, scenario=c.scenario if named else hall.name)
+    base = TrainConfig(**{**{k: data[k] for k in ("algo", "preset", "scenario") if k in data}, **chosen, **where})
     if not data:
         return base
-    merged = _nested_update(base.to_dict(), data, f"--config {file}")
-    return TrainConfig.from_dict({**merged, **pick, "seed": seed})
+    return TrainConfig.from_dict({**_nested_update(base.to_dict(), data, f"--config {file}"), **chosen})
 
 
 def train_command(args: list[str]) -> None:
@@ -193,11 +209,8 @@ def pretrain_command(args: list[str]) -> None:
     from uavris.experiments.training.pretrain import PretrainConfig, default_pretrain_dir, pretrain
     from uavris.runs import read_done
 
-    dataset = peek(args, "--dataset", "DATASET" if _is_help(args) else None)
-    if dataset is None:
-        raise UsageError("pretrain-dt: --dataset DIR is required (a dataset written by `uavris collect`)")
-    cfg = PretrainConfig(dataset=dataset, preset=peek_preset(args), seed=peek_int(args, "--seed", 0))
-    default = PretrainArgs(_required_in_help(cfg, "dataset") if _is_help(args) else cfg)
+    c = read_first(_Preset, args, "uavris pretrain-dt")
+    default = PretrainArgs(_required(PretrainConfig(dataset="", **_given(preset=c.preset)), "dataset"))
     a = parse(PretrainArgs, args, "uavris pretrain-dt", pretrain_command.__doc__ or "", default=default)
     run_dir = _run_dt(pretrain, a.run, a.options, default_pretrain_dir)
     done = read_done(run_dir)
@@ -206,6 +219,16 @@ def pretrain_command(args: list[str]) -> None:
 
 
 # ------------------------------------------------------------------------------------- finetune-dt
+@dataclass(frozen=True)
+class _FinetuneChoices:
+    """The flags of ``uavris finetune-dt`` that choose the defaults of the others: the model (its
+    system), the scenario and the preset."""
+
+    model: Unset[str] = None
+    scenario: Unset[str] = None
+    preset: Unset[Preset] = None
+
+
 @dataclass(frozen=True)
 class FinetuneArgs:
     run: Annotated[FinetuneConfig, Flat]
@@ -227,18 +250,16 @@ def finetune_command(args: list[str]) -> None:
     from uavris.experiments.training.finetune import FinetuneConfig, default_finetune_dir, finetune
     from uavris.runs import read_done
 
-    placeholder = _is_help(args)
-    model = peek(args, "--model", "MODEL" if placeholder else None)
-    scenario = peek(args, "--scenario")
-    if model is None or (scenario is None and peek(args, "--layout") is None and not placeholder):
-        raise UsageError("finetune-dt: --model DIR and --scenario NAME (or --layout) are required")
-    system, hall = layout_defaults(args, SystemConfig() if placeholder else dt_system(model))
-    start = hall.start if hall is not None and scenario is None else None
-    scenario = scenario or (hall.name if hall is not None else "unseen1")
-    cfg = FinetuneConfig(model=model, scenario=scenario, preset=peek_preset(args),
-                         seed=peek_int(args, "--seed", 0),
-                          system=system, start=start)
-    default = FinetuneArgs(_required_in_help(cfg, "model") if placeholder else cfg)
+    c = read_first(_FinetuneChoices, args, "uavris finetune-dt")
+    system, hall = layout_defaults(args, SystemConfig() if c.model is None else dt_system(c.model),
+                                   "uavris finetune-dt")
+    start = hall.start if hall is not None and c.scenario is None else None
+    scenario = c.scenario or (hall.name if hall is not None else None)
+    # the placeholders (the paper's unseen1, no model) compute the other defaults; tyro asks for the flags
+    cfg = FinetuneConfig(model="", scenario=scenario or "unseen1", system=system, start=start,
+                         **_given(preset=c.preset))
+    cfg = _required(cfg, "model") if c.model is None else cfg
+    default = FinetuneArgs(_required(cfg, "scenario") if scenario is None else cfg)
     a = parse(FinetuneArgs, args, "uavris finetune-dt", finetune_command.__doc__ or "", default=default)
     run_dir = _run_dt(finetune, a.run, a.options, default_finetune_dir)
     done = read_done(run_dir)
@@ -293,9 +314,10 @@ def reproduce_command(args: list[str]) -> None:
     from uavris.agents.torch_device import resolve_device
     from uavris.experiments.study.reproduce import estimate, reproduce
 
-    system, _ = layout_defaults(args, SystemConfig())
+    system, _ = layout_defaults(args, SystemConfig(), "uavris reproduce")
+    c = read_first(_Preset, args, "uavris reproduce")
     a = parse(ReproduceArgs, args, "uavris reproduce", reproduce_command.__doc__ or "",
-              default=ReproduceArgs(ReproduceConfig(preset=peek_preset(args), system=system)))
+              default=ReproduceArgs(ReproduceConfig(system=system, **_given(preset=c.preset))))
     if a.estimate:
         print(estimate(a.study, a.workers), end="")
         return

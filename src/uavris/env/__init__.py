@@ -1,6 +1,6 @@
 """Gymnasium environments of the UAV-RIS D2D system.
 
-``uavris/UavRisD2D-v0`` is registered here, not with the classes as entry points but with
+``uavris/UavRisD2D-v1`` is registered here, not with the classes as entry points but with
 :func:`make_env` / :func:`make_vector_env`: an ``EnvSpec`` is stored as JSON (Minari
 datasets keep one), so its ``config`` kwarg comes back as a plain dict, and
 ``gymnasium.make(spec)`` must accept that as well as a :class:`SystemConfig`. They also
@@ -21,7 +21,7 @@ from uavris.env.single import UavRisD2DEnv
 from uavris.env.vector import UavRisD2DVectorEnv
 from uavris.layouts import Layout, resolve_layout
 
-ENV_ID = "uavris/UavRisD2D-v0"
+ENV_ID = "uavris/UavRisD2D-v1"
 
 
 def _system(config: SystemConfig | Mapping[str, Any] | None) -> SystemConfig | None:

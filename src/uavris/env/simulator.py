@@ -288,7 +288,7 @@ def stored_system(system: Any, layout: Any, where: str, error: type[Exception] =
     """The system configuration a file (dataset, checkpoint) was made with, checked against the
     observation layout the current environment gives that system; ``error`` names the problem."""
     try:
-        config = SystemConfig.from_stored(system)
+        config = SystemConfig.from_dict(system)
     except (ConfigError, TypeError, ValueError, AttributeError) as e:
         raise error(f"{where}: stored system configuration is invalid ({str(e).splitlines()[0] if str(e) else e!r})"
                     ) from None

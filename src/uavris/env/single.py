@@ -1,4 +1,4 @@
-"""Gymnasium environment ``uavris/UavRisD2D-v0`` (one UAV-RIS system).
+"""Gymnasium environment ``uavris/UavRisD2D-v1`` (one UAV-RIS system).
 
 Lives here: :class:`UavRisD2DEnv`, a one-row :class:`uavris.env.simulator.BatchedSimulator`
 behind Gymnasium's ``reset`` and ``step`` (spaces, reward, termination: its docstring). Not
@@ -114,7 +114,7 @@ class UavRisD2DEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
 
     ## Arguments
 
-    ``gymnasium.make("uavris/UavRisD2D-v0", config=None, scenario="fig2")``:
+    ``gymnasium.make("uavris/UavRisD2D-v1", config=None, scenario="fig2")``:
 
     - ``config``: the system, a :class:`uavris.config.SystemConfig` or its ``to_dict()`` (an
       environment spec stored as JSON, e.g. by Minari, gives a dict); ``None``: the paper's
@@ -125,7 +125,7 @@ class UavRisD2DEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
       device (else :class:`uavris.errors.ConfigError`). A hall of your own:
       ``system, scenario = layout.resolve(SystemConfig())`` (:mod:`uavris.layouts`).
 
-    ``gymnasium.make_vec("uavris/UavRisD2D-v0", num_envs=n, vectorization_mode="vector_entry_point")``
+    ``gymnasium.make_vec("uavris/UavRisD2D-v1", num_envs=n, vectorization_mode="vector_entry_point")``
     gives the batched :class:`uavris.env.vector.UavRisD2DVectorEnv`. ``info`` holds
     ``sum_rate``, ``pair_rates`` (``K x K``), ``pairing``, ``incidence_deg``, ``position``,
     ``velocity``, ``attitude``, ``acceleration``, ``energy_used``, ``energy_remaining``,
@@ -133,22 +133,21 @@ class UavRisD2DEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
 
     ## Version History
 
-    The id has stayed ``v0``; what changed since uavris 0.1.0:
+    Gymnasium's rule: the version moves when a change can alter results.
 
-    - 0.2.0: the UAV keeps ``SystemConfig.safety_distance`` (3 m) from every device, enforced
-      by the kinematics like the walls (a start inside a safety ball is a ``ConfigError``), so
-      the channels' observation bound fell from 92.38 to 10.76; configurations stored before
-      the field existed load with 0 (``SystemConfig.from_stored``). ``config`` may be a dict,
-      so that a stored spec (Minari's ``recover_environment``) rebuilds the environment.
-      Invalid actions raise ``ActionError``, a ``ValueError`` as before. The optimiser's phases
-      for motion-only policies moved to :mod:`uavris.env.wrappers`.
-    - After 0.2.0: halls of one's own (layouts, :mod:`uavris.layouts`): every device must stand
-      below ``z_min`` and at least ``min_device_spacing`` (5 m) horizontally from every other
-      (stored configurations load with 0). ``observe_devices`` (off by default) appends the
-      devices to the observation, in the layout's order and in metres over one length (a first
-      version sorted them nearest first). At the defaults the spaces' shapes are those of 0.1.0.
-    - 0.1.0: the paper's system: 22 actions, 158 observations, reward the sum rate, termination
-      on the energy budget, truncation at the horizon.
+    - v1 (uavris 0.3.0; the dynamics since 0.2.0): the UAV keeps ``SystemConfig.safety_distance``
+      (3 m) from every device, enforced by the kinematics like the walls (a start inside a
+      safety ball is a ``ConfigError``), so the channels' observation bound fell from 92.38 to
+      10.76. Off by default, so that the defaults' spaces are v0's: ``observe_devices`` (the
+      devices appended to the observation, in the layout's order, in metres over one length),
+      ``layout=`` (a hall of one's own: devices below ``z_min``, ``min_device_spacing`` apart),
+      ``phase_control="optimizer"`` (6 motion entries, the optimiser's phases) and
+      ``front_margin_deg`` (the attitude safety layer). ``config`` may be a dict (a stored
+      spec, e.g. Minari's ``recover_environment``, rebuilds the environment); invalid actions
+      raise ``ActionError``, a ``ValueError``.
+    - v0 (uavris 0.1.0): the paper's system: 22 actions, 158 observations, reward the sum rate,
+      termination on the energy budget, truncation at the horizon, no safety separation (under
+      v1: ``SystemConfig(safety_distance=0)``).
     """
 
     metadata = {"render_modes": []}

@@ -12,15 +12,15 @@
   expert), :mod:`~.training.compare` (the algorithm comparison, Fig. 2),
   :mod:`~.training.collect` (the experts' dataset), :mod:`~.training.demonstrations` (the
   oracle's, over generated halls), :mod:`~.training.pretrain` and :mod:`~.training.finetune`
-  (the DT's two stages), :mod:`~.training.dt_runs` (their run directories).
+  (the DT's two stages), :mod:`~.training.dt_runs` (writing their run directories).
 - :mod:`.tools`: what a user calls on a policy or a hall: :mod:`~.tools.targets` (what a
-  name on the command line names), :mod:`~.tools.evaluate`, :mod:`~.tools.user_policy`,
+  name on the command line names, and a report's row), :mod:`~.tools.evaluate`, :mod:`~.tools.user_policy`,
   :mod:`~.tools.benchmark` (the study's protocol), :mod:`~.tools.sweep` (a grid of system
   parameters), :mod:`~.tools.plan` (the oracle's plan and
   rate map), :mod:`~.tools.run_curves` (learning curves), :mod:`~.tools.demo`.
-- :mod:`.study`: ``uavris reproduce``: :mod:`~.study.config`, :mod:`~.study.tracks`,
-  :mod:`~.study.pipeline`, :mod:`~.study.workers`, :mod:`~.study.reproduce` and
-  :mod:`~.study.report`.
+- :mod:`.study`: ``uavris reproduce``: :mod:`~.study.config`, :mod:`~.study.tracks` (and
+  their rows), :mod:`~.study.pipeline`, :mod:`~.study.workers`, :mod:`~.study.reproduce`,
+  :mod:`~.study.rows` (a study's row evaluated again) and :mod:`~.study.report`.
 
 Each room imports only the rooms listed before it (``display`` and ``engine`` import no
 other). Lives here: nothing at package level; import from the modules. Not here: the

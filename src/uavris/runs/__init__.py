@@ -5,7 +5,7 @@ DT pre-training and fine-tuning) does with its run directory. Not here: what a r
 besides (its logs, checkpoints and models, each written by its own command).
 
 A run directory holds its configuration (``config.yaml``, :data:`CONFIG_FILE`, for every
-kind of run; DT runs made before 0.3 hold ``config.json``, which still loads), a
+kind of run), a
 ``checkpoints/latest.json`` pointer to the newest checkpoint (moved last and atomically,
 so a kill at any moment leaves the previous checkpoint usable), ``timing.json`` (the
 wall-clock time it took, over every session: the one file that differs between two runs
@@ -25,7 +25,6 @@ from uavris.errors import UavrisError
 from uavris.io import read_json, read_yaml, to_plain, write_json, write_yaml
 
 CONFIG_FILE = "config.yaml"
-LEGACY_CONFIG_FILE = "config.json"  # DT runs before 0.3
 DONE_FILE = "done.json"
 POINTER = Path("checkpoints") / "latest.json"
 TIMING_FILE = "timing.json"  # wall-clock measurements: kept apart so every other file is reproducible to the bit
@@ -36,21 +35,16 @@ def is_finished(run_dir: str | Path) -> bool:
 
 
 def config_path(run_dir: str | Path) -> Path | None:
-    """The run's configuration file (:data:`CONFIG_FILE`, or an older run's JSON), or None."""
-    for name in (CONFIG_FILE, LEGACY_CONFIG_FILE):
-        path = Path(run_dir) / name
-        if path.is_file():
-            return path
-    return None
+    """The run's configuration file (:data:`CONFIG_FILE`), or None."""
+    path = Path(run_dir) / CONFIG_FILE
+    return path if path.is_file() else None
 
 
 def read_config(run_dir: str | Path) -> Any:
     """The stored configuration of a run (a mapping, unless the file is not a run's), or None
     when the directory holds none."""
     path = config_path(run_dir)
-    if path is None:
-        return None
-    return read_json(path) if path.suffix == ".json" else read_yaml(path)
+    return None if path is None else read_yaml(path)
 
 
 def prepare(run_dir: Path, record: dict[str, Any], *, resume: bool, force: bool, what: str = "uavris run",

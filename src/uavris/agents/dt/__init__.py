@@ -1,12 +1,16 @@
-"""The Decision Transformer of the paper's Sec. IV: model, cache, checkpoints, data, trainer, policy.
+"""The Decision Transformer of the paper's Sec. IV: its configuration, model, training and deployment.
 
-Modules: :mod:`.model` (the transformer and its configuration), :mod:`.cache` (the banded
-layout's key/value cache), :mod:`.checkpoint` (safetensors + JSON), :mod:`.trajectories`
-(eq. 14-18: trajectories, returns-to-go, elites, windows), :mod:`.dataset` (Minari files),
-:mod:`.trainer` (the optimiser, the learning-rate schedule and the training step),
-:mod:`.policy` (deployment).
+Modules, in the order a reader meets them: :mod:`.config` (:class:`~.config.DTConfig`, the
+model's size and kind), :mod:`.encoders` (the state encoders: the DT paper's linear map, or
+a hall as a set of devices), :mod:`.model` (the transformer), :mod:`.cache` (the banded
+layout's key/value cache), :mod:`.trajectories` (eq. 14-18: trajectories, returns-to-go,
+elites, recording, normalisation), :mod:`.training` (the windows, the loss L_OFF / L_FT, the
+optimiser, its schedule and the steps, read top to bottom), :mod:`.checkpoint` (safetensors
++ JSON), :mod:`.dataset` (Minari files) and :mod:`.policy` (deployment, and
+:func:`~.policy.load_dt_policy`, the one loader).
 
-Lives here: nothing at package level; import from the modules. Not here: the pipelines that
-use them (:mod:`uavris.experiments.training.collect`, :mod:`uavris.experiments.training.pretrain`,
-:mod:`uavris.experiments.training.finetune`) and DT run directories (:mod:`uavris.experiments.training.dt_runs`).
+Lives here: nothing at package level; import from the modules. Not here: the runs that use
+them, with their directories, logs and checkpoints (:mod:`uavris.experiments.training.collect`,
+:mod:`uavris.experiments.training.pretrain`, :mod:`uavris.experiments.training.finetune`,
+:mod:`uavris.experiments.training.dt_runs`).
 """

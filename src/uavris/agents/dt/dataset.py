@@ -9,7 +9,7 @@ Dataset layout (a directory ``DIR``)::
                              SystemConfig, the observation layout, obs/action sizes and
                              the phase control ("agent": full actions; "optimizer": the
                              6 motion entries, the phases being the optimiser's);
-                             env_spec and eval_env_spec: uavris/UavRisD2D-v0 with kwargs
+                             env_spec and eval_env_spec: uavris/UavRisD2D-v1 with kwargs
                              config (SystemConfig.to_dict()) and scenario (a name)
     DIR/data/main_data.hdf5  one group per episode: observations (T+1, obs_dim),
                              actions (T, act_dim), rewards, terminations, truncations;
@@ -23,12 +23,11 @@ derived from DIR's name (:func:`dataset_id_for`): ``uavris/<name>-vN`` for datas
 :func:`write_dataset` without ``namespace``.
 
 ``dataset.recover_environment()`` (and ``eval_env=True``, the same environment) gives
-``uavris/UavRisD2D-v0`` with the dataset's system in the dataset's recorded scenario, the
+``uavris/UavRisD2D-v1`` with the dataset's system in the dataset's recorded scenario, the
 first trajectory's unless the writer named one (``collect``: the first expert's). An episode's
 own scenario is in its metadata. Under phase control "optimizer" that environment still
 takes full actions, the dataset's being the 6 motion entries (``optimised_action`` adds the
-phases). Datasets written before env_spec was recorded still load here; Minari cannot
-recover their environment.
+phases).
 """
 
 from __future__ import annotations
@@ -51,7 +50,7 @@ from uavris.env.simulator import layout_as_lists, observation_bounds, stored_sys
 from uavris.env.wrappers import PHASE_CONTROLS, action_dim_for
 from uavris.errors import ConfigError, DatasetError
 
-DATASET_FORMAT_VERSION = 1  # env_spec is optional within it: older datasets lack it
+DATASET_FORMAT_VERSION = 2  # 2: the environment spec and the phase control always recorded
 DATASET_NAMESPACE = "uavris"
 
 
@@ -247,7 +246,7 @@ def load_dataset(path: str | Path) -> ExpertDataset:
     info = meta.get("uavris")
     if not isinstance(info, dict):
         raise DatasetError(f"{path} was not written by uavris collect (no 'uavris' metadata)")
-    for key in ("format_version", "system", "observation_layout", "observation_dim", "action_dim"):
+    for key in ("format_version", "system", "observation_layout", "observation_dim", "action_dim", "phase_control"):
         if key not in info:
             raise DatasetError(f"{path}: the uavris metadata is missing the field {key!r}")
     if info["format_version"] != DATASET_FORMAT_VERSION:
@@ -255,7 +254,7 @@ def load_dataset(path: str | Path) -> ExpertDataset:
                            f"this uavris reads format {DATASET_FORMAT_VERSION}")
     system = stored_system(info["system"], info["observation_layout"], str(path), DatasetError)
     _check_env_spec(ds.env_spec, system, str(path))
-    phase_control = info.get("phase_control", "agent")  # datasets from before the field: full actions
+    phase_control = info["phase_control"]
     if phase_control not in PHASE_CONTROLS:
         raise DatasetError(f"{path}: unknown phase control {phase_control!r} in the uavris metadata")
     obs_dim, act_dim = system.observation_dim, action_dim_for(system, phase_control)
@@ -291,8 +290,9 @@ def load_dataset(path: str | Path) -> ExpertDataset:
 
 def _episode_layout(meta: dict[str, Any], system: SystemConfig, where: str
                     ) -> tuple[tuple[float, ...] | None, tuple[tuple[float, ...], ...] | None]:
-    """An episode's recorded start and devices (None where a dataset from before them has none),
-    checked: a layout the dataset's system accepts, with its number of devices."""
+    """An episode's recorded start and devices (None where its trajectory had none: one made
+    without a hall, e.g. synthetic data), checked: a layout the dataset's system accepts, with
+    its number of devices."""
     start, users = meta.get("start"), meta.get("users")
     try:
         if users is not None:
@@ -309,13 +309,13 @@ def _episode_layout(meta: dict[str, Any], system: SystemConfig, where: str
 
 def _check_env_spec(spec, system: SystemConfig, where: str) -> None:
     """Minari's ``recover_environment`` must rebuild the system the data was collected in."""
-    if spec is None:  # datasets written before the spec was recorded: nothing to recover, nothing to check
-        return
+    if spec is None:
+        raise DatasetError(f"{where}: no environment spec recorded (Minari could not recover the environment)")
     if spec.id != ENV_ID:
         raise DatasetError(f"{where}: the recorded environment is {spec.id!r}, not {ENV_ID!r}")
     config = spec.kwargs.get("config")
     try:
-        same = isinstance(config, dict) and SystemConfig.from_stored(config) == system
+        same = isinstance(config, dict) and SystemConfig.from_dict(config) == system
     except (ConfigError, TypeError, ValueError):
         same = False
     if not same:
@@ -352,7 +352,7 @@ def episode_environment(dataset: Any, episode: int, eval_env: bool = False) -> A
     kwargs = dict(base.spec.kwargs)
     base.close()
     meta = dict(next(iter(dataset.storage.get_episode_metadata([episode]))))
-    system = SystemConfig.from_stored(kwargs["config"])
+    system = SystemConfig.from_dict(kwargs["config"])
     start, users = _episode_layout(meta, system, f"episode {episode}")
     if users is not None:
         kwargs["config"] = system.replace(users=users).to_dict()

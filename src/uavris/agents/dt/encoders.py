@@ -87,8 +87,7 @@ def _uav_index(lay: dict[str, slice]) -> torch.Tensor:
 
 
 class FlatEncoder(nn.Linear):
-    """One linear map of the whole normalised observation (the DT paper's state embedding; a
-    ``Linear`` itself, so that checkpoints of earlier versions keep their weights' names)."""
+    """One linear map of the whole normalised observation (the DT paper's state embedding)."""
 
     def forward(self, raw: torch.Tensor, normalised: torch.Tensor) -> torch.Tensor:  # type: ignore[override]
         return F.linear(normalised, self.weight, self.bias)

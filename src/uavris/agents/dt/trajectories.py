@@ -47,7 +47,7 @@ class Trajectory:
     seed: int
     expert: str = ""
     expert_algo: str = ""
-    start: tuple[float, ...] | None = None  # the UAV's start (None: datasets from before it was recorded)
+    start: tuple[float, ...] | None = None  # the UAV's start (None: a trajectory made without a hall)
     users: tuple[tuple[float, ...], ...] | None = None  # the devices of the episode's layout (likewise)
 
     @property

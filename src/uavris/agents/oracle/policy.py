@@ -21,10 +21,10 @@ counters they do not use). Every slot, for every environment of the batch:
      gives a target position and attitude. The UAV flies straight at it as fast as the
      bounds allow (:func:`approach_command`: the largest speed from which it can still stop
      at the target, reached at up to ``a_max``; lateral velocity is cancelled) and turns the
-     RIS towards the target attitude by up to one attitude step per slot and axis. Within
-     ``final_radius`` of the target, at low speed, the local lookahead takes over for the
-     final approach (:func:`.lookahead.choose_moves` with the attitude held), which settles
-     on the nearby best pose of the interference-free score.
+     RIS towards the target attitude by up to one attitude step per slot and axis. (Handing
+     the last half metre to the local lookahead instead cost 0.1 bps/Hz on fig2 and unseen2,
+     8 episodes each: its interference-free score pulls the UAV off the optimiser-refined
+     target; docs/model.md, "The oracle".)
    - **greedy oracle** (:func:`greedy_oracle_policy`): the one-step lookahead from every
      state, the oracle of earlier releases. It climbs to the nearest local optimum of the
      expected rate: from ``unseen2`` it stops by device 3 although the region between
@@ -56,11 +56,6 @@ from uavris.config import SystemConfig
 from uavris.env.simulator import BatchedSimulator, phases_to_action
 from uavris.env.wrappers import motion_of
 from uavris.physics.phase_opt import DEFAULT_ITERATIONS, DEFAULT_RESTARTS, optimize_slot_phases
-
-# Off by default: handing the last half metre to the lookahead cost 0.1 bps/Hz on fig2 and
-# unseen2 (8 episodes each), because its interference-free score pulls the UAV off the
-# optimiser-refined target (docs/model.md, "The oracle").
-FINAL_RADIUS = 0.0  # m: within it (and slower than one slot of a_max) the lookahead takes over
 
 
 def approach_command(config: SystemConfig, pos: NDArray, vel: NDArray, target: NDArray) -> NDArray[np.float64]:
@@ -123,8 +118,7 @@ def greedy_oracle_policy(*, restarts: int = DEFAULT_RESTARTS, iterations: int = 
     return Privileged(act)
 
 
-def fly_to(sim: BatchedSimulator, plan: Plan, final_radius: float = FINAL_RADIUS
-           ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+def fly_to(sim: BatchedSimulator, plan: Plan) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """The move towards ``plan``'s pose from the simulator's current state: acceleration command
     ``(n, 3)`` (m/s^2) and attitude increments ``(n, 3)`` (rad); the planning oracle's motion
     (module docstring), for any plan, also one made for another hall."""
@@ -136,13 +130,7 @@ def fly_to(sim: BatchedSimulator, plan: Plan, final_radius: float = FINAL_RADIUS
     turn_slots = np.ceil(np.max(np.abs(np.mod(plan.attitude + np.pi, 2 * np.pi) - np.pi)) /
                          max(c.attitude_step_rad, 1e-12))
     arriving = np.linalg.norm(sim.pos - plan.target, axis=1) <= (turn_slots + 1) * c.v_max * c.slot_s
-    datt = turn_towards(c, sim.att, np.where(arriving[:, None], plan.attitude, 0.0))
-    near = (np.linalg.norm(sim.pos - plan.target, axis=1) < final_radius) & (
-        np.linalg.norm(sim.vel, axis=1) <= c.a_max * c.slot_s)
-    if near.any():
-        local, _, _ = choose_moves(c, sim.pos[near], sim.vel[near], sim.att[near], turn=False)
-        accel[near] = local
-    return accel, datt
+    return accel, turn_towards(c, sim.att, np.where(arriving[:, None], plan.attitude, 0.0))
 
 
 def motion_entries(config: SystemConfig, accel: NDArray, datt: NDArray) -> NDArray[np.float32]:
@@ -176,12 +164,11 @@ class PlanningOracle:
     privileged: ClassVar[bool] = True  # reads the simulator's state (uavris.agents.policy)
 
     def __init__(self, *, restarts: int = DEFAULT_RESTARTS, iterations: int = DEFAULT_ITERATIONS, seed: int = 0,
-                 settings: PlanSettings | None = None, final_radius: float = FINAL_RADIUS) -> None:
+                 settings: PlanSettings | None = None) -> None:
         if seed < 0:
             raise ValueError(f"seed must be >= 0, got {seed}")
         self.restarts, self.iterations, self.seed = restarts, iterations, seed
         self.settings = settings or PlanSettings(seed=seed)
-        self.final_radius = final_radius
         self.plans: dict[tuple[Any, ...], Plan] = {}
         self._memo: dict[SystemConfig, dict[bytes, float]] = {}
 
@@ -195,7 +182,7 @@ class PlanningOracle:
         """The oracle's move for the simulator's current state: acceleration command ``(n, 3)``
         (m/s^2) and attitude increments ``(n, 3)`` (rad). A function of the pose and velocity
         alone, given the plan of the scenario's start."""
-        return fly_to(sim, self.plan(sim.config, sim.scenario.start), self.final_radius)
+        return fly_to(sim, self.plan(sim.config, sim.scenario.start))
 
     def motion_action(self, sim: BatchedSimulator) -> NDArray[np.float32]:
         """:meth:`motion` as the 6 motion entries of an action in [-1, 1] (acceleration, attitude)."""

@@ -63,9 +63,12 @@ class JobResult:
 THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS")
 
 
-def configure_threads() -> None:
+def configure_threads(torch_now: bool = True) -> None:
     """One thread in every thread pool of this process: torch's, and the BLAS and OpenMP
-    libraries that numpy, scipy and torch load (threadpoolctl).
+    libraries that numpy, scipy and torch load (threadpoolctl). Called where a process
+    starts its work, never by a library call: by every job (:func:`_run_logged`), by the job
+    runner before it starts workers, and by the command line (``torch_now=False``: torch is
+    left to read the environment when a command imports it, so that ``--help`` stays quick).
 
     The machine's cores go to parallel jobs, not to threads within one. It also makes the
     numbers independent of the machine: a BLAS reduction split over another number of threads
@@ -80,10 +83,12 @@ def configure_threads() -> None:
         os.environ.setdefault(var, "1")
     import numpy  # noqa: F401  (its BLAS must be loaded for threadpoolctl to limit it)
     import scipy.linalg  # noqa: F401  (likewise scipy's own BLAS)
-    import torch
     from threadpoolctl import threadpool_limits
 
-    torch.set_num_threads(1)
+    if torch_now or "torch" in sys.modules:
+        import torch
+
+        torch.set_num_threads(1)
     threadpool_limits(limits=1)
 
 
@@ -149,6 +154,10 @@ class JobRunner:
         if backend not in BACKENDS:
             raise ValueError(f"unknown backend {backend!r}; choose one of {', '.join(BACKENDS)}")
         self.workers, self.backend, self.ray_address = max(1, int(workers)), backend, ray_address
+        import os
+
+        for var in THREAD_VARIABLES:  # the workers this runner starts begin with one thread (configure_threads)
+            os.environ.setdefault(var, "1")
         self._lock = threading.Condition()
         self._pool: ProcessPoolExecutor | None = None
         self._ray_started = False

@@ -17,7 +17,7 @@ from uavris.errors import UavrisError
 from uavris.experiments.display.progress import progress_bar
 from uavris.experiments.display.tables import markdown_table
 from uavris.experiments.engine.forecast import expected_schedule
-from uavris.experiments.engine.jobs import BACKENDS, configure_threads
+from uavris.experiments.engine.jobs import BACKENDS
 from uavris.experiments.engine.scheduling import StudyContext
 from uavris.experiments.study.config import AUTO, ReproduceConfig
 from uavris.experiments.study.pipeline import build_pipeline
@@ -59,7 +59,6 @@ def reproduce(rc: ReproduceConfig, out: str | Path, *, workers: int = 2, backend
     if workers < 1:
         raise UavrisError(f"--workers must be >= 1, got {workers}")
     out = Path(out)
-    configure_threads()  # before any worker starts: they inherit it, and jobs run here with one worker
     # The bar counts expected seconds of work (uavris.experiments.engine.scheduling), shown as a share.
     bar = progress_bar(0, "reproduce", "s", progress,
                        bar_format="{desc}: {percentage:3.0f}%|{bar}| [{elapsed}{postfix}]")

@@ -15,10 +15,10 @@ adding a row to the study is an edit of :func:`track_rows`. Not here: the pipeli
   imitates them.
 - **strong**: the same study, with learning on the motion and attitude only and the
   per-slot phase optimiser setting the phases at every slot of training, collection,
-  fine-tuning and evaluation (:mod:`uavris.env.wrappers`). The experts are PPO policies
-  of the 6 motion entries, initialised by imitation of the planning oracle's motion in
-  their own scenario (behaviour cloning with DAgger, :mod:`uavris.agents.experts.imitation`), then
-  trained by PPO for the preset's RL budget. The DT is the paper's, trained offline on
+  fine-tuning and evaluation (:mod:`uavris.env.wrappers`). The experts are imitations of
+  the planning oracle's motion in their own scenario (behaviour cloning with DAgger,
+  :mod:`uavris.agents.experts.imitation`) in SB3's PPO network of the 6 motion entries; no
+  RL runs after the imitation (PPO after it lost ground). The DT is the paper's, trained offline on
   those experts' trajectories (motion actions) and deployed with optimised phases.
   Why this recipe: docs/study.md, "Strong track".
 - **deployment**: the strong track's recipe over generated halls (docs/study.md, section
@@ -44,7 +44,7 @@ from uavris.config import SCENARIOS, TRAINING_SCENARIOS, UNSEEN_SCENARIOS, Scena
 from uavris.experiments.tools.targets import Row, Target
 from uavris.experiments.training.train_expert import TrainConfig
 from uavris.layouts import LayoutGenerator, Site, layout_distance
-from uavris.presets import STRONG_IMITATION, STRONG_RL_STEPS
+from uavris.presets import STRONG_IMITATION
 
 TRANSFER_NEIGHBOURS = 2
 # The attitude safety layer's margin in the deployment track's "safe" rows: every device at least
@@ -110,11 +110,11 @@ def is_other_hall(name: str) -> bool:
 def strong_expert_config(scenario: str, seed: int, preset: str, eval_episodes: int, system: SystemConfig,
                          start: tuple[float, float, float] | None = None) -> TrainConfig:
     """The strong track's expert of ``scenario`` (module docstring), starting at ``start`` (a layout's)
-    when given."""
+    when given: DAgger imitation of the planning oracle's motion into SB3's PPO network
+    (``algo="ppo"`` names the network), and no RL steps after it (``total_steps=0``)."""
     return TrainConfig(algo="ppo", scenario=scenario, seed=seed, preset=preset, eval_episodes=eval_episodes,
-                       system=system, start=start,
-                         phase_control="optimizer", imitation=ImitationConfig(**STRONG_IMITATION[preset]),
-                         total_steps=STRONG_RL_STEPS[preset])
+                       system=system, start=start, phase_control="optimizer",
+                       imitation=ImitationConfig(**STRONG_IMITATION[preset]), total_steps=0)
 
 
 def nearest_training_scenarios(scenario: str | Scenario, k: int = TRANSFER_NEIGHBOURS) -> list[str]:

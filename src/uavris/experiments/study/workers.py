@@ -17,7 +17,6 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from uavris.experiments.engine.jobs import configure_threads
 from uavris.experiments.study.tracks import TRACK_SPECS, Track
 from uavris.experiments.tools.targets import Row
 from uavris.layouts import Site
@@ -36,7 +35,6 @@ def demonstrations_job(cfg_dict: dict[str, Any], first: int, count: int, out: st
     """Demonstrations of halls ``first .. first + count - 1`` as a dataset of their own at ``out``."""
     from uavris.experiments.training.demonstrations import DemonstrationConfig, collect_demonstrations, demonstrate
 
-    configure_threads()
     cfg = DemonstrationConfig.from_dict(cfg_dict)
     trajectories = demonstrate(cfg, first, count)
     collect_demonstrations(cfg, out, force=True, progress=False, trajectories=trajectories)

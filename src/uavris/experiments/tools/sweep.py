@@ -142,7 +142,7 @@ def sweep_cell(target: str, system: dict[str, Any], scenario: dict[str, Any], ep
     from uavris.config import Scenario
     from uavris.experiments.tools.targets import resolve_target
 
-    cfg = SystemConfig.from_stored(system)
+    cfg = SystemConfig.from_dict(system)
     resolved = resolve_target(target)
     if resolved.kind in ("dt", "expert") and resolved.own_system().observe_devices:
         # A model that reads the devices' positions is given them: they add entries to the

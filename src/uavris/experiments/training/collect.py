@@ -28,7 +28,6 @@ from uavris.agents.evaluation import MAX_EPISODES
 from uavris.agents.experts.sb3 import load_model
 from uavris.errors import UavrisError
 from uavris.experiments.display.progress import progress_bar
-from uavris.experiments.engine.jobs import configure_threads
 from uavris.experiments.training.train_expert import final_model_path, load_run_config, run_policy
 from uavris.presets import COLLECT_SEED
 
@@ -37,11 +36,10 @@ def collect(experts: Sequence[str | Path], trajectories: int, out: str | Path, *
             force: bool = False, progress: bool = True) -> Path:
     """Roll every expert out ``trajectories`` times in its own scenario and write a dataset.
 
-    The dataset records the environment spec (``uavris/UavRisD2D-v0``, the experts' system)
+    The dataset records the environment spec (``uavris/UavRisD2D-v1``, the experts' system)
     for Minari's ``recover_environment``, in the first expert's scenario: a spec holds one
     scenario, each episode's own scenario is in its metadata.
     """
-    configure_threads()
     if not experts:
         raise UavrisError("give at least one expert run directory (--experts RUN_DIR ...)")
     if not 1 <= trajectories <= MAX_EPISODES:

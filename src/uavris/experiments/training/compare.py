@@ -29,7 +29,7 @@ from uavris.experiments.display.plots import learning_curves
 from uavris.experiments.display.progress import progress_bar
 from uavris.experiments.display.tables import MISSING, interval, markdown_table, num, pct
 from uavris.experiments.engine.costs import train_cost
-from uavris.experiments.engine.jobs import Job, JobResult, configure_threads, run_jobs
+from uavris.experiments.engine.jobs import Job, JobResult, run_jobs
 from uavris.experiments.training.train_expert import TrainConfig, train_job
 from uavris.io import atomic_write_text, read_csv, write_csv, write_json
 from uavris.presets import PRESETS
@@ -131,7 +131,6 @@ def compare_algorithms(preset: str = "quick", seeds: int = 5, workers: int = 2, 
         check_algorithm(a)
     system = system or SystemConfig()
     scenario_at(scenario, start).validate_for(system)
-    configure_threads()
     out = Path(out or f"runs/compare-{preset}")
     n_eval = eval_episodes or (100 if preset == "paper" else 32)
     cfgs = comparison_configs(preset, seeds, algos, scenario, n_eval, system, start, steps)

@@ -141,9 +141,7 @@ def collect_demonstrations(cfg: DemonstrationConfig, out: str | Path, *, force: 
     """Every hall's demonstrations (or the given ``trajectories``, made by :func:`demonstrate`
     in parts) as one Minari dataset at ``out``; returns its path."""
     from uavris.experiments.display.progress import progress_bar
-    from uavris.experiments.engine.jobs import configure_threads
 
-    configure_threads()
     out = Path(out)
     check_dataset_target(out, force)  # before the rollouts, not only when writing
     if trajectories is None:

@@ -9,7 +9,7 @@ reading a run or model directory back (:func:`uavris.agents.dt.checkpoint.dt_mod
 Run directories (every file written atomically; ``--resume`` continues from the last
 checkpoint with identical results; a finished run is never redone without ``--force``)::
 
-    config.yaml          the resolved PretrainConfig / FinetuneConfig ("kind" says which; config.json before 0.3)
+    config.yaml          the resolved PretrainConfig / FinetuneConfig ("kind" says which)
     train_log.csv        pre-training: step, loss, learning rate (throughput: TensorBoard)
     finetune.csv         fine-tuning: one row per round (round 0 = zero-shot)
     tb/                  TensorBoard logs

@@ -81,7 +81,7 @@ ROUND_HEADER = ("round", "env_interactions", "gradient_steps", "candidate_mean_r
 
 @dataclass(frozen=True)
 class FinetuneConfig(DictConfig):
-    """Everything that determines a fine-tuning run (dumped as config.json). Fields left at
+    """Everything that determines a fine-tuning run (dumped as config.yaml). Fields left at
     ``PRESET`` take the preset's values (:data:`uavris.presets.FINETUNE`)."""
 
     model: str  # a pre-trained DT: a `uavris pretrain-dt` run or model directory
@@ -113,7 +113,7 @@ class FinetuneConfig(DictConfig):
         fill_from_preset(self, FINETUNE[self.preset])
         object.__setattr__(self, "model", str(self.model))
         if isinstance(self.system, dict):
-            object.__setattr__(self, "system", SystemConfig.from_stored(self.system))
+            object.__setattr__(self, "system", SystemConfig.from_dict(self.system))
         if self.start is not None:
             object.__setattr__(self, "start", float_tuple(self.start, "FinetuneConfig", "start", "[x, y, z] (m)"))
         scenario = scenario_at(self.scenario, self.start)

@@ -62,7 +62,6 @@ from uavris.config import (
 from uavris.env.wrappers import PhaseControl, check_phase_control
 from uavris.errors import CheckpointError, ConfigError, UavrisError
 from uavris.experiments.display.progress import progress_bar
-from uavris.experiments.engine.jobs import configure_threads
 from uavris.io import atomic_write_bytes, read_csv, read_rows, write_csv
 from uavris.presets import EVAL_SEED, PRESETS, TRAIN, Preset, check_preset
 
@@ -275,7 +274,6 @@ def train(cfg: TrainConfig, run_dir: str | Path, *, resume: bool = False, force:
     unfinished run without ``resume``/``force``, a resume whose config differs, or a
     corrupt checkpoint. ``interrupt_at`` is a test hook that stops training at that step.
     """
-    configure_threads()
     run_dir = Path(run_dir)
     resuming = runs.prepare(run_dir, cfg.to_dict(), resume=resume, force=force,
                             same=lambda stored: isinstance(stored, dict) and TrainConfig.from_dict(stored) == cfg)
@@ -286,11 +284,12 @@ def train(cfg: TrainConfig, run_dir: str | Path, *, resume: bool = False, force:
     episodes: list[dict[str, Any]] = []
     evals: list[dict[str, Any]] = []
     start = 0
-    latest = runs.read_pointer(run_dir, "model", "env_steps", "episodes", "evals") if resuming else None
+    latest = runs.read_pointer(run_dir, "model", "state", "env_steps", "episodes", "evals") if resuming else None
     if resuming:
         if latest is not None:
             try:
                 model_path = run_dir / "checkpoints" / latest["model"]
+                state_path = run_dir / "checkpoints" / str(latest["state"])
                 start, n_ep, n_ev = int(latest["env_steps"]), int(latest["episodes"]), int(latest["evals"])
             except (TypeError, ValueError):
                 raise UavrisError(f"{run_dir / runs.POINTER} is corrupt") from None
@@ -303,12 +302,10 @@ def train(cfg: TrainConfig, run_dir: str | Path, *, resume: bool = False, force:
                     model.load_replay_buffer(buf)
                 except Exception as e:  # noqa: BLE001
                     raise CheckpointError(f"replay buffer {buf} is corrupt ({type(e).__name__})") from None
-            if "state" in latest:  # older checkpoints have none: the run then starts fresh episodes
-                state_path = run_dir / "checkpoints" / str(latest["state"])
-                try:
-                    resume_state.restore(model, state_path.read_bytes())
-                except (OSError, ValueError) as e:
-                    raise CheckpointError(f"resume state {state_path} is missing or corrupt ({e})") from None
+            try:
+                resume_state.restore(model, state_path.read_bytes())
+            except (OSError, ValueError) as e:
+                raise CheckpointError(f"resume state {state_path} is missing or corrupt ({e})") from None
             episodes = read_rows(run_dir / "episodes.csv", EPISODE_HEADER, n_ep, INT_COLUMNS)
             evals = read_rows(run_dir / "evals.csv", EVAL_HEADER, n_ev, INT_COLUMNS)
     if latest is None:
