@@ -327,3 +327,24 @@ def test_one_layout_resolves_nothing():
     bc = next(c for c in claims if "return conditioning on demonstrations" in c)
     assert bc.endswith("+28.00 [n/a, n/a] bps/Hz per layout, not resolved (one layout).")  # as the percentages
     assert "minus hovering +8.00 [n/a, n/a] bps/Hz, not resolved (one layout)" in zero_shot
+
+
+def test_a_row_added_to_the_study_shows_under_its_own_label():
+    """A row the report has no name for (one added to tracks.track_rows) gets its line in the
+    table of every row, in the per-layout table and in the decomposition, under its label."""
+    from uavris.experiments.study.report.decomposition import decomposition_section
+
+    results = _results()
+    for j, res in enumerate(results.values()):
+        res["dt-new"] = {"mean": 30.0 + j, "label": "my new controller", "variant": "dt-new", "seed": None}
+    lines, _ = deployment_section(layout_scores(results), {"dt-new": "my new controller"}, None, None,
+                                  seeds=seed_scores(results))
+    table = {r[0]: r[1:] for r in _rows(lines, "| policy | fraction of oracle")}
+    fractions = np.array([30.0, 31.0, 32.0]) / np.array(ORACLES)
+    assert table["my new controller"][2] == f"{fractions.min():.1%}"
+    for res in results.values():  # the decomposition's fields, the same for every row here
+        for v in res.values():
+            v.update(end_rate_level=v["mean"], end_rate_own=v["mean"], behind_share=0.0)
+        res["oracle"]["plan_rate_level"] = res["oracle"]["mean"]
+    lines, _ = decomposition_section(results, {"dt-new": "my new controller"})
+    assert any(line.startswith("| my new controller |") for line in lines)

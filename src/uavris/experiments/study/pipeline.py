@@ -40,6 +40,7 @@ from pathlib import Path
 from typing import Any, Sequence
 
 from uavris import runs
+from uavris.agents.dt.dataset import DATASET_FORMAT_VERSION
 from uavris.agents.experts import ALGORITHMS
 from uavris.experiments.engine.costs import (
     dataset_cost,
@@ -219,8 +220,9 @@ class TrackStages:
         t, episodes = self.t, self.rc.trajectories_for(self.track)
         if not self.track.demonstrations:
             cost = dataset_cost(len(self.train) * episodes, self.horizon, self.control)
-            return [Stage(t("dataset"), {"trajectories": episodes, "seed": COLLECT_SEED},
-                          partial(self._run_collect, episodes, cost), (t("experts-train"),), (cost,))]
+            config = {"trajectories": episodes, "seed": COLLECT_SEED, "format": DATASET_FORMAT_VERSION}
+            return [Stage(t("dataset"), config, partial(self._run_collect, episodes, cost), (t("experts-train"),),
+                          (cost,))]
         system = self.rc.system.replace(observe_devices=True)
         oracle = DemonstrationConfig(halls=len(self.train), episodes=episodes, layout_seed=self.rc.layout_seed,
                                      system=system)
@@ -243,7 +245,9 @@ class TrackStages:
     def _demonstrations_stage(self, name: str, cfg: DemonstrationConfig) -> Stage:
         costs = tuple(demonstration_cost(n, cfg.episodes * len(cfg.behaviours), self.horizon, cfg.exact_plans)
                       for _, n in self._chunks(cfg))
-        return Stage(self.t(name), cfg.to_dict(), partial(self._run_demonstrations, name, cfg, costs), (), costs)
+        # the dataset format is part of the key: a stage of another format is not read, it is made again
+        return Stage(self.t(name), {**cfg.to_dict(), "format": DATASET_FORMAT_VERSION},
+                     partial(self._run_demonstrations, name, cfg, costs), (), costs)
 
     def _run_demonstrations(self, name: str, cfg: DemonstrationConfig, costs: tuple[float, ...], d: Path,
                             deps: dict[str, Path]) -> dict[str, Any]:

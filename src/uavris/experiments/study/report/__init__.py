@@ -24,6 +24,7 @@ from uavris.experiments.engine.stages import Pipeline, StageRecord
 from uavris.experiments.study.report.decomposition import decomposition_section
 from uavris.experiments.study.report.deployment import (
     NEAREST,
+    ROWS,
     deployment_section,
     layout_scores,
     layouts_figure,
@@ -179,7 +180,9 @@ class _Report:
         suffix = "" if where == "deployment track" else "-other"
         first = next(iter(results.values()))
         curve_keys = [k for k, v in first.items() if v["variant"].startswith("dt-zero-shot-n") and not v["seed"]]
-        labels = {k: first[k]["label"] for k in curve_keys}
+        # a row the report has no name for goes by its own label (seed 0's, where it has seeds)
+        labels = {k: v["label"] for k, v in first.items()
+                  if k == v["variant"] and k not in dict(ROWS) and not k.startswith("transfer-")}
         if any(v["label"].startswith("oracle plan of") for k, v in first.items() if k.startswith("transfer-")):
             labels[NEAREST] = "oracle plan of the nearest training layout, flown here"
         stem = f"{track.prefix}layouts{suffix}"

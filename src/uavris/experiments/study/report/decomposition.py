@@ -27,7 +27,7 @@ import numpy as np
 
 from uavris.agents.references import ORACLE
 from uavris.experiments.display.tables import markdown_table, pct, signed
-from uavris.experiments.study.report.deployment import ROWS, layout_scores
+from uavris.experiments.study.report.deployment import ROWS, layout_scores, new_rows
 
 BLOCKING_LIMIT = 0.01  # no learned row blocks a device in more than this share of its slots (issue 29)
 LEARNED = ("dt-zero-shot", "dt-ensemble", "dt-finetuned", "bc", "dt-zero-shot-safe", "dt-ensemble-safe",
@@ -45,7 +45,8 @@ def decomposition_section(results: dict[str, dict[str, Any]], labels: dict[str, 
     blocked = layout_scores(results, "behind_share")
     target = {lay: float(results[lay][ORACLE]["plan_rate_level"]) for lay in layouts}
     labels = {**dict(ROWS), **labels}
-    keys = [k for k in (*LEARNED, ORACLE, "oracle-safe") if all(k in level[lay] for lay in layouts)]
+    added = [k for k in new_rows(level[layouts[0]]) if not k.startswith("dt-zero-shot-n")]  # a row added to the study
+    keys = [k for k in (*LEARNED, *added, ORACLE, "oracle-safe") if all(k in level[lay] for lay in layouts)]
     place = {k: [target[lay] - level[lay][k] for lay in layouts] for k in keys}
     tilt = {k: [level[lay][k] - own[lay][k] for lay in layouts] for k in keys}
     block = {k: [blocked[lay][k] for lay in layouts] for k in keys}
@@ -64,7 +65,7 @@ def decomposition_section(results: dict[str, dict[str, Any]], labels: dict[str, 
         lines += markdown_table(("layout", *(labels.get(k, k) for k in per_hall)), [
             (lay, *(f"{signed(place[k][i])} / {signed(tilt[k][i])}, {pct(block[k][i])}" for k in per_hall))
             for i, lay in enumerate(layouts)], "l" + "r" * len(per_hall))
-    learned = [k for k in keys if k in LEARNED]
+    learned = [k for k in keys if k in LEARNED or k in added]
     worst = max(learned, key=lambda k: float(np.mean(block[k])), default=None)
     if worst is None:
         return lines, []

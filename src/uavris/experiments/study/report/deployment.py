@@ -57,6 +57,15 @@ PAIRS: tuple[tuple[str, str], ...] = (("dt-zero-shot", HOVER_OPTIMIZER), ("dt-ze
                                       ("dt-finetuned", "dt-zero-shot"))
 
 
+def new_rows(row: dict[str, float]) -> list[str]:
+    """The rows of a layout's scores the report has no name of its own for, in the results' order
+    with the data curve's points last by their number of halls: a row added to the study
+    (:func:`uavris.experiments.study.tracks.track_rows`) shows under its own label."""
+    new = [k for k in row if k not in dict(ROWS) and not k.startswith("transfer-")]
+    curve = sorted((k for k in new if k.startswith("dt-zero-shot-n")), key=lambda k: int(k.rsplit("n", 1)[1]))
+    return [k for k in new if k not in curve] + curve
+
+
 def layout_scores(results: dict[str, dict[str, Any]], field: str = "mean") -> dict[str, dict[str, float]]:
     """``{layout: {row: mean}}`` from the evaluation stages' results (or another ``field`` of
     the summaries, e.g. the decomposition's), with the transferred experts summarised as the
@@ -109,8 +118,7 @@ def deployment_section(scores: dict[str, dict[str, float]], labels: dict[str, st
     layouts = list(scores)
     labels = {**dict(ROWS), **labels}
     rows = [(k, labels[k]) for k, _ in ROWS if all(k in scores[lay] for lay in layouts)]
-    extra = sorted((k for k in scores[layouts[0]] if k.startswith("dt-zero-shot-n")),
-                   key=lambda k: int(k.rsplit("n", 1)[1]))
+    extra = [k for k in new_rows(scores[layouts[0]]) if all(k in scores[lay] for lay in layouts)]
     rows += [(k, labels.get(k, k)) for k in extra]
     frac = {k: [scores[lay][k] / scores[lay][ORACLE] for lay in layouts] for k, _ in rows}
     lines = [f"Unseen layouts: {len(layouts)}; the unit of generalisation is the layout: means and 95% CIs are "
