@@ -12,7 +12,7 @@ import pytest
 from uavris import physics as ph
 from uavris.agents.evaluation import evaluate
 from uavris.agents.oracle import PlanningOracle
-from uavris.agents.oracle.planner import expected_optimised_rate
+from uavris.agents.oracle.planner import assessed_rate
 from uavris.agents.oracle.policy import PlannedFlight
 from uavris.config import SystemConfig
 from uavris.experiments.study.report.decomposition import decomposition_section
@@ -55,7 +55,8 @@ def test_a_tilt_that_puts_a_device_behind_costs_what_the_evaluator_says(hall):
     _, rec = _flown(system, where, plan, tilt)
     d = _decomposition(system, rec)
     pos = np.asarray(d["end_position"])
-    want_level, want_tilted = expected_optimised_rate(system, np.stack([pos, pos]), np.stack([np.zeros(3), tilt]))
+    own = np.radians(d["end_attitude_deg"])  # the tilt it flew with, as the episodes ended
+    (want_level, want_tilted), _ = assessed_rate(system, np.stack([pos, pos]), np.stack([np.zeros(3), own]))
     assert d["end_rate_level"] == pytest.approx(want_level) and d["end_rate_own"] == pytest.approx(want_tilted)
     assert d["end_rate_level"] - d["end_rate_own"] > 1.0  # a lost device costs bps/Hz, not a rounding
     assert d["behind_share"] > 0.0

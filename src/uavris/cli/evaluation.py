@@ -290,7 +290,8 @@ def plan_command(args: list[str]) -> None:
     t = plan["target"]
     print(f"{layout.name}: fly from {[round(v, 2) for v in plan['layout']['start']]} to "
           f"[{t[0]:.2f}, {t[1]:.2f}, {t[2]:.2f}] (attitude {[round(v, 1) for v in plan['attitude_deg']]} deg) in "
-          f"{plan['travel_s']:.1f} s; expected sum rate there {plan['expected_sum_rate']:.2f} bps/Hz "
+          f"{plan['travel_s']:.1f} s; expected sum rate there {plan['expected_sum_rate']:.2f} "
+          f"+- {plan['expected_sum_rate_se']:.2f} (standard error) bps/Hz "
           f"(at the start {plan['start_sum_rate']:.2f}); expected episode average "
           f"{plan['expected_episode_average']:.2f} -> {', '.join(str(p) for p in paths)}")
 

@@ -104,12 +104,13 @@ class _Whereabouts:
 
 def _decomposition(system: Any, rec: _Whereabouts) -> dict[str, Any]:
     """Where a policy ended and what that pose is worth: the expected sum rate with optimised
-    phases (the planner's R) at its median end position, level and with its own attitude, and
-    the share of its slots with a device behind the RIS (docs/study.md section 21)."""
-    from uavris.agents.oracle.planner import expected_optimised_rate
+    phases (the planner's R, on the fresh draws plans state their numbers with, so that it
+    pairs with the oracle's target's) at its median end position, level and with its own
+    attitude, and the share of its slots with a device behind the RIS (docs/study.md section 21)."""
+    from uavris.agents.oracle.planner import assessed_rate
 
     pos, att = rec.end_pose()
-    level, own = expected_optimised_rate(system, np.stack([pos, pos]), np.stack([np.zeros(3), att]))
+    (level, own), _ = assessed_rate(system, np.stack([pos, pos]), np.stack([np.zeros(3), att]))
     return {"end_position": pos.tolist(), "end_attitude_deg": np.degrees(att).tolist(),
             "end_rate_level": float(level), "end_rate_own": float(own),
             "behind_share": rec.behind / max(rec.slots, 1)}
@@ -147,12 +148,12 @@ def evaluate_rows(out: Path, site: Site, track: Track, episodes: int, rows: Sequ
 
 def oracle_target(where: Site) -> dict[str, Any]:
     """The planning oracle's target in ``where``: its pose, R there with its attitude
-    (``plan_rate``) and level (``plan_rate_level``, what :func:`_decomposition`'s place gap
-    compares an end position with)."""
+    (``plan_rate``, with its standard error) and level (``plan_rate_level``, what
+    :func:`_decomposition`'s place gap compares an end position with, on the same draws)."""
     from uavris.agents.oracle import PlanningOracle
-    from uavris.agents.oracle.planner import expected_optimised_rate
+    from uavris.agents.oracle.planner import assessed_rate
 
     plan = PlanningOracle().plan(where.system, where.scenario.start)
-    return {"plan_rate": plan.rate, "plan_rate_level": float(expected_optimised_rate(where.system, plan.target,
-                                                                                     np.zeros(3))[0]),
+    (level,), _ = assessed_rate(where.system, plan.target, np.zeros(3))
+    return {"plan_rate": plan.rate, "plan_rate_se": plan.rate_se, "plan_rate_level": float(level),
             "plan_target": plan.target.tolist(), "plan_attitude_deg": np.degrees(plan.attitude).tolist()}

@@ -41,7 +41,8 @@ def plan_layout(layout: Layout, system: SystemConfig, settings: PlanSettings | N
     plan = plan_target(hall, scenario.start, settings or PlanSettings())
     return {"layout": layout.to_dict(), "target": [float(v) for v in plan.target],
             "attitude_deg": [float(v) for v in np.degrees(plan.attitude)],
-            "expected_sum_rate": plan.rate, "start_sum_rate": plan.start_rate, "travel_slots": plan.travel_slots,
+            "expected_sum_rate": plan.rate, "expected_sum_rate_se": plan.rate_se, "start_sum_rate": plan.start_rate,
+            "travel_slots": plan.travel_slots,
             "travel_s": plan.travel_slots * hall.slot_s, "expected_episode_average": plan.value,
             "poses_valued": plan.poses_valued}
 

@@ -8,7 +8,9 @@ device. Not here: the numbers, which the evaluation stages record
 section (:mod:`.deployment`).
 
 Definitions (docs/study.md section 21), with R the planner's expected sum rate with
-optimised phases at a pose (:func:`uavris.agents.oracle.planner.expected_optimised_rate`):
+optimised phases at a pose, on the fresh draws a plan states its numbers with
+(:func:`uavris.agents.oracle.planner.assessed_rate`: every pose on the same draws, none of
+them the draws the plan was chosen on, so the target's R is not biased upwards):
 
 - **place gap** = R(the oracle's target, level) - R(the row's median end position, level):
   what the place it flew to costs, whatever its attitude;
