@@ -211,4 +211,4 @@ def test_plan_draws_any_hall(tmp_path, capsys):
         for ext in ("png", "pdf"):
             assert out.with_suffix(f".{ext}").stat().st_size > 5000
         printed = capsys.readouterr().out
-        assert f"{plan['expected_sum_rate']:.2f} bps/Hz" in printed and f"{plan['travel_s']:.1f} s" in printed
+        assert f"{plan['expected_sum_rate']:.2f} +- " in printed and f"{plan['travel_s']:.1f} s" in printed

@@ -17,7 +17,14 @@ from uavris.experiments.study.config import ReproduceConfig
 from uavris.experiments.study.pipeline import build_pipeline
 from uavris.experiments.study.report.deployment import ZERO_SHOT_TARGET
 from uavris.experiments.study.reproduce import reproduce
-from uavris.experiments.study.tracks import TRACK_SPECS, track_rows, trained_models, transfer_sources
+from uavris.experiments.study.tracks import (
+    SEMI_TOP_K,
+    TRACK_SPECS,
+    places_stage,
+    track_rows,
+    trained_models,
+    transfer_sources,
+)
 from uavris.io import read_json
 from uavris.layouts import LayoutGenerator, layout_distance
 
@@ -35,10 +42,11 @@ def deployment_run(tmp_path_factory):
 def test_the_trained_models_are_the_rows_over_seeds():
     track = TRACK_SPECS["deployment"]
     main = trained_models(track, ["a", "b", "c"], (1, 2), 3)
-    assert [m.stage for m in main] == [f"{m}{s}" for m in ("pretrain", "bc") for s in ("", "-s1", "-s2")]
+    assert [m.stage for m in main] == [f"{m}{s}" for m in ("pretrain", "bc", "goal") for s in ("", "-s1", "-s2")]
+    assert main[-1].row == "dt-goal" and dict(main[-1].model) == {"goal": True, "condition_on_return": False}
     assert [(m.row, m.seed) for m in main[:3]] == [("dt-zero-shot", 0), ("dt-zero-shot", 1), ("dt-zero-shot", 2)]
     models = {m.stage: m for m in trained_models(track, ["a", "b", "c"], (1, 2), 3, ablation=True)}
-    assert len(models) == (1 + 1 + 2 + 1 + 2) * 3  # DT, BC, two curve points, flat, mixed DT and BC; 3 seeds each
+    assert len(models) == (1 + 1 + 1 + 2 + 1 + 2) * 3  # DT, BC, goal DT, 2 curve points, flat, mixed DT, BC; 3 seeds
     track_fields = {"learning_rate": 3e-4, "model": {"width": 64}}
     assert models["pretrain-n2-s2"].pretrain_fields(track_fields) == {**track_fields, "scenarios": ("a", "b")}
     assert models["pretrain-n2-s2"].row == "dt-zero-shot-n2" and models["pretrain-n2-s2"].seed == 2
@@ -57,16 +65,20 @@ def test_the_main_rows_are_the_controllers_under_the_safety_layer():
     train, unseen = ReproduceConfig("smoke").sites(track)
     where = unseen[0]
     models = trained_models(track, [t.name for t in train], (1,), 2)
-    dirs = {k: Path("/models") / k for k in ("pretrain", "pretrain-s1", "bc", "bc-s1", f"finetune-{where.name}")}
+    stages = ("pretrain", "pretrain-s1", "bc", "bc-s1", "goal", "goal-s1", "value", f"finetune-{where.name}",
+              places_stage(where.name, 0), places_stage(where.name, 1))
+    dirs = {k: Path("/models") / k for k in stages}
     sources = transfer_sources(track, where, train)
     main = {r.key: r for r in track_rows(track, where, sources, dirs, models, train)}
     full = {r.key: r for r in track_rows(track, where, sources, dirs, models, train, ablation=True)}
-    plain = {"dt-zero-shot", "dt-zero-shot@s1", "dt-ensemble", "dt-finetuned", "bc", "bc@s1"}
+    plain = {"dt-zero-shot", "dt-zero-shot@s1", "dt-ensemble", "dt-finetuned", "bc", "bc@s1", "dt-goal", "dt-goal@s1",
+             "dt-goal-finetuned", "dt-goal-finetuned@s1"}
     safe = {"dt-zero-shot-safe", "dt-zero-shot-safe@s1", "dt-ensemble-safe", "dt-finetuned-safe", "bc-safe",
-            "bc-safe@s1"}
+            "bc-safe@s1", "dt-goal-safe", "dt-goal-safe@s1", "dt-goal-finetuned-safe", "dt-goal-finetuned-safe@s1"}
     [transfer] = [k for k in main if k.startswith("transfer-")]
     refs = {"zero-action", "hover-optimizer", "oracle"}
-    assert set(main) == safe | refs | {"oracle-safe", transfer}
+    planners = {"plan-learned", "plan-semi"}  # the learned planner's place flown by the oracle's controller
+    assert set(main) == safe | refs | planners | {"oracle-safe", transfer}
     assert set(full) == set(main) | plain | {"dt-zero-shot-level", "dt-zero-shot-level@s1", "dt-ensemble-level"}
     assert list(main)[-3:] == ["zero-action", "hover-optimizer", "oracle"]  # the references last
     for key in ("dt-zero-shot@s1", "bc", "dt-finetuned"):
@@ -80,6 +92,13 @@ def test_the_main_rows_are_the_controllers_under_the_safety_layer():
                                                                      Path("/models/pretrain-s1/model")]
     assert main[transfer].plan_of == {t.name: t for t in train}[transfer[len("transfer-"):]]
     assert main["dt-zero-shot-safe@s1"].label_for() == "zero-shot DT, seed 1, safety layer"
+    # the goal-conditioned DT is told the learned planner's place; its fine-tuned form keeps its own
+    value = Path("/models/value/value")
+    assert main["dt-goal-safe@s1"].goal_from.path == value and main["dt-goal-safe@s1"].target.path == Path(
+        "/models/goal-s1/model")
+    assert main["dt-goal-finetuned-safe@s1"].goal_from is None
+    assert main["dt-goal-finetuned-safe@s1"].target.path == Path("/models") / places_stage(where.name, 1) / "model"
+    assert main["plan-learned"].target.path == value and main["plan-semi"].target.top_k == SEMI_TOP_K
 
 
 def test_demonstrations_cover_every_training_hall(deployment_run):

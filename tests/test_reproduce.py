@@ -348,13 +348,15 @@ def test_changed_parameter_invalidates_exactly_its_dependents(tmp_path):
 
     dt = {"dataset", "pretrain", "finetune-unseen1", "finetune-unseen2", "evaluate-unseen1", "evaluate-unseen2"}
     deploy = {n for n in base.stages if n.startswith("deploy-")}
-    models = {"pretrain", "bc", "pretrain-n1", "flat", "mixed-dt", "mixed-bc"}  # each for 2 seeds at smoke
+    models = {"pretrain", "bc", "goal", "pretrain-n1", "flat", "mixed-dt", "mixed-bc"}  # each for 2 seeds at smoke
     evaluations = {f"deploy-evaluate-layout-{split}-{j}" for split in ("unseen", "other") for j in (0, 1)}
+    places = {f"deploy-finetune-places-layout-unseen-{j}{s}" for j in (0, 1) for s in ("", "-s1")}
     assert deploy == {"deploy-dataset", "deploy-dataset-mixed", "deploy-finetune-layout-unseen-0",
-                      "deploy-finetune-layout-unseen-1"} | evaluations | {
+                      "deploy-finetune-layout-unseen-1", "deploy-values", "deploy-value"} | evaluations | places | {
                           f"deploy-{m}{s}" for m in models for s in ("", "-s1")}
     assert changed(trajectories=3) == dt | {f"strong-{n}" for n in dt}
-    assert changed(layout_trajectories=3) == deploy
+    # the learned value's labels come from their own halls, its fit from them and the demonstrations' plans
+    assert changed(layout_trajectories=3) == deploy - {"deploy-values"}
     # the paper track's experts follow the comparison (they are its winner's)
     assert changed(compare_seeds=2) == {"compare", "experts-train", "experts-unseen"} | dt
     assert changed(expert_algo="ppo") == {"experts-train", "experts-unseen"} | dt
@@ -580,12 +582,14 @@ def test_the_progress_bar_counts_this_invocations_work(tmp_path: Path) -> None:
 
 def test_the_ablation_runs_on_demand_only(tmp_path):
     """`make run` (no --ablation) has no ablation stage; with --ablation the data curve, the flat
-    encoder and the mixed-quality rows come back, each for every pre-training seed, and nothing
-    else changes but the evaluations that read them."""
+    encoder and the mixed-quality rows come back, each for every pre-training seed, and the return-
+    conditioned DT's fine-tuning (the goal-conditioned DT's, trying places, is the main one), and
+    nothing else changes but the evaluations that read them."""
     ctx = StudyContext(1, "local", None)
     plain = build_pipeline(dataclasses.replace(RC, ablation=False), tmp_path, ctx).stages
     full = build_pipeline(RC, tmp_path, ctx).stages
-    ablation = {"deploy-dataset-mixed", "deploy-evaluate-layout-other-0", "deploy-evaluate-layout-other-1"} | {
+    ablation = {"deploy-dataset-mixed", "deploy-evaluate-layout-other-0", "deploy-evaluate-layout-other-1",
+                "deploy-finetune-layout-unseen-0", "deploy-finetune-layout-unseen-1"} | {
         f"deploy-{m}{s}" for m in ("pretrain-n1", "flat", "mixed-dt", "mixed-bc") for s in ("", "-s1")}
     assert set(full) - set(plain) == ablation and set(plain) <= set(full)
     assert not any(m in n for n in plain for m in ("-flat", "-mixed", "-pretrain-n"))

@@ -23,6 +23,7 @@ EVAL_SEED = 1_000_000  # evaluation episodes: every policy of a report is scored
 COLLECT_SEED = 2_000_000  # expert trajectories for the DT's dataset
 FINETUNE_SEED = 3_000_000  # the DT's fine-tuning candidates
 IMITATION_SEED = 4_000_000  # the strong experts' imitation rollouts
+VALUE_SEED = 5_000_000  # the learned value's labelled poses and their draws
 
 # A table per config class, each complete: a config built with ``preset=NAME`` takes every
 # field of ``TABLE[NAME]`` that it is not given (uavris.config.PRESET marks those fields), in
@@ -59,6 +60,23 @@ FINETUNE: dict[str, dict[str, Any]] = {
                   warmup_steps=2, eval_episodes=2),
     "quick": dict(rounds=3, epochs_per_round=2, eval_episodes=16, **_FT_PAPER),
     "paper": dict(rounds=10, epochs_per_round=5, eval_episodes=100, **_FT_PAPER),
+}
+
+# The learned value of a pose (uavris.agents.place, issue 36): the labels (training halls per
+# device count, labelled poses per hall; uavris.experiments.training.values.ValueLabelsConfig)
+# and the fit (ValueFitConfig: the network's width and its gradient steps).
+VALUE: dict[str, dict[str, Any]] = {
+    "smoke": dict(counts=(3, 4), halls=2, poses=9, width=16, steps=40),
+    "quick": dict(counts=(3, 4, 5, 6, 7, 8), halls=32, poses=48, width=64, steps=3000),
+    "paper": dict(counts=(3, 4, 5, 6, 7, 8), halls=256, poses=96, width=128, steps=20_000),
+}
+# Fine-tuning that tries places (a goal-conditioned DT, issue 36): the start and this many of
+# the learned planner's best places, one per candidate episode (rollouts_per_seed a multiple
+# of places + 1: each episode seed tries every place; the track's fine-tuning table otherwise).
+PLACES_FINETUNE: dict[str, dict[str, Any]] = {
+    "smoke": dict(places=1),
+    "quick": dict(places=4),
+    "paper": dict(places=4),
 }
 
 # The strong track's experts: imitation of the oracle's motion (DAgger rounds, episodes per

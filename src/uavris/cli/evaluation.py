@@ -258,6 +258,11 @@ class PlanArgs:
     """output file stem: writes OUT.json, OUT.png and OUT.pdf (default: runs/plans/LAYOUT)"""
     grid_step: float = 2.0
     """spacing of the rate map's grid, m (1.0 takes about four times as long)"""
+    learned: Unset[Path] = None
+    """a learned value of a pose (a study's stages/value-* folder, made by `uavris reproduce --track
+    deployment`): plan with the argmax of V instead of the exact planner, and map V (milliseconds)"""
+    top_k: int = 0
+    """with --learned: value its best K places (1-5) and the start by the exact R (semi-amortised; seconds)"""
     progress: bool = True
     """show a progress bar"""
     system: SystemConfig = SystemConfig()
@@ -284,16 +289,26 @@ def plan_command(args: list[str]) -> None:
         layout_defaults(["--layout", a.layout, *args], a.system)  # --system.users beside a layout: one line
         layout = resolve_layout(a.layout, a.system)
     check_grid(layout.system(a.system), a.grid_step)  # before anything is written
-    out = a.out or Path("runs/plans") / layout.name
+    if not 0 <= a.top_k <= 5 or (a.top_k and a.learned is None):
+        raise UsageError(f"--top-k must be in 0-5 and needs --learned, got {a.top_k}"
+                          + ("" if a.learned is not None else " without --learned"))
+    value = None
+    if a.learned is not None:
+        from uavris.agents.place.checkpoint import load_value
+        value, _ = load_value(a.learned)
+    out = a.out or Path("runs/plans") / (layout.name + ("-learned" if value is not None else ""))
     output_dir(out.parent, "--out's folder")
-    plan, paths = plan_hall(layout, a.system, out, a.grid_step, progress=a.progress)
+    plan, paths = plan_hall(layout, a.system, out, a.grid_step, progress=a.progress, value=value, top_k=a.top_k)
     t = plan["target"]
+    se = plan["expected_sum_rate_se"]
+    where = "expected sum rate there" if se is not None else "learned value V there"
     print(f"{layout.name}: fly from {[round(v, 2) for v in plan['layout']['start']]} to "
           f"[{t[0]:.2f}, {t[1]:.2f}, {t[2]:.2f}] (attitude {[round(v, 1) for v in plan['attitude_deg']]} deg) in "
-          f"{plan['travel_s']:.1f} s; expected sum rate there {plan['expected_sum_rate']:.2f} "
-          f"+- {plan['expected_sum_rate_se']:.2f} (standard error) bps/Hz "
-          f"(at the start {plan['start_sum_rate']:.2f}); expected episode average "
-          f"{plan['expected_episode_average']:.2f} -> {', '.join(str(p) for p in paths)}")
+          f"{plan['travel_s']:.1f} s; {where} {plan['expected_sum_rate']:.2f} "
+          + (f"+- {se:.2f} (standard error) " if se is not None else "")
+          + f"bps/Hz (at the start {plan['start_sum_rate']:.2f}); expected episode average "
+          f"{plan['expected_episode_average']:.2f}; planned by the {plan['planner']} planner in "
+          f"{1000 * plan['planning_s']:.0f} ms -> {', '.join(str(p) for p in paths)}")
 
 
 # ----------------------------------------------------------------------------------------- collect

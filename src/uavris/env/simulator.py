@@ -238,6 +238,25 @@ def device_observation(users: NDArray[np.float64], pos: NDArray[np.float64], sca
     return rel.reshape(len(pos), -1)
 
 
+def uav_position(observations: NDArray, config: SystemConfig) -> NDArray[np.float64]:
+    """The UAV's position (m), ``(..., 3)``, read back from observations ``(..., D)`` of ``config``."""
+    lo, hi = np.asarray(config.region_low), np.asarray(config.region_high)
+    lay = observation_layout(config)
+    return 0.5 * (lo + hi) + 0.5 * (hi - lo) * np.asarray(observations, dtype=np.float64)[..., lay["position"]]
+
+
+def devices_seen(observations: NDArray, config: SystemConfig) -> NDArray[np.float64]:
+    """The devices' positions (m), ``(..., K, 3)``, read back from observations ``(..., D)`` of a
+    system whose observation holds them (``observe_devices``): the UAV's position plus each
+    device's offset (:func:`device_observation`)."""
+    lay = observation_layout(config)
+    if "devices" not in lay:
+        raise ConfigError("the observation holds no devices: SystemConfig(observe_devices=True) gives them")
+    obs = np.asarray(observations, dtype=np.float64)
+    rel = obs[..., lay["devices"]].reshape(*obs.shape[:-1], -1, 3) * device_scale(config)
+    return uav_position(obs, config)[..., None, :] + rel
+
+
 def step_info(sim: BatchedSimulator, slot: SlotInfo | None) -> dict[str, NDArray]:
     """The environments' ``info`` after a reset (``slot`` None) or a step, one row per environment."""
     out: dict[str, NDArray] = {

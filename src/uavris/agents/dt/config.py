@@ -45,6 +45,7 @@ class DTConfig(DictConfig):
     devices: Annotated[int, Suppress] = 0  # the system's devices K (the device encoder's; 0 for flat)
     elements: Annotated[int, Suppress] = 0  # the system's RIS elements N (the device encoder's; 0 for flat)
     ris_frame: bool = False  # the device encoder also reads each device's elevation above the RIS plane
+    goal: bool = False  # the controller is told where to go: the goal's offset from the UAV joins each state token
 
     def __post_init__(self) -> None:
         for name in ("state_dim", "act_dim", "context", "width", "depth", "heads", "max_timestep", "mlp_ratio"):

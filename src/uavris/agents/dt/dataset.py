@@ -44,7 +44,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from uavris.agents.dt.trajectories import Trajectory
-from uavris.config import SCENARIOS, Scenario, SystemConfig, get_scenario, scenario_at
+from uavris.config import SCENARIOS, Scenario, SystemConfig, float_tuple, get_scenario, scenario_at
 from uavris.env import ENV_ID
 from uavris.env.simulator import layout_as_lists, observation_bounds, stored_system
 from uavris.env.wrappers import PHASE_CONTROLS, action_dim_for
@@ -207,6 +207,8 @@ def _episode_metadata(tr: Trajectory) -> dict[str, Any]:
         meta["start"] = list(tr.start)
     if tr.users is not None:
         meta["users"] = [list(u) for u in tr.users]
+    if tr.goal is not None:
+        meta["goal"] = list(tr.goal)
     return meta
 
 
@@ -277,7 +279,7 @@ def load_dataset(path: str | Path) -> ExpertDataset:
             tr = Trajectory(np.asarray(ep["observations"]), np.asarray(ep["actions"]), rewards,
                             bool(term[-1]) if term.size else False, bool(trunc[-1]) if trunc.size else False,
                             str(em["scenario"]), int(em["seed"]), str(em["expert"]), str(em.get("expert_algo", "")),
-                            *_episode_layout(em, system, f"{path}: episode {i}"))
+                            *_episode_layout(em, system, f"{path}: episode {i}"), _goal(em, f"{path}: episode {i}"))
             _check_trajectory(tr, obs_dim, act_dim, f"{path}: episode {i}")
             trajectories.append(tr)
     except (KeyError, ValueError, OSError, TypeError, AssertionError, IndexError) as e:
@@ -286,6 +288,17 @@ def load_dataset(path: str | Path) -> ExpertDataset:
         raise DatasetError(f"{path}: episode data is unreadable ({_one_line(e)})") from None
     return ExpertDataset(path, str(meta.get("dataset_id", "")), system, trajectories, str(meta.get("description", "")),
                          phase_control)
+
+
+def _goal(meta: dict[str, Any], where: str) -> tuple[float, float, float] | None:
+    """An episode's recorded goal (where it flew to: a demonstration's plan target), checked, or None."""
+    goal = meta.get("goal")
+    if goal is None:
+        return None
+    try:
+        return float_tuple(goal, "episode", "goal", "a point [x, y, z] (m)")
+    except ConfigError as e:
+        raise DatasetError(f"{where}: recorded goal is invalid ({_one_line(e)})") from None
 
 
 def _episode_layout(meta: dict[str, Any], system: SystemConfig, where: str

@@ -66,6 +66,7 @@ from torch import nn
 from uavris.agents.dt.cache import KVCache
 from uavris.agents.dt.config import DTConfig
 from uavris.agents.dt.encoders import devices_of_width, make_state_encoder, stats_for_devices
+from uavris.agents.dt.goals import GOAL_DIM
 from uavris.env.simulator import observation_slices
 from uavris.errors import ConfigError
 
@@ -135,6 +136,9 @@ class DecisionTransformer(nn.Module):
         self.blocks = nn.ModuleList(_Block(cfg) for _ in range(cfg.depth))
         self.final_norm = nn.LayerNorm(w)
         self.action_head = nn.Linear(w, cfg.act_dim)
+        # A goal-conditioned controller reads where it is told to go, added to each state token
+        # (created last, so that a model without a goal draws the same initial weights as before).
+        self.embed_goal = nn.Linear(GOAL_DIM, w) if cfg.goal else None
         mean = np.zeros(cfg.state_dim) if state_mean is None else np.asarray(state_mean, dtype=np.float64)
         std = np.ones(cfg.state_dim) if state_std is None else np.asarray(state_std, dtype=np.float64)
         if mean.shape != (cfg.state_dim,) or std.shape != (cfg.state_dim,) or np.any(std <= 0):
@@ -147,7 +151,8 @@ class DecisionTransformer(nn.Module):
         self.apply(_init_weights)
 
     def forward(self, returns_to_go: torch.Tensor, states: torch.Tensor, actions: torch.Tensor,
-                timesteps: torch.Tensor, valid: torch.Tensor | None = None, last_only: bool = False) -> torch.Tensor:
+                timesteps: torch.Tensor, valid: torch.Tensor | None = None, last_only: bool = False,
+                goals: torch.Tensor | None = None) -> torch.Tensor:
         """Predicted actions.
 
         Args:
@@ -157,11 +162,13 @@ class DecisionTransformer(nn.Module):
             timesteps: ``(B, L)`` slot index within the episode (long).
             valid: ``(B, L)`` bool, False at (left) padding; None means all real.
             last_only: predict only the last slot's action.
+            goals: ``(B, L, 3)`` the goal's offset from the UAV at each slot (a goal-conditioned
+                model's, :func:`uavris.agents.dt.goals.goal_offsets`; None for any other).
         Returns:
             ``(B, L, act_dim)`` in (-1, 1), or ``(B, act_dim)`` with ``last_only``.
         """
         b, length = returns_to_go.shape
-        r, s, a = self._embed(returns_to_go, states, actions, timesteps)
+        r, s, a = self._embed(returns_to_go, states, actions, timesteps, goals=goals)
         n = 3 * length - 1  # the last slot's action token is dropped (nothing reads it)
         x = torch.stack((r, s, a), dim=2).reshape(b, 3 * length, -1)[:, :n]
         x = self.embed_drop(self.embed_norm(x))
@@ -176,10 +183,11 @@ class DecisionTransformer(nn.Module):
         return out[:, -1] if last_only else out
 
     def _embed(self, returns_to_go: torch.Tensor, states: torch.Tensor, actions: torch.Tensor,
-               timesteps: torch.Tensor, action_timesteps: torch.Tensor | None = None
-               ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+               timesteps: torch.Tensor, action_timesteps: torch.Tensor | None = None,
+               goals: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         """Token embeddings of R_hat, S and A (before the embedding LayerNorm), each with the
-        timestep embedding of its slot added (``action_timesteps`` for A, if given)."""
+        timestep embedding of its slot added (``action_timesteps`` for A, if given), and the
+        goal's embedding added to S for a goal-conditioned model."""
         top = self.cfg.max_timestep - 1
         time_emb = self.embed_timestep(timesteps.clamp(0, top))
         if not self.cfg.condition_on_return:
@@ -190,6 +198,10 @@ class DecisionTransformer(nn.Module):
         r = self.embed_return((returns_to_go / self.return_scale).unsqueeze(-1)) + time_emb
         mean, std = self.state_statistics(states.shape[-1])
         s = self.embed_state(states, (states - mean) / std) + time_emb
+        if self.embed_goal is not None:
+            if goals is None:
+                raise ValueError("this DT is goal-conditioned: it needs the goal's offset at every slot (goals=)")
+            s = s + self.embed_goal(goals)
         return r, s, self.embed_action(actions) + act_time
 
     def new_cache(self, batch: int) -> KVCache:
@@ -200,7 +212,7 @@ class DecisionTransformer(nn.Module):
         return KVCache(self.cfg, batch, p.device, p.dtype)
 
     def step(self, cache: KVCache, returns_to_go: torch.Tensor, states: torch.Tensor, prev_actions: torch.Tensor,
-             timesteps: torch.Tensor) -> torch.Tensor:
+             timesteps: torch.Tensor, goals: torch.Tensor | None = None) -> torch.Tensor:
         """Predict A_t of every row from the cache plus three new tokens, and add them to it.
 
         The new tokens are A_{t-1}, R_hat_t and S_t (their order in the sequence). Equal to
@@ -213,13 +225,14 @@ class DecisionTransformer(nn.Module):
             states: ``(B, state_dim)`` raw S_t.
             prev_actions: ``(B, act_dim)`` A_{t-1}; ignored where t = 0 (an episode's first slot has none).
             timesteps: ``(B,)`` t (long), the slot within each row's episode.
+            goals: ``(B, 3)`` the goal's offset from the UAV (a goal-conditioned model's).
         Returns:
             ``(B, act_dim)`` in (-1, 1).
         """
         if self.training:
             raise RuntimeError("DecisionTransformer.step is for deployment: call model.eval() first")
         r, s, a = self._embed(returns_to_go[:, None], states[:, None], prev_actions[:, None], timesteps[:, None],
-                              (timesteps - 1)[:, None])
+                              (timesteps - 1)[:, None], None if goals is None else goals[:, None])
         x = self.embed_norm(torch.cat((a, r, s), dim=1))
         real = torch.ones_like(timesteps, dtype=torch.bool)
         new_valid = torch.stack((timesteps > 0, real, real), dim=1)

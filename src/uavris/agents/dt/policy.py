@@ -39,6 +39,7 @@ import torch
 from numpy.typing import NDArray
 
 from uavris.agents.dt.checkpoint import checkpoint_system, dt_model_dir, load_dt
+from uavris.agents.dt.goals import GOAL_DIM, FixedGoals, GoalSource, first_goals, goal_offsets
 from uavris.agents.dt.model import DecisionTransformer
 from uavris.config import Scenario, SystemConfig, scenario_at
 from uavris.env.wrappers import MOTION_DIM, check_phase_control
@@ -55,10 +56,14 @@ class DTBatchPolicy:
         seed: seed of the noise.
         phase_control: ``"agent"`` (the model sets every action entry) or ``"optimizer"``
             (the model sets the motion, the optimiser the phases).
+        goals: where a goal-conditioned model is told to go (:mod:`.goals`), asked at each
+            batch's first slot; ``system``: the system the observations are of (the goal's
+            offsets are read against it; :meth:`for_system` sets it).
     """
 
     def __init__(self, model: DecisionTransformer, target_return: float, noise_sigma: float = 0.0,
-                 seed: int | None = None, phase_control: str = "agent") -> None:
+                 seed: int | None = None, phase_control: str = "agent", goals: GoalSource | None = None,
+                 system: SystemConfig | None = None) -> None:
         if not np.isfinite(target_return):
             raise ValueError(f"target_return must be finite, got {target_return!r}")
         if noise_sigma < 0:
@@ -73,6 +78,8 @@ class DTBatchPolicy:
         self.noise_sigma = float(noise_sigma)
         self._seed = seed
         self._rng = np.random.default_rng(seed)
+        self.goals, self.system = goals, system
+        self.episode_goals: NDArray[np.float64] | None = None  # (n, 3) m, this batch's (a goal-conditioned model)
 
     @property
     def observation_dim(self) -> int:
@@ -85,11 +92,23 @@ class DTBatchPolicy:
         (:meth:`~uavris.agents.dt.model.DecisionTransformer.for_devices`); ``self`` where
         nothing differs or the model cannot (the caller's fit check then says why)."""
         cfg = self.model.cfg
-        if (system.observation_dim == cfg.state_dim or cfg.state_encoder != "devices" or not system.observe_devices
+        model = self.model
+        if not (system.observation_dim == cfg.state_dim or cfg.state_encoder != "devices" or not system.observe_devices
                 or system.num_elements != cfg.elements):
+            model = self.model.for_devices(system.num_users)
+        elif not cfg.goal or system == self.system:
             return self
-        return DTBatchPolicy(self.model.for_devices(system.num_users), self.target_return, self.noise_sigma,
-                             self._seed, self.phase_control)
+        return DTBatchPolicy(model, self.target_return, self.noise_sigma, self._seed, self.phase_control, self.goals,
+                             system)
+
+    def with_goals(self, goals: GoalSource, noise_sigma: float | None = None, seed: int | None = None
+                   ) -> DTBatchPolicy:
+        """This policy told where to go by ``goals`` (a goal-conditioned model), with other noise
+        if given; the same model (its weights shared)."""
+        if not self.model.cfg.goal:
+            raise ValueError("only a goal-conditioned DT (DTConfig.goal) is told a goal")
+        return DTBatchPolicy(self.model, self.target_return, self.noise_sigma if noise_sigma is None else noise_sigma,
+                             self._seed if seed is None else seed, self.phase_control, goals, self.system)
 
     # ------------------------------------------------------------------ history
     def begin(self, n: int) -> None:
@@ -97,6 +116,7 @@ class DTBatchPolicy:
         self._n = n
         self._history = _CachedHistory(self.model, n) if self.model.cfg.band is not None else _Window(self.model, n)
         self.remaining = np.full(n, self.target_return)  # R_hat_t of the current slot, float64
+        self.episode_goals = None
 
     def __call__(self, obs: NDArray[np.float32]) -> NDArray[np.float32]:
         """Append S_t with the current R_hat_t and return the action of every row (motion only
@@ -105,8 +125,16 @@ class DTBatchPolicy:
             self.begin(obs.shape[0])
         if self.model.training:  # acting is always deterministic apart from the explicit noise
             self.model.eval()
+        offsets = None
+        if self.model.cfg.goal:
+            if self.goals is None or self.system is None:
+                raise ValueError("a goal-conditioned DT acts only when told its goals and its system "
+                                 "(DTBatchPolicy(goals=..., system=...), or for_system)")
+            if self.episode_goals is None:  # the batch's first slot: where each episode goes
+                self.episode_goals = first_goals(self.goals, obs, self.system)
+            offsets = goal_offsets(obs, self.episode_goals, self.system)
         with torch.inference_mode():
-            pred = self._history.predict(self.remaining, obs)
+            pred = self._history.predict(self.remaining, obs, offsets)
         if self.noise_sigma > 0:
             pred = pred + self._rng.normal(0.0, self.noise_sigma, pred.shape)
         return np.clip(pred, -1.0, 1.0).astype(np.float32)
@@ -177,12 +205,16 @@ class _Window:
         self.actions = np.zeros((n, k, c.act_dim), dtype=np.float32)
         self.steps = np.zeros((n, k), dtype=np.int64)
         self.valid = np.zeros((n, k), dtype=bool)
+        self.goals = np.zeros((n, k, GOAL_DIM), dtype=np.float32)  # the goal's offsets (a goal-conditioned model)
         self.filled = np.zeros(n, dtype=np.int64)
         self.t = np.zeros(n, dtype=np.int64)
 
-    def predict(self, remaining: NDArray[np.float64], obs: NDArray[np.float32]) -> NDArray[np.float32]:
-        for buf in (self.rtg, self.states, self.actions, self.steps, self.valid):
+    def predict(self, remaining: NDArray[np.float64], obs: NDArray[np.float32],
+                offsets: NDArray[np.float32] | None = None) -> NDArray[np.float32]:
+        for buf in (self.rtg, self.states, self.actions, self.steps, self.valid, self.goals):
             buf[:, :-1] = buf[:, 1:]
+        if offsets is not None:
+            self.goals[:, -1] = offsets
         self.rtg[:, -1] = remaining
         self.states[:, -1] = obs
         self.actions[:, -1] = 0.0  # A_t is not known yet; the model never reads it
@@ -193,8 +225,9 @@ class _Window:
         # rows: drop them (exact, and the forward pass gets shorter).
         sl = slice(self.model.cfg.context - int(self.filled.max()), None)
         m = self.model
+        goals = _tensor(self.goals[:, sl], m) if offsets is not None else None
         return _numpy(m(_tensor(self.rtg[:, sl], m), _tensor(self.states[:, sl], m), _tensor(self.actions[:, sl], m),
-                        _tensor(self.steps[:, sl], m), _tensor(self.valid[:, sl], m), last_only=True))
+                        _tensor(self.steps[:, sl], m), _tensor(self.valid[:, sl], m), last_only=True, goals=goals))
 
     def record(self, actions: NDArray[np.float32]) -> None:
         self.actions[:, -1] = actions
@@ -210,11 +243,13 @@ class _CachedHistory:
         self.prev_action = np.zeros((n, model.cfg.act_dim), dtype=np.float32)  # read only where t > 0
         self.t = np.zeros(n, dtype=np.int64)
 
-    def predict(self, remaining: NDArray[np.float64], obs: NDArray[np.float32]) -> NDArray[np.float32]:
+    def predict(self, remaining: NDArray[np.float64], obs: NDArray[np.float32],
+                offsets: NDArray[np.float32] | None = None) -> NDArray[np.float32]:
         m = self.model
         return _numpy(m.step(self.cache, _tensor(remaining.astype(np.float32), m),
                              _tensor(np.ascontiguousarray(obs, dtype=np.float32), m),
-                             _tensor(self.prev_action, m), _tensor(self.t, m)))
+                             _tensor(self.prev_action, m), _tensor(self.t, m),
+                             None if offsets is None else _tensor(np.ascontiguousarray(offsets), m)))
 
     def record(self, actions: NDArray[np.float32]) -> None:
         self.prev_action = np.asarray(actions, dtype=np.float32).copy()
@@ -245,7 +280,9 @@ def load_dt_policy(path: str | Path, target_return: float | None = None, noise_s
     target = meta.get("target_return") if target_return is None else target_return
     if target is None:
         raise CheckpointError(f"{model_dir} stores no target return; pass one (--target-return)")
-    policy = DTBatchPolicy(model, float(target), noise_sigma, seed, meta.get("phase_control", "agent"))
+    # a goal-conditioned model fine-tuned in a hall keeps the place it chose there (its "goal")
+    goals = FixedGoals(meta["goal"]) if model.cfg.goal and meta.get("goal") is not None else None
+    policy = DTBatchPolicy(model, float(target), noise_sigma, seed, meta.get("phase_control", "agent"), goals)
     name = meta.get("scenario")
     try:
         scenario = None if name is None else scenario_at(str(name), meta.get("start"))

@@ -22,11 +22,14 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 import torch
+from numpy.typing import NDArray
 
 from uavris.agents.dt.config import DTConfig
 from uavris.agents.dt.encoders import pooled_over_devices
+from uavris.agents.dt.goals import goal_offsets
 from uavris.agents.dt.model import DecisionTransformer
 from uavris.agents.dt.trajectories import Trajectory, normalisation_from, returns_to_go
+from uavris.config import SystemConfig
 from uavris.errors import CheckpointError, DatasetError
 from uavris.io import atomic_write_bytes, read_json, write_json
 
@@ -43,7 +46,8 @@ class TrainingWindows:
     instead one whole episode chosen uniformly, left-padded to the longest episode.
     """
 
-    def __init__(self, trajectories: Sequence[Trajectory], context: int, whole_episodes: bool = False) -> None:
+    def __init__(self, trajectories: Sequence[Trajectory], context: int, whole_episodes: bool = False,
+                 goals: Sequence[NDArray] | None = None) -> None:
         if not trajectories:
             raise DatasetError("no trajectories to train on")
         lengths = np.array([tr.length for tr in trajectories])
@@ -55,13 +59,25 @@ class TrainingWindows:
         self.states = np.concatenate([tr.observations[:-1] for tr in trajectories]).astype(np.float32)
         self.actions = np.concatenate([tr.actions for tr in trajectories]).astype(np.float32)
         self.rtg = np.concatenate([returns_to_go(tr.rewards) for tr in trajectories]).astype(np.float32)
+        # a goal-conditioned model's: the goal's offset from the UAV at every slot (.goals.goal_offsets)
+        self.goals = None if goals is None else np.concatenate(goals).astype(np.float32)
         self.timesteps = np.concatenate([np.arange(n) for n in lengths]).astype(np.int64)
         self.episode_start = np.repeat(starts, lengths)
 
     @classmethod
-    def for_model(cls, trajectories: Sequence[Trajectory], model_config: DTConfig) -> TrainingWindows:
-        """The samples a model of this :class:`~uavris.agents.dt.model.DTConfig` trains on."""
-        return cls(trajectories, model_config.context, whole_episodes=model_config.attention == "banded")
+    def for_model(cls, trajectories: Sequence[Trajectory], model_config: DTConfig,
+                  system: SystemConfig | None = None) -> TrainingWindows:
+        """The samples a model of this :class:`~uavris.agents.dt.config.DTConfig` trains on; a
+        goal-conditioned model's hold each trajectory's own goal (its plan's target) as the UAV
+        saw it at every slot, read against ``system``."""
+        goals = None
+        if model_config.goal:
+            if system is None or any(tr.goal is None for tr in trajectories):
+                raise DatasetError("a goal-conditioned DT trains on trajectories that record their goal "
+                                   "(the oracle's demonstrations), with their system")
+            goals = [goal_offsets(tr.observations[:-1], np.asarray(tr.goal), system) for tr in trajectories]
+        return cls(trajectories, model_config.context, whole_episodes=model_config.attention == "banded",
+                   goals=goals)
 
     @property
     def num_slots(self) -> int:
@@ -87,10 +103,15 @@ class TrainingWindows:
         pad = ~valid
         states, actions = self.states[idx], self.actions[idx]
         rtg, steps = self.rtg[idx], self.timesteps[idx]
+        goals = None if self.goals is None else self.goals[idx]
         states[pad], actions[pad], rtg[pad], steps[pad] = 0.0, 0.0, 0.0, 0
-        return {"returns_to_go": torch.from_numpy(rtg), "states": torch.from_numpy(states),
-                "actions": torch.from_numpy(actions), "timesteps": torch.from_numpy(steps),
-                "valid": torch.from_numpy(valid)}
+        batch = {"returns_to_go": torch.from_numpy(rtg), "states": torch.from_numpy(states),
+                 "actions": torch.from_numpy(actions), "timesteps": torch.from_numpy(steps),
+                 "valid": torch.from_numpy(valid)}
+        if goals is not None:
+            goals[pad] = 0.0
+            batch["goals"] = torch.from_numpy(goals)
+        return batch
 
 
 class MixedWindows:
@@ -176,7 +197,8 @@ def train_steps(model: DecisionTransformer, opt: torch.optim.Optimizer, windows:
     losses = []
     for i in range(count):
         batch = {k: v.to(device) for k, v in windows.sample(batch_size, rng).items()}
-        pred = model(batch["returns_to_go"], batch["states"], batch["actions"], batch["timesteps"], batch["valid"])
+        pred = model(batch["returns_to_go"], batch["states"], batch["actions"], batch["timesteps"], batch["valid"],
+                     goals=batch.get("goals"))
         loss = masked_action_loss(pred, batch["actions"], batch["valid"])
         opt.zero_grad(set_to_none=True)
         loss.backward()

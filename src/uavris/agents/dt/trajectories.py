@@ -49,6 +49,7 @@ class Trajectory:
     expert_algo: str = ""
     start: tuple[float, ...] | None = None  # the UAV's start (None: a trajectory made without a hall)
     users: tuple[tuple[float, ...], ...] | None = None  # the devices of the episode's layout (likewise)
+    goal: tuple[float, ...] | None = None  # where it flew to (a demonstration's plan target; None: not told)
 
     @property
     def length(self) -> int:
@@ -96,23 +97,27 @@ def select_elites(trajectories: Sequence[Trajectory], k: int, rule: str = "retur
 # ------------------------------------------------------------------------------ collection
 def record_episodes(policy: Any, config: SystemConfig, scenario: str | Scenario,
                     seeds: Sequence[int] | NDArray[np.integer], *, expert: str = "", expert_algo: str = "",
-                    phase_control: str | None = None, batch_size: int = 256) -> list[Trajectory]:
+                    phase_control: str | None = None, batch_size: int = 256,
+                    goal: NDArray | Sequence[float] | None = None) -> list[Trajectory]:
     """Roll ``policy`` out on one episode per seed, ``batch_size`` episodes per simulator.
 
     Episode j is the one a single environment produces after ``reset(seed=seeds[j])``, as in
     :func:`uavris.agents.evaluation.evaluate`. Returns the trajectories in seed order. With
     ``phase_control="optimizer"`` (default: the policy's own) the trajectories keep only the
     6 motion entries of the executed actions (the phases were the optimiser's, a function
-    of the state).
+    of the state). ``goal`` (``(3,)`` or one per seed, m) is where the episodes flew to, recorded
+    with them (a goal-conditioned DT trains on it).
     """
     seeds = np.asarray(seeds, dtype=np.int64)
+    goals = None if goal is None else np.broadcast_to(np.asarray(goal, dtype=np.float64), (len(seeds), 3))
     out: list[Trajectory] = []
     for start in range(0, len(seeds), batch_size):
         b = rollout(policy, config, scenario, seeds[start:start + batch_size], phase_control=phase_control, record=True)
         where = get_scenario(scenario)
         out.extend(Trajectory(b.observations[i, :b.lengths[i] + 1].copy(), b.actions[i, :b.lengths[i]].copy(),
                               b.rewards[i, :b.lengths[i]].copy(), bool(b.terminated[i]), not bool(b.terminated[i]),
-                              where.name, int(b.seeds[i]), expert, expert_algo, where.start, config.users)
+                              where.name, int(b.seeds[i]), expert, expert_algo, where.start, config.users,
+                              None if goals is None else tuple(float(c) for c in goals[start + i]))
                    for i in range(len(b.seeds)))
     return out
 

@@ -335,11 +335,12 @@ def plan_target(config: SystemConfig, start: tuple[float, float, float], setting
             pos_step, att_step = pos_step / 2, att_step / 2
     table = tuple((tuple(float(x) for x in p), float(rv), float(vv)) for p, rv, vv in zip(cands, r, vals))
     runners_up = [cands[i] for i in np.argsort(-vals, kind="stable")[:FINALIST_CANDIDATES] if i != 0]
-    return _checked(c, s, start_q, [(start_q, level), (q, att), *((p, level) for p in runners_up)], valued, table)
+    finalists = [(start_q, level), (q, att), *((p, level) for p in runners_up)]
+    return check_finalists(c, s, start_q, finalists, valued, table)
 
 
-def _checked(c: SystemConfig, s: PlanSettings, start_q: NDArray, finalists: list[tuple[NDArray, NDArray]],
-             valued: int, table: tuple) -> Plan:
+def check_finalists(c: SystemConfig, s: PlanSettings, start_q: NDArray, finalists: list[tuple[NDArray, NDArray]],
+                    valued: int, table: tuple) -> Plan:
     """Step 5 (module docstring): the finalists (the start first) valued on fresh batches, a move
     taken only when it beats staying by more than a standard error, the plan's numbers stated
     on a second fresh set."""

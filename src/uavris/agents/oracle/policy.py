@@ -178,6 +178,16 @@ class PlanningOracle:
             self.plans[key] = plan_target(config, start, self.settings, self._memo.setdefault(config, {}))
         return self.plans[key]
 
+    def valued_poses(self, config: SystemConfig) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """The poses ``(P, 6)`` (position, attitude) its plans of ``config`` valued with ``R``
+        itself (the reference planner's, not the cheap ranking's), and ``R`` at each: what a
+        learned value of a pose can be fitted to, at no cost beyond the plans."""
+        memo = self._memo.get(config, {})
+        exact = [(np.frombuffer(key[1:], dtype=np.float64), value) for key, value in memo.items() if key[:1] == b"\x01"]
+        if not exact:
+            return np.zeros((0, 6)), np.zeros(0)
+        return np.stack([pose for pose, _ in exact]), np.array([value for _, value in exact])
+
     def motion(self, sim: BatchedSimulator) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """The oracle's move for the simulator's current state: acceleration command ``(n, 3)``
         (m/s^2) and attitude increments ``(n, 3)`` (rad). A function of the pose and velocity

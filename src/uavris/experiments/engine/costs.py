@@ -90,6 +90,22 @@ def finetune_cost(cfg: Any, horizon: int, phase_control: str, model: Any) -> flo
     return cfg.eval_episodes * horizon * SLOT_S[phase_control] + cfg.rounds * per_round
 
 
+# The planner's R of one pose (its pairings x 2 NLoS draws, optimised), by the number of devices:
+# K = 3 has one pair at most (the closed form); more pairs, more optimiser per slot.
+POSE_S = {3: 1e-4, 4: 0.015, 5: 0.014, 6: 0.027, 7: 0.045, 8: 0.063}
+VALUE_STEP_S = 0.03  # a gradient step of the learned value at width 64, batch 256 (scales with width^2)
+
+
+def value_labels_cost(count: int, halls: int, poses: int) -> float:
+    """Labelling ``poses`` poses in each of ``halls`` halls of ``count`` devices (and each hall's screen)."""
+    return halls * (poses * POSE_S.get(count, POSE_S[8] * (count / 8) ** 2) + 0.05)
+
+
+def value_fit_cost(steps: int, width: int) -> float:
+    """Fitting the learned value: ``steps`` gradient steps of a network of ``width``."""
+    return steps * VALUE_STEP_S * (width / 64) ** 2
+
+
 def evaluate_cost(policies: int, episodes: int, horizon: int, phase_control: str) -> float:
     """Evaluating ``policies`` learned policies and the references (zero action, hover with the
     optimiser's phases, the planning oracle) on ``episodes`` episodes."""

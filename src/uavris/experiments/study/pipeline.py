@@ -54,11 +54,13 @@ from uavris.experiments.engine.jobs import Job
 from uavris.experiments.engine.scheduling import StudyContext
 from uavris.experiments.engine.stages import Pipeline, Stage
 from uavris.experiments.study.config import AUTO, ReproduceConfig
+from uavris.experiments.study.places import places_finetune_stages, value_stages
 from uavris.experiments.study.tracks import (
     REFERENCE_ROWS,
     Track,
     TrainedModel,
     is_other_hall,
+    places_stage,
     strong_expert_config,
     track_rows,
     trained_models,
@@ -140,7 +142,10 @@ class TrackStages:
                                      rc.dt_seeds if track.seeded else 1, rc.ablation)
         # the stages the evaluation reads beside each site's fine-tuning
         self.inputs = [*(["experts-train"] if not track.demonstrations else []),
-                       *(["experts-unseen"] if track.unseen_experts else []), *(m.stage for m in self.models)]
+                       *(["experts-unseen"] if track.unseen_experts else []), *(m.stage for m in self.models),
+                       *(["value"] if track.places else [])]
+        # the return-conditioned DT's fine-tuning: the paper's; where the track tries places, the ablation's
+        self.finetunes_returns = not track.places or rc.ablation
 
     # ------------------------------------------------------------------ experts
     def experts(self) -> list[Stage]:
@@ -204,8 +209,10 @@ class TrackStages:
             cfg = self._pretrain_config("<dataset>", m)
             stages.append(Stage(self.t(m.stage), cfg.to_dict(), partial(self._run_pretrain, m),
                                 (self.t(m.dataset),), (pretrain_cost(cfg),)))
-        for w in (w for w in self.unseen if not is_other_hall(w.name)):
-            ft = self._finetune_config("<pretrain>", w)
+        if self.track.places:
+            stages += value_stages(self) + places_finetune_stages(self)
+        for w in (w for w in self.unseen if not is_other_hall(w.name) and self.finetunes_returns):
+            ft = self.finetune_config("<pretrain>", w)
             stages.append(Stage(self.t(f"finetune-{w.name}"), ft.to_dict(), partial(self._run_finetune, w),
                                 (self.t("pretrain"),),
                                 (finetune_cost(ft, self.horizon, self.control, self.model),)))
@@ -224,8 +231,10 @@ class TrackStages:
             return [Stage(t("dataset"), config, partial(self._run_collect, episodes, cost), (t("experts-train"),),
                           (cost,))]
         system = self.rc.system.replace(observe_devices=True)
+        # a track that learns places learns from the reference planner's plans (the teacher is the judge)
+        # and fits its value to the poses those plans valued
         oracle = DemonstrationConfig(halls=len(self.train), episodes=episodes, layout_seed=self.rc.layout_seed,
-                                     system=system)
+                                     system=system, exact_plans=self.track.places)
         stages = [self._demonstrations_stage("dataset", oracle)]
         if self.track.ablation and self.rc.ablation:
             stages.append(self._demonstrations_stage("dataset-mixed", dataclasses.replace(
@@ -270,21 +279,29 @@ class TrackStages:
         return self.ctx.run_one(self.t(model.stage), pretrain_job, (cfg.to_dict(), str(d / "model"), self.ctx.device),
                                 d / "job.log", pretrain_cost(cfg))
 
-    def _finetune_config(self, model: Path | str, where: Site) -> FinetuneConfig:
+    def finetune_config(self, model: Path | str, where: Site, extra: dict[str, Any] | None = None) -> FinetuneConfig:
         # fine-tuning evaluates each round on the study's episodes unless the track's table says otherwise
         own = {"eval_episodes": self.rc.eval_episodes, **TRACK_FINETUNE[self.track.name][self.rc.preset],
+               **(extra or {}),
                **({} if not self.track.layouts else {"system": where.system, "start": where.start})}
         return FinetuneConfig(model=model, scenario=where.name, preset=self.rc.preset, seed=self.rc.seed, **own)
 
     def _run_finetune(self, where: Site, d: Path, deps: dict[str, Path]) -> dict[str, Any]:
-        cfg = self._finetune_config(deps[self.t("pretrain")] / "model", where)
+        cfg = self.finetune_config(deps[self.t("pretrain")] / "model", where)
         return self.ctx.run_one(self.t(f"finetune-{where.name}"), finetune_job,
                                 (cfg.to_dict(), str(d / "model"), self.ctx.device), d / "job.log",
                                 finetune_cost(cfg, self.horizon, self.control, self.model))
 
+    def finetunes(self, site: str) -> list[str]:
+        """The fine-tuning stages of ``site`` (none in a hall of the other generator)."""
+        if is_other_hall(site):
+            return []
+        places = [places_stage(site, m.seed) for m in self.models if m.row == "dt-goal"]
+        return [*([f"finetune-{site}"] if self.finetunes_returns else []), *places]
+
     def _evaluate_stage(self, where: Site) -> Stage:
         sources = transfer_sources(self.track, where, self.train)
-        keys = [*self.inputs, *([] if is_other_hall(where.name) else [f"finetune-{where.name}"])]
+        keys = [*self.inputs, *self.finetunes(where.name)]
         rows = self._rows(where, sources, {k: Path() for k in keys})
         cost = evaluate_cost(len(rows) - len(REFERENCE_ROWS), self.rc.eval_episodes, self.horizon, self.control)
         config = {"episodes": self.rc.eval_episodes, "seed": EVAL_SEED, "track": self.track.name,
@@ -299,8 +316,7 @@ class TrackStages:
     def rows_in(self, site: Site, pipeline: Pipeline) -> list[Row]:
         """The rows of this track in any ``site`` (a user's hall included), reading the models of
         ``pipeline``'s stage directories; a fine-tuned row only where the study fine-tuned."""
-        keys = [*self.inputs, *([f"finetune-{site.name}"] if self.t(f"finetune-{site.name}") in pipeline.stages
-                                else [])]
+        keys = [*self.inputs, *(k for k in self.finetunes(site.name) if self.t(k) in pipeline.stages)]
         return self._rows(site, transfer_sources(self.track, site, self.train),
                           {k: pipeline.directory(self.t(k)) for k in keys})
 

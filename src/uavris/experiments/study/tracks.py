@@ -32,6 +32,7 @@ adding a row to the study is an edit of :func:`track_rows`. Not here: the pipeli
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Sequence
@@ -50,7 +51,10 @@ TRANSFER_NEIGHBOURS = 2
 # The attitude safety layer's margin in the deployment track's "safe" rows: every device at least
 # this far in front of the RIS plane (SystemConfig.front_margin_deg; docs/study.md section 21).
 SAFE_MARGIN_DEG = 1.0
+SEMI_TOP_K = 3  # the semi-amortised learned planner: its top places valued by R
 REFERENCE_ROWS = (ZERO_ACTION, HOVER_OPTIMIZER, ORACLE)  # every evaluation stage scores them beside its rows
+# the learned controllers: under the attitude safety layer in a track with a margin (track_rows)
+PROTECTED = ("dt-zero-shot", "dt-ensemble", "dt-finetuned", "bc", "dt-goal", "dt-goal-finetuned")
 TRACKS: tuple[str, ...] = ("paper", "strong", "deployment")
 
 
@@ -69,6 +73,7 @@ class Track:
     seeded: bool = False  # every learned row over several pre-training seeds (ReproduceConfig.dt_seeds)
     ablation: bool = False  # an ablation on demand (--ablation): the data curve, the flat encoder, mixed-quality data
     front_margin_deg: float | None = None  # the DT rows also under the attitude safety layer with this margin
+    places: bool = False  # a learned value of a pose, a DT told its place, fine-tuning that tries places (issue 36)
 
     def stage(self, name: str) -> str:
         return self.prefix + name
@@ -81,7 +86,7 @@ TRACK_SPECS: dict[str, Track] = {  # each track's DT and fine-tuning: uavris.pre
     "deployment": Track("deployment", "deploy-", "optimizer",
                         "deployment track (the oracle's demonstrations in many generated halls; unseen halls)",
                         layouts=True, unseen_experts=False, behaviour_cloning=True, demonstrations=True,
-                        seeded=True, ablation=True, front_margin_deg=SAFE_MARGIN_DEG),
+                        seeded=True, ablation=True, front_margin_deg=SAFE_MARGIN_DEG, places=True),
 }
 
 
@@ -154,7 +159,7 @@ def track_rows(track: Track, site: Site, sources: list[tuple[str, float]], dirs:
     rows = _learned_rows(track, site, sources, dirs, models, train)
     margin = track.front_margin_deg
     if margin is not None:
-        protected = [r for r in rows if r.name in ("dt-zero-shot", "dt-ensemble", "dt-finetuned", "bc")]
+        protected = [r for r in rows if r.name in PROTECTED]
         safe = [r.replace(front_margin_deg=margin) for r in (*protected, Row.reference(ORACLE))]
         if ablation:
             rows = rows + safe + [r.replace(level=True) for r in protected if r.name in ("dt-zero-shot", "dt-ensemble")]
@@ -172,8 +177,21 @@ def _learned_rows(track: Track, site: Site, sources: list[tuple[str, float]], di
     if f"finetune-{site.name}" in dirs:
         rows.append(Row("dt-finetuned", "fine-tuned DT", Target.of_model(dirs[f"finetune-{site.name}"] / "model")))
     seeded = len({m.seed for m in models}) > 1
-    rows += [Row(m.row, m.label, Target.of_model(dirs[m.stage] / "model"), seed=m.seed if seeded else None)
-             for m in models]
+    value = Target.of_model(dirs["value"] / "value", "value") if "value" in dirs else None
+    for m in models:
+        goal = {"goal_from": value} if m.row == "dt-goal" else {}
+        rows.append(Row(m.row, m.label, Target.of_model(dirs[m.stage] / "model"), seed=m.seed if seeded else None,
+                        **goal))
+    for m in models:  # fine-tuned by trying places in this hall: it keeps the place it chose
+        stage = places_stage(site.name, m.seed)
+        if m.row == "dt-goal" and stage in dirs:
+            rows.append(Row("dt-goal-finetuned", "goal-conditioned DT, fine-tuned by trying places",
+                            Target.of_model(dirs[stage] / "model"), seed=m.seed if seeded else None))
+    if value is not None:
+        rows += [Row("plan-learned", "learned planner's place (V's argmax), flown by the oracle's controller",
+                     value),
+                 Row("plan-semi", f"learned planner's top {SEMI_TOP_K} places valued by R, flown by the oracle's "
+                     "controller", dataclasses.replace(value, top_k=SEMI_TOP_K))]
     dts = [Target.of_model(dirs[m.stage] / "model") for m in models if m.row == "dt-zero-shot"]
     if len(dts) > 1:
         rows.append(Row("dt-ensemble", f"zero-shot DT, ensemble of the {len(dts)} seeds' models (mean action)",
@@ -187,6 +205,11 @@ def _learned_rows(track: Track, site: Site, sources: list[tuple[str, float]], di
         label = f"transferred from {src}{near}" + (f", {dist:.1f} m" if track.layouts else "")
         rows.append(Row(f"transfer-{src}", label, Target.of_model(dirs["experts-train"] / "runs" / src, "expert")))
     return rows
+
+
+def places_stage(site: str, seed: int) -> str:
+    """The stage that fine-tunes the goal-conditioned DT of pre-training seed ``seed`` in ``site`` by trying places."""
+    return f"finetune-places-{site}" + (f"-s{seed}" if seed else "")
 
 
 @dataclass(frozen=True)
@@ -224,6 +247,9 @@ def trained_models(track: Track, train: Sequence[str], scaling: Sequence[int], s
     kinds: list[Kind] = [("pretrain", "dataset", (), (), "dt-zero-shot", "zero-shot DT")]
     if track.behaviour_cloning:
         kinds.append(("bc", "dataset", (), bc, "bc", "behaviour cloning (the DT without return conditioning)"))
+    if track.places:  # told a goal rather than a return: each demonstration's own plan target in training
+        kinds.append(("goal", "dataset", (), (("goal", True), ("condition_on_return", False)), "dt-goal",
+                      "goal-conditioned DT, told the learned planner's place"))
     if ablation and track.ablation:
         if track.layouts:
             kinds += [(f"pretrain-n{n}", "dataset", (("scenarios", tuple(train[:n])),), (), f"dt-zero-shot-n{n}",

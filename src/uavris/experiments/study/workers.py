@@ -36,7 +36,14 @@ def demonstrations_job(cfg_dict: dict[str, Any], first: int, count: int, out: st
     from uavris.experiments.training.demonstrations import DemonstrationConfig, collect_demonstrations, demonstrate
 
     cfg = DemonstrationConfig.from_dict(cfg_dict)
-    trajectories = demonstrate(cfg, first, count)
+    labels: dict[str, list[Any]] | None = {} if cfg.exact_plans else None
+    trajectories = demonstrate(cfg, first, count, labels=labels)
+    if labels:  # the plans' valued poses: labels of the learned value (a part beside the dataset's)
+        from uavris.experiments.training.values import write_label_part
+
+        part = Path(out)
+        write_label_part(part.parent.parent / "labels" / f"{part.name}.npz",
+                         **{k: np.concatenate(v) for k, v in labels.items()})
     collect_demonstrations(cfg, out, force=True, progress=False, trajectories=trajectories)
     return {"halls": count, "episodes": len(trajectories)}
 
@@ -64,6 +71,24 @@ def pretrain_job(cfg_dict: dict[str, Any], out: str, device: str = "cpu") -> dic
     model_dir = Path(out)
     pretrain(PretrainConfig.from_dict(cfg_dict), model_dir, resume=model_dir.exists(), progress=False, device=device)
     return read_done(model_dir)
+
+
+def value_labels_job(cfg_dict: dict[str, Any], count: int, first: int, n: int, out: str) -> dict[str, Any]:
+    """The learned value's labels of training halls ``first .. first + n - 1`` of ``count``
+    devices, a part at ``out``."""
+    from uavris.experiments.training.values import ValueLabelsConfig, make_labels
+
+    make_labels(ValueLabelsConfig.from_dict(cfg_dict), count, first, n, out)
+    return {"count": count, "halls": n}
+
+
+def value_fit_job(cfg_dict: dict[str, Any], parts: Sequence[str], out: str) -> dict[str, Any]:
+    """The learned value fitted to the label ``parts``, a checkpoint at ``out``; returns its done record."""
+    from uavris.experiments.training.values import ValueFitConfig, fit
+    from uavris.io import read_json
+
+    fit(ValueFitConfig.from_dict(cfg_dict), parts, out)
+    return read_json(Path(out) / "done.json")
 
 
 def finetune_job(cfg_dict: dict[str, Any], out: str, device: str = "cpu") -> dict[str, Any]:

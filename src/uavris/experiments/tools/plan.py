@@ -1,10 +1,11 @@
 """``uavris plan``: where the UAV should go in a hall, and what it is worth there.
 
-Lives here: :func:`plan_layout` (the planning oracle's plan for a layout, written as JSON)
-and :func:`rate_map` / :func:`plan_figure` (the expected sum rate over the hall at the
-plan's altitude, with the devices, their safety balls, the start and the target). Not
-here: the plan itself (:func:`uavris.agents.oracle.plan_target`) and the layouts
-(:mod:`uavris.layouts`).
+Lives here: :func:`plan_layout` (the planning oracle's plan for a layout, or the learned
+planner's, written as JSON) and :func:`rate_map` / :func:`plan_figure` (the expected sum
+rate over the hall at the plan's altitude, or the learned value ``V`` there, with the
+devices, their safety balls, the start and the target). Not here: the plans themselves
+(:func:`uavris.agents.oracle.plan_target`, :func:`uavris.agents.place.planner.learned_plan`) and the
+layouts (:mod:`uavris.layouts`).
 
 This is what a network planner asks first about a new hall: the best hovering pose, its
 expected sum rate with optimised phases, how long the trip takes from the start, and how
@@ -16,6 +17,7 @@ value is with its refined attitude.
 
 from __future__ import annotations
 
+import time
 from pathlib import Path
 from typing import Any
 
@@ -24,6 +26,8 @@ from numpy.typing import NDArray
 
 from uavris.agents.oracle import PlanSettings, expected_optimised_rate, plan_target
 from uavris.agents.oracle.planner import feasible
+from uavris.agents.place.planner import PlaceSettings, learned_plan
+from uavris.agents.place.value import PoseValue, predict
 from uavris.config import SystemConfig
 from uavris.errors import ConfigError
 from uavris.experiments.display.plots import plt, save_figure
@@ -34,17 +38,27 @@ from uavris.layouts import Layout
 MAP_CHUNK = 64  # poses valued per call (the progress bar's step)
 
 
-def plan_layout(layout: Layout, system: SystemConfig, settings: PlanSettings | None = None) -> dict[str, Any]:
-    """The planning oracle's plan for ``layout`` on ``system``: target pose, expected sum rate
-    there and at the start, travel time, the plan's expected episode average."""
+def plan_layout(layout: Layout, system: SystemConfig, settings: PlanSettings | None = None,
+                value: PoseValue | None = None, top_k: int = 0) -> dict[str, Any]:
+    """The plan for ``layout`` on ``system``: target pose, expected sum rate there and at the
+    start, travel time, the plan's expected episode average, and the seconds planning took.
+    The planning oracle's by default; with a learned ``value``, the learned planner's (its
+    numbers ``V``'s, no standard error), with ``top_k`` > 0 its top places valued by ``R``."""
     hall, scenario = layout.resolve(system)
-    plan = plan_target(hall, scenario.start, settings or PlanSettings())
-    return {"layout": layout.to_dict(), "target": [float(v) for v in plan.target],
+    began = time.perf_counter()
+    if value is None:
+        plan, planner = plan_target(hall, scenario.start, settings or PlanSettings()), "exact"
+    else:
+        plan = learned_plan(value, hall, scenario.start, PlaceSettings(top_k=top_k))
+        planner = f"learned, top {top_k} valued by R" if top_k else "learned"
+    seconds = time.perf_counter() - began
+    se = plan.rate_se if value is None or top_k else None  # V's numbers have no sampling error to state
+    return {"layout": layout.to_dict(), "planner": planner, "target": [float(v) for v in plan.target],
             "attitude_deg": [float(v) for v in np.degrees(plan.attitude)],
-            "expected_sum_rate": plan.rate, "expected_sum_rate_se": plan.rate_se, "start_sum_rate": plan.start_rate,
+            "expected_sum_rate": plan.rate, "expected_sum_rate_se": se, "start_sum_rate": plan.start_rate,
             "travel_slots": plan.travel_slots,
             "travel_s": plan.travel_slots * hall.slot_s, "expected_episode_average": plan.value,
-            "poses_valued": plan.poses_valued}
+            "poses_valued": plan.poses_valued, "planning_s": seconds}
 
 
 MAX_MAP_POSES = 10_000  # about 3 min of one core (~19 ms a pose): a 0.4 m grid over the 40 m hall
@@ -74,10 +88,11 @@ def _min_step(system: SystemConfig) -> float:
     return float(np.sqrt(area / MAX_MAP_POSES))
 
 
-def rate_map(system: SystemConfig, altitude: float, step: float, progress: bool = False
-             ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+def rate_map(system: SystemConfig, altitude: float, step: float, progress: bool = False,
+             value: PoseValue | None = None) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
     """``(x, y, R)``: the expected sum rate (level RIS, optimised phases) on a grid of spacing
-    ``step`` over the floor plan at ``altitude``; NaN where the UAV may not be (a safety ball)."""
+    ``step`` over the floor plan at ``altitude``, or the learned ``value``'s ``V`` there (one
+    call: milliseconds); NaN where the UAV may not be (a safety ball)."""
     check_grid(system, step)
     nx, ny = _grid_points(system, step)
     xs, ys = np.linspace(0.0, system.room[0], nx), np.linspace(0.0, system.room[1], ny)
@@ -85,6 +100,9 @@ def rate_map(system: SystemConfig, altitude: float, step: float, progress: bool 
     poses = np.column_stack([grid, np.full(len(grid), altitude)])
     ok = np.flatnonzero(feasible(system, poses))
     values = np.full(len(poses), np.nan)
+    if value is not None:
+        values[ok] = predict(value, np.asarray(system.users, dtype=np.float64), poses[ok])
+        return xs, ys, values.reshape(len(xs), len(ys))
     with progress_bar(len(ok), "rate map", "pose", progress, leave=False) as bar:
         for start in range(0, len(ok), MAP_CHUNK):
             idx = ok[start:start + MAP_CHUNK]
@@ -96,11 +114,12 @@ def rate_map(system: SystemConfig, altitude: float, step: float, progress: bool 
 def plan_figure(system: SystemConfig, plan: dict[str, Any], xs: NDArray, ys: NDArray, rates: NDArray,
                 stem: Path) -> list[Path]:
     """The rate map with the devices, their safety balls at the map's altitude, start and target."""
+    learned = plan.get("planner", "exact") != "exact"
     fig, ax = plt.subplots(figsize=(4.8, 4.2))
     cmap = plt.get_cmap("viridis").with_extremes(bad="0.85")  # grey: inside a safety ball, no place to be
     mesh = ax.pcolormesh(xs, ys, rates.T, shading="nearest", cmap=cmap)
     ax.grid(False)
-    fig.colorbar(mesh, ax=ax, label="expected sum rate (bps/Hz)")
+    fig.colorbar(mesh, ax=ax, label="learned value V (bps/Hz)" if learned else "expected sum rate (bps/Hz)")
     users = np.asarray(system.users)
     altitude = plan["target"][2]
     ring = np.linspace(0, 2 * np.pi, 90)
@@ -119,20 +138,22 @@ def plan_figure(system: SystemConfig, plan: dict[str, Any], xs: NDArray, ys: NDA
     ax.set_aspect("equal")
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")
-    ax.set_title(f"{plan['layout']['name']}: expected sum rate at z = {altitude:.2f} m (level RIS)\n"
+    what = "learned value V" if learned else "expected sum rate"
+    ax.set_title(f"{plan['layout']['name']}: {what} at z = {altitude:.2f} m (level RIS)\n"
                  f"target {np.round(target, 2).tolist()}: {plan['expected_sum_rate']:.2f} bps/Hz, "
                  f"{plan['travel_s']:.1f} s from the start", fontsize=8)
     ax.legend(fontsize=7, loc="upper right", framealpha=0.7)
     return save_figure(fig, stem)
 
 
-def plan_hall(layout: Layout, system: SystemConfig, out: Path, grid_step: float,
-                     progress: bool = True) -> tuple[dict[str, Any], list[Path]]:
-    """Plan, map and draw ``layout``: writes ``out.json``, ``out.png`` and ``out.pdf``."""
+def plan_hall(layout: Layout, system: SystemConfig, out: Path, grid_step: float, progress: bool = True,
+              value: PoseValue | None = None, top_k: int = 0) -> tuple[dict[str, Any], list[Path]]:
+    """Plan, map and draw ``layout``: writes ``out.json``, ``out.png`` and ``out.pdf``; with a
+    learned ``value``, its plan and its map (:func:`plan_layout`, :func:`rate_map`)."""
     hall, _ = layout.resolve(system)
     check_grid(hall, grid_step)
-    plan = plan_layout(layout, system)
-    xs, ys, rates = rate_map(hall, plan["target"][2], grid_step, progress)
+    plan = plan_layout(layout, system, value=value, top_k=top_k)
+    xs, ys, rates = rate_map(hall, plan["target"][2], grid_step, progress, value)
     paths = plan_figure(hall, plan, xs, ys, rates, out)
     write_json(out.with_suffix(".json"), plan)
     return plan, [out.with_suffix(".json"), *paths]

@@ -16,6 +16,8 @@ The kinds, in the order a name is tried:
   reference (:data:`uavris.agents.references.REFERENCES`), made for the system asked for;
 - ``MODULE:NAME`` or ``FILE.py:NAME``: a user's policy (README, "Your own controller");
 - a directory holding a DT model (``model.json``) or a DT run (pre-training, fine-tuning);
+- a directory holding a learned value of a pose (``value.json``): the learned planner's
+  place, flown by the oracle's controller (:class:`uavris.agents.place.planner.LearnedPlanner`);
 - any other directory: an expert's training run (``uavris train``).
 """
 
@@ -32,7 +34,7 @@ from uavris.config import Scenario, SystemConfig
 from uavris.errors import ConfigError, UavrisError
 from uavris.layouts import Site
 
-TargetKind = Literal["reference", "user", "dt", "expert"]
+TargetKind = Literal["reference", "user", "dt", "expert", "value"]
 BASELINE_PREFIX = "baseline:"
 _MODULE = re.compile(r"[A-Za-z_][\w]*(\.[A-Za-z_][\w]*)*")
 
@@ -55,7 +57,32 @@ class Target:
     name: str  # as written
     kind: TargetKind
     reference: str | None = None  # the reference's name (kind "reference")
-    path: Path | None = None  # the directory (kinds "dt" and "expert")
+    path: Path | None = None  # the directory (kinds "dt", "expert" and "value")
+    top_k: int = 0  # kind "value": the top places valued by R (0: the learned value alone)
+
+    def planner_model(self) -> Any:
+        """A learned value's network (kind "value")."""
+        from uavris.agents.place.checkpoint import load_value
+
+        return load_value(self.path)[0]
+
+    def goal_source(self) -> Any:
+        """Where a goal-conditioned controller is told to go by this target: the learned
+        planner's place (kind "value") or the planning oracle's target (the reference
+        ``oracle``), per hall and start (:class:`uavris.agents.dt.goals.PlannedGoals`)."""
+        from uavris.agents.dt.goals import PlannedGoals
+
+        if self.kind == "value":
+            from uavris.agents.place.planner import LearnedPlanner, PlaceSettings
+
+            planner = LearnedPlanner(self.planner_model(), PlaceSettings(top_k=self.top_k))
+            return PlannedGoals(planner.target, f"learned planner ({self.name})")
+        if self.kind == "reference" and self.reference == "oracle":
+            from uavris.agents.oracle import PlanningOracle
+
+            oracle = PlanningOracle()
+            return PlannedGoals(lambda config, start: oracle.plan(config, start).target, "planning oracle")
+        raise ConfigError(f"{self.name} tells no goal (a learned value or the oracle does)")
 
     def own_system(self) -> SystemConfig:
         """The system the target was made for, read from its configuration only: a run's, a DT
@@ -88,6 +115,12 @@ class Target:
 
             dt = load_dt_policy(self.path, device=device)
             return Loaded(dt.policy, dt.system, dt.scenario, self.path)
+        if self.kind == "value":
+            from uavris.agents.place.planner import LearnedPlanner, PlaceSettings
+
+            system = system or SystemConfig()
+            return Loaded(LearnedPlanner(self.planner_model(), PlaceSettings(top_k=self.top_k)), system, None,
+                          self.path)
         from uavris.experiments.training.train_expert import load_run_policy
 
         cfg, policy = load_run_policy(self.path, device)
@@ -131,7 +164,10 @@ def resolve_target(name: str | Path) -> Target:
         return Target(name, "reference", reference=ref)
     if path.is_dir():
         from uavris.agents.dt.checkpoint import dt_model_dir
+        from uavris.agents.place.checkpoint import is_value_dir
 
+        if is_value_dir(path):
+            return Target(name, "value", path=path)
         return Target(name, "dt" if dt_model_dir(path) is not None else "expert", path=path)
     if name in REFERENCES:
         return Target(name, "reference", reference=name)
@@ -152,8 +188,10 @@ class Row:
     attitude safety layer (``front_margin_deg``: the system's margin, docs/model.md section
     3), with its attitude held level (``level``: :class:`uavris.agents.policy.LevelAttitude`).
     ``seed`` is the pre-training seed of its model where the study trains a row over several
-    (the report averages a row over its seeds). Its :attr:`key`, ``NAME[-level][-safe][@sK]``,
-    names it in a stage's results, its files and ``uavris evaluate --row``.
+    (the report averages a row over its seeds). A goal-conditioned controller is told where to
+    go by ``goal_from`` (:meth:`Target.goal_source`: the learned planner or the oracle; a model
+    fine-tuned in a hall keeps the place it chose there). Its :attr:`key`,
+    ``NAME[-level][-safe][@sK]``, names it in a stage's results, its files and ``uavris evaluate --row``.
     """
 
     name: str  # the row without its variants: "dt-zero-shot", "bc", "transfer-layout-train-5", "oracle"
@@ -164,6 +202,7 @@ class Row:
     seed: int | None = None
     front_margin_deg: float | None = None
     level: bool = False
+    goal_from: Target | None = None
 
     def __post_init__(self) -> None:
         if sum((self.target is not None, bool(self.members), self.plan_of is not None)) != 1:
@@ -207,6 +246,8 @@ class Row:
         where the row says so; the system it is evaluated in is :meth:`system`'s."""
         if self.target is not None:
             loaded = self.target.load(system, device)
+            if self.goal_from is not None:
+                loaded = dataclasses.replace(loaded, policy=loaded.policy.with_goals(self.goal_from.goal_source()))
         elif self.members:
             from uavris.agents.dt.policy import DTEnsemble
 

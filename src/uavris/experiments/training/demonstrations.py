@@ -107,9 +107,12 @@ def _noisy(oracle: PlanningOracle, sigma: float, rng: np.random.Generator) -> Pr
 
 
 def demonstrate(cfg: DemonstrationConfig, first: int = 0, count: int | None = None,
-                on_hall: Any = None) -> list[Trajectory]:
+                on_hall: Any = None, labels: dict[str, list[NDArray]] | None = None) -> list[Trajectory]:
     """The demonstrations of halls ``first .. first + count - 1`` (module docstring), hall by
-    hall, behaviour by behaviour; ``on_hall()`` is called after each hall (progress)."""
+    hall, behaviour by behaviour; ``on_hall()`` is called after each hall (progress). With
+    ``labels`` (a dict of lists) and the reference planner (``exact_plans``), every level pose its
+    plan of each hall valued with ``R`` is added to it (users, position, rate, hall): the
+    learned value's labels near each hall's best poses, at no cost beyond the plan."""
     layouts = cfg.layouts(first, count)
     oracle = PlanningOracle(settings=PlanSettings(exact=cfg.exact_plans))
     resolved = [layout.resolve(cfg.system) for layout in layouts]
@@ -117,11 +120,13 @@ def demonstrate(cfg: DemonstrationConfig, first: int = 0, count: int | None = No
     for i, (system, where) in enumerate(resolved):
         j = first + i
         seeds = cfg.seed + j * cfg.episodes + np.arange(cfg.episodes)
+        target = oracle.plan(system, where.start).target  # each demonstration records where it flew to
         for behaviour in cfg.behaviours:
+            goal = target
             if behaviour == "oracle":
                 policy: Any = Privileged(lambda obs, sim: oracle.motion_action(sim))
             elif behaviour == "hover":
-                policy = Privileged(lambda obs, sim: np.zeros((sim.num_envs, 6), dtype=np.float32))
+                policy, goal = Privileged(lambda obs, sim: np.zeros((sim.num_envs, 6), dtype=np.float32)), where.start
             elif behaviour == "noisy-oracle":
                 policy = _noisy(oracle, cfg.noise, np.random.default_rng([cfg.seed, j]))
             else:  # another hall's plan, flown here: the next hall of the range (wrapping)
@@ -129,8 +134,17 @@ def demonstrate(cfg: DemonstrationConfig, first: int = 0, count: int | None = No
                 if len(resolved) == 1:  # a range of one hall: the next hall of the generator
                     other_system, other_where = cfg.layouts(j + 1, 1)[0].resolve(cfg.system)
                 policy = PlannedFlight(oracle.plan(other_system, other_where.start))
+                goal = policy.plan.target
             out.extend(record_episodes(policy, system, where, seeds, expert=behaviour, expert_algo="oracle",
-                                       phase_control="optimizer"))
+                                       phase_control="optimizer", goal=goal))
+        if labels is not None:
+            poses, rates = oracle.valued_poses(system)
+            level = np.all(poses[:, 3:] == 0.0, axis=1)
+            labels.setdefault("users", []).append(np.broadcast_to(np.asarray(system.users),
+                                                                  (int(level.sum()), system.num_users, 3)))
+            labels.setdefault("position", []).append(poses[level, :3])
+            labels.setdefault("rate", []).append(rates[level])
+            labels.setdefault("hall", []).append(np.array([layouts[i].name] * int(level.sum())))
         if on_hall is not None:
             on_hall()
     return out

@@ -41,8 +41,10 @@ from pathlib import Path
 from typing import Any, Callable, Sequence
 
 import numpy as np
+from numpy.typing import NDArray
 
 from uavris.agents.dt.checkpoint import save_dt
+from uavris.agents.dt.goals import FixedGoals
 from uavris.agents.dt.policy import DTBatchPolicy, load_dt_policy
 from uavris.agents.dt.training import TrainingWindows, load_trainer_state, make_optimizer, train_steps
 from uavris.agents.dt.trajectories import ELITE_RULES, EliteRule, Trajectory, record_episodes, select_elites
@@ -107,6 +109,8 @@ class FinetuneConfig(DictConfig):
     eval_episodes: int = PRESET  # evaluation episodes after each round (the zero-shot model first)
     eval_seed: int = EVAL_SEED  # seed of the first evaluation episode
     collect_seed: int = FINETUNE_SEED  # seed of the first candidate episode
+    value: str | None = None  # a goal-conditioned DT: the learned value whose planner gives its goal (places)
+    places: int = 0  # a goal-conditioned DT: its candidates try the start and this many of the best places by V
 
     def __post_init__(self) -> None:
         check_preset(self.preset)
@@ -139,10 +143,15 @@ class FinetuneConfig(DictConfig):
                               f"rollouts_per_seed ({self.rollouts_per_seed}), got {self.level_rollouts!r}")
         if self.target_return is not None and not math.isfinite(self.target_return):
             raise ConfigError(f"FinetuneConfig.target_return must be finite, got {self.target_return}")
+        if self.places and (self.value is None or self.selection != "paired"
+                            or self.rollouts_per_seed % (self.places + 1) or self.level_rollouts):
+            raise ConfigError(f"FinetuneConfig.places ({self.places}) needs a learned value, paired selection and "
+                              f"rollouts_per_seed a multiple of places + 1 (each seed tries every place), without "
+                              f"level_rollouts; got value {self.value!r}, rollouts_per_seed {self.rollouts_per_seed}")
 
 
 def _candidates(cfg: FinetuneConfig, h: int, dt_policy: Callable[..., DTBatchPolicy], system: SystemConfig,
-                scenario: Scenario, phase_control: str) -> list[Trajectory]:
+                scenario: Scenario, phase_control: str, places: NDArray | None = None) -> list[Trajectory]:
     """Round ``h``'s noisy rollouts: ``candidates / rollouts_per_seed`` episode seeds with
     ``rollouts_per_seed`` rollouts each (paired selection; one each for plain top-K), the
     noise seeded by (seed, round), so that a resumed run explores as an uninterrupted one.
@@ -156,9 +165,13 @@ def _candidates(cfg: FinetuneConfig, h: int, dt_policy: Callable[..., DTBatchPol
     per_seed = cfg.rollouts_per_seed if cfg.selection == "paired" else 1
     distinct = cfg.candidates // per_seed
     first = cfg.collect_seed + (h - 1) * cfg.candidates + np.arange(distinct)
-    out = record_episodes(dt_policy(cfg.noise_sigma, noise_seed), system, scenario,
-                          np.repeat(first, per_seed - cfg.level_rollouts), expert="dt-finetune", expert_algo="dt",
-                          phase_control=phase_control)
+    seeds = np.repeat(first, per_seed - cfg.level_rollouts)
+    if places is not None:  # one place per episode: each seed's rollouts go round the places (the start first)
+        goals = places[np.arange(len(seeds)) % len(places)]
+        return record_episodes(dt_policy(cfg.noise_sigma, noise_seed, FixedGoals(goals)), system, scenario, seeds,
+                               expert="dt-finetune", expert_algo="dt", phase_control=phase_control, goal=goals)
+    out = record_episodes(dt_policy(cfg.noise_sigma, noise_seed), system, scenario, seeds, expert="dt-finetune",
+                          expert_algo="dt", phase_control=phase_control)
     if cfg.level_rollouts:
         level_seed = int(np.random.SeedSequence([cfg.seed, h, 1]).generate_state(1)[0])
         out += record_episodes(LevelAttitude(dt_policy(cfg.noise_sigma, level_seed)), system, scenario,
@@ -184,6 +197,47 @@ def _round_row(h: int, interactions: int, steps: int, cands: list[Trajectory], e
 def _evaluation(row: dict[str, Any]) -> dict[str, float]:
     """A round's evaluation from its log row: mean and 95% CI."""
     return {"mean": row["eval_mean"], "ci_low": row["eval_ci_low"], "ci_high": row["eval_ci_high"]}
+
+
+class _Places:
+    """Where a goal-conditioned DT is told to go while it fine-tunes: the learned planner's
+    place at first, then, with places to try (the start and the best places by ``V``), the one
+    whose episodes did best, paired within each episode seed (the rollouts of a seed share
+    every channel and pairing draw, so their difference is the place's), over all rounds."""
+
+    def __init__(self, cfg: FinetuneConfig, system: SystemConfig, start: tuple[float, float, float]) -> None:
+        from uavris.agents.place.checkpoint import load_value
+        from uavris.agents.place.planner import learned_plan, places_to_try
+
+        if cfg.value is None:
+            raise ConfigError("a goal-conditioned DT fine-tunes with a learned value to tell its goal "
+                              "(FinetuneConfig.value)")
+        value, _ = load_value(cfg.value)
+        self.chosen = np.asarray(learned_plan(value, system, start).target, dtype=np.float64)
+        self.places = places_to_try(value, system, start, cfg.places) if cfg.places else None
+        n = 0 if self.places is None else len(self.places)
+        self.total, self.count = np.zeros(n), np.zeros(n)
+
+    def update(self, cands: Sequence[Trajectory]) -> None:
+        """Add a round's candidates' paired scores to their places', and choose the best place."""
+        if self.places is None:
+            return
+        ret = np.array([tr.episode_return for tr in cands])
+        seeds = np.array([tr.seed for tr in cands])
+        for s in np.unique(seeds):
+            ret[seeds == s] -= ret[seeds == s].mean()
+        for tr, score in zip(cands, ret):
+            i = int(np.argmin(np.linalg.norm(self.places - np.asarray(tr.goal), axis=1)))
+            self.total[i] += score
+            self.count[i] += 1
+        self.chosen = self.places[int(np.argmax(self.total / np.maximum(self.count, 1)))].copy()
+
+    def state(self) -> dict[str, Any]:
+        return {"place_total": self.total.tolist(), "place_count": self.count.tolist(), "goal": self.chosen.tolist()}
+
+    def restore(self, meta: dict[str, Any]) -> None:
+        self.total, self.count = np.asarray(meta["place_total"]), np.asarray(meta["place_count"])
+        self.chosen = np.asarray(meta["goal"], dtype=np.float64)
 
 
 def default_finetune_dir(cfg: FinetuneConfig, root: str | Path = "runs/dt") -> Path:
@@ -213,8 +267,12 @@ def finetune(cfg: FinetuneConfig, run_dir: str | Path, *, resume: bool = False, 
                   "system": system.to_dict(), "observation_layout": layout_as_lists(system),
                   "pretrained_model": str(cfg.model), "target_return": float(target)}
 
-    def dt_policy(sigma: float = 0.0, noise_seed: int | None = None) -> DTBatchPolicy:
-        return DTBatchPolicy(model, target, sigma, noise_seed, phase_control)
+    places = _Places(cfg, system, scenario.start) if model.cfg.goal else None
+
+    def dt_policy(sigma: float = 0.0, noise_seed: int | None = None, goals: Any = None) -> DTBatchPolicy:
+        if places is not None and goals is None:
+            goals = FixedGoals(places.chosen)
+        return DTBatchPolicy(model, target, sigma, noise_seed, phase_control, goals, system)
 
     done_round, steps, interactions, rows = 0, 0, 0, []
     if resuming and (latest := latest_checkpoint(run_dir)) is not None:
@@ -222,6 +280,8 @@ def finetune(cfg: FinetuneConfig, run_dir: str | Path, *, resume: bool = False, 
         restore_weights(model, ck)
         meta = load_trainer_state(ck, opt, rng)
         steps, interactions = int(meta["gradient_steps"]), int(meta["env_interactions"])
+        if places is not None:
+            places.restore(meta)
         rows = read_rows(run_dir / "finetune.csv", ROUND_HEADER, done_round + 1, INT_COLUMNS)
     writer = tb_writer(run_dir, done_round)
     model.eval()
@@ -234,10 +294,13 @@ def finetune(cfg: FinetuneConfig, run_dir: str | Path, *, resume: bool = False, 
     clock = RunClock(run_dir, resuming)
     try:
         for h in range(done_round + 1, cfg.rounds + 1):
-            cands = _candidates(cfg, h, dt_policy, system, scenario, phase_control)
+            cands = _candidates(cfg, h, dt_policy, system, scenario, phase_control,
+                                None if places is None else places.places)
             interactions += sum(tr.length for tr in cands)
+            if places is not None:
+                places.update(cands)
             elites = select_elites(cands, cfg.elites, cfg.selection)
-            windows = TrainingWindows.for_model(elites, model.cfg)  # RTGs from the rewards actually received
+            windows = TrainingWindows.for_model(elites, model.cfg, system)  # RTGs from the rewards actually received
             count = cfg.epochs_per_round * math.ceil(windows.samples_per_epoch / cfg.batch_size)
             losses = train_steps(model, opt, windows, rng, steps, count, cfg.batch_size, cfg.learning_rate,
                                   cfg.warmup_steps, cfg.grad_clip)
@@ -251,10 +314,11 @@ def finetune(cfg: FinetuneConfig, run_dir: str | Path, *, resume: bool = False, 
                                 ("rollout/env_interactions", interactions)):
                 writer.add_scalar(name, value, h)
             write_csv(run_dir / "finetune.csv", ROUND_HEADER, rows)
-            write_checkpoint(run_dir, h, model, {**model_meta, "env_interactions": interactions,
+            goal = {} if places is None else {"goal": places.chosen.tolist()}
+            write_checkpoint(run_dir, h, model, {**model_meta, **goal, "env_interactions": interactions,
                                                   "finetune_rounds": h, "finetune_gradient_steps": steps}, opt, rng,
-                              {"gradient_steps": steps, "env_interactions": interactions}, prefix="round",
-                              clock=clock)
+                              {"gradient_steps": steps, "env_interactions": interactions,
+                               **({} if places is None else places.state())}, prefix="round", clock=clock)
             bar.update(1)
             bar.set_postfix(eval=f"{ev['mean']:.2f}", refresh=False)
             if interrupt_after_round is not None and h >= interrupt_after_round:
@@ -263,7 +327,8 @@ def finetune(cfg: FinetuneConfig, run_dir: str | Path, *, resume: bool = False, 
         writer.close()
         bar.close()
     clock.save(round=cfg.rounds)
-    save_dt(model, run_dir, {**model_meta, "env_interactions": interactions, "finetune_rounds": cfg.rounds,
+    goal = {} if places is None else {"goal": places.chosen.tolist(), **places.state()}
+    save_dt(model, run_dir, {**model_meta, **goal, "env_interactions": interactions, "finetune_rounds": cfg.rounds,
                              "finetune_gradient_steps": steps})
     write_done(run_dir, {
         "rounds": cfg.rounds, "env_interactions": interactions, "gradient_steps": steps,

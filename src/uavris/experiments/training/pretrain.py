@@ -156,9 +156,10 @@ def pretrain(cfg: PretrainConfig, run_dir: str | Path, *, resume: bool = False, 
     model = model_for_data(cfg.model.for_data(system, action_dim_for(system, ds.phase_control)),
                            ds.trajectories).to(device)
     opt = make_optimizer(model, cfg.learning_rate, cfg.weight_decay)
-    windows: TrainingWindows | MixedWindows = TrainingWindows.for_model(ds.trajectories, model.cfg)
+    windows: TrainingWindows | MixedWindows = TrainingWindows.for_model(ds.trajectories, model.cfg, system)
     if more:  # halls of several device counts: one set of windows per dataset, one model (.encoders)
-        windows = MixedWindows([windows] + [TrainingWindows.for_model(d.trajectories, model.cfg) for d in more])
+        windows = MixedWindows([windows] + [TrainingWindows.for_model(d.trajectories, model.cfg, d.system)
+                                            for d in more])
     everything = [tr for d in [ds, *more] for tr in d.trajectories]
     model_meta = {
         "stage": "pretrain", "scenario": None, "scenarios": ds.scenarios, "dataset": str(cfg.dataset),

@@ -1,0 +1,155 @@
+"""The learned planner: where to go in a hall, from the argmax of the learned value ``V`` (issue 36).
+
+Lives here: :class:`PlaceSettings` and :func:`learned_plan`: ``V`` over a grid of the flight
+region outside the safety balls, the exact planner's travel-time rule (a place's value is
+the episode average ``(t min(V(start), V(q)) + (T - t) V(q)) / T``, ``t`` the trip's slots)
+and "stay" always a candidate; its semi-amortised form (``top_k`` > 0): the ``top_k`` best
+places by that value, apart from each other, and the start, valued by ``R`` and chosen as the
+exact planner chooses its finalists (a move only when it beats staying by more than a
+standard error, the plan's numbers on fresh draws). Not here: ``V`` (:mod:`.value`), the
+exact planner (:func:`uavris.agents.oracle.planner.plan_target`), whose :class:`Plan` this
+returns too, so the same flight controller flies either.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import ClassVar
+
+import numpy as np
+from numpy.typing import NDArray
+
+from uavris.agents.oracle.planner import Plan, PlanSettings, check_finalists, feasible, travel_slots
+from uavris.agents.oracle.policy import fly_to, motion_entries
+from uavris.agents.place.value import PoseValue, predict
+from uavris.config import SystemConfig
+from uavris.env.simulator import BatchedSimulator
+
+
+@dataclass(frozen=True)
+class PlaceSettings:
+    """How the learned planner looks."""
+
+    grid_step: float = 2.0  # m, the coarse grid V is read on
+    fine_step: float = 0.5  # m, the finer grid V is read on around the coarse grid's best places
+    fine_places: int = 8  # the coarse grid's best places (apart by ``separation``) refined on the finer grid
+    top_k: int = 0  # 0: V alone (amortised); 1-5: the top places by V valued by R (semi-amortised)
+    separation: float = 3.0  # m: the top places are at least this far apart (distinct places, not one peak)
+    check_batches: int = 8  # fresh batches R values the finalists on (semi-amortised)
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.grid_step) and self.grid_step > 0):
+            raise ValueError(f"PlaceSettings.grid_step must be > 0, got {self.grid_step!r}")
+        if not 0 <= self.top_k <= 5:
+            raise ValueError(f"PlaceSettings.top_k must be in [0, 5], got {self.top_k!r}")
+
+
+def place_grid(config: SystemConfig, step: float) -> NDArray[np.float64]:
+    """The feasible positions ``(M, 3)`` of a grid of spacing ``step`` over the flight region
+    (inside it, outside every safety ball): the places the learned planner reads."""
+    lo, hi = np.asarray(config.region_low), np.asarray(config.region_high)
+    axes = [np.linspace(lo[i], hi[i], max(2, int(round((hi[i] - lo[i]) / step)) + 1)) for i in range(3)]
+    grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
+    return grid[feasible(config, grid)]
+
+
+def place_values(model: PoseValue, config: SystemConfig, start: NDArray, places: NDArray
+                 ) -> tuple[NDArray[np.float64], float]:
+    """The episode value of flying to each of ``places`` and hovering there, by ``V`` and the
+    travel-time rule, and ``V`` at the start (the value of staying)."""
+    users = np.asarray(config.users, dtype=np.float64)
+    v = predict(model, users, places)
+    v0 = float(predict(model, users, np.asarray(start, dtype=np.float64)[None])[0])
+    t = np.minimum(travel_slots(config, np.linalg.norm(places - start, axis=1)), config.horizon)
+    return (t * np.minimum(v0, v) + (config.horizon - t) * v) / config.horizon, v0
+
+
+def top_places(values: NDArray, places: NDArray, k: int, separation: float) -> list[int]:
+    """Indices of the ``k`` best places by ``values``, each at least ``separation`` from the better ones."""
+    chosen: list[int] = []
+    for i in np.argsort(-values, kind="stable"):
+        if all(np.linalg.norm(places[i] - places[j]) >= separation for j in chosen):
+            chosen.append(int(i))
+            if len(chosen) == k:
+                break
+    return chosen
+
+
+def ranked_places(model: PoseValue, config: SystemConfig, start: NDArray, settings: PlaceSettings = PlaceSettings()
+                  ) -> tuple[NDArray[np.float64], NDArray[np.float64], float]:
+    """Every place the learned planner reads (the coarse grid, and the finer grid around its
+    best places) with its episode value by ``V``, best first, and ``V`` at the start."""
+    start_q = np.asarray(start, dtype=np.float64)
+    coarse = place_grid(config, settings.grid_step)
+    values, v0 = place_values(model, config, start_q, coarse)
+    # the finer grid around the coarse grid's best places (V is smooth: its argmax lies near them)
+    step, reach = settings.fine_step, settings.grid_step
+    offsets = np.stack(np.meshgrid(*[np.arange(-reach, reach + 1e-9, step)] * 3, indexing="ij"), -1).reshape(-1, 3)
+    near = np.concatenate([coarse[i] + offsets for i in top_places(values, coarse, settings.fine_places,
+                                                                   settings.separation)])
+    near = near[feasible(config, near)]
+    fine, _ = place_values(model, config, start_q, near)
+    places, values = np.concatenate([coarse, near]), np.concatenate([values, fine])
+    order = np.argsort(-values, kind="stable")
+    return places[order], values[order], v0
+
+
+def learned_plan(model: PoseValue, config: SystemConfig, start: tuple[float, float, float],
+                 settings: PlaceSettings = PlaceSettings()) -> Plan:
+    """Where to go from ``start`` in ``config``'s hall (module docstring), level. With
+    ``top_k`` 0 the plan's rate and value are ``V``'s (no ``R`` is computed: milliseconds);
+    with ``top_k`` > 0 they are ``R``'s on fresh draws, as the exact planner's."""
+    start_q = np.asarray(start, dtype=np.float64)
+    places, values, v0 = ranked_places(model, config, start_q, settings)
+    level = np.zeros(3)
+    if settings.top_k:
+        best = top_places(values, places, settings.top_k, settings.separation)
+        checks = PlanSettings(check_batches=settings.check_batches)
+        table = tuple((tuple(float(x) for x in places[i]), float("nan"), float(values[i])) for i in best)
+        finalists = [(start_q, level), *((places[i], level) for i in best)]
+        return check_finalists(config, checks, start_q, finalists, 0, table)
+    moves = values[0] > v0
+    target = places[0] if moves else start_q
+    slots = int(travel_slots(config, np.linalg.norm(target - start_q))[0]) if moves else 0
+    rate = float(predict(model, np.asarray(config.users, dtype=np.float64), target[None])[0])
+    value = float(values[0]) if moves else v0
+    return Plan(start=tuple(float(x) for x in start_q), target=target.copy(), attitude=level, rate=rate,
+                start_rate=v0, travel_slots=slots, value=value, poses_valued=0,
+                candidates=((tuple(float(x) for x in target), rate, value),))
+
+
+def places_to_try(model: PoseValue, config: SystemConfig, start: tuple[float, float, float], count: int,
+                  settings: PlaceSettings = PlaceSettings()) -> NDArray[np.float64]:
+    """The start and the ``count`` best places by ``V`` (apart by ``settings.separation``),
+    ``(count + 1, 3)``: what fine-tuning that tries places flies to (one place per episode)."""
+    start_q = np.asarray(start, dtype=np.float64)
+    places, values, _ = ranked_places(model, config, start_q, settings)
+    return np.concatenate([start_q[None], places[top_places(values, places, count, settings.separation)]])
+
+
+class LearnedPlanner:
+    """The learned planner's plan flown by the planning oracle's controller
+    (:func:`uavris.agents.oracle.policy.fly_to`) with the optimiser's phases: what the learned
+    place is worth, apart from any learned controller. Privileged like the oracle (it reads
+    the simulator's pose, velocity and hall); plans are made once per hall and start."""
+
+    privileged: ClassVar[bool] = True
+    phase_control: ClassVar[str] = "optimizer"
+
+    def __init__(self, model: PoseValue, settings: PlaceSettings = PlaceSettings()) -> None:
+        self.model, self.settings = model, settings
+        self.plans: dict[tuple, Plan] = {}
+
+    def plan(self, config: SystemConfig, start: tuple[float, float, float]) -> Plan:
+        key = (config, tuple(start))
+        if key not in self.plans:
+            self.plans[key] = learned_plan(self.model, config, start, self.settings)
+        return self.plans[key]
+
+    def target(self, config: SystemConfig, start: tuple[float, float, float]) -> NDArray[np.float64]:
+        """Where the plan goes (a goal source's planner: :class:`uavris.agents.dt.goals.PlannedGoals`)."""
+        return self.plan(config, start).target
+
+    def __call__(self, obs: NDArray[np.float32], sim: BatchedSimulator) -> NDArray[np.float32]:
+        return motion_entries(sim.config, *fly_to(sim, self.plan(sim.config, sim.scenario.start)))
