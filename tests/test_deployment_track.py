@@ -163,6 +163,15 @@ def test_the_report_averages_seeds_and_states_the_claims(deployment_run):
     row = next(line for line in section.splitlines() if line.startswith("| zero-shot DT |"))
     assert row.split("|")[2].strip().startswith(f"{mean:.1%}")  # the row is the mean over seeds, then over halls
     assert f"**zero-shot DT >= {ZERO_SHOT_TARGET:.0%} of the oracle" in report and "**the device-set encoder" in report
+    # the learned value's accuracy: the table's numbers are the halls' (rank correlation, R at V's argmax / oracle's)
+    results = [read_json(p)["result"] for p in evals]
+    rho = [r["plan-learned"]["value_rank_correlation"] for r in results]
+    share = [r["plan-learned"]["value_target_rate_level"] / r["oracle"]["plan_rate_level"] for r in results]
+    assert all(-1.0 <= x <= 1.0 for x in rho)
+    value = section[section.index("### The learned value of a pose"):]
+    row = next(line for line in value.splitlines() if line.startswith("| learned planner's place"))
+    cells = [c.strip() for c in row.split("|")[2:-1]]
+    assert cells == [f"{np.mean(rho):.3f}", f"{np.min(rho):.3f}", f"{np.mean(share):.1%}", f"{np.min(share):.1%}"]
 
 
 @pytest.mark.parametrize("key", ["dt-ensemble-safe", "dt-zero-shot-level@s1", "dt-finetuned-safe", "bc-safe@s1",

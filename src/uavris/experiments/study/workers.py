@@ -167,18 +167,45 @@ def evaluate_rows(out: Path, site: Site, track: Track, episodes: int, rows: Sequ
         write_results(res, summary, out / row.key)
         result[row.key] = summary
     if track.layouts:
-        result[ORACLE].update(oracle_target(site))
+        from uavris.agents.oracle import PlanningOracle
+
+        oracle = PlanningOracle()
+        result[ORACLE].update(oracle_target(site, oracle))
+        for row in rows:
+            if row.target is not None and row.target.kind == "value" and not row.target.top_k:
+                result[row.key].update(value_accuracy(site, row.target.planner_model(), oracle))
     return result
 
 
-def oracle_target(where: Site) -> dict[str, Any]:
+def oracle_target(where: Site, oracle: Any = None) -> dict[str, Any]:
     """The planning oracle's target in ``where``: its pose, R there with its attitude
     (``plan_rate``, with its standard error) and level (``plan_rate_level``, what
     :func:`_decomposition`'s place gap compares an end position with, on the same draws)."""
     from uavris.agents.oracle import PlanningOracle
     from uavris.agents.oracle.planner import assessed_rate
 
-    plan = PlanningOracle().plan(where.system, where.scenario.start)
+    plan = (oracle or PlanningOracle()).plan(where.system, where.scenario.start)
     (level,), _ = assessed_rate(where.system, plan.target, np.zeros(3))
     return {"plan_rate": plan.rate, "plan_rate_se": plan.rate_se, "plan_rate_level": float(level),
             "plan_target": plan.target.tolist(), "plan_attitude_deg": np.degrees(plan.attitude).tolist()}
+
+
+def value_accuracy(where: Site, value: Any, oracle: Any) -> dict[str, Any]:
+    """How well a learned value ``V`` knows ``where`` (issue 36): Spearman's rank correlation of
+    ``V`` with ``R`` over the level poses the planning ``oracle`` valued there with ``R``
+    (``value_rank_correlation``), and ``R`` at ``V``'s argmax, level, on the draws a plan states
+    its numbers with (``value_target_rate_level``: the oracle's ``plan_rate_level`` is its match)."""
+    from scipy.stats import spearmanr
+
+    from uavris.agents.oracle.planner import assessed_rate
+    from uavris.agents.place.planner import learned_plan
+    from uavris.agents.place.value import predict
+
+    system, start = where.system, where.scenario.start
+    oracle.plan(system, start)
+    poses, rates = oracle.valued_poses(system)
+    level = np.all(poses[:, 3:] == 0.0, axis=1)
+    v = predict(value, np.asarray(system.users, dtype=np.float64), poses[level, :3])
+    rho = float(spearmanr(v, rates[level]).statistic) if level.sum() > 2 else float("nan")
+    (at,), _ = assessed_rate(system, learned_plan(value, system, start).target, np.zeros(3))
+    return {"value_rank_correlation": rho, "value_poses": int(level.sum()), "value_target_rate_level": float(at)}

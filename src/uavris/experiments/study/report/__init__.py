@@ -21,7 +21,7 @@ from uavris.config import UNSEEN_SCENARIOS, get_scenario
 from uavris.experiments.display.tables import fraction, interval, markdown_table, num
 from uavris.experiments.engine.jobs import machine
 from uavris.experiments.engine.stages import Pipeline, StageRecord
-from uavris.experiments.study.report.decomposition import decomposition_section
+from uavris.experiments.study.report.decomposition import decomposition_section, value_section
 from uavris.experiments.study.report.deployment import (
     NEAREST,
     ROWS,
@@ -206,6 +206,7 @@ class _Report:
         lines, claims = decomposition_section(results, labels, where)
         self.add(*lines)
         self.claims += claims
+        self.add(*value_section(results, labels))
 
     # ------------------------------------------------------------------ both tracks side by side
     def side_by_side(self, tracks: Sequence[Track], results: dict[str, dict[str, dict[str, Any]]]) -> None:

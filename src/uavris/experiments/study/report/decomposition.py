@@ -3,7 +3,8 @@
 Lives here: :func:`decomposition_section`, the deployment report's table of every row's gap to
 the oracle split into place and attitude, with the share of its slots in which a device is
 behind the RIS plane, over halls and per hall, and the claim that no learned row blocks a
-device. Not here: the numbers, which the evaluation stages record
+device; :func:`value_section`, how well the learned value knows the place (its accuracy).
+Not here: the numbers, which the evaluation stages record
 (:func:`uavris.experiments.study.workers.evaluate_rows`), and the rest of the deployment
 section (:mod:`.deployment`).
 
@@ -77,3 +78,28 @@ def decomposition_section(results: dict[str, dict[str, Any]], labels: dict[str, 
              f"{pct(float(np.mean(block[worst])))} of its slots on average"
              + (f"; above the limit: {', '.join(labels.get(k, k) for k in over)}" if over else "") + ").")
     return lines, [claim]
+
+
+def value_section(results: dict[str, dict[str, Any]], labels: dict[str, str]) -> list[str]:
+    """The learned value's accuracy in the unseen halls (issue 36), for every row that records
+    it (:func:`uavris.experiments.study.workers.value_accuracy`): the rank correlation of ``V``
+    with ``R`` over the poses the oracle valued, and ``R`` at ``V``'s argmax against ``R`` at the
+    oracle's target (both level, on the same fresh draws), mean and worst hall."""
+    layouts = list(results)
+    keys = [k for k in (next(iter(results.values())) if layouts else {})
+            if all("value_rank_correlation" in results[lay].get(k, {}) for lay in layouts)]
+    if not keys:
+        return []
+    labels = {**dict(ROWS), **labels}
+    rows = []
+    for k in keys:
+        rho = [float(results[lay][k]["value_rank_correlation"]) for lay in layouts]
+        share = [float(results[lay][k]["value_target_rate_level"]) / float(results[lay][ORACLE]["plan_rate_level"])
+                 for lay in layouts]
+        rows.append((labels.get(k, k), f"{np.mean(rho):.3f}", f"{np.min(rho):.3f}", pct(float(np.mean(share))),
+                     pct(float(np.min(share)))))
+    return ["", "### The learned value of a pose in the unseen halls", "",
+            "Rank correlation (Spearman) of V with R over the level poses the oracle valued in each hall; R at V's "
+            "argmax as a fraction of R at the oracle's target (both level, on the same fresh draws).", "",
+            *markdown_table(("learned value", "rank correlation, mean", "worst hall",
+                             "R at its argmax / oracle's, mean", "worst hall"), rows, "lrrrr")]
