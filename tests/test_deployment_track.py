@@ -28,7 +28,8 @@ from uavris.experiments.study.tracks import (
 from uavris.io import read_json
 from uavris.layouts import LayoutGenerator, layout_distance
 
-RC = ReproduceConfig("smoke", track="deployment", eval_episodes=2, dt_seeds=2, scaling=(1,), ablation=True)
+RC = ReproduceConfig("smoke", track="deployment", eval_episodes=2, dt_seeds=2, scaling=(1,), ablation=True,
+                     device_counts=(3,))
 
 
 @pytest.fixture(scope="module")
@@ -120,6 +121,10 @@ def test_the_nearest_training_halls_plan_is_the_one_at_the_smallest_distance(dep
     for r in records:
         if not r.name.startswith("deploy-evaluate-"):
             continue
+        if r.name.endswith("-k3"):  # a hall of another device count: no training hall is "nearest", no fine-tuning
+            assert not any(k.startswith(("transfer-", "dt-finetuned", "dt-goal-finetuned")) for k in r.result)
+            assert {"dt-goal-safe", "plan-learned", "plan-semi", "hover-optimizer", "oracle"} <= set(r.result)
+            continue
         other = "-other-" in r.name  # the ablation's halls of another generator: zero-shot only
         unseen = gen.layout("other" if other else "unseen", int(r.name.rsplit("-", 1)[1]))
         nearest = min(train, key=lambda t: layout_distance(unseen, t))  # independent of transfer_sources
@@ -154,7 +159,8 @@ def test_the_report_averages_seeds_and_states_the_claims(deployment_run):
     report = (out / "report.md").read_text()
     section = report[report.index("## Deployment track"):]
     assert "mean over 2 pre-training seeds" in section
-    evals = sorted((out / "stages").glob("deploy-evaluate-layout-unseen-*/stage.json"))  # not the other generator's
+    evals = sorted(p for p in (out / "stages").glob("deploy-evaluate-layout-unseen-*/stage.json")
+                   if "-k3-" not in p.parent.name)  # neither the other generator's nor the 3-device halls
     per_hall = []
     for path in evals:
         res = read_json(path)["result"]
@@ -172,6 +178,24 @@ def test_the_report_averages_seeds_and_states_the_claims(deployment_run):
     row = next(line for line in value.splitlines() if line.startswith("| learned planner's place"))
     cells = [c.strip() for c in row.split("|")[2:-1]]
     assert cells == [f"{np.mean(rho):.3f}", f"{np.min(rho):.3f}", f"{np.mean(share):.1%}", f"{np.min(share):.1%}"]
+
+
+def test_the_rows_per_device_count_are_the_halls_numbers(deployment_run):
+    """--device-counts 3: every row zero-shot in unseen halls of 3 devices, a table per count,
+    each cell the mean of the halls' fractions of the oracle (seeds averaged first)."""
+    out, _ = deployment_run
+    report = (out / "report.md").read_text()
+    section = report[report.index("### Any number of devices"):]
+    section = section[:section.index("### Halls of 3 devices")]
+    for count in (4, 3):
+        dirs = (out / "stages").glob("deploy-evaluate-layout-unseen-*")
+        halls = [read_json(p / "stage.json")["result"] for p in sorted(dirs) if ("-k3-" in p.name) == (count == 3)]
+        assert len(halls) == RC.unseen_layouts
+        share = [np.mean([r[k]["mean"] for k in ("dt-goal-safe", "dt-goal-safe@s1")]) / r["oracle"]["mean"]
+                 for r in halls]
+        row = next(line for line in section.splitlines() if line.startswith("| goal-conditioned DT"))
+        column = 1 + (count == 4)  # the columns go by count: 3, then 4
+        assert row.split("|")[column + 1].strip().startswith(f"{np.mean(share):.1%}")
 
 
 @pytest.mark.parametrize("key", ["dt-ensemble-safe", "dt-zero-shot-level@s1", "dt-finetuned-safe", "bc-safe@s1",

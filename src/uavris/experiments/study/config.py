@@ -24,6 +24,7 @@ TRACK_CHOICES: tuple[str, ...] = get_args(TrackChoice)
 AUTO = "auto"
 ExpertAlgo = Literal["auto", "ddpg", "ppo", "sac", "td3"]
 TRACK_SETS = {"all": TRACKS, "both": ("paper", "strong")}
+MAX_DEVICES = 8  # the learned value is trained on halls of 3-8 devices; the exact planner's cost grows fast
 SIZE_BOUNDS = {"compare_seeds": 100, "compare_steps": 100_000_000, "eval_episodes": 100_000, "trajectories": 100_000,
                "layout_trajectories": 100_000, "train_layouts": 100_000, "unseen_layouts": 10_000, "dt_seeds": 100,
                "mixed_layouts": 100_000}
@@ -51,6 +52,7 @@ class ReproduceConfig(DictConfig):
     dt_seeds: int = PRESET  # deployment track: pre-training seeds of every learned row
     mixed_layouts: int = PRESET  # deployment track: halls of the mixed-quality dataset
     ablation: bool = False  # deployment track: also the ablation's rows (data curve, flat encoder, mixed-quality data)
+    device_counts: tuple[int, ...] = ()  # deployment track: also every row zero-shot in unseen halls of these counts
     system: SystemConfig = dataclasses.field(default_factory=SystemConfig)
 
     def __post_init__(self) -> None:
@@ -71,6 +73,11 @@ class ReproduceConfig(DictConfig):
             if getattr(self, name) < 0:
                 raise UavrisError(f"--{name.replace('_', '-')} must be >= 0, got {getattr(self, name)}")
         object.__setattr__(self, "scaling", tuple(int(n) for n in self.scaling))
+        counts = tuple(self.device_counts)
+        if any(isinstance(k, bool) or not isinstance(k, int) or not 2 <= k <= MAX_DEVICES for k in counts) \
+                or len(set(counts)) != len(counts):
+            raise UavrisError(f"--device-counts {list(counts)}: distinct device counts in [2, {MAX_DEVICES}]")
+        object.__setattr__(self, "device_counts", tuple(sorted(counts)))
         bad = [n for n in self.scaling if not 1 <= n < self.train_layouts]
         if bad:
             raise UavrisError(f"--scaling {list(self.scaling)}: each must be >= 1 and below "
@@ -88,6 +95,8 @@ class ReproduceConfig(DictConfig):
 
     def sites(self, track: Track) -> tuple[list[Site], list[Site]]:
         """The training and unseen sites of ``track``; with the ablation, the unseen ones
-        include as many halls of another generator (zero-shot only)."""
+        include as many halls of another generator, and as many of each of ``device_counts``
+        (both zero-shot only)."""
         other = self.unseen_layouts if self.ablation and track.ablation and track.layouts else 0
-        return sites(track, self.system, self.train_layouts, self.unseen_layouts, self.layout_seed, other)
+        return sites(track, self.system, self.train_layouts, self.unseen_layouts, self.layout_seed, other,
+                     self.device_counts if track.places else ())

@@ -59,12 +59,12 @@ from uavris.experiments.study.tracks import (
     REFERENCE_ROWS,
     Track,
     TrainedModel,
-    is_other_hall,
     places_stage,
     strong_expert_config,
     track_rows,
     trained_models,
     transfer_sources,
+    zero_shot_only,
 )
 from uavris.experiments.study.workers import (
     dataset_job,
@@ -211,7 +211,7 @@ class TrackStages:
                                 (self.t(m.dataset),), (pretrain_cost(cfg),)))
         if self.track.places:
             stages += value_stages(self) + places_finetune_stages(self)
-        for w in (w for w in self.unseen if not is_other_hall(w.name) and self.finetunes_returns):
+        for w in (w for w in self.unseen if not zero_shot_only(w.name) and self.finetunes_returns):
             ft = self.finetune_config("<pretrain>", w)
             stages.append(Stage(self.t(f"finetune-{w.name}"), ft.to_dict(), partial(self._run_finetune, w),
                                 (self.t("pretrain"),),
@@ -294,7 +294,7 @@ class TrackStages:
 
     def finetunes(self, site: str) -> list[str]:
         """The fine-tuning stages of ``site`` (none in a hall of the other generator)."""
-        if is_other_hall(site):
+        if zero_shot_only(site):
             return []
         places = [places_stage(site, m.seed) for m in self.models if m.row == "dt-goal"]
         return [*([f"finetune-{site}"] if self.finetunes_returns else []), *places]

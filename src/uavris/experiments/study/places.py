@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING, Any
 from uavris.experiments.engine.costs import finetune_cost, value_fit_cost, value_labels_cost
 from uavris.experiments.engine.jobs import Job
 from uavris.experiments.engine.stages import Stage
-from uavris.experiments.study.tracks import is_other_hall, places_stage
+from uavris.experiments.study.tracks import places_stage, zero_shot_only
 from uavris.experiments.study.workers import finetune_job, value_fit_job, value_labels_job
 from uavris.experiments.training.finetune import FinetuneConfig
 from uavris.experiments.training.values import ValueFitConfig, ValueLabelsConfig
@@ -80,7 +80,7 @@ def places_config(ts: TrackStages, model: Path | str, value: Path | str, where: 
 def places_finetune_stages(ts: TrackStages) -> list[Stage]:
     """Per unseen hall of the study's generator and goal-conditioned DT, fine-tuning that tries places."""
     stages = []
-    for w in (w for w in ts.unseen if not is_other_hall(w.name)):
+    for w in (w for w in ts.unseen if not zero_shot_only(w.name)):
         for m in (m for m in ts.models if m.row == "dt-goal"):
             cfg = places_config(ts, "<goal>", "<value>", w)
             stages.append(Stage(ts.t(places_stage(w.name, m.seed)), cfg.to_dict(),

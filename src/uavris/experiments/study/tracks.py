@@ -33,6 +33,8 @@ adding a row to the study is an edit of :func:`track_rows`. Not here: the pipeli
 from __future__ import annotations
 
 import dataclasses
+import math
+import re
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Sequence
@@ -91,25 +93,42 @@ TRACK_SPECS: dict[str, Track] = {  # each track's DT and fine-tuning: uavris.pre
 
 
 def sites(track: Track, system: SystemConfig, train_layouts: int, unseen_layouts: int,
-                layout_seed: int = 0, other_layouts: int = 0) -> tuple[list[Site], list[Site]]:
+          layout_seed: int = 0, other_layouts: int = 0, device_counts: Sequence[int] = ()
+          ) -> tuple[list[Site], list[Site]]:
     """The training and the unseen sites of ``track`` on ``system``: the paper's eight
     training and two unseen scenarios, or generated layouts (the devices observed), the unseen
     ones followed by ``other_layouts`` halls of another generator (the ``other`` split of
-    :class:`uavris.layouts.LayoutGenerator`: a result tuned to the study's generator shows)."""
+    :class:`uavris.layouts.LayoutGenerator`: a result tuned to the study's generator shows)
+    and by ``unseen_layouts`` unseen halls of each of ``device_counts`` devices (named
+    ``layout-unseen-J-kK``)."""
     if not track.layouts:
         return [Site(s, system) for s in TRAINING_SCENARIOS], [Site(s, system) for s in UNSEEN_SCENARIOS]
     base = system.replace(observe_devices=True)
-    gen = LayoutGenerator(devices=system.num_users, seed=layout_seed)
 
-    def made(split: str, count: int) -> list[Site]:
+    def made(split: str, count: int, devices: int = system.num_users) -> list[Site]:
+        gen = LayoutGenerator(devices=devices, seed=layout_seed)
         return [Site.of(layout, base) for layout in gen.layouts(split, count, base)]
 
-    return made("train", train_layouts), made("unseen", unseen_layouts) + made("other", other_layouts)
+    counts = [made("unseen", unseen_layouts, k) for k in device_counts if k != system.num_users]
+    return made("train", train_layouts), made("unseen", unseen_layouts) + made("other", other_layouts) + sum(counts, [])
 
 
 def is_other_hall(name: str) -> bool:
-    """A hall of the other generator (evaluated zero-shot only: no fine-tuning there)."""
+    """A hall of the other generator."""
     return name.startswith("layout-other-")
+
+
+def hall_devices(name: str) -> int | None:
+    """The device count a generated hall's name states (``...-kK``), None where it states none
+    (the study's own count)."""
+    found = re.search(r"-k(\d+)$", name)
+    return int(found.group(1)) if found else None
+
+
+def zero_shot_only(name: str) -> bool:
+    """A hall the study evaluates zero-shot only (no fine-tuning there): the other generator's
+    and those of another device count."""
+    return is_other_hall(name) or hall_devices(name) is not None
 
 
 def strong_expert_config(scenario: str, seed: int, preset: str, eval_episodes: int, system: SystemConfig,
@@ -140,6 +159,7 @@ def transfer_sources(track: Track, unseen: Site, train: Sequence[Site]) -> list[
                 for s in nearest_training_scenarios(unseen.scenario)]
     dist = sorted(((d.name, layout_distance(unseen.system.users, d.system.users)) for d in train),
                   key=lambda x: (round(x[1], 9), x[0]))
+    dist = [(name, d) for name, d in dist if math.isfinite(d)]  # no hall of another device count is "nearest"
     return dist[:1] if track.demonstrations else dist
 
 
@@ -178,6 +198,8 @@ def _learned_rows(track: Track, site: Site, sources: list[tuple[str, float]], di
         rows.append(Row("dt-finetuned", "fine-tuned DT", Target.of_model(dirs[f"finetune-{site.name}"] / "model")))
     seeded = len({m.seed for m in models}) > 1
     value = Target.of_model(dirs["value"] / "value", "value") if "value" in dirs else None
+    if hall_devices(site.name) is not None:  # a flat encoder's weights read one device count only
+        models = [m for m in models if dict(m.model).get("state_encoder") != "flat"]
     for m in models:
         goal = {"goal_from": value} if m.row == "dt-goal" else {}
         rows.append(Row(m.row, m.label, Target.of_model(dirs[m.stage] / "model"), seed=m.seed if seeded else None,

@@ -21,7 +21,7 @@ from uavris.config import UNSEEN_SCENARIOS, get_scenario
 from uavris.experiments.display.tables import fraction, interval, markdown_table, num
 from uavris.experiments.engine.jobs import machine
 from uavris.experiments.engine.stages import Pipeline, StageRecord
-from uavris.experiments.study.report.decomposition import decomposition_section, value_section
+from uavris.experiments.study.report.decomposition import counts_section, decomposition_section, value_section
 from uavris.experiments.study.report.deployment import (
     NEAREST,
     ROWS,
@@ -33,7 +33,7 @@ from uavris.experiments.study.report.deployment import (
 )
 from uavris.experiments.study.report.figures import fig3, interactions_figure, trajectory_figure
 from uavris.experiments.study.report.schedule import schedule_figure, stage_table
-from uavris.experiments.study.tracks import Track, is_other_hall
+from uavris.experiments.study.tracks import Track, hall_devices, is_other_hall, zero_shot_only
 from uavris.experiments.training.compare import fig2_table
 from uavris.io import atomic_write_text, read_json
 from uavris.presets import EVAL_SEED
@@ -162,8 +162,12 @@ class _Report:
         if missing:
             self.add(f"Not available for {len(missing)} of {len(unseen)} unseen layouts (their evaluation stage did "
                      f"not finish): {', '.join(missing)}.", "")
-        study = {lay: res for lay, res in results.items() if not is_other_hall(lay)}
+        study = {lay: res for lay, res in results.items() if not zero_shot_only(lay)}
         other = {lay: res for lay, res in results.items() if is_other_hall(lay)}
+        counts: dict[int, dict[str, Any]] = {}
+        for lay, res in results.items():
+            if hall_devices(lay) is not None:
+                counts.setdefault(hall_devices(lay), {})[lay] = res
         if study:
             self._deployment_group(track, study)
         if other:
@@ -171,13 +175,21 @@ class _Report:
                      "The same models and rows, zero-shot, in unseen halls drawn by another generator (devices further "
                      "from the walls and from each other, higher, starts anywhere over the floor: "
                      "`uavris.layouts.OTHER_SPLIT`): a result tuned to the study's generator would show here.", "")
-            self._deployment_group(track, other, "deployment track, another generator's halls")
+            self._deployment_group(track, other, "deployment track, another generator's halls", "-other")
+        if counts:
+            self.add(*counts_section({self.rc.system.num_users: study, **counts}))
+            for k, group in sorted(counts.items()):
+                self.add("", f"### Halls of {k} devices", "",
+                         f"The same models and rows, zero-shot, in unseen halls of {k} devices (the DTs were "
+                         f"pre-trained on halls of {self.rc.system.num_users}; the learned value on halls of "
+                         "several counts).", "")
+                self._deployment_group(track, group, f"deployment track, {k} devices", f"-k{k}")
 
     def _deployment_group(self, track: Track, results: dict[str, dict[str, Any]],
-                          where: str = "deployment track") -> None:
-        """One group of unseen halls: its tables, figures, decomposition and claims."""
+                          where: str = "deployment track", suffix: str = "") -> None:
+        """One group of unseen halls (its figures' names end in ``suffix``): its tables,
+        figures, decomposition and claims."""
         scores = layout_scores(results)
-        suffix = "" if where == "deployment track" else "-other"
         first = next(iter(results.values()))
         curve_keys = [k for k, v in first.items() if v["variant"].startswith("dt-zero-shot-n") and not v["seed"]]
         # a row the report has no name for goes by its own label (seed 0's, where it has seeds)

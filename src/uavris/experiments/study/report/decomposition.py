@@ -3,7 +3,8 @@
 Lives here: :func:`decomposition_section`, the deployment report's table of every row's gap to
 the oracle split into place and attitude, with the share of its slots in which a device is
 behind the RIS plane, over halls and per hall, and the claim that no learned row blocks a
-device; :func:`value_section`, how well the learned value knows the place (its accuracy).
+device; :func:`value_section`, how well the learned value knows the place (its accuracy);
+:func:`counts_section`, the rows per device count.
 Not here: the numbers, which the evaluation stages record
 (:func:`uavris.experiments.study.workers.evaluate_rows`), and the rest of the deployment
 section (:mod:`.deployment`).
@@ -28,9 +29,10 @@ from typing import Any
 
 import numpy as np
 
-from uavris.agents.references import ORACLE
-from uavris.experiments.display.tables import markdown_table, pct, signed
+from uavris.agents.references import HOVER_OPTIMIZER, ORACLE, ZERO_ACTION
+from uavris.experiments.display.tables import markdown_table, pct, signed, with_ci
 from uavris.experiments.study.report.deployment import ROWS, layout_scores, new_rows
+from uavris.stats import over_units
 
 BLOCKING_LIMIT = 0.01  # no learned row blocks a device in more than this share of its slots (issue 29)
 LEARNED = ("dt-zero-shot", "dt-ensemble", "dt-finetuned", "bc", "dt-zero-shot-safe", "dt-ensemble-safe",
@@ -103,3 +105,35 @@ def value_section(results: dict[str, dict[str, Any]], labels: dict[str, str]) ->
             "argmax as a fraction of R at the oracle's target (both level, on the same fresh draws).", "",
             *markdown_table(("learned value", "rank correlation, mean", "worst hall",
                              "R at its argmax / oracle's, mean", "worst hall"), rows, "lrrrr")]
+
+
+COUNT_ROWS = ("dt-goal-safe", "plan-learned", "plan-semi", "dt-zero-shot-safe", "bc-safe", HOVER_OPTIMIZER, ZERO_ACTION)
+
+
+def counts_section(groups: dict[int, dict[str, dict[str, Any]]]) -> list[str]:
+    """Any number of devices (issue 36): per device count (``groups``: ``{K: {layout: results}}``),
+    each row's fraction of the oracle, mean [95% CI over halls], and the place row minus
+    hovering with optimised phases (paired, bps/Hz)."""
+    scores = {k: layout_scores(g) for k, g in groups.items() if g}
+    if len(scores) < 2:
+        return []
+    keys = [r for r in COUNT_ROWS if all(r in s[lay] for s in scores.values() for lay in s)]
+    labels = dict(ROWS)
+    first = next(iter(groups[min(scores)].values()))
+    labels.update({k: v["label"] for k, v in first.items() if k == v["variant"] and k not in labels})
+
+    def frac(k: int, r: str) -> str:
+        return with_ci(over_units([scores[k][lay][r] / scores[k][lay][ORACLE] for lay in scores[k]]), pct)
+
+    rows = [(labels.get(r, r), *(frac(k, r) for k in sorted(scores))) for r in keys]
+    if "dt-goal-safe" in keys:
+        rows.append(("place row minus hovering with optimised phases (bps/Hz)",
+                     *(with_ci(over_units([scores[k][lay]["dt-goal-safe"] - scores[k][lay][HOVER_OPTIMIZER]
+                                           for lay in scores[k]]), signed) for k in sorted(scores))))
+    rows.append(("oracle (bps/Hz)", *(f"{np.mean([scores[k][lay][ORACLE] for lay in scores[k]]):.2f}"
+                                       for k in sorted(scores))))
+    return ["", "### Any number of devices", "",
+            "Fraction of the oracle, mean [95% CI over halls], in unseen halls of each device count (halls per "
+            "count: " + ", ".join(f"{k}: {len(scores[k])}" for k in sorted(scores)) + ").", "",
+            *markdown_table(("policy", *(f"{k} devices" for k in sorted(scores))), rows,
+                            "l" + "r" * len(scores))]
