@@ -5,9 +5,10 @@ level "with fewer interactions". Here, in the deployment track of a finished stu
 ``uavris reproduce --track deployment``), in its first ``--halls`` unseen halls (default 4):
 
 - fine-tuning: the goal-conditioned DT fine-tuned by trying places (the study's
-  ``deploy-finetune-places-LAYOUT`` stages, every pre-training seed): its level (the mean over
-  seeds of the study's score of ``dt-goal-finetuned-safe``, 32 episodes) and the interactions
-  it used (the mean over seeds of its ``env_interactions``);
+  ``deploy-finetune-places-LAYOUT`` stages, every pre-training seed, ``--ablation``): its level
+  (the mean over seeds of the study's score of ``dt-goal-finetuned-safe``, 32 episodes; the
+  zero-shot ``dt-goal-safe`` beside it) and the interactions it used (the mean over seeds of
+  its ``env_interactions``);
 - from scratch: hybrid PPO on the motion entries with the optimiser's phases (the strong
   track's learner, no imitation, the quick hyperparameters), trained in the hall from its
   start under the attitude safety layer, evaluated every ``--eval-every`` environment steps
@@ -20,7 +21,7 @@ Each PPO run is one process pinned to one core. The pre-training's own interacti
 oracle's demonstrations in the training halls) are printed beside it: with them counted,
 fine-tuning's interactions are those plus its own.
 
-    .venv/bin/python benchmarks/from_scratch.py --study runs/quick
+    .venv/bin/python benchmarks/from_scratch.py --study runs/ablation   # a study made with --ablation
 """
 
 from __future__ import annotations
@@ -75,12 +76,13 @@ def main(argv: list[str] | None = None) -> int:
           f"evaluated every {args.eval_every:,} on {rc.eval_episodes} episodes\n"
           f"- pre-training's demonstrations: {demos['slots']:,} environment steps "
           f"({demos['episodes']:,} episodes in {demos['halls']} halls)\n")
-    rows = [("hall", "fine-tuned level", "fine-tuning's interactions", "expert's best", "expert reaches it after",
-             "fine-tuning / expert", "expert's training (s)")]
+    rows = [("hall", "zero-shot level", "fine-tuned level", "fine-tuning's interactions", "expert's best",
+             "expert reaches the fine-tuned level after", "fine-tuning / expert", "expert's training (s)")]
     for where in unseen[:args.halls]:
         res = stage(args.study, f"deploy-evaluate-{where.name}")["result"]
         seeds = [k for k in res if k.startswith("dt-goal-finetuned-safe")]
         level = float(np.mean([res[k]["mean"] for k in seeds]))
+        zero_shot = float(np.mean([res[k]["mean"] for k in res if k.startswith("dt-goal-safe")]))
         used = []
         for k in seeds:
             suffix = k.split("@s")[1] if "@s" in k else None
@@ -97,7 +99,8 @@ def main(argv: list[str] | None = None) -> int:
                 evals = [(int(r["env_steps"]), float(r["mean"])) for r in csv.DictReader(f)]
         reached = next((steps for steps, mean in evals if mean >= level), None)
         mean_used = float(np.mean(used))
-        rows.append((where.name, f"{level:.2f}", f"{mean_used:,.0f}", f"{max(m for _, m in evals):.2f}",
+        rows.append((where.name, f"{zero_shot:.2f}", f"{level:.2f}", f"{mean_used:,.0f}",
+                     f"{max(m for _, m in evals):.2f}",
                      f"{reached:,}" if reached else f"not within {args.steps:,}",
                      f"{mean_used / reached:.1%}" if reached else f"< {mean_used / args.steps:.1%}", f"{wall:.0f}"))
         print(table(rows), flush=True)

@@ -45,7 +45,8 @@ BAD_FLOAT = ["nan", "inf", "-inf", "abc"]
 # Float fields for which a negative value is meaningful (so only nan/inf/text are wrong).
 SIGNED = {"noise_dbm", "target_return"}
 # Integers for which 0 is a valid count or seed; every other integer flag must be >= 1.
-ZERO_OK = {"seed", "eval_seed", "collect_seed", "learning_starts", "warmup_steps", "total_steps", "layout_seed"}
+ZERO_OK = {"seed", "eval_seed", "collect_seed", "learning_starts", "warmup_steps", "total_steps", "layout_seed",
+           "top_k"}  # top_k 0: the learned value alone
 
 
 def _numeric_flags(cls: type, prefix: str = "") -> list[tuple[str, str, type]]:

@@ -305,11 +305,12 @@ def reproduce_command(args: list[str]) -> None:
     Deployment track (the planning oracle's demonstrations in generated halls, docs/study.md
     section 21): deploy-dataset, deploy-values (the learned value's labels) and deploy-value (its
     fit), deploy-pretrain, deploy-bc (behaviour cloning) and deploy-goal (the goal-conditioned
-    DT) for each pre-training seed, deploy-finetune-places-LAYOUT (fine-tuning that tries places,
-    per seed) and deploy-evaluate-LAYOUT per unseen layout;
-    with --ablation also the return-conditioned DT's fine-tuning (deploy-finetune-LAYOUT), the
-    data curve (deploy-pretrain-nN), the flat encoder (deploy-flat) and the mixed-quality
-    dataset (deploy-dataset-mixed, deploy-mixed-dt, deploy-mixed-bc).
+    DT) for each pre-training seed, and deploy-evaluate-LAYOUT per unseen layout; with
+    --ablation also fine-tuning that tries places (deploy-finetune-places-LAYOUT, per seed), the
+    return-conditioned DT's fine-tuning (deploy-finetune-LAYOUT), the data curve
+    (deploy-pretrain-nN), the flat encoder (deploy-flat) and the mixed-quality dataset
+    (deploy-dataset-mixed, deploy-mixed-dt, deploy-mixed-bc); with --device-counts 3 6 8 every
+    row zero-shot in unseen halls of those counts too (deploy-evaluate-LAYOUT-kK, docs/places.md).
     Each stage is stored under OUT/stages/NAME-KEY (KEY: a hash of its configuration and
     inputs); independent stages run concurrently.
     Writes OUT/report.md and OUT/figures/.

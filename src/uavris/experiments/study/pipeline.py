@@ -146,6 +146,10 @@ class TrackStages:
                        *(["value"] if track.places else [])]
         # the return-conditioned DT's fine-tuning: the paper's; where the track tries places, the ablation's
         self.finetunes_returns = not track.places or rc.ablation
+        # fine-tuning that tries places: the ablation's too (quick run of 2026-11-26, docs/places.md: it ended
+        # below the zero-shot goal-conditioned DT it started from, -0.29 [-0.44, -0.14] bps/Hz over 16 halls,
+        # for 48 fine-tuning runs, about 14 core-minutes)
+        self.tries_places = track.places and rc.ablation
 
     # ------------------------------------------------------------------ experts
     def experts(self) -> list[Stage]:
@@ -210,7 +214,7 @@ class TrackStages:
             stages.append(Stage(self.t(m.stage), cfg.to_dict(), partial(self._run_pretrain, m),
                                 (self.t(m.dataset),), (pretrain_cost(cfg),)))
         if self.track.places:
-            stages += value_stages(self) + places_finetune_stages(self)
+            stages += value_stages(self) + (places_finetune_stages(self) if self.tries_places else [])
         for w in (w for w in self.unseen if not zero_shot_only(w.name) and self.finetunes_returns):
             ft = self.finetune_config("<pretrain>", w)
             stages.append(Stage(self.t(f"finetune-{w.name}"), ft.to_dict(), partial(self._run_finetune, w),
@@ -296,7 +300,7 @@ class TrackStages:
         """The fine-tuning stages of ``site`` (none in a hall of the other generator)."""
         if zero_shot_only(site):
             return []
-        places = [places_stage(site, m.seed) for m in self.models if m.row == "dt-goal"]
+        places = [places_stage(site, m.seed) for m in self.models if m.row == "dt-goal" and self.tries_places]
         return [*([f"finetune-{site}"] if self.finetunes_returns else []), *places]
 
     def _evaluate_stage(self, where: Site) -> Stage:
