@@ -382,3 +382,21 @@ def test_resume_uses_the_runs_own_configuration(tmp_path: Path, capsys: pytest.C
     assert json.loads((run / "done.json").read_text())["final_eval"] == json.loads(done)["final_eval"]
     line = _check_one_line(capsys, main(["train", "--out", str(run), "--resume", "--algo", "ddpg"]), "differs")
     assert "ddpg" in line or "config" in line
+
+
+@pytest.mark.parametrize("cmd", sorted(COMMANDS))
+def test_ctrl_c_names_only_a_flag_the_command_has(cmd, monkeypatch, capsys):
+    """Ctrl-C is one line, exit 130; it says "--resume" only for a command whose --help offers it."""
+    import uavris.cli as cli
+
+    def interrupted(args: list[str]) -> None:
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(cli, "command", lambda name: interrupted)
+    assert main([cmd]) == 130
+    line = capsys.readouterr().err.strip()
+    assert "\n" not in line and line.startswith("uavris: interrupted")
+    monkeypatch.undo()
+    assert main([cmd, "--help"]) == 0
+    offers = "--resume" in capsys.readouterr().out
+    assert ("--resume" in line) == offers, (cmd, line)

@@ -31,7 +31,8 @@ def test_parameters_and_values_parse_or_are_one_line():
     for name, spec, what in (("system.wingspan", "1,2", "not a numeric system parameter"),
                              ("system.nx", "1:0:1", "start:stop:step"), ("system.nx", "2.5,4", "whole numbers"),
                              ("system.rician-factor", "0:1000:0.001", "between 1 and"),
-                             ("system.devices", "1,4", "whole numbers >= 2")):
+                             ("system.devices", "1,4", "whole numbers >= 2"),
+                             ("system.rician-factor", "nan,2", "every value must be a finite number, got nan")):
         with pytest.raises(ConfigError, match=what):
             parse_axis(name, spec)
 

@@ -81,6 +81,20 @@ def _run(argv: list[str]) -> None:
     command(name)(rest)
 
 
+RESUMABLE = ("train", "pretrain-dt", "finetune-dt")  # the commands with --resume (cli.options.RunOptions)
+RERUN_REUSES = ("reproduce", "sweep")  # the commands whose rerun reuses what finished (stages, cells)
+
+
+def _after_interrupt(argv: list[str] | None) -> str:
+    """What to do after Ctrl-C, for the command interrupted (no command offers a flag it lacks)."""
+    name = (list(sys.argv[1:] if argv is None else argv) or [""])[0]
+    if name in RESUMABLE:
+        return "; rerun with --resume to continue from the last checkpoint"
+    if name in RERUN_REUSES:
+        return "; rerun the same command to continue (what finished is reused)"
+    return ""
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run ``uavris`` on ``argv`` (default: the process's); returns the exit code."""
     try:
@@ -89,7 +103,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{PROG}: error: {' '.join(str(e).split())}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except KeyboardInterrupt:
-        print(f"{PROG}: interrupted; rerun with --resume to continue from the last checkpoint", file=sys.stderr)
+        print(f"{PROG}: interrupted{_after_interrupt(argv)}", file=sys.stderr)
         return 130
     except SystemExit as e:  # --help
         return int(e.code or 0) if not isinstance(e.code, str) else EXIT_BAD_INPUT

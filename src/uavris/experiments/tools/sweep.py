@@ -104,8 +104,11 @@ def parse_axis(name: str, spec: str) -> Axis:
     except ValueError:
         raise ConfigError(f"--param {name} {spec}: values are start:stop:step (step > 0, stop >= start) or "
                           "v1,v2,...") from None
-    if not values or len(values) > MAX_CELLS or not all(math.isfinite(v) for v in values):
-        raise ConfigError(f"--param {name} {spec}: between 1 and {MAX_CELLS} finite values, got {len(values)}")
+    bad = [v for v in values if not math.isfinite(v)]
+    if bad:
+        raise ConfigError(f"--param {name} {spec}: every value must be a finite number, got {bad[0]}")
+    if not values or len(values) > MAX_CELLS:
+        raise ConfigError(f"--param {name} {spec}: between 1 and {MAX_CELLS} values, got {len(values)}")
     if key in ("devices", "ris_size", "nx", "ny") and not all(v == int(v) and v >= (2 if key == "devices" else 1)
                                                             for v in values):
         raise ConfigError(f"--param {name} {spec}: whole numbers >= {2 if key == 'devices' else 1}")
