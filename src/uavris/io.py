@@ -134,3 +134,26 @@ def read_rows(path: str | Path, header: Sequence[str], limit: int, int_columns: 
 
 def read_csv(path: str | Path) -> list[dict[str, str]]:
     return _read(path, lambda f: list(csv.DictReader(f)), (csv.Error,), "CSV", newline="")
+
+
+def read_checkpoint_meta(directory: str | Path, meta_file: str, kind: str, version: int, what: str,
+                         described: str) -> dict[str, Any]:
+    """A checkpoint directory's JSON metadata (``meta_file``), checked for its ``kind`` and
+    ``format_version``; one :class:`~uavris.errors.CheckpointError` line when it is missing
+    (``directory`` is not ``what``), corrupt, of another kind (it does not describe
+    ``described``) or of another version."""
+    from uavris.errors import CheckpointError
+
+    path = Path(directory) / meta_file
+    if not path.is_file():
+        raise CheckpointError(f"{directory} is not {what} (no {meta_file})")
+    try:
+        meta = json.loads(path.read_text(encoding="utf-8"))
+    except (json.JSONDecodeError, UnicodeDecodeError) as e:
+        raise CheckpointError(f"{path} is corrupt ({e})") from None
+    if not isinstance(meta, dict) or meta.get("kind") != kind:
+        raise CheckpointError(f"{path} does not describe {described}")
+    if meta.get("format_version") != version:
+        raise CheckpointError(f"{path} has format version {meta.get('format_version')!r}; "
+                              f"this uavris reads version {version}")
+    return meta

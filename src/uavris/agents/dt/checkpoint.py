@@ -12,7 +12,6 @@ loader of it (:func:`uavris.agents.dt.policy.load_dt_policy`), writing run direc
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import Any
 
@@ -24,7 +23,7 @@ from uavris.agents.dt.model import DecisionTransformer
 from uavris.config import SystemConfig
 from uavris.env.simulator import stored_system
 from uavris.errors import CheckpointError, ConfigError, UavrisError
-from uavris.io import atomic_write_bytes, write_json
+from uavris.io import atomic_write_bytes, read_checkpoint_meta, write_json
 
 PRETRAIN_KIND = "uavris-dt-pretrain"  # the "kind" of a DT run directory's config.yaml
 FINETUNE_KIND = "uavris-dt-finetune"
@@ -52,19 +51,8 @@ def save_dt(model: DecisionTransformer, directory: str | Path, metadata: dict[st
 
 def read_dt_metadata(directory: str | Path) -> dict[str, Any]:
     """The ``model.json`` of a DT checkpoint directory, checked for kind and version."""
-    path = Path(directory) / META_FILE
-    if not path.exists():
-        raise CheckpointError(f"{directory} is not a DT checkpoint (no {META_FILE})")
-    try:
-        meta = json.loads(path.read_text(encoding="utf-8"))
-    except (json.JSONDecodeError, UnicodeDecodeError) as e:
-        raise CheckpointError(f"{path} is corrupt ({e})") from None
-    if not isinstance(meta, dict) or meta.get("kind") != MODEL_KIND:
-        raise CheckpointError(f"{path} does not describe a uavris Decision Transformer")
-    if meta.get("format_version") != MODEL_FORMAT_VERSION:
-        raise CheckpointError(f"{path} has format version {meta.get('format_version')!r}; "
-                              f"this uavris reads version {MODEL_FORMAT_VERSION}")
-    return meta
+    return read_checkpoint_meta(directory, META_FILE, MODEL_KIND, MODEL_FORMAT_VERSION, "a DT checkpoint",
+                                "a uavris Decision Transformer")
 
 
 def load_dt(directory: str | Path, device: str = "cpu") -> tuple[DecisionTransformer, dict[str, Any]]:

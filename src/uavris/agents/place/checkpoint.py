@@ -8,7 +8,6 @@ labels it was fitted to), written atomically, the JSON last. Not here: the netwo
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import Any
 
@@ -16,7 +15,7 @@ import torch
 
 from uavris.agents.place.value import PoseValue, ValueConfig
 from uavris.errors import CheckpointError, ConfigError
-from uavris.io import atomic_write_bytes, write_json
+from uavris.io import atomic_write_bytes, read_checkpoint_meta, write_json
 
 VALUE_KIND = "uavris-pose-value"
 VALUE_FORMAT_VERSION = 1
@@ -46,18 +45,9 @@ def load_value(directory: str | Path) -> tuple[PoseValue, dict[str, Any]]:
     from safetensors.torch import load
 
     directory = Path(directory)
+    meta = read_checkpoint_meta(directory, META_FILE, VALUE_KIND, VALUE_FORMAT_VERSION, "a learned value",
+                                "a uavris learned value")
     path = directory / META_FILE
-    if not path.is_file():
-        raise CheckpointError(f"{directory} is not a learned value (no {META_FILE})")
-    try:
-        meta = json.loads(path.read_text(encoding="utf-8"))
-    except (json.JSONDecodeError, UnicodeDecodeError) as e:
-        raise CheckpointError(f"{path} is corrupt ({e})") from None
-    if not isinstance(meta, dict) or meta.get("kind") != VALUE_KIND:
-        raise CheckpointError(f"{path} does not describe a uavris learned value")
-    if meta.get("format_version") != VALUE_FORMAT_VERSION:
-        raise CheckpointError(f"{path} has format version {meta.get('format_version')!r}; this uavris reads "
-                              f"version {VALUE_FORMAT_VERSION}")
     try:
         model = PoseValue(ValueConfig.from_dict(meta.get("config", {})))
     except ConfigError as e:
