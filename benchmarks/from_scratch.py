@@ -56,6 +56,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--halls", type=int, default=4, help="unseen halls (default: 4)")
     parser.add_argument("--steps", type=int, default=200_000, help="the expert's budget of environment steps")
     parser.add_argument("--eval-every", type=int, default=10_000, help="environment steps between evaluations")
+    parser.add_argument("--json", type=Path, help="also write the per-hall numbers here (uavris claims --from-scratch)")
     args = parser.parse_args(argv)
     pinning = pin_to_one_core()
     import torch
@@ -78,6 +79,7 @@ def main(argv: list[str] | None = None) -> int:
           f"({demos['episodes']:,} episodes in {demos['halls']} halls)\n")
     rows = [("hall", "zero-shot level", "fine-tuned level", "fine-tuning's interactions", "expert's best",
              "expert reaches the fine-tuned level after", "fine-tuning / expert", "expert's training (s)")]
+    measured = []
     for where in unseen[:args.halls]:
         res = stage(args.study, f"deploy-evaluate-{where.name}")["result"]
         seeds = [k for k in res if k.startswith("dt-goal-finetuned-safe")]
@@ -104,6 +106,14 @@ def main(argv: list[str] | None = None) -> int:
                      f"{reached:,}" if reached else f"not within {args.steps:,}",
                      f"{mean_used / reached:.1%}" if reached else f"< {mean_used / args.steps:.1%}", f"{wall:.0f}"))
         print(table(rows), flush=True)
+        measured.append({"hall": where.name, "level": level, "oracle": float(res["oracle-safe"]["mean"]),
+                         "finetune_interactions": mean_used,
+                         "expert_to_level": float(reached or args.steps), "reached": reached is not None,
+                         "expert_steps": args.steps})
+        if args.json:
+            from uavris.io import write_json
+
+            write_json(args.json, {"study": str(args.study), "cpu": cpu_model(), "halls": measured})
     return 0
 
 

@@ -16,8 +16,10 @@ from pathlib import Path
 import pytest
 
 from uavris.cli import COMMANDS, main
+from uavris.cli import claims as cli_claims
 from uavris.cli import evaluation as cli_evaluation
 from uavris.cli import training as cli_training
+from uavris.cli.claims import ClaimsArgs
 from uavris.cli.evaluation import BenchmarkArgs, CollectArgs, DemoArgs, EvaluateArgs, PlanArgs, PlotArgs, SweepArgs
 from uavris.cli.training import CompareArgs, FinetuneArgs, PretrainArgs, ReproduceArgs, TrainArgs
 
@@ -39,11 +41,11 @@ BASE = {
 }
 ARGS = {"train": TrainArgs, "evaluate": EvaluateArgs, "compare-algorithms": CompareArgs, "collect": CollectArgs,
         "pretrain-dt": PretrainArgs, "finetune-dt": FinetuneArgs, "reproduce": ReproduceArgs, "demo": DemoArgs,
-        "plan": PlanArgs, "benchmark": BenchmarkArgs, "plot": PlotArgs, "sweep": SweepArgs}
+        "plan": PlanArgs, "benchmark": BenchmarkArgs, "plot": PlotArgs, "sweep": SweepArgs, "claims": ClaimsArgs}
 BAD_INT = ["-1", "abc", "1.5"]
 BAD_FLOAT = ["nan", "inf", "-inf", "abc"]
 # Float fields for which a negative value is meaningful (so only nan/inf/text are wrong).
-SIGNED = {"noise_dbm", "target_return"}
+SIGNED = {"noise_dbm", "target_return", "reference_gain_db"}
 # Integers for which 0 is a valid count or seed; every other integer flag must be >= 1.
 ZERO_OK = {"seed", "eval_seed", "collect_seed", "learning_starts", "warmup_steps", "total_steps", "layout_seed",
            "top_k"}  # top_k 0: the learned value alone
@@ -120,7 +122,7 @@ def _check_one_line(capsys: pytest.CaptureFixture[str], code: int, what: str) ->
 def _args_class(command: str) -> type:
     """The dataclass a command parses, found from the CLI's own command table (its module, and
     the class the command's function parses: ``<first word>Args`` by the CLI's convention)."""
-    module = {"training": cli_training, "evaluation": cli_evaluation}[COMMANDS[command][0]]
+    module = {"training": cli_training, "evaluation": cli_evaluation, "claims": cli_claims}[COMMANDS[command][0]]
     return getattr(module, command.split("-")[0].capitalize() + "Args")
 
 
@@ -316,7 +318,7 @@ def test_evaluate_writes_what_it_prints(tmp_path: Path, capsys: pytest.CaptureFi
     assert main(["evaluate", "zero-action", "--scenario", "fig2", "--episodes", "3", "--out", str(tmp_path),
                  "--no-progress"]) == 0
     printed = capsys.readouterr().out
-    (path,) = tmp_path.glob("fig2-seed1000000-n3-*.json")  # -KEY: the system evaluated
+    (path,) = tmp_path.glob("zero-action-fig2-seed1000000-n3-*.json")  # -KEY: the system evaluated
     summary = json.loads(path.read_text())
     rows = read_csv(path.with_suffix(".csv"))
     assert len(rows) == 3

@@ -173,7 +173,7 @@ def test_system_users_on_the_command_line_give_a_hall(tmp_path, capsys):
     users = ["--system.users", "6", "8", "1", "12", "8", "1", "34", "36", "0.5", "34", "20", "0.5"]
     assert cli_main(["evaluate", "hover-optimizer", *users, "--scenario", "fig2", "--episodes", "2", "--out",
                      str(tmp_path / "a"), "--no-progress"]) == 0
-    (path,) = (tmp_path / "a").glob("fig2-seed1000000-n2-*.json")
+    (path,) = (tmp_path / "a").glob("hover-optimizer-fig2-seed1000000-n2-*.json")
     got = json.loads(path.read_text())
     hall = SystemConfig(users=((6, 8, 1), (12, 8, 1), (34, 36, 0.5), (34, 20, 0.5)))
     assert got["system"]["users"] == [list(u) for u in hall.users]

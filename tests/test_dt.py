@@ -364,7 +364,7 @@ def test_cli_collect_pretrain_evaluate_finetune(tmp_path, capsys):
     assert cli_main(["evaluate", str(ft), "--episodes", "2"]) == 0  # its own scenario by default
     out = capsys.readouterr().out
     assert "pre-trained" in out and "fine-tuned" in out and "environment interactions" in out
-    (stem,) = (p.with_suffix("") for p in (ft / "eval").glob("unseen2-seed1000000-n2-*.json"))
+    (stem,) = (p.with_suffix("") for p in (ft / "eval").glob(f"{ft.name}-unseen2-seed1000000-n2-*.json"))
     summary = json.loads(stem.with_suffix(".json").read_text())
     with open(stem.with_suffix(".csv"), newline="") as f:
         episodes = list(csv.DictReader(f))

@@ -137,7 +137,7 @@ def test_evaluations_of_two_systems_into_one_folder_keep_both(tmp_path: Path,
         assert str(new) in printed
     assert len(list(out.glob("*.csv"))) == 2
     for power, path in names.items():
-        assert re.fullmatch(r"fig2-seed1000000-n2-[0-9a-f]{8}\.json", path.name), path.name
+        assert re.fullmatch(r"zero-action-fig2-seed1000000-n2-[0-9a-f]{8}\.json", path.name), path.name
         summary = json.loads(path.read_text())
         system = SystemConfig(tx_power_w=float(power))
         assert summary["system"]["tx_power_w"] == float(power)

@@ -39,7 +39,7 @@ def test_references_evaluate_from_the_cli_as_from_python(name, tmp_path, capsys)
     for target in (name, f"baseline:{name}"):
         out = tmp_path / target.replace(":", "_")
         assert cli_main(["evaluate", target, "--scenario", "unseen2", "--episodes", "2", "--out", str(out)]) == 0
-        (csv_path,) = out.glob("unseen2-seed1000000-n2-*.csv")
+        (csv_path,) = out.glob(f"{name}-unseen2-seed1000000-n2-*.csv")
         rows = csv_path.read_text().splitlines()[1:]
         np.testing.assert_array_equal([float(r.split(",")[1]) for r in rows], expected)
     assert "average sum rate" in capsys.readouterr().out
@@ -232,7 +232,7 @@ def test_strong_dt_rollout_in_finetuning_equals_uavris_evaluate(motion_dataset, 
     zero_shot = json.loads((run / "done.json").read_text())["zero_shot_eval"]["mean"]
     assert cli_main(["evaluate", str(model_dir), "--scenario", "unseen1", "--episodes", "3",
                      "--out", str(tmp_path / "ev")]) == 0
-    (path,) = (tmp_path / "ev").glob("unseen1-seed1000000-n3-*.json")
+    (path,) = (tmp_path / "ev").glob(f"{model_dir.name}-unseen1-seed1000000-n3-*.json")
     summary = json.loads(path.read_text())
     assert summary["mean"] == pytest.approx(zero_shot, abs=1e-9)
     capsys.readouterr()

@@ -23,7 +23,7 @@ from dataclasses import dataclass, field
 from typing import Any, Literal, Mapping, Sequence, TypeVar, get_args
 
 from uavris.errors import ConfigError
-from uavris.io import to_plain
+from uavris.io import OMIT_DEFAULT, to_plain
 
 C = TypeVar("C", bound="DictConfig")
 
@@ -195,6 +195,8 @@ class SystemConfig(DictConfig):
     pathloss_exponent: float = 2.4  # path-loss exponent alpha
     tx_power_w: float = 1.0  # transmit power P of each device, W
     noise_dbm: float = -80.0  # noise power sigma^2 at each receiver, dBm
+    reference_gain_db: float = dataclasses.field(  # path gain of each hop at 1 m, dB
+        default=0.0, metadata={OMIT_DEFAULT: True})  # (0: none, the paper's; -40: free space at 2.4 GHz)
     slot_s: float = 0.5  # slot length Delta t, s
     horizon: int = 100  # slots per episode, T
     v_max: float = 5.0  # the UAV's largest speed, m/s
@@ -238,6 +240,8 @@ class SystemConfig(DictConfig):
         _check(_finite(self.rician_factor) and self.rician_factor >= 0, o, "rician_factor",
                "a finite number >= 0", self.rician_factor)
         _check(_finite(self.noise_dbm), o, "noise_dbm", "a finite number (dBm)", self.noise_dbm)
+        _check(_finite(self.reference_gain_db) and -200 <= self.reference_gain_db <= 0, o, "reference_gain_db",
+               "a finite gain in [-200, 0] dB", self.reference_gain_db)
         _check(_finite(self.attitude_step_deg) and 0 <= self.attitude_step_deg <= 180, o,
                "attitude_step_deg", "in [0, 180]", self.attitude_step_deg)
         _check(_finite(self.safety_distance) and self.safety_distance >= 0, o, "safety_distance",
@@ -289,7 +293,12 @@ class SystemConfig(DictConfig):
 
     @property
     def noise_w(self) -> float:
-        return 10.0 ** (self.noise_dbm / 10.0) / 1000.0
+        """The noise power every rate sees, W: sigma^2 over the two hops' reference gain beta0^2.
+        The channels keep the paper's h = d^(-alpha/2) g (eq. 1); a reference path gain beta0 on
+        each hop scales every cascaded gain by beta0^2, and SINR = P beta0^2 S / (P beta0^2 I +
+        sigma^2) = P S / (P I + sigma^2 / beta0^2): the rates are exactly those of this noise,
+        and the observed channels keep their scale (docs/model.md, "The regime")."""
+        return 10.0 ** ((self.noise_dbm - 2.0 * self.reference_gain_db) / 10.0) / 1000.0
 
     @property
     def attitude_step_rad(self) -> float:

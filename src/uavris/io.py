@@ -56,10 +56,16 @@ def atomic_write_text(path: str | Path, text: str) -> None:
     atomic_write_bytes(path, text.encode("utf-8"))
 
 
+OMIT_DEFAULT = "omit_default"  # dataclass field metadata: left out of to_plain at its default
+
+
 def to_plain(obj: Any) -> Any:
     """Dataclasses, tuples and numpy scalars to plain YAML/JSON-able values."""
     if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
-        return {f.name: to_plain(getattr(obj, f.name)) for f in dataclasses.fields(obj)}
+        # A field added after a release is written only when set (metadata OMIT_DEFAULT), so the
+        # stage keys hashed from a config (uavris.experiments.engine.stages) stay those of earlier runs.
+        return {f.name: to_plain(getattr(obj, f.name)) for f in dataclasses.fields(obj)
+                if not (f.metadata.get(OMIT_DEFAULT) and getattr(obj, f.name) == f.default)}
     if isinstance(obj, dict):
         return {str(k): to_plain(v) for k, v in obj.items()}
     if isinstance(obj, (list, tuple)):

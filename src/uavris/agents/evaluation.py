@@ -18,7 +18,7 @@ from numpy.typing import NDArray
 from uavris import stats
 from uavris.agents.policy import fit_policy
 from uavris.config import Scenario, SystemConfig
-from uavris.env.rollout import SlotHook, rollout
+from uavris.env.rollout import SlotHook, StepHook, rollout
 from uavris.errors import ConfigError
 
 
@@ -61,17 +61,19 @@ def check_episodes(episodes: int, seed: int, prefix: str = "") -> None:
 
 def evaluate(policy: Any, config: SystemConfig, scenario: str | Scenario, episodes: int, seed: int,
              batch_size: int = 256, phase_control: str | None = None,
-             on_slot: SlotHook | None = None) -> EpisodeResults:
+             on_slot: SlotHook | None = None, on_step: StepHook | None = None) -> EpisodeResults:
     """Run ``episodes`` episodes (seeds ``seed .. seed + episodes - 1``) in batches of ``batch_size``.
 
     ``phase_control="optimizer"`` executes the policy's motion with the optimiser's phases
     (default: the policy's own ``phase_control``); ``on_slot`` is passed to
-    :func:`~uavris.env.rollout.rollout` (progress bars use it).
+    :func:`~uavris.env.rollout.rollout` (progress bars use it), and ``on_step`` (a slot's
+    reward: :class:`uavris.experiments.tools.trajectory.SlotLog`). With hooks, keep
+    ``episodes <= batch_size``: the rows of a batch are its episodes.
     """
     check_episodes(episodes, seed)
     policy = fit_policy(policy, config)
     parts = [rollout(policy, config, scenario, seed + start + np.arange(min(batch_size, episodes - start)),
-                     phase_control=phase_control, on_slot=on_slot)
+                     phase_control=phase_control, on_slot=on_slot, on_step=on_step)
              for start in range(0, episodes, batch_size)]
     returns = np.concatenate([p.returns for p in parts])
     length = np.concatenate([p.lengths for p in parts])

@@ -9,6 +9,7 @@ Commands:
   pretrain-dt         pre-train the Decision Transformer offline (Algorithm 1, stage 1)
   finetune-dt         fine-tune it online in a scenario (Algorithm 1, stage 2)
   reproduce           the whole study in three tracks, with figures and report
+  claims              the paper's claims judged in every track of one or more studies
   plot                learning curves of one or more runs (PNG and PDF)
   plan                where the UAV should go in a hall: the oracle's plan and a rate map
   sweep               the sum rate of policies over a grid of one or two system parameters
@@ -45,6 +46,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "pretrain-dt": ("training", "pretrain_command"),
     "finetune-dt": ("training", "finetune_command"),
     "reproduce": ("training", "reproduce_command"),
+    "claims": ("claims", "claims_command"),
     "plot": ("evaluation", "plot_command"),
     "plan": ("evaluation", "plan_command"),
     "sweep": ("evaluation", "sweep_command"),

@@ -61,6 +61,9 @@ class EvaluateArgs:
     start) or at --scenario, on the study's episodes unless --episodes is given"""
     track: Unset[TrackName] = None
     """the track of --row (default: deployment where the study ran it, else its last track)"""
+    trajectory: bool = False
+    """also write every slot (OUT/...-slots.csv: position, attitude, active pairs, sum rate, energy), draw the first
+    episode's flight in the hall (...-trajectory.png) and split the rate by the number of active pairs"""
 
 
 def evaluate_command(args: list[str]) -> None:
@@ -68,10 +71,10 @@ def evaluate_command(args: list[str]) -> None:
 
     The target's own system is the default of every --system.* flag; --layout puts it in
     another hall (the flags change the system first: --layout paper --system.room 40 40 8).
-    Writes OUT/SCENARIO-seedSEED-nEPISODES-KEY.csv (one row per episode: average sum rate,
-    return, length, energy) and .json (mean, 95% CI, IQM, the system) and prints the summary;
-    KEY, 8 hex digits of the system, phase control and start, keeps evaluations of other
-    systems in the same OUT apart.
+    Writes OUT/TARGET-SCENARIO-seedSEED-nEPISODES-KEY.csv (one row per episode: average sum
+    rate, return, length, energy) and .json (mean, 95% CI, IQM, the system) and prints the
+    summary; TARGET (the reference, policy or row) and KEY (8 hex digits of the system, phase
+    control and start) keep evaluations of other targets and systems in the same OUT apart.
     Your own policy (MODULE:NAME or FILE.py:NAME) is scored with the zero action and the
     oracle beside it on the same episodes (in the JSON under "references"; default OUT
     runs/policies/TARGET/eval). For the study's whole protocol use `uavris benchmark`.
@@ -95,7 +98,7 @@ def evaluate_command(args: list[str]) -> None:
     episodes = DEFAULT_EPISODES if a.episodes is None else a.episodes
     summary, path = evaluate_target(target, scenario=a.scenario or hall, episodes=episodes, seed=a.seed, out=a.out,
                                     phase_control=a.phase_control, device=resolve_device(a.device),
-                                    progress=a.progress, system=a.system)
+                                    progress=a.progress, system=a.system, trajectory=a.trajectory)
     _print_evaluation(a.target, summary, path)
 
 
@@ -123,7 +126,7 @@ def _evaluate_row(first: EvaluateArgs, args: list[str], doc: str) -> None:
     episodes = rc.eval_episodes if a.episodes is None else a.episodes
     summary, path = evaluate_target(row, scenario=site.scenario, episodes=episodes, seed=a.seed, out=a.out,
                                     phase_control=a.phase_control, device=resolve_device(a.device),
-                                    progress=a.progress, system=site.system)
+                                    progress=a.progress, system=site.system, trajectory=a.trajectory)
     _print_evaluation(f"{row.key} ({summary['label']}, {track} track)", summary, path)
 
 
@@ -133,6 +136,9 @@ def _print_evaluation(what: str, summary: dict, path: Path) -> None:
     print(f"{what} in {summary['scenario']}: average sum rate {summary['mean']:.2f} bps/Hz "
           f"(95% CI {rate_interval(summary['ci_low'], summary['ci_high'])}, IQM {summary['iqm']:.2f}, "
           f"{summary['episodes']} episodes) -> {path}")
+    for m, part in summary.get("active_pairs", {}).items():
+        print(f"  slots with {m} active pair{'s' * (m != '1')}: {part['share']:.0%} of the slots, mean sum rate "
+              f"{part['rate']:.2f} bps/Hz")
     for name, ref in summary.get("references", {}).items():
         print(f"  beside it on the same episodes: {name} {ref['mean']:.2f} bps/Hz "
               f"(95% CI {rate_interval(ref['ci_low'], ref['ci_high'])})")

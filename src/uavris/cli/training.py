@@ -150,6 +150,9 @@ class CompareArgs:
     """scenario (the paper's Fig. 2: fig2, [15, 20, 4.5]; with --layout: the layout's start by default)"""
     eval_episodes: Unset[int] = None
     """final evaluation episodes per run (default: 32 smoke/quick, 100 paper)"""
+    eval_every: Unset[int] = None
+    """environment steps between the periodic evaluations of each run (default: the preset's,
+    10,000 quick); every multiple is a budget the run is scored at (docs/results/budget.md)"""
     backend: Backend = "local"
     """local (process pool) or ray (pip install 'uavris[ray]')"""
     ray_address: Unset[str] = None
@@ -180,7 +183,7 @@ def compare_command(args: list[str]) -> None:
     report = compare_algorithms(preset=a.preset, seeds=seeds, workers=a.workers, out=a.out, algos=a.algos,
                                 scenario=a.scenario, eval_episodes=a.eval_episodes, backend=a.backend,
                                 ray_address=a.ray_address, device=resolve_device(a.device), system=a.system,
-                                start=start, steps=steps)
+                                start=start, steps=steps, eval_every=a.eval_every)
     print(f"report: {report}")
 
 

@@ -39,6 +39,7 @@ from uavris.env.simulator import BatchedSimulator
 from uavris.env.wrappers import action_dim_for, check_phase_control, motion_of, optimised_action
 
 SlotHook = Callable[[BatchedSimulator, NDArray[np.float32], NDArray[np.float32], NDArray[np.bool_]], None]
+StepHook = Callable[[BatchedSimulator, NDArray[np.float64], NDArray[np.bool_]], None]
 
 
 @dataclass(frozen=True)
@@ -63,12 +64,13 @@ def policy_phase_control(policy: Any, phase_control: str | None = None) -> str:
 
 
 def rollout(policy: Any, config: SystemConfig, scenario: str | Scenario, seeds: Sequence[int] | NDArray[np.integer],
-            *, phase_control: str | None = None, record: bool = False, on_slot: SlotHook | None = None
-            ) -> RolloutBatch:
+            *, phase_control: str | None = None, record: bool = False, on_slot: SlotHook | None = None,
+            on_step: StepHook | None = None) -> RolloutBatch:
     """Roll ``policy`` out on one episode per seed, all in one batched simulator.
 
     ``on_slot(sim, obs, executed_actions, alive)`` is called before every step, with the
-    simulator in the state the actions were chosen in.
+    simulator in the state the actions were chosen in; ``on_step(sim, reward, alive)`` after
+    it, with the slot's reward and the rows it counts for.
     """
     seeds = np.asarray(seeds, dtype=np.int64)
     mode = policy_phase_control(policy, phase_control)
@@ -98,6 +100,8 @@ def rollout(policy: Any, config: SystemConfig, scenario: str | Scenario, seeds: 
             obs_buf[alive, t] = obs[alive]
             act_buf[alive, t] = (motion_of(executed) if mode == "optimizer" else executed)[alive]
         reward, term, trunc, _ = sim.step(executed)
+        if on_step is not None:
+            on_step(sim, reward, alive)
         if hasattr(policy, "record"):
             policy.record(action, reward)
         returns += np.where(alive, reward, 0.0)

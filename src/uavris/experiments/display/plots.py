@@ -52,7 +52,7 @@ def reference_lines(ax: plt.Axes, references: Mapping[str, tuple[str, float]]) -
 def learning_curves(curves: Mapping[str, tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]],
                     stem: Path, title: str, paper_values: Mapping[str, float] | None = None,
                     references: Mapping[str, tuple[str, float]] | None = None) -> list[Path]:
-    """Average sum rate vs training episodes: mean over seeds with a 95% bootstrap band.
+    """Average sum rate vs training episodes: mean over seeds with a 95% Student-t band.
 
     ``curves[name] = (episodes, mean, low, high)``; optional dotted lines at the paper's
     converged values and horizontal lines at reference scores (:func:`reference_lines`).

@@ -1,6 +1,7 @@
 """``uavris evaluate``: a run, a DT model, a reference or a user's policy on seeded episodes,
-written as CSV and JSON (``OUT/SCENARIO-seedSEED-nEPISODES-KEY``, KEY: 8 hex digits of the
-system, phase control and start evaluated, :func:`evaluated_key`).
+written as CSV and JSON (``OUT/TARGET-SCENARIO-seedSEED-nEPISODES-KEY``: TARGET the row,
+reference or policy, :func:`file_token`; KEY 8 hex digits of the system, phase control and
+start evaluated, :func:`evaluated_key`).
 
 Lives here: :func:`evaluate_target` and :func:`write_results` (a target's per-episode
 results); a user's policy (``MODULE:NAME`` or ``FILE.py:NAME``) is scored with the zero
@@ -12,8 +13,11 @@ from __future__ import annotations
 
 import hashlib
 import json
+import re
 from pathlib import Path
 from typing import Any
+
+import numpy as np
 
 from uavris.agents.evaluation import EpisodeResults, check_episodes, evaluate
 from uavris.agents.policy import fit_policy
@@ -24,6 +28,7 @@ from uavris.env.wrappers import check_phase_control
 from uavris.errors import UavrisError
 from uavris.experiments.display.progress import progress_bar
 from uavris.experiments.tools.targets import Row, Target, as_row
+from uavris.experiments.tools.trajectory import SlotLog, rate_by_active_pairs, trajectory_plot, write_slots
 from uavris.io import write_csv, write_json
 from uavris.layouts import Layout, resolve_layout
 
@@ -46,7 +51,8 @@ def write_results(res: EpisodeResults, summary: dict[str, Any], stem: Path) -> N
 def evaluate_target(target: str | Target | Row, scenario: str | Scenario | None, episodes: int, seed: int,
                     out: Path | None = None, phase_control: str | None = None, device: str = "cpu",
                     progress: bool = False, system: SystemConfig | None = None,
-                    layout: str | Layout | None = None, references: bool = True) -> tuple[dict[str, Any], Path]:
+                    layout: str | Layout | None = None, references: bool = True, trajectory: bool = False
+                    ) -> tuple[dict[str, Any], Path]:
     """Evaluate ``target`` (a name :func:`~.targets.resolve_target` reads, a resolved
     :class:`~.targets.Target`, or a report's :class:`~.targets.Row`, evaluated as the report
     does: under the safety layer, held level, an ensemble, another hall's plan);
@@ -57,7 +63,10 @@ def evaluate_target(target: str | Target | Row, scenario: str | Scenario | None,
     puts it in another hall: the layout's devices, and its start unless ``scenario`` names
     one. With ``progress`` a bar counts the simulated slots (the optimiser and the oracle
     take milliseconds per slot, so a long evaluation is visibly alive). A user's policy gets the
-    zero action and the oracle beside it (``references=False``: not)."""
+    zero action and the oracle beside it (``references=False``: not). With ``trajectory`` every
+    slot is written too (``STEM-slots.csv``: pose, active pairs, sum rate, energy), the
+    first episode's flight drawn in the hall (``STEM-trajectory.png``), and the summary
+    splits the rate by the number of active pairs."""
     check_episodes(episodes, seed, "--")  # the command's flags
     if phase_control is not None:
         check_phase_control(phase_control)
@@ -84,11 +93,18 @@ def evaluate_target(target: str | Target | Row, scenario: str | Scenario | None,
     beside = [ZERO_ACTION, ORACLE] if user and references else []
     with progress_bar((1 + len(beside)) * episodes * system.horizon, f"evaluate {where.name}", "slot", progress,
                       leave=False) as bar:
-        def run(policy: Any, mode: str | None, in_system: SystemConfig) -> EpisodeResults:
-            return evaluate(policy, in_system, where, episodes, seed, phase_control=mode,
-                            on_slot=lambda sim, obs, executed, alive: bar.update(int(alive.sum())))
+        def run(policy: Any, mode: str | None, in_system: SystemConfig, log: SlotLog | None = None) -> EpisodeResults:
+            def on_slot(sim: Any, obs: Any, executed: Any, alive: Any) -> None:
+                bar.update(int(alive.sum()))
+                if log is not None:
+                    log.on_slot(sim, obs, executed, alive)
 
-        res = run(policy, phase_control, evaluated)
+            return evaluate(policy, in_system, where, episodes, seed, phase_control=mode, on_slot=on_slot,
+                            on_step=log.on_step if log is not None else None,
+                            batch_size=256 if log is None else max(256, episodes))
+
+        log = SlotLog(seed + np.arange(episodes)) if trajectory else None
+        res = run(policy, phase_control, evaluated, log)
         # A user's policy: the references on the same episodes, so its number reads at once.
         refs = {name: run(reference_policy(name, system, REFERENCE_SEED), None, system) for name in beside}
     summary = {"target": row.key, **({"label": row.label_for(loaded.expert_kind)} if study_row else {}),
@@ -100,7 +116,21 @@ def evaluate_target(target: str | Target | Row, scenario: str | Scenario | None,
         summary["fraction_of_oracle"] = summary["mean"] / oracle if oracle > 0 else None
     suffix = "-optimizer-phases" if phase_control == "optimizer" else ""
     default = Path("runs/rows") / row.key if study_row or row.target is None else row.target.default_out()
-    name = f"{row.key}-" if study_row else ""
-    stem = Path(out or default) / f"{name}{where.name}-seed{seed}-n{episodes}{suffix}-{evaluated_key(summary)}"
+    stem = Path(out or default) / (f"{file_token(row, study_row)}-{where.name}-seed{seed}-n{episodes}{suffix}-"
+                                   f"{evaluated_key(summary)}")
+    if log is not None:
+        summary["active_pairs"] = {str(m): v for m, v in rate_by_active_pairs(log.rows).items()}
+        write_slots(log, stem.parent / f"{stem.name}-slots.csv")
+        trajectory_plot(log, evaluated, stem.parent / f"{stem.name}-trajectory",
+                        f"{row.key} in {where.name}, episode seed {seed}")
     write_results(res, summary, stem)
     return summary, stem.with_suffix(".json")
+
+
+def file_token(row: Row, study_row: bool) -> str:
+    """What a result file's name starts with: the row, the reference or the policy evaluated
+    (two targets into one folder never share a file), safe for any file system."""
+    t = row.target
+    name = (row.key if study_row or t is None else str(t.reference) if t.kind == "reference" else
+            t.name if t.kind == "user" else Path(t.name).name)
+    return re.sub(r"[^\w.@-]+", "_", name).strip("_") or "policy"

@@ -33,7 +33,7 @@ from uavris.experiments.engine.jobs import Job, JobResult, run_jobs
 from uavris.experiments.training.train_expert import TrainConfig, train_job
 from uavris.io import atomic_write_text, read_csv, write_csv, write_json
 from uavris.presets import PRESETS
-from uavris.stats import bootstrap_band, summarize, versus
+from uavris.stats import summarize, t_band, versus
 
 # The paper's converged average sum rates from [15, 20, 4.5], bps/Hz (docs/model.md).
 PAPER_FIG2 = {"ddpg": 29.5, "ppo": 25.0, "td3": 20.5, "sac": 17.0}
@@ -104,7 +104,7 @@ def learning_curve_summary(series: Sequence[np.ndarray], points: int = 100) -> t
     start = max(x[0] for x, _ in raw)
     grid = np.unique(np.linspace(start, end, points).round().astype(int))
     curves = np.stack([np.interp(grid, x, y) for x, y in raw])
-    mean, lo, hi = bootstrap_band(curves)
+    mean, lo, hi = t_band(curves)
     return grid, mean, lo, hi
 
 
@@ -115,7 +115,7 @@ def compare_algorithms(preset: str = "quick", seeds: int = 5, workers: int = 2, 
                        device: str = "cpu", system: SystemConfig | None = None,
                        start: tuple[float, float, float] | None = None,
                        submit: Callable[[list[Job]], list[JobResult]] | None = None,
-                       steps: int | None = None) -> Path:
+                       steps: int | None = None, eval_every: int | None = None) -> Path:
     """Train ``algos`` x ``seeds`` in ``scenario`` (starting at ``start``, a layout's, when
     given) of ``system`` (default the paper's) for ``steps`` environment steps each (default
     the preset's training length) and write the comparison into ``out``; returns
@@ -124,7 +124,7 @@ def compare_algorithms(preset: str = "quick", seeds: int = 5, workers: int = 2, 
     if preset not in PRESETS:
         raise UavrisError(f"unknown preset {preset!r}; choose one of {', '.join(PRESETS)}")
     for flag, value in (("--seeds", seeds), ("--workers", workers), ("--eval-episodes", eval_episodes),
-                        ("--steps", steps)):
+                        ("--steps", steps), ("--eval-every", eval_every)):
         if value is not None and value < 1:
             raise UavrisError(f"{flag} must be >= 1, got {value}")
     for a in algos:
@@ -133,7 +133,7 @@ def compare_algorithms(preset: str = "quick", seeds: int = 5, workers: int = 2, 
     scenario_at(scenario, start).validate_for(system)
     out = Path(out or f"runs/compare-{preset}")
     n_eval = eval_episodes or (100 if preset == "paper" else 32)
-    cfgs = comparison_configs(preset, seeds, algos, scenario, n_eval, system, start, steps)
+    cfgs = comparison_configs(preset, seeds, algos, scenario, n_eval, system, start, steps, eval_every)
     jobs = [Job(f"{a}-s{s}", train_job, (cfg.to_dict(), str(out / "runs" / f"{a}-s{s}"), device),
                 out / "logs" / f"{a}-s{s}.log", train_cost(cfg)) for (a, s), cfg in cfgs.items()]
     t0 = time.perf_counter()
@@ -161,10 +161,13 @@ def compare_algorithms(preset: str = "quick", seeds: int = 5, workers: int = 2, 
 
 def comparison_configs(preset: str, seeds: int, algos: Sequence[str], scenario: str, eval_episodes: int,
                        system: SystemConfig, start: tuple[float, float, float] | None = None,
-                       steps: int | None = None) -> dict[tuple[str, int], TrainConfig]:
+                       steps: int | None = None, eval_every: int | None = None
+                       ) -> dict[tuple[str, int], TrainConfig]:
     """The training run of every (algorithm, seed) of a comparison, ``steps`` environment steps
-    each (None: the preset's)."""
+    each and evaluated every ``eval_every`` (None: the preset's)."""
     length = {} if steps is None else {"total_steps": steps}
+    if eval_every is not None:
+        length["eval_every"] = eval_every
     return {(a, s): TrainConfig(algo=a, scenario=scenario, seed=s, preset=preset, eval_episodes=eval_episodes,
                                 system=system, start=start, **length)
             for a in algos for s in range(seeds)}
@@ -214,7 +217,7 @@ def write_comparison(out: Path, cfgs: dict[tuple[str, int], TrainConfig], scenar
     if curves:
         refs = {name: (REFERENCES[name].label, by_name[name]["mean"]) for name in FIGURE_REFERENCES}
         figs = learning_curves(curves, out / "learning_curves",
-                               f"{scenario} {any_cfg.resolved_scenario.start}, mean and 95% bootstrap band over seeds",
+                               f"{scenario} {any_cfg.resolved_scenario.start}, mean and 95% t band over seeds",
                                PAPER_FIG2 if scenario == "fig2" else None, refs)
     choice = expert_choice(rows) if any(r["kind"] == "DRL" for r in rows) else None
     write_json(out / "summary.json", {"rows": rows, "expert": choice and choice["expert"], "expert_choice": choice,

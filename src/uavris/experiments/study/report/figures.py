@@ -16,7 +16,9 @@ from uavris.agents.dt.policy import load_dt_policy
 from uavris.agents.references import REFERENCES
 from uavris.config import get_scenario
 from uavris.experiments.display.plots import REFERENCE_STYLE, plt, reference_lines, save_figure
+from uavris.experiments.study.claims import expert_curve, finetune_curve
 from uavris.io import read_csv, read_json
+from uavris.stats import steps_to_level
 
 KIND_STYLE = {"expert": ("#1f77b4", "-"), "dt-finetuned": ("#2ca02c", "-"), "dt-zero-shot": ("#ff7f0e", "-"),
               "transfer": ("#7f7f7f", "--")}
@@ -52,16 +54,8 @@ def fig3(scenario: str, stage_dir: Path, stem: Path, track: str) -> list[Path]:
 def interactions_figure(scenario: str, finetune_dir: Path, expert_dir: Path, stem: Path,
                         expert_label: str = "expert") -> tuple[list[Path], dict[str, float]]:
     """Sum rate against environment interactions: DT fine-tuning versus the expert's training."""
-    ft = read_csv(finetune_dir / "finetune.csv")
-    ex = read_csv(expert_dir / "evals.csv")
-    fx = np.array([float(r["env_interactions"]) for r in ft])
-    fy = np.array([float(r["eval_mean"]) for r in ft])
-    # An expert that imitated the oracle first interacted for its imitation rollouts (the
-    # states it labelled) before any RL step: its evaluations sit after those interactions.
-    imitation = expert_dir / "imitation.csv"
-    offset = float(read_csv(imitation)[-1]["samples"]) if imitation.exists() else 0.0
-    ex_x = offset + np.array([float(r["env_steps"]) for r in ex])
-    ex_y = np.array([float(r["mean"]) for r in ex])
+    fx, fy = finetune_curve(finetune_dir)
+    ex_x, ex_y = expert_curve(expert_dir)
     fig, ax = plt.subplots(figsize=(4.8, 3.4))
     # linear axis: the zero-shot DT sits at 0 interactions, which a log axis cannot show
     ax.plot(fx, fy, "o-", color=KIND_STYLE["dt-finetuned"][0], label="DT fine-tuning (at 0: zero-shot)")
@@ -75,9 +69,7 @@ def interactions_figure(scenario: str, finetune_dir: Path, expert_dir: Path, ste
             "finetune_final": float(fy[-1]) if fy.size else float("nan"),
             "expert_steps": float(ex_x[-1]) if ex_x.size else float("nan"),
             "expert_final": float(ex_y[-1]) if ex_y.size else float("nan")}
-    # interactions the expert needed to first reach the fine-tuned DT's level
-    reached = ex_x[ex_y >= info["finetune_final"]] if fy.size else np.array([])
-    info["expert_steps_to_match"] = float(reached[0]) if reached.size else float("nan")
+    info["expert_steps_to_match"] = steps_to_level(ex_x, ex_y, info["finetune_final"])
     return save_figure(fig, stem), info
 
 

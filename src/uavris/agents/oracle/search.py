@@ -1,0 +1,169 @@
+"""How good the oracle's plan is: a much wider search of the same objective, to measure its gap.
+
+Lives here: :func:`exhaustive_plan` (the best pose a dense search finds for a start) and
+:func:`plan_gap` (the oracle's plan against it, both valued on the same fresh draws). Not
+here: the oracle's own planner (:mod:`.planner`), whose objective this searches.
+
+The objective is the planner's (docs/model.md, "The oracle"): the expected episode average
+of flying from rest at ``start`` to a pose and hovering there, ``(t min(R_start, R) + (T - t)
+R) / T`` with ``R`` the expected sum rate with optimised phases at the pose
+(:func:`.planner.expected_optimised_rate`) and ``t`` the trip's slots. The search:
+
+1. every feasible position of a grid (``grid_step`` across, ``z_step`` in height), level;
+2. at the ``top`` best by value (at least ``grid_step`` apart), every attitude of a grid of
+   yaw, pitch and roll (``attitudes_deg`` each);
+3. a pattern search in position and attitude from each of the ``refine`` best, down to
+   ``min_step``.
+
+Its draws are not the planner's (``seed``), so the oracle is not judged on its own common
+random numbers; :func:`plan_gap` then values both poses and staying on ``batches`` fresh
+batches with a many-restart optimiser, and gives their paired difference.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+from numpy.typing import NDArray
+
+from uavris import physics as ph
+from uavris.agents.oracle.planner import (
+    ASSESS_SEED,
+    Plan,
+    expected_optimised_rate,
+    feasible,
+    rate_batches,
+    travel_slots,
+)
+from uavris.config import SystemConfig
+
+Valuer = Callable[[NDArray[np.float64], NDArray[np.float64]], NDArray[np.float64]]  # R of (P, 3) positions, attitudes
+
+
+@dataclass(frozen=True)
+class SearchSettings:
+    grid_step: float = 2.0  # m, across the hall
+    z_step: float = 1.0  # m, in height
+    top: int = 12  # positions whose attitudes are searched
+    attitudes_deg: tuple[float, ...] = (-20.0, -10.0, 0.0, 10.0, 20.0)  # each of yaw, pitch, roll
+    refine: int = 3  # poses the pattern search starts from
+    refine_step: float = 1.0  # m, first pattern-search step (the attitude's: attitude_step_deg)
+    min_step: float = 0.0625  # m, the pattern search stops below this step
+    draws: int = 2  # NLoS draws per pairing in R
+    seed: int = 7  # R's common random numbers: not the planner's
+
+
+@dataclass(frozen=True)
+class Found:
+    target: NDArray[np.float64]
+    attitude: NDArray[np.float64]
+    value: float  # the objective on the search's draws
+    poses_valued: int
+
+
+def episode_value(config: SystemConfig, start: NDArray, r_start: float, positions: NDArray, rates: NDArray
+                  ) -> NDArray[np.float64]:
+    """The planner's objective: the episode average of flying from ``start`` to each position and hovering."""
+    t = np.minimum(travel_slots(config, np.linalg.norm(np.atleast_2d(positions) - start, axis=-1)), config.horizon)
+    return (t * np.minimum(r_start, rates) + (config.horizon - t) * rates) / config.horizon
+
+
+def _grid(config: SystemConfig, step: float, z_step: float) -> NDArray[np.float64]:
+    lo, hi = np.asarray(config.region_low), np.asarray(config.region_high)
+    axes = [np.linspace(lo[i], hi[i], max(2, int(round((hi[i] - lo[i]) / s)) + 1))
+            for i, s in enumerate((step, step, z_step))]
+    grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
+    return grid[feasible(config, grid)]
+
+
+def exhaustive_plan(config: SystemConfig, start: tuple[float, float, float],
+                    settings: SearchSettings = SearchSettings(), valuer: Valuer | None = None) -> Found:
+    """The best pose for ``start`` that the search of the module docstring finds (``valuer``: R
+    of poses; default the optimiser's expected rate on the search's draws)."""
+    s, c = settings, config
+    count = 0
+
+    def default(q: NDArray, att: NDArray) -> NDArray[np.float64]:
+        return expected_optimised_rate(c, q, att, draws=s.draws, seed=s.seed)
+
+    rate_of = valuer or default
+
+    def value(q: NDArray, att: NDArray) -> NDArray[np.float64]:
+        nonlocal count
+        count += len(q)
+        return episode_value(c, start_q, r_start, q, rate_of(q, att))
+
+    start_q = np.asarray(start, dtype=np.float64)
+    level = np.zeros(3)
+    r_start = float(rate_of(start_q[None], level[None])[0])
+    grid = np.concatenate([start_q[None], _grid(c, s.grid_step, s.z_step)])
+    v = value(grid, np.zeros_like(grid))
+    chosen: list[int] = []
+    for i in np.argsort(-v, kind="stable"):  # the best, at least a grid step apart
+        if all(np.linalg.norm(grid[i] - grid[j]) >= s.grid_step - 1e-9 for j in chosen):
+            chosen.append(int(i))
+        if len(chosen) == s.top:
+            break
+    angles = np.radians(np.array(list(itertools.product(s.attitudes_deg, repeat=3))))
+    poses = [(grid[i], a) for i in chosen for a in angles]
+    q_all = np.array([p for p, _ in poses])
+    a_all = np.array([a for _, a in poses])
+    va = value(q_all, a_all)
+    order = np.argsort(-va, kind="stable")[:s.refine]
+    best = max(((q_all[i], a_all[i], float(va[i])) for i in order), key=lambda x: x[2])
+    for i in order:
+        q, att, vb = _pattern_search(c, s, q_all[i].copy(), a_all[i].copy(), float(va[i]), value)
+        if vb > best[2]:
+            best = (q, att, vb)
+    return Found(np.asarray(best[0]), ph.wrap_angle(np.asarray(best[1])), best[2], count)
+
+
+def _pattern_search(c: SystemConfig, s: SearchSettings, q: NDArray, att: NDArray, vq: float,
+                    value: Callable[[NDArray, NDArray], NDArray]) -> tuple[NDArray, NDArray, float]:
+    pos_step, att_step = s.refine_step, math.radians(c.attitude_step_deg)
+    eye = np.eye(3)
+    while pos_step >= s.min_step:
+        nq = np.concatenate([q + pos_step * eye, q - pos_step * eye, np.repeat(q[None], 6, 0)])
+        na = np.concatenate([np.repeat(att[None], 6, 0), att + att_step * eye, att - att_step * eye])
+        ok = feasible(c, nq)
+        if not ok.any():
+            pos_step, att_step = pos_step / 2, att_step / 2
+            continue
+        nv = value(nq[ok], na[ok])
+        i = int(np.argmax(nv))
+        if nv[i] > vq + 1e-9:
+            q, att, vq = nq[ok][i], na[ok][i], float(nv[i])
+        else:
+            pos_step, att_step = pos_step / 2, att_step / 2
+    return q, att, vq
+
+
+@dataclass(frozen=True)
+class Gap:
+    """The oracle's plan against the search's pose, valued on the same fresh draws (bps/Hz)."""
+
+    oracle_value: float
+    search_value: float
+    stay_value: float
+    difference: float  # search minus oracle, per batch mean
+    difference_se: float
+
+
+def plan_gap(config: SystemConfig, start: tuple[float, float, float], plan: Plan, found: Found, batches: int = 8,
+             seed: int = 0) -> Gap:
+    """The episode values of the oracle's plan, the search's pose and staying, each on the same
+    ``batches`` batches of fresh draws (:data:`.planner.ASSESS_SEED` + 5,000: neither the plan's
+    draws nor the search's), and the paired difference search minus oracle with its standard error."""
+    start_q = np.asarray(start, dtype=np.float64)
+    q = np.stack([start_q, plan.target, found.target])
+    att = np.stack([np.zeros(3), plan.attitude, found.attitude])
+    r = rate_batches(config, q, att, batches, seed + ASSESS_SEED + 5_000)  # (3, B)
+    t = np.minimum(travel_slots(config, np.linalg.norm(q - start_q, axis=1)), config.horizon)[:, None]
+    v = (t * np.minimum(r[0], r) + (config.horizon - t) * r) / config.horizon
+    d = v[2] - v[1]
+    return Gap(float(v[1].mean()), float(v[2].mean()), float(v[0].mean()), float(d.mean()),
+               float(d.std(ddof=1) / math.sqrt(batches)))

@@ -1,0 +1,390 @@
+"""The paper's three claims, judged in every track by one rule: ``uavris claims OUT [OUT ...]``.
+
+Lives here: :data:`CLAIMS` (what the paper claims, in our words), :class:`Judgement` (one
+claim in one track: its verdict, the paired difference that decides it and its 95% CI over
+the unit of generalisation), :func:`judge_studies` (every claim of every track of one or
+more studies, the paper and strong tracks pooled over studies run with ``--seed 0, 1, 2``)
+and :func:`claims_table` (the claim x track table the README and the results page open
+with). Not here: the rule itself (:func:`uavris.stats.verdict`: "holds" where the CI excludes
+zero the claimed way, "refuted" the other way, "not resolved" otherwise), the studies' stages
+(:mod:`.pipeline`), the report of one study (:mod:`.report`).
+
+The units: in the paper and strong tracks one unit is a (training seed, unseen scenario)
+pair, every learned model of it trained with that seed; in the deployment track a unit is an
+unseen hall, its learned rows averaged over the pre-training seeds. Within a unit two rows
+are compared on the same evaluation episodes (their per-episode difference averaged).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any, Sequence
+
+import numpy as np
+
+from uavris.errors import UavrisError
+from uavris.experiments.display.tables import markdown_table
+from uavris.experiments.engine.scheduling import StudyContext
+from uavris.experiments.engine.stages import Pipeline
+from uavris.experiments.study.config import ReproduceConfig
+from uavris.experiments.study.pipeline import build_pipeline
+from uavris.experiments.study.rows import read_study
+from uavris.experiments.study.tracks import TRACK_SPECS, TRACKS, Track, zero_shot_only
+from uavris.io import atomic_write_text, read_csv, read_json, write_json
+from uavris.stats import HOLDS, NOT_RESOLVED, REFUTED, paired_difference, steps_to_level, welch_difference
+
+WITHIN = 0.05  # "nearly the same performance" (paper Sec. IV-C): within 5% of the expert's mean
+CLAIMS: dict[str, str] = {
+    "ddpg-best": "DDPG trains the best expert of DDPG, PPO, SAC and TD3 (Fig. 2)",
+    "zero-shot": "the zero-shot DT scores above the experts transferred from training deployments (Fig. 3)",
+    "near-expert": f"the fine-tuned DT is within {WITHIN:.0%} of the expert trained where it is deployed (Fig. 3)",
+    "fewer": "fine-tuning needs fewer environment interactions than that expert needs to reach the fine-tuned "
+             "level (Sec. IV-C)",
+    "fewer-total": "the same, counting the interactions of the experts and demonstrations the DT was pre-trained on",
+}
+NOT_TESTED = "not tested"
+
+
+@dataclass(frozen=True)
+class Judgement:
+    """One claim in one track: the mean paired difference over ``n`` units (``unit``), its 95%
+    CI, the verdict, and what was compared (``text``, one sentence)."""
+
+    claim: str
+    track: str
+    verdict: str
+    mean: float = float("nan")
+    ci_low: float = float("nan")
+    ci_high: float = float("nan")
+    n: int = 0
+    unit: str = ""
+    text: str = ""
+
+    @property
+    def cell(self) -> str:
+        if self.verdict == NOT_TESTED:
+            return "-"
+        ci = "" if math.isnan(self.ci_low) else f" [{self.ci_low:+,.2f}, {self.ci_high:+,.2f}]"
+        return f"**{self.verdict}**: {self.mean:+,.2f}{ci}"
+
+
+def _judged(claim: str, track: str, diff: dict[str, Any], unit: str, text: str) -> Judgement:
+    return Judgement(claim, track, diff["verdict"], diff["mean"], diff["ci_low"], diff["ci_high"], diff["n"], unit,
+                     text)
+
+
+# ------------------------------------------------------------------------------ reading a study
+@dataclass
+class _Study:
+    out: Path
+    rc: ReproduceConfig
+    pipeline: Pipeline
+
+    @classmethod
+    def read(cls, out: Path) -> _Study:
+        rc = read_study(out)
+        return cls(Path(out), rc, build_pipeline(rc, Path(out), StudyContext(1, "local", None)))
+
+    def done(self, name: str) -> Path | None:
+        return self.pipeline.directory(name) if name in self.pipeline.stages and self.pipeline.is_done(name) else None
+
+    def result(self, track: Track, site: str) -> tuple[Path, dict[str, Any]] | None:
+        d = self.done(track.stage(f"evaluate-{site}"))
+        return (d, read_json(d / "stage.json")["result"]) if d else None
+
+
+def episode_rates(edir: Path, row: str) -> np.ndarray:
+    """The per-episode average sum rates of ``row`` in the evaluation stage ``edir``."""
+    return np.array([float(r["avg_sum_rate"]) for r in read_csv(edir / f"{row}.csv")])
+
+
+def expert_curve(run_dir: Path) -> tuple[np.ndarray, np.ndarray]:
+    """An expert's periodic evaluations against the environment interactions it had used: an
+    expert that imitated the oracle first interacted for its imitation rollouts (the states it
+    labelled), so its evaluations sit after those."""
+    imitation = run_dir / "imitation.csv"
+    offset = float(read_csv(imitation)[-1]["samples"]) if imitation.exists() else 0.0
+    evals = read_csv(run_dir / "evals.csv") if (run_dir / "evals.csv").exists() else []
+    x = offset + np.array([float(r["env_steps"]) for r in evals])
+    y = np.array([float(r["mean"]) for r in evals])
+    if imitation.exists() and (run_dir / "done.json").exists() and not x.size:  # imitation only: its final score
+        x, y = np.array([offset]), np.array([float(read_json(run_dir / "done.json")["final_eval"]["mean"])])
+    return x, y
+
+
+def finetune_curve(model_dir: Path) -> tuple[np.ndarray, np.ndarray]:
+    """A fine-tuning run's evaluations against its environment interactions (0: the zero-shot DT)."""
+    rows = read_csv(model_dir / "finetune.csv")
+    return (np.array([float(r["env_interactions"]) for r in rows]), np.array([float(r["eval_mean"]) for r in rows]))
+
+
+def run_interactions(run_dir: Path) -> float:
+    """The environment interactions an expert's training used: its imitation rollouts and RL steps."""
+    x, _ = expert_curve(run_dir)
+    steps = float(read_json(run_dir / "timing.json").get("env_steps", 0)) if (run_dir / "timing.json").exists() \
+        else 0.0
+    imitation = run_dir / "imitation.csv"
+    offset = float(read_csv(imitation)[-1]["samples"]) if imitation.exists() else 0.0
+    return max(offset + steps, float(x[-1]) if x.size else 0.0)
+
+
+# ------------------------------------------------------------------------------ the comparison (Fig. 2)
+def judge_comparison(scores: dict[str, Sequence[float]], track: str = "paper", budget: str = "") -> Judgement:
+    """"DDPG is best" from each algorithm's final scores over its seeds (independent runs, so
+    Welch's interval): holds where DDPG is above each other algorithm, refuted where another is
+    above DDPG, each by a CI excluding zero; the estimate is DDPG minus the best other."""
+    if "ddpg" not in scores or len(scores) < 2:
+        return Judgement("ddpg-best", track, NOT_TESTED, text="the comparison has no DDPG run and another")
+    others = {a: welch_difference(scores["ddpg"], s) for a, s in scores.items() if a != "ddpg"}
+    closest = min(others, key=lambda a: others[a]["mean"])
+    if any(d["verdict"] == REFUTED for d in others.values()):
+        v = REFUTED
+    elif all(d["verdict"] == HOLDS for d in others.values()):
+        v = HOLDS
+    else:
+        v = NOT_RESOLVED
+    n = len(scores["ddpg"])
+    above = ", ".join(f"{a.upper()} {d['mean']:+.2f} [{d['ci_low']:+.2f}, {d['ci_high']:+.2f}]"
+                      for a, d in others.items())
+    return Judgement("ddpg-best", track, v, others[closest]["mean"], others[closest]["ci_low"],
+                     others[closest]["ci_high"], n, "training seeds per algorithm",
+                     f"DDPG minus each algorithm{budget}, final evaluation over {n} seeds (Welch): {above}")
+
+
+def comparison_scores(cdir: Path, steps: int | None = None) -> dict[str, list[float]]:
+    """Each algorithm's scores over its seeds in a comparison: the final evaluations
+    (``final_per_run.csv``), or with ``steps`` the first periodic evaluation at or after that many environment
+    steps (a run of N steps evaluated at B < N is the run of budget B: the schedules are constant)."""
+    scores: dict[str, list[float]] = {}
+    if steps is None:
+        for r in read_csv(cdir / "final_per_run.csv"):
+            scores.setdefault(r["algo"], []).append(float(r["final_eval_mean"]))
+        return scores
+    for run in sorted((cdir / "runs").iterdir()):
+        at = [float(r["mean"]) for r in read_csv(run / "evals.csv") if float(r["env_steps"]) >= steps] \
+            if (run / "evals.csv").exists() else []
+        if at:  # the first evaluation at or after the budget (PPO evaluates at the end of a rollout)
+            scores.setdefault(run.name.rsplit("-s", 1)[0], []).append(at[0])
+    return scores
+
+
+# ------------------------------------------------------------------------------ the scenario tracks
+def _scenario_units(studies: Sequence[_Study], track: Track) -> list[dict[str, Any]]:
+    """One unit per (study seed, unseen scenario) with the evaluation and fine-tuning finished."""
+    units = []
+    for st in studies:
+        if track not in st.rc.tracks:
+            continue
+        _, unseen = st.rc.sites(track)
+        train_cost = _pretraining_interactions(st, track)
+        for w in unseen:
+            found = st.result(track, w.name)
+            ft = st.done(track.stage(f"finetune-{w.name}"))
+            experts = st.done(track.stage("experts-unseen"))
+            if found is None or ft is None or experts is None:
+                continue
+            edir, res = found
+            transfers = [k for k in res if k.startswith("transfer-")]
+            units.append({"seed": st.rc.seed, "site": w.name, "edir": edir, "res": res, "transfers": transfers,
+                          "finetune": ft / "model", "expert": experts / "runs" / w.name, "pretraining": train_cost})
+    return units
+
+
+def _pretraining_interactions(st: _Study, track: Track) -> float:
+    """The interactions behind the DT's pre-training: its training experts' and the dataset's rollouts."""
+    experts = st.done(track.stage("experts-train"))
+    dataset = st.done(track.stage("dataset"))
+    total = sum(run_interactions(d) for d in sorted((experts / "runs").iterdir())) if experts else float("nan")
+    slots = read_json(dataset / "stage.json")["result"].get("slots") if dataset else None
+    return total + float(slots) if slots is not None else float("nan")
+
+
+def _stronger(edir: Path, res: dict[str, Any], keys: Sequence[str]) -> tuple[str, np.ndarray]:
+    key = max(keys, key=lambda k: res[k]["mean"])
+    return key, episode_rates(edir, key)
+
+
+def judge_scenario_track(studies: Sequence[_Study], track: Track) -> list[Judgement]:
+    """The Fig. 3 claims in the paper's unseen scenarios, over (seed, scenario) units."""
+    units = _scenario_units(studies, track)
+    name = track.name
+    if not units:
+        return [Judgement(c, name, NOT_TESTED, text="no unit finished") for c in ("zero-shot", "near-expert", "fewer",
+                                                                                  "fewer-total")]
+    seeds = sorted({u["seed"] for u in units})
+    unit = f"(seed, scenario) pairs: seeds {seeds} x {sorted({u['site'] for u in units})}"
+    zs, tr, ft, ex, fewer, total, censored = [], [], [], [], [], [], 0
+    for u in units:
+        edir, res = u["edir"], u["res"]
+        z = episode_rates(edir, "dt-zero-shot")
+        _, t = _stronger(edir, res, u["transfers"])
+        zs.append(float(np.mean(z - t)))
+        tr.append(0.0)
+        f, e = episode_rates(edir, "dt-finetuned"), episode_rates(edir, "expert")
+        ft.append(float(np.mean(f - (1 - WITHIN) * e)))
+        ex.append(0.0)
+        fx, _ = finetune_curve(u["finetune"])
+        x, y = expert_curve(u["expert"])
+        need = steps_to_level(x, y, float(res["dt-finetuned"]["mean"]))
+        if math.isnan(need):  # never reached in its budget: its whole budget is a lower bound
+            censored += 1
+            need = float(x[-1]) if x.size else float("nan")
+        fewer.append(need - float(fx[-1]))
+        total.append(need - float(fx[-1]) - u["pretraining"])
+    note = (f"; the expert never reached the level in {censored} of {len(units)} units (its budget counted, a lower "
+            "bound)") if censored else ""
+    return [
+        _judged("zero-shot", name, paired_difference(zs, tr), unit,
+                "zero-shot DT minus the stronger transferred expert, bps/Hz, paired on the evaluation episodes"),
+        _judged("near-expert", name, paired_difference(ft, ex), unit,
+                f"fine-tuned DT minus {1 - WITHIN:.0%} of the expert trained in the scenario, bps/Hz"),
+        _judged("fewer", name, paired_difference(fewer, [0.0] * len(fewer)), unit,
+                "interactions the expert needed to reach the fine-tuned DT's level minus fine-tuning's" + note),
+        _judged("fewer-total", name, paired_difference(total, [0.0] * len(total)), unit,
+                "the same minus the pre-training's interactions (its experts' training and the dataset)" + note),
+    ]
+
+
+# ------------------------------------------------------------------------------ the deployment track
+DEPLOYMENT_DT = "dt-zero-shot-safe"  # the paper's DT (return-conditioned) under the track's safety layer
+
+
+def _seeds_mean(edir: Path, res: dict[str, Any], variant: str) -> np.ndarray | None:
+    """Per episode, the mean over the pre-training seeds of a row's variant (None: no such row)."""
+    keys = [k for k, s in res.items() if s.get("variant") == variant]
+    return np.mean([episode_rates(edir, k) for k in keys], axis=0) if keys else None
+
+
+def judge_deployment(study: _Study, from_scratch: Sequence[dict[str, float]] = ()) -> list[Judgement]:
+    """The Fig. 3 claims over the unseen halls (the unit), each hall's learned rows averaged
+    over the pre-training seeds. The transferred expert is the nearest training hall's oracle
+    plan; the expert trained where the DT is deployed is the oracle (whose demonstrations the
+    DT learned from), and fine-tuning the one that tries places (``--ablation``).
+    ``from_scratch``: per hall, ``expert_to_level`` and ``finetune_interactions`` measured by
+    ``benchmarks/from_scratch.py`` (an expert trained from scratch in the hall)."""
+    track = TRACK_SPECS["deployment"]
+    _, unseen = study.rc.sites(track)
+    zs, ft, names = [], [], []
+    for w in unseen:
+        if zero_shot_only(w.name):
+            continue
+        found = study.result(track, w.name)
+        if found is None:
+            continue
+        edir, res = found
+        dt = _seeds_mean(edir, res, DEPLOYMENT_DT)
+        transfer = [k for k in res if k.startswith("transfer-")]
+        if dt is None or not transfer:
+            continue
+        names.append(w.name)
+        zs.append(float(np.mean(dt - episode_rates(edir, transfer[0]))))
+        fine = _seeds_mean(edir, res, "dt-goal-finetuned-safe")
+        if fine is None:
+            fine = _seeds_mean(edir, res, "dt-finetuned-safe")
+        if fine is not None:
+            ft.append(float(np.mean(fine - (1 - WITHIN) * episode_rates(edir, "oracle-safe"))))
+    unit = f"{len(names)} unseen halls"
+    out = [_judged("zero-shot", "deployment", paired_difference(zs, np.zeros(len(zs))), unit,
+                   "zero-shot DT (return-conditioned, safety layer, mean of its seeds) minus the nearest training "
+                   "hall's oracle plan, bps/Hz")] if len(zs) else \
+        [Judgement("zero-shot", "deployment", NOT_TESTED, text="no unseen hall evaluated")]
+    if len(ft) == len(names) and ft:
+        out.append(_judged("near-expert", "deployment", paired_difference(ft, np.zeros(len(ft))), unit,
+                           f"DT fine-tuned in the hall minus {1 - WITHIN:.0%} of the oracle (the track's expert), "
+                           "both under the safety layer, bps/Hz"))
+    elif from_scratch:
+        near = [h["level"] - (1 - WITHIN) * h["oracle"] for h in from_scratch]
+        out.append(_judged("near-expert", "deployment", paired_difference(near, np.zeros(len(near))),
+                           f"{len(near)} unseen halls (benchmarks/from_scratch.py)",
+                           f"DT fine-tuned by trying places (mean of its seeds) minus {1 - WITHIN:.0%} of the oracle "
+                           "(the track's expert), both under the safety layer, bps/Hz"))
+    else:
+        out.append(Judgement("near-expert", "deployment", NOT_TESTED,
+                             text="fine-tuning in the unseen halls runs with --ablation only"))
+    if from_scratch:
+        need = [h["expert_to_level"] for h in from_scratch]
+        spent = [h["finetune_interactions"] for h in from_scratch]
+        unit_fs = f"{len(need)} unseen halls (benchmarks/from_scratch.py)"
+        out.append(_judged("fewer", "deployment", paired_difference(need, spent), unit_fs,
+                           "interactions hybrid PPO from scratch needed to reach the fine-tuned level (its 200,000 "
+                           "steps where it never did: a lower bound) minus fine-tuning's"))
+        pre = float(read_json(study.done(track.stage("dataset")) / "stage.json")["result"]["slots"])
+        out.append(_judged("fewer-total", "deployment", paired_difference(np.subtract(need, pre), spent), unit_fs,
+                           f"the same minus the {pre:,.0f} interactions of the oracle's demonstrations"))
+    else:
+        out += [Judgement(c, "deployment", NOT_TESTED, text="needs benchmarks/from_scratch.py's measurement")
+                for c in ("fewer", "fewer-total")]
+    return out
+
+
+# ------------------------------------------------------------------------------ every track
+def judge_studies(outs: Sequence[Path], budgets: Sequence[tuple[Path, int]] = (),
+                  from_scratch: Sequence[dict[str, float]] = ()) -> list[Judgement]:
+    """Every claim in every track the studies in ``outs`` ran: the paper and strong tracks over
+    every study that ran them (one seed each: run them with ``--seed 0``, ``1``, ``2``), the
+    deployment track from the first study that ran it (its seeds are within it). ``budgets``:
+    (comparison, environment steps): the comparison's runs judged at that budget too
+    (``uavris compare-algorithms --steps N --eval-every B``)."""
+    studies = [_Study.read(Path(o)) for o in outs]
+    seeds = [s.rc.seed for s in studies]
+    if len(set(seeds)) != len(seeds) and len(studies) > 1:
+        raise UavrisError(f"the studies share a seed ({seeds}): run each with its own --seed")
+    out: list[Judgement] = []
+    compare = next((d for s in studies if (d := s.done("compare"))), None)
+    out.append(judge_comparison(comparison_scores(compare), budget=f" at {studies[0].rc.compare_steps:,} steps")
+               if compare else Judgement("ddpg-best", "paper", NOT_TESTED, text="no finished comparison"))
+    for cdir, steps in budgets:
+        scores = comparison_scores(Path(cdir), steps)
+        if not scores:
+            raise UavrisError(f"{cdir}: no run of the comparison was evaluated at {steps:,} steps")
+        out.append(judge_comparison(scores, budget=f" at {steps:,} steps ({', '.join(scores)})"))
+    for name in TRACKS:
+        track = TRACK_SPECS[name]
+        ran = [s for s in studies if track in s.rc.tracks]
+        if not ran:
+            continue
+        if name != "paper":
+            out.append(Judgement("ddpg-best", name, NOT_TESTED,
+                                 text="the track's experts are not trained by DRL (they imitate the oracle)"))
+        out += judge_deployment(ran[0], from_scratch) if track.layouts else judge_scenario_track(ran, track)
+    return out
+
+
+def claims_table(judgements: Sequence[Judgement]) -> list[str]:
+    """The claim x track table (markdown lines): each cell the verdict and the mean paired
+    difference with its 95% CI (bps/Hz, or interactions for the "fewer" rows)."""
+    tracks = [t for t in TRACKS if any(j.track == t for j in judgements)]
+    rows = []
+    for claim, text in CLAIMS.items():
+        cells = []
+        for t in tracks:
+            found = [j for j in judgements if j.claim == claim and j.track == t]
+            cells.append(" / ".join(j.cell for j in found) if found else "-")
+        rows.append((text, *cells))
+    return markdown_table(("claim", *tracks), rows, "l" + "l" * len(tracks))
+
+
+def write_claims(outs: Sequence[Path], dest: Path, budgets: Sequence[tuple[Path, int]] = (),
+                 from_scratch: Path | None = None) -> Path:
+    """Judge (:func:`judge_studies`) and write ``dest/claims.md`` and ``dest/claims.json``; the markdown's path."""
+    halls = read_json(from_scratch)["halls"] if from_scratch is not None else ()
+    judgements = judge_studies(outs, budgets, halls)
+    lines = ["# The paper's claims, judged", "",
+             "\n".join(claims_table(judgements)), "",
+             "Each cell: the verdict, the mean paired difference over the units and its 95% CI (Student's t; "
+             "Welch's for the comparison). A claim **holds** where the CI excludes zero the claimed way, is "
+             "**refuted** where it excludes zero the other way, and is **not resolved** otherwise. What each cell "
+             "compares:", ""]
+    for j in judgements:
+        if j.verdict != NOT_TESTED:
+            lines.append(f"- {j.track}, {j.claim}: {j.text}; {j.n} units ({j.unit}).")
+        else:
+            lines.append(f"- {j.track}, {j.claim}: not tested: {j.text}.")
+    lines += ["", f"Studies: {', '.join(str(o) for o in outs)}" + (f"; comparison {budgets[0][0]}" if budgets else "")
+              + (f"; from scratch: {from_scratch}" if from_scratch else "") + ".", ""]
+    path = Path(dest) / "claims.md"
+    atomic_write_text(path, "\n".join(lines))
+    write_json(Path(dest) / "claims.json", [asdict(j) for j in judgements])
+    return path
