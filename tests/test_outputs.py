@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import os
 import json
 from pathlib import Path
 
@@ -53,3 +54,80 @@ def test_the_trajectory_export_adds_up_to_the_episodes(tmp_path: Path, capsys: p
         assert part["rate"] == pytest.approx(np.mean(mine))
         assert f"slots with {m} active pair" in printed
     assert {r["active_pairs"] for r in rows} == {"1", "2"}  # the paper's 4 devices: one or two links a slot
+
+
+def test_a_directory_written_by_a_live_process_is_refused_and_a_dead_ones_lock_taken_over(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    import socket
+    import subprocess
+    import sys
+
+    from uavris.errors import UavrisError
+    from uavris.runs.lock import LOCK_FILE, locked
+
+    out = tmp_path / "s"
+    out.mkdir()
+    other = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
+    try:
+        (out / LOCK_FILE).write_text(json.dumps({"pid": other.pid, "host": socket.gethostname(),
+                                                 "started": "now", "command": "uavris sweep ..."}))
+        args = ["sweep", "zero-action", "--param", "system.rician-factor", "0,8", "--episodes", "2",
+                "--system.horizon", "10", "--workers", "1", "--out", str(out), "--no-progress"]
+        assert main(args) == 2
+        err = capsys.readouterr().err
+        assert f"being written by process {other.pid}" in err and len(err.strip().splitlines()) == 1
+        assert not (out / "sweep.csv").exists()
+    finally:
+        other.kill()
+        other.wait()
+    assert main(args) == 0  # the lock of a process that no longer runs: taken over
+    assert (out / "sweep.csv").exists() and not (out / LOCK_FILE).exists()  # and released at the end
+    with locked(out):  # in one process: a second writer is refused too
+        with pytest.raises(UavrisError, match="being written by process"):
+            with locked(out):
+                pass
+    assert not (out / LOCK_FILE).exists()
+
+
+@pytest.mark.parametrize("command", [
+    ["evaluate", "zero-action", "--scenario", "fig2", "--episodes", "2"],
+    ["sweep", "zero-action", "--param", "system.nx", "2"],
+    ["plan", "paper"],
+    ["reproduce", "--preset", "smoke"],
+])
+def test_an_output_folder_that_cannot_be_written_is_one_line_before_any_work(
+        command: list[str], capsys: pytest.CaptureFixture[str]) -> None:
+    # /proc/1 accepts no new file, even from root (where a chmod'ed folder would not stop a write)
+    out = "/proc/1/uavris-out"
+    if Path("/proc/1").is_dir() is False:
+        pytest.skip("needs Linux's /proc")
+    flag = ["--out", out + ("/map" if command[0] == "plan" else "")]
+    assert main([*command, *flag]) == 2
+    captured = capsys.readouterr()
+    assert "cannot be written" in captured.err and len(captured.err.strip().splitlines()) == 1
+    assert "average sum rate" not in captured.out and "report" not in captured.out
+
+
+def test_ctrl_c_in_a_sweep_leaves_one_line_and_a_resumable_state(tmp_path: Path) -> None:
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    out = tmp_path / "s"
+    args = [sys.executable, "-m", "uavris", "sweep", "hover-optimizer", "oracle", "--param", "system.nx",
+            "2,3,4,5", "--episodes", "4", "--workers", "2", "--out", str(out), "--no-progress"]
+    proc = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+    deadline = time.time() + 120
+    while not list((out / "cells").glob("*.json")) and time.time() < deadline:  # some cells done, others running
+        time.sleep(0.2)
+    os.killpg(proc.pid, signal.SIGINT)  # Ctrl-C reaches the whole process group, the workers included
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 130, err
+    lines = [x for x in err.splitlines() if x.strip()]
+    assert lines == ["uavris: interrupted; rerun the same command to continue (what finished is reused)"], err
+    done = {p.name for p in (out / "cells").glob("*.json")}
+    assert done and not (out / "sweep.csv").exists()
+    rerun = subprocess.run(args, capture_output=True, text=True, timeout=600)
+    assert rerun.returncode == 0, rerun.stderr
+    assert done <= {p.name for p in (out / "cells").glob("*.json")} and (out / "sweep.csv").exists()

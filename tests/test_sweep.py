@@ -42,7 +42,7 @@ def test_each_cell_is_the_policy_evaluated_in_that_system(tmp_path):
     paths = sweep(["hover-optimizer"], [parse_axis("system.tx-power-dbm", "0,20")], tmp_path, base=SHORT,
                   episodes=3)
     rows = _rows(paths[0])
-    assert [float(r["x"]) for r in rows] == [0.0, 20.0]
+    assert [float(r["tx_power_dbm"]) for r in rows] == [0.0, 20.0]
     for r, watts in zip(rows, (1e-3, 0.1)):
         system = SHORT.replace(tx_power_w=watts)
         res = evaluate(reference_policy("hover-optimizer", system), system, "fig2", 3, 1_000_000)
@@ -79,10 +79,23 @@ def test_the_command_writes_the_csv_and_a_bad_grid_is_one_line(tmp_path, capsys)
                      "--episodes", "2", "--system.horizon", "10", "--workers", "1", "--out", str(out),
                      "--no-progress"]) == 0
     rows = _rows(out / "sweep.csv")
-    assert len(rows) == 4 and {(r["x"], r["y"]) for r in rows} == {("0.0", "2.0"), ("0.0", "4.0"), ("8.0", "2.0"),
-                                                                    ("8.0", "4.0")}
+    assert len(rows) == 4 and {(r["rician_factor"], r["nx"]) for r in rows} == {
+        ("0.0", "2.0"), ("0.0", "4.0"), ("8.0", "2.0"), ("8.0", "4.0")}  # the columns named after the parameters
+    before = {p: p.read_bytes() for p in out.rglob("*") if p.is_file()}
+    assert cli_main(["sweep", "zero-action", "--param", "system.rician-factor", "0,4", "--episodes", "2",
+                     "--system.horizon", "10", "--workers", "1", "--out", str(out), "--no-progress"]) == 2
+    assert "holds a sweep of other parameters" in capsys.readouterr().err
+    assert {p: p.read_bytes() for p in out.rglob("*") if p.is_file()} == before  # nothing replaced
     assert cli_main(["sweep", "zero-action", "--param", "system.nx", "0:4:0", "--out", str(tmp_path / "t")]) == 2
     assert "start:stop:step" in capsys.readouterr().err
     assert not (tmp_path / "t").exists()
     assert cli_main(["sweep", "nothing-at-all", "--param", "system.nx", "2", "--out", str(tmp_path / "u")]) == 2
     assert not (tmp_path / "u").exists()
+
+
+def test_legends_name_a_model_by_its_folder():
+    from uavris.experiments.tools.sweep import policy_label
+
+    assert policy_label("runs/quick/stages/deploy-pretrain-0a1b2c3d4e5f/model") == "deploy-pretrain-0a1b2c3d4e5f"
+    assert policy_label("hover-optimizer") == "hover-optimizer"
+    assert policy_label("runs/ppo-fig2") == "ppo-fig2"

@@ -147,9 +147,26 @@ def read_first(cls: type[T], args: list[str], prog: str, default: T | None = Non
 
 
 def output_dir(path: Path | None, flag: str = "--out") -> None:
-    """An output directory may exist (as a directory) or not yet; a file in its place is an error."""
-    if path is not None and Path(path).exists() and not Path(path).is_dir():
+    """An output directory may exist (as a directory) or not yet; a file in its place is an
+    error, and so is one that cannot be written (read-only, immutable, another user's): found
+    before any work, by writing a file into its nearest existing folder (None: ``runs/``, where
+    the commands write by default)."""
+    target = Path("runs") if path is None else Path(path)
+    if target.exists() and not target.is_dir():
         raise UsageError(f"{flag} {path}: exists and is not a directory")
+    folder = target.absolute()
+    while not folder.exists():
+        folder = folder.parent
+    if not folder.is_dir():
+        raise UsageError(f"{flag} {target}: {folder} is not a directory")
+    import tempfile
+
+    try:
+        with tempfile.TemporaryFile(dir=folder, prefix=".uavris-probe-"):
+            pass
+    except OSError as e:
+        what = f"--out (default {target})" if path is None else f"{flag} {target}"
+        raise UsageError(f"{what}: {folder} cannot be written ({e.strerror or e})") from None
 
 
 def load_overrides(path: Path, kind: str) -> dict[str, Any]:

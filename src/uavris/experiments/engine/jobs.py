@@ -166,6 +166,7 @@ class JobRunner:
         self._busy = 0
         self._free = list(range(self.workers))  # worker slots, lowest first
         self._held = False
+        self._closing = False  # close() began (Ctrl-C, or the end): nothing new is started
         self.active: dict[int, tuple[Job, float]] = {}  # running jobs by id: (job, time.time() it started)
 
     def hold(self) -> None:
@@ -189,8 +190,12 @@ class JobRunner:
         self.close()
 
     def close(self) -> None:
+        with self._lock:
+            # jobs finishing while the pool shuts down (Ctrl-C stops the workers too) start nothing
+            self._closing = True
+            self._waiting.clear()
         if self._pool is not None:
-            self._pool.shutdown()
+            self._pool.shutdown(cancel_futures=True)
             self._pool = None
         if self._ray_started:
             import ray
@@ -234,7 +239,7 @@ class JobRunner:
 
     def _dispatch(self) -> None:
         """Start waiting jobs, highest priority first, while workers are free (lock held)."""
-        while self._busy < self.workers and self._waiting and not self._held:
+        while self._busy < self.workers and self._waiting and not self._held and not self._closing:
             _, _, job, outer = heapq.heappop(self._waiting)
             self._busy += 1
             slot = heapq.heappop(self._free)
@@ -246,6 +251,9 @@ class JobRunner:
     def _submit(self, job: Job, outer: Future[JobResult], slot: int, started: float, pool: ProcessPoolExecutor,
                 alone: bool) -> None:
         """``job`` on ``pool`` (lock held); a pool broken meanwhile is replaced first."""
+        if self._closing:
+            outer.set_result(JobResult(job.name, False, None, "interrupted", job.log))
+            return
         try:
             inner = pool.submit(_run_logged, job)
         except BrokenProcessPool:
@@ -267,7 +275,7 @@ class JobRunner:
             res = inner.result()
         except BrokenProcessPool as e:  # a worker died (the OOM killer, a crash in native code)
             with self._lock:
-                if not alone:
+                if not alone and not self._closing:
                     # The pool fails every job it was running, and cannot say whose worker died: run
                     # this one again in a pool of its own, where it can neither take a neighbour
                     # down nor be taken down by one. Dying there too, it failed.

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import time
 from pathlib import Path
-from typing import Sequence
+from typing import Any, Sequence
 
 from uavris.errors import UavrisError
 from uavris.experiments.display.progress import progress_bar
@@ -23,6 +23,7 @@ from uavris.experiments.study.config import AUTO, ReproduceConfig
 from uavris.experiments.study.pipeline import build_pipeline
 from uavris.experiments.study.rows import STUDY_FILE
 from uavris.io import write_json, write_yaml
+from uavris.runs.lock import locked
 
 
 # ------------------------------------------------------------------------------------------ entry point
@@ -68,6 +69,15 @@ def reproduce(rc: ReproduceConfig, out: str | Path, *, workers: int = 2, backend
     if unknown:
         bar.close()
         raise UavrisError(f"--force names unknown stage(s) {unknown}; stages: {list(pipeline.stages) + ['report']}")
+    try:
+        with locked(out, "uavris reproduce"):  # one invocation writes a study at a time
+            return _run(rc, out, pipeline, ctx, force, bar, progress, workers)
+    finally:
+        bar.close()
+
+
+def _run(rc: ReproduceConfig, out: Path, pipeline: Any, ctx: StudyContext, force: Sequence[str], bar: Any,
+         progress: bool, workers: int) -> Path:
     write_yaml(out / STUDY_FILE, rc.to_dict())  # what `uavris evaluate OUT --row KEY` reads (.rows)
     ctx.plan(pipeline)
     t0, origin = time.perf_counter(), time.time()

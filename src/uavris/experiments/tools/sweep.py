@@ -47,6 +47,7 @@ from uavris.experiments.display.progress import progress_bar
 from uavris.experiments.engine.jobs import Job, run_jobs
 from uavris.io import read_json, to_plain, write_csv, write_json
 from uavris.presets import EVAL_SEED
+from uavris.runs.lock import locked
 from uavris.stats import over_units, t_interval
 
 VIRTUAL = {"tx_power_dbm": "transmit power (dBm)", "ris_size": "RIS size n (n x n elements)",
@@ -183,6 +184,20 @@ def sweep(targets: Sequence[str], axes: Sequence[Axis], out: Path, *, base: Syst
     if len(grid) > MAX_CELLS:
         raise ConfigError(f"the grid has {len(grid)} cells; at most {MAX_CELLS}")
     places = {point: cell_systems(base, axes, point, halls, scenario) for point in grid}  # every cell checked first
+    spec = {"targets": list(targets), "axes": [to_plain(a) for a in axes], "episodes": episodes, "seed": EVAL_SEED,
+            "halls": halls, "scenario": scenario, "system": base.to_dict()}
+    made = Path(out) / "sweep.json"
+    if made.exists() and to_plain(read_json(made)) != to_plain(spec):
+        old = read_json(made)
+        raise ConfigError(f"{out} holds a sweep of other parameters ({', '.join(a['name'] for a in old['axes'])} "
+                          f"over {', '.join(old['targets'])}); give this one another --out (its cells would be kept, "
+                          "its table and figure replaced)")
+    with locked(out, "uavris sweep"):  # one invocation writes a sweep at a time
+        return _run(targets, axes, Path(out), places, spec, episodes, workers, backend, progress)
+
+
+def _run(targets: Sequence[str], axes: Sequence[Axis], out: Path, places: dict[tuple, list], spec: dict[str, Any],
+         episodes: int, workers: int, backend: str, progress: bool) -> list[Path]:
     jobs, files = [], {}
     for point, where in places.items():
         for target in targets:
@@ -202,11 +217,21 @@ def sweep(targets: Sequence[str], axes: Sequence[Axis], out: Path, *, base: Syst
         raise UavrisError(f"{len(failed)} of {len(jobs)} sweep cells failed; first: {failed[0].name}: "
                           f"{failed[0].error} (log {failed[0].log})")
     rows = _rows(targets, axes, places, files)
-    write_csv(Path(out) / "sweep.csv", COLUMNS, rows)
-    write_json(Path(out) / "sweep.json", {"targets": list(targets), "axes": [to_plain(a) for a in axes],
-                                          "episodes": episodes, "seed": EVAL_SEED, "halls": halls,
-                                          "scenario": scenario, "system": base.to_dict()})
+    # the columns of the parameters carry their names (x and y only inside this module)
+    columns = ["policy", axes[0].name, *([axes[1].name] if len(axes) > 1 else []), *COLUMNS[3:]]
+    write_csv(Path(out) / "sweep.csv", columns,
+              [[r["policy"], r["x"], *([r["y"]] if len(axes) > 1 else []), *(r[c] for c in COLUMNS[3:])]
+               for r in rows])
+    write_json(Path(out) / "sweep.json", spec)
     return [Path(out) / "sweep.csv", *sweep_figure(rows, axes, Path(out) / "sweep")]
+
+
+def policy_label(target: str) -> str:
+    """A legend's name for a policy: a reference's name, a model's folder (not its whole path)."""
+    path = Path(target)
+    if len(path.parts) < 2:
+        return target
+    return path.parent.name if path.name in ("model", "value") else path.name
 
 
 def _rows(targets: Sequence[str], axes: Sequence[Axis], places: dict[tuple, list], files: dict) -> list[dict]:
@@ -239,7 +264,7 @@ def sweep_figure(rows: list[dict], axes: Sequence[Axis], stem: Path) -> list[Pat
         for j, y in enumerate(ys):
             part = sorted((r for r in rows if r["policy"] == target and r["y"] == y), key=lambda r: r["x"])
             x = [r["x"] for r in part]
-            label = target + (f", {axes[1].symbol} = {y:g}" if y != "" else "")
+            label = policy_label(target) + (f", {axes[1].symbol} = {y:g}" if y != "" else "")
             ax.plot(x, [r["mean"] for r in part], styles[j % len(styles)], color=color, marker="o", ms=3,
                     lw=1.3, label=label)
             ax.fill_between(x, [r["ci_low"] for r in part], [r["ci_high"] for r in part], color=color, alpha=0.15,
