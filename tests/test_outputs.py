@@ -131,3 +131,34 @@ def test_ctrl_c_in_a_sweep_leaves_one_line_and_a_resumable_state(tmp_path: Path)
     rerun = subprocess.run(args, capture_output=True, text=True, timeout=600)
     assert rerun.returncode == 0, rerun.stderr
     assert done <= {p.name for p in (out / "cells").glob("*.json")} and (out / "sweep.csv").exists()
+
+
+@pytest.mark.slow
+def test_a_named_scenario_is_the_papers_hall_for_a_model_trained_in_another(tmp_path: Path,
+                                                                            capsys: pytest.CaptureFixture[str]):
+    """Issue 38: a model trained in a generated hall, evaluated at --scenario fig2 and benchmarked in
+    unseen1/unseen2, flies the paper's hall (the references there are the report's), and says so."""
+    from uavris.agents.evaluation import evaluate
+    from uavris.agents.references import reference_policy
+    from uavris.config import SystemConfig
+
+    run = tmp_path / "run"
+    assert main(["train", "--algo", "ppo", "--preset", "smoke", "--layout", "layout-unseen-0", "--out", str(run),
+                 "--no-progress"]) == 0
+    own = json.loads(next((run / "eval").glob("*.json")).read_text())["system"] if (run / "eval").exists() else None
+    assert own is None or own["users"] != [list(u) for u in SystemConfig().users]
+    capsys.readouterr()
+    assert main(["evaluate", str(run), "--scenario", "fig2", "--episodes", "2", "--out", str(tmp_path / "e"),
+                 "--no-progress"]) == 0
+    assert "in fig2 (the paper's hall)" in capsys.readouterr().out
+    (path,) = (tmp_path / "e").glob("run-fig2-*.json")
+    summary = json.loads(path.read_text())
+    assert summary["system"]["users"] == [list(u) for u in SystemConfig().users] and summary["hall"] == \
+        "the paper's hall"
+    assert main(["benchmark", str(run), "--preset", "smoke", "--cells", "scenarios", "--out", str(tmp_path / "b"),
+                 "--no-progress"]) == 0
+    rows = json.loads((tmp_path / "b" / "benchmark.json").read_text())["cells"]
+    paper = SystemConfig()
+    for row in rows:  # the zero action of each cell is the paper hall's, computed here independently
+        want = evaluate(reference_policy("zero-action", paper), paper, row["cell"], 8, 1_000_000).avg_sum_rate.mean()
+        assert row["zero_action"] == pytest.approx(want, rel=1e-12), row["cell"]

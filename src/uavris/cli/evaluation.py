@@ -92,7 +92,10 @@ def evaluate_command(args: list[str]) -> None:
     if first.row is not None:
         return _evaluate_row(first, args, doc)
     target = resolve_target(first.target)
-    system, hall = layout_defaults(args, target.own_system(), "uavris evaluate")
+    own = target.own_system()
+    if first.scenario is not None and first.layout is None:  # a named scenario is a start in the paper's hall
+        own = paper_hall(own)
+    system, hall = layout_defaults(args, own, "uavris evaluate")
     a = parse(EvaluateArgs, args, "uavris evaluate", doc, default=EvaluateArgs(first.target, system=system))
     output_dir(a.out)
     episodes = DEFAULT_EPISODES if a.episodes is None else a.episodes
@@ -100,6 +103,15 @@ def evaluate_command(args: list[str]) -> None:
                                     phase_control=a.phase_control, device=resolve_device(a.device),
                                     progress=a.progress, system=a.system, trajectory=a.trajectory)
     _print_evaluation(a.target, summary, path)
+
+
+def paper_hall(system: SystemConfig) -> SystemConfig:
+    """``system`` in the paper's hall (its devices and room): where the named scenarios (fig2,
+    train1..8, unseen1..2) are, whatever hall a model was trained in (the --system.* flags still
+    apply on top)."""
+    from uavris.layouts import resolve_layout
+
+    return resolve_layout("paper", system).resolve(system)[0]
 
 
 def _evaluate_row(first: EvaluateArgs, args: list[str], doc: str) -> None:
@@ -133,7 +145,7 @@ def _evaluate_row(first: EvaluateArgs, args: list[str], doc: str) -> None:
 def _print_evaluation(what: str, summary: dict, path: Path) -> None:
     from uavris.experiments.display.tables import rate_interval
 
-    print(f"{what} in {summary['scenario']}: average sum rate {summary['mean']:.2f} bps/Hz "
+    print(f"{what} in {summary['scenario']} ({summary['hall']}): average sum rate {summary['mean']:.2f} bps/Hz "
           f"(95% CI {rate_interval(summary['ci_low'], summary['ci_high'])}, IQM {summary['iqm']:.2f}, "
           f"{summary['episodes']} episodes) -> {path}")
     for m, part in summary.get("active_pairs", {}).items():

@@ -101,7 +101,9 @@ def benchmark(target: str, preset: str = "quick", cells: Cells = "all", out: Pat
 def _cell(target: Target, cell: Cell, episodes: int, out: Path, system: SystemConfig, phase_control: str | None,
           device: str) -> dict[str, Any]:
     """The target, the zero action and the oracle in one cell, each written under ``out``."""
-    place = dict(scenario=cell.name) if cell.kind == "scenario" else dict(scenario=None, layout=cell.name)
+    # a scenario of the paper is a start in the paper's hall, whatever hall the target was trained in
+    place = dict(scenario=cell.name, layout="paper") if cell.kind == "scenario" else dict(scenario=None,
+                                                                                           layout=cell.name)
     paths = {}
     for key, who in (("target", target), (ZERO_ACTION, ZERO_ACTION), (ORACLE, ORACLE)):
         pc = phase_control if key == "target" else None

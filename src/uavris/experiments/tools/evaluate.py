@@ -22,7 +22,7 @@ import numpy as np
 from uavris.agents.evaluation import EpisodeResults, check_episodes, evaluate
 from uavris.agents.policy import fit_policy
 from uavris.agents.references import ORACLE, REFERENCE_SEED, ZERO_ACTION, reference_policy
-from uavris.config import Scenario, SystemConfig, get_scenario
+from uavris.config import SCENARIOS, Scenario, SystemConfig, get_scenario
 from uavris.env.rollout import policy_phase_control
 from uavris.env.wrappers import check_phase_control
 from uavris.errors import UavrisError
@@ -108,7 +108,8 @@ def evaluate_target(target: str | Target | Row, scenario: str | Scenario | None,
         # A user's policy: the references on the same episodes, so its number reads at once.
         refs = {name: run(reference_policy(name, system, REFERENCE_SEED), None, system) for name in beside}
     summary = {"target": row.key, **({"label": row.label_for(loaded.expert_kind)} if study_row else {}),
-               "scenario": where.name, "start": list(where.start), "seed": seed,
+               "scenario": where.name, "hall": hall_name(evaluated, layout, where.name), "start": list(where.start),
+               "seed": seed,
                "phase_control": phase_control or "as trained", **res.summary(), "system": evaluated.to_dict()}
     if refs:
         summary["references"] = {name: r.summary() for name, r in refs.items()}
@@ -125,6 +126,19 @@ def evaluate_target(target: str | Target | Row, scenario: str | Scenario | None,
                         f"{row.key} in {where.name}, episode seed {seed}")
     write_results(res, summary, stem)
     return summary, stem.with_suffix(".json")
+
+
+def hall_name(system: SystemConfig, layout: str | Layout | None, site: str) -> str:
+    """The hall a result was made in, as the result records it (its devices are in its
+    ``system``): the paper's, the layout named, or the hall of the site evaluated."""
+    if system.users == SystemConfig().users and system.room == SystemConfig().room:
+        return "the paper's hall"
+    if isinstance(layout, str):
+        return f"hall {Path(layout).name if layout.endswith(('.yaml', '.yml')) else layout}"
+    if isinstance(layout, Layout):
+        return f"hall {layout.name}"
+    return f"hall of {site}, {system.num_users} devices" if site not in SCENARIOS else \
+        f"{system.num_users} devices of --system.users"
 
 
 def file_token(row: Row, study_row: bool) -> str:
