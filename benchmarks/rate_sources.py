@@ -58,7 +58,7 @@ def main(argv: list[str] | None = None) -> int:
             row = study_row(args.study, key, "deployment", site)
             with tempfile.TemporaryDirectory() as tmp:
                 summary, _ = evaluate_target(row, site.scenario, rc.eval_episodes, EVAL_SEED, out=Path(tmp),
-                                             system=site.system, trajectory=True)
+                                             system=site.system, trajectory=True, references=False)
             split = summary["active_pairs"]
             parts.append((split["1"]["share"], split["1"]["rate"], split["2"]["share"], split["2"]["rate"],
                           summary["mean"], summary["mean_energy_j"]))

@@ -61,6 +61,9 @@ class EvaluateArgs:
     start) or at --scenario, on the study's episodes unless --episodes is given"""
     track: Unset[TrackName] = None
     """the track of --row (default: deployment where the study ran it, else its last track)"""
+    references: bool = True
+    """score the zero action, hovering with the optimiser's phases and the oracle beside the target on the same
+    episodes (a reference alone: never)"""
     trajectory: bool = False
     """also write every slot (OUT/...-slots.csv: position, attitude, active pairs, sum rate, energy), draw the first
     episode's flight in the hall (...-trajectory.png) and split the rate by the number of active pairs"""
@@ -75,8 +78,9 @@ def evaluate_command(args: list[str]) -> None:
     rate, return, length, energy) and .json (mean, 95% CI, IQM, the system) and prints the
     summary; TARGET (the reference, policy or row) and KEY (8 hex digits of the system, phase
     control and start) keep evaluations of other targets and systems in the same OUT apart.
-    Your own policy (MODULE:NAME or FILE.py:NAME) is scored with the zero action and the
-    oracle beside it on the same episodes (in the JSON under "references"; default OUT
+    Every target but a reference is scored with the zero action, hovering with the optimiser's
+    phases and the oracle beside it on the same episodes (in the JSON under "references";
+    --no-references: not); your own policy is MODULE:NAME or FILE.py:NAME (default OUT
     runs/policies/TARGET/eval). For the study's whole protocol use `uavris benchmark`.
     A row of a study's report (--row, TARGET the study's OUT) is evaluated as the report
     evaluates it, here or in a hall of your own (default OUT runs/rows/ROW).
@@ -101,7 +105,8 @@ def evaluate_command(args: list[str]) -> None:
     episodes = DEFAULT_EPISODES if a.episodes is None else a.episodes
     summary, path = evaluate_target(target, scenario=a.scenario or hall, episodes=episodes, seed=a.seed, out=a.out,
                                     phase_control=a.phase_control, device=resolve_device(a.device),
-                                    progress=a.progress, system=a.system, trajectory=a.trajectory)
+                                    progress=a.progress, system=a.system, trajectory=a.trajectory,
+                                    references=a.references)
     _print_evaluation(a.target, summary, path)
 
 
@@ -138,7 +143,8 @@ def _evaluate_row(first: EvaluateArgs, args: list[str], doc: str) -> None:
     episodes = rc.eval_episodes if a.episodes is None else a.episodes
     summary, path = evaluate_target(row, scenario=site.scenario, episodes=episodes, seed=a.seed, out=a.out,
                                     phase_control=a.phase_control, device=resolve_device(a.device),
-                                    progress=a.progress, system=site.system, trajectory=a.trajectory)
+                                    progress=a.progress, system=site.system, trajectory=a.trajectory,
+                                    references=a.references)
     _print_evaluation(f"{row.key} ({summary['label']}, {track} track)", summary, path)
 
 

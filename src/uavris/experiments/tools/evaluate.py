@@ -4,8 +4,8 @@ reference or policy, :func:`file_token`; KEY 8 hex digits of the system, phase c
 start evaluated, :func:`evaluated_key`).
 
 Lives here: :func:`evaluate_target` and :func:`write_results` (a target's per-episode
-results); a user's policy (``MODULE:NAME`` or ``FILE.py:NAME``) is scored with the zero
-action and the oracle beside it on the same episodes. Not here: what a target names
+results); every policy that is not itself a reference is scored with the zero action,
+hovering with the optimiser's phases and the oracle beside it on the same episodes. Not here: what a target names
 (:mod:`.targets`), the evaluation itself (:func:`uavris.agents.evaluation.evaluate`).
 """
 
@@ -21,7 +21,7 @@ import numpy as np
 
 from uavris.agents.evaluation import EpisodeResults, check_episodes, evaluate
 from uavris.agents.policy import fit_policy
-from uavris.agents.references import ORACLE, REFERENCE_SEED, ZERO_ACTION, reference_policy
+from uavris.agents.references import HOVER_OPTIMIZER, ORACLE, REFERENCE_SEED, ZERO_ACTION, reference_policy
 from uavris.config import SCENARIOS, Scenario, SystemConfig, get_scenario
 from uavris.env.rollout import policy_phase_control
 from uavris.env.wrappers import check_phase_control
@@ -62,8 +62,9 @@ def evaluate_target(target: str | Target | Row, scenario: str | Scenario | None,
     :class:`~uavris.layouts.Layout` or what :func:`~uavris.layouts.resolve_layout` reads)
     puts it in another hall: the layout's devices, and its start unless ``scenario`` names
     one. With ``progress`` a bar counts the simulated slots (the optimiser and the oracle
-    take milliseconds per slot, so a long evaluation is visibly alive). A user's policy gets the
-    zero action and the oracle beside it (``references=False``: not). With ``trajectory`` every
+    take milliseconds per slot, so a long evaluation is visibly alive). Every target but a
+    reference gets the zero action, hovering with the optimiser's phases and the oracle beside
+    it on the same episodes (``references=False``: not). With ``trajectory`` every
     slot is written too (``STEM-slots.csv``: pose, active pairs, sum rate, energy), the
     first episode's flight drawn in the hall (``STEM-trajectory.png``), and the summary
     splits the rate by the number of active pairs."""
@@ -89,8 +90,9 @@ def evaluate_target(target: str | Target | Row, scenario: str | Scenario | None,
                           "scenario of its own)")
     where = get_scenario(scenario)
     where.validate_for(evaluated)
-    user = row.target is not None and row.target.kind == "user"
-    beside = [ZERO_ACTION, ORACLE] if user and references else []
+    # every policy beside the three references the docs read results against (not a reference beside itself)
+    reference = row.target is not None and row.target.kind == "reference"
+    beside = [] if reference or not references else [ZERO_ACTION, HOVER_OPTIMIZER, ORACLE]
     with progress_bar((1 + len(beside)) * episodes * system.horizon, f"evaluate {where.name}", "slot", progress,
                       leave=False) as bar:
         def run(policy: Any, mode: str | None, in_system: SystemConfig, log: SlotLog | None = None) -> EpisodeResults:
