@@ -53,3 +53,22 @@ def test_a_dying_ray_worker_fails_its_own_job_and_no_other(tmp_path: Path):
     pytest.importorskip("ray")
     with JobRunner(2, "ray") as runner:
         _check(runner.run(_jobs(tmp_path)), tmp_path)
+
+
+@pytest.mark.slow
+def test_ray_runs_a_job_again_when_its_worker_is_lost_but_not_when_it_fails(tmp_path: Path):
+    """Issue 38: a lost worker (a preempted node, here a process that exits) is a system failure that
+    Ray retries, and the job resumes; an error of the job itself is its result, run once."""
+    pytest.importorskip("ray")
+    marker, count = tmp_path / "first-attempt", tmp_path / "attempts"
+    # builtins.exec: a function every Ray worker can import
+    lost_once = (f"import os, pathlib\np = pathlib.Path({str(marker)!r})\n"
+                 "if not p.exists():\n    p.write_text('x')\n    os._exit(3)\n")
+    fails = (f"import pathlib\nc = pathlib.Path({str(count)!r})\nc.write_text((c.read_text() if c.exists() else '') "
+             "+ 'x')\nraise ValueError('the job itself is wrong')\n")
+    with JobRunner(1, "ray") as runner:
+        results = {r.name: r for r in runner.run([Job("lost", exec, (lost_once,), tmp_path / "lost.log"),
+                                                  Job("fails", exec, (fails,), tmp_path / "fails.log")])}
+    assert results["lost"].ok and marker.exists(), results["lost"].error  # the second attempt finished it
+    assert not results["fails"].ok and "the job itself is wrong" in results["fails"].error
+    assert count.read_text() == "x"  # run once: an application error is not retried

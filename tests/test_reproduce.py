@@ -357,7 +357,7 @@ def check_track_claims(stages: dict[tuple[str, str], Path], compare_dir: Path, t
     assert ddpg[0] == f"**not resolved**: {min(gaps.values()):+,.2f}"  # one seed per algorithm: no interval
     for col, track in enumerate(("paper", "strong")):
         zs, near = [], []
-        for (t, scenario), stage in sorted(stages.items()):
+        for (t, _scenario), stage in sorted(stages.items()):
             if t != track:
                 continue
             res = read_json(stage / "stage.json")["result"]

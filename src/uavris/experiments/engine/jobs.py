@@ -335,7 +335,9 @@ class JobRunner:
                 else:
                     ray.init(num_cpus=self.workers, include_dashboard=False, log_to_driver=False)
                 self._ray_started = True
-            remote = ray.remote(num_cpus=1, max_retries=0)(_run_logged)
+            # A job whose worker or node is lost (a preempted cluster node) is run again elsewhere, where it
+            # resumes from its checkpoints; a job that fails is not: _run_logged returns its error as a result.
+            remote = ray.remote(num_cpus=1, max_retries=RAY_SYSTEM_RETRIES, retry_exceptions=False)(_run_logged)
             refs = {remote.remote(job): job for job in jobs}
         pending = list(refs)
         results: list[JobResult] = []
@@ -351,6 +353,9 @@ class JobRunner:
                 if on_done:
                     on_done(res)
         return results
+
+
+RAY_SYSTEM_RETRIES = 3  # per job, for system failures only (a lost worker process or node)
 
 
 def run_jobs(jobs: list[Job], workers: int, on_done: Callable[[JobResult], None] | None = None,
