@@ -9,9 +9,10 @@ export NO_MKDOCS_2_WARNING := 1
 
 .PHONY: run test demo docs bench clean
 
-$(STAMP): pyproject.toml
+# constraints.txt: the exact versions that reproduce the study (pyproject.toml holds the ranges)
+$(STAMP): pyproject.toml constraints.txt
 	$(PYTHON) -m venv $(VENV)
-	$(PY) -m pip install --quiet -e '.[test,docs]'
+	$(PY) -m pip install --quiet -c constraints.txt -e '.[train,test,docs]'
 	touch $(STAMP)
 
 run: $(STAMP)
@@ -29,7 +30,7 @@ docs: $(STAMP)
 	$(VENV)/bin/mkdocs build --strict
 
 bench: $(STAMP)
-	$(PY) -m pip install --quiet -e '.[bench]'
+	$(PY) -m pip install --quiet -c constraints.txt -e '.[bench]'
 	$(PY) benchmarks/env_throughput.py
 	$(PY) benchmarks/train_throughput.py
 	$(PY) benchmarks/sb3_share.py

@@ -162,3 +162,35 @@ def test_a_named_scenario_is_the_papers_hall_for_a_model_trained_in_another(tmp_
     for row in rows:  # the zero action of each cell is the paper hall's, computed here independently
         want = evaluate(reference_policy("zero-action", paper), paper, row["cell"], 8, 1_000_000).avg_sum_rate.mean()
         assert row["zero_action"] == pytest.approx(want, rel=1e-12), row["cell"]
+
+
+def test_the_simulator_installs_without_the_training_stack(tmp_path: Path) -> None:
+    """Issue 38: `pip install uavris` (no extra) brings the simulator, the environments, the
+    references and their commands; a command that needs torch says so in one line. Simulated by
+    an import hook that hides what the `train` extra installs."""
+    import subprocess
+    import sys
+
+    script = tmp_path / "no_train.py"
+    script.write_text(
+        "import importlib.abc, sys\n"
+        "class Hide(importlib.abc.MetaPathFinder):\n"
+        "    def find_spec(self, name, path, target=None):\n"
+        "        if name.split('.')[0] in ('torch', 'stable_baselines3', 'tensorboard', 'minari', 'h5py',\n"
+        "                                  'safetensors', 'ray'):\n"
+        "            raise ModuleNotFoundError(f'No module named {name!r}', name=name)\n"
+        "sys.meta_path.insert(0, Hide())\n"
+        "import gymnasium as gym\n"
+        "import uavris\n"
+        "env = gym.make('uavris/UavRisD2D-v1')\n"
+        "obs, _ = env.reset(seed=0)\n"
+        "assert obs.shape == (158,)\n"
+        "from uavris.cli import main\n"
+        "assert main(['evaluate', 'oracle', '--scenario', 'fig2', '--episodes', '1', '--out', sys.argv[1],\n"
+        "             '--no-progress']) == 0\n"
+        "sys.exit(main(['train', '--preset', 'smoke', '--out', sys.argv[1] + '/run']))\n")
+    proc = subprocess.run([sys.executable, str(script), str(tmp_path / "o")], capture_output=True, text=True,
+                          timeout=300)
+    assert proc.returncode == 2, proc.stderr
+    assert proc.stderr.strip().splitlines()[-1].startswith("uavris: error: this needs the training stack")
+    assert "Traceback" not in proc.stderr and "oracle in fig2" in proc.stdout

@@ -135,6 +135,9 @@ def test_paper_and_strong_verdicts_come_from_evaluation_files(smoke_run):
     stages = {("strong" if s.name.startswith("strong-") else "paper", s.name.split("-")[-2]): s
               for s in sorted((out / "stages").glob("*evaluate-unseen*"))}
     check_track_claims(stages, next((out / "stages").glob("compare-*")), report.read_text())
+    deploy = [s for s in sorted((out / "stages").glob("deploy-evaluate-layout-unseen-*"))
+              if re.fullmatch(r"deploy-evaluate-layout-unseen-\d+-[0-9a-f]{12}", s.name)]
+    check_deployment_claims(deploy, report.read_text())
 
 
 @pytest.mark.slow
@@ -339,6 +342,24 @@ def _cell(diffs) -> str:
 def _episodes(stage: Path, row: str) -> np.ndarray:
     with open(stage / f"{row}.csv", newline="") as f:
         return np.array([float(r["avg_sum_rate"]) for r in csv.DictReader(f)])
+
+
+def check_deployment_claims(stages: list[Path], text: str) -> None:
+    """The claims table's deployment cell of the zero-shot claim: the return- and the
+    goal-conditioned DT (safety layer, mean of the seeds per episode) minus the nearest training
+    hall's plan, per unseen hall of the study's own generator and count."""
+    table = _table(text, "| claim | paper | strong | deployment |")
+    [row] = [r for r in table if r[0].startswith("the zero-shot DT scores above")]
+    cells = []
+    for variant in ("dt-zero-shot-safe", "dt-goal-safe"):
+        diffs = []
+        for stage in stages:
+            res = read_json(stage / "stage.json")["result"]
+            keys = [k for k, s in res.items() if s.get("variant") == variant]
+            [near] = [k for k in res if k.startswith("transfer-")]
+            diffs.append(np.mean(np.mean([_episodes(stage, k) for k in keys], axis=0) - _episodes(stage, near)))
+        cells.append(_cell(diffs))
+    assert row[3] == " / ".join(cells), (row[3], cells)
 
 
 def check_track_claims(stages: dict[tuple[str, str], Path], compare_dir: Path, text: str) -> None:

@@ -32,6 +32,8 @@ from typing import Callable
 from uavris.errors import UavrisError
 
 EXIT_BAD_INPUT = 2
+# What `pip install 'uavris[train]'` adds (pyproject.toml): the experts, the DT and the study need it
+TRAINING_STACK = ("torch", "stable_baselines3", "tensorboard", "minari", "h5py", "safetensors")
 PROG = "uavris"
 
 
@@ -107,6 +109,13 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print(f"{PROG}: interrupted{_after_interrupt(argv)}", file=sys.stderr)
         return 130
+    except ModuleNotFoundError as e:  # `pip install uavris` without its training extra
+        root = (e.name or "").split(".")[0]
+        if root not in TRAINING_STACK:
+            raise
+        print(f"{PROG}: error: this needs the training stack ({root} is not installed): "
+              "pip install 'uavris[train]'", file=sys.stderr)
+        return EXIT_BAD_INPUT
     except SystemExit as e:  # --help
         return int(e.code or 0) if not isinstance(e.code, str) else EXIT_BAD_INPUT
     except BrokenPipeError:  # `uavris ... --help | head`: the reader left, which is not an error
