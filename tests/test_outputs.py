@@ -194,3 +194,31 @@ def test_the_simulator_installs_without_the_training_stack(tmp_path: Path) -> No
     assert proc.returncode == 2, proc.stderr
     assert proc.stderr.strip().splitlines()[-1].startswith("uavris: error: this needs the training stack")
     assert "Traceback" not in proc.stderr and "oracle in fig2" in proc.stdout
+
+
+HALL = "devices:\n  - [5, 5, 1]\n  - [25, 8, 1]\n  - [20, 20, 0.5]\n  - [6, 18, 1]\nstart: [12, 12, 4]\nroom: [30, 24, 6]\n"
+
+
+def test_sweep_and_benchmark_fly_your_own_hall(tmp_path: Path) -> None:
+    """Issue 38: --layout on sweep and benchmark is the hall's devices, room and start, as in evaluate."""
+    from uavris.agents.evaluation import evaluate
+    from uavris.agents.references import reference_policy
+    from uavris.config import SystemConfig
+    from uavris.layouts import resolve_layout
+
+    hall = tmp_path / "hall.yaml"
+    hall.write_text(HALL)
+    system, start = resolve_layout(str(hall), SystemConfig(horizon=10)).resolve(SystemConfig(horizon=10))
+    assert system.room == (30.0, 24.0, 6.0) and tuple(start.start) == (12.0, 12.0, 4.0)
+    assert main(["sweep", "zero-action", "--param", "system.nx", "2,4", "--layout", str(hall), "--episodes", "2",
+                 "--system.horizon", "10", "--workers", "1", "--out", str(tmp_path / "s"), "--no-progress"]) == 0
+    rows = _rows(tmp_path / "s" / "sweep.csv")
+    for r in rows:
+        cell = system.replace(nx=int(float(r["nx"])))
+        want = evaluate(reference_policy("zero-action", cell), cell, start, 2, 1_000_000).avg_sum_rate.mean()
+        assert float(r["mean"]) == pytest.approx(want, rel=1e-12)
+    assert main(["benchmark", "zero-action", "--preset", "smoke", "--layout", str(hall), "--system.horizon", "10",
+                 "--out", str(tmp_path / "b"), "--no-progress"]) == 0
+    [row] = json.loads((tmp_path / "b" / "benchmark.json").read_text())["cells"]
+    want = evaluate(reference_policy("zero-action", system), system, start, 8, 1_000_000).avg_sum_rate.mean()
+    assert row["cell"] == "hall" and row["zero_action"] == pytest.approx(want, rel=1e-12)

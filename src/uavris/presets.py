@@ -93,9 +93,10 @@ STRONG_IMITATION: dict[str, dict[str, Any]] = {
 # evaluation episodes per policy, comparison seeds per algorithm and environment steps per run,
 # expert trajectories per training scenario (the paper: 500). quick: 3 seeds (5 before the
 # strong track) and 25,000 steps (250 episodes; 50,000 before 2026-11-25): the study must fit
-# 30 minutes on 2 cores, the comparison took 31 of its 86 core-minutes at 50,000 steps, and its
-# learning curves are flat from episode 250 on (docs/timings.md); paper keeps 5 seeds and the
-# paper's ~25,000 episodes.
+# 30 minutes on 2 cores and the comparison took 31 of its 86 core-minutes at 50,000 steps. Its
+# curves still rise at 25,000 steps (PPO crosses the zero action between 100,000 and 400,000:
+# docs/results/budget.md), so the quick comparison's verdicts hold at that budget only; paper
+# keeps 5 seeds and the paper's ~25,000 episodes.
 # The deployment track (docs/study.md section 21): generated training halls with the planning
 # oracle's demonstrations (episodes per hall: layout_trajectories), unseen halls, the smaller
 # training sets of the data curve (zero-shot score against the number of training halls; the

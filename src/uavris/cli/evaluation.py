@@ -174,6 +174,9 @@ class BenchmarkArgs:
     layouts)"""
     cells: Cells = "all"
     """scenarios: the paper's unseen scenarios; layouts: the deployment track's unseen layouts; all: both"""
+    layout: Unset[str] = None
+    """your own hall instead of the protocol's cells: a YAML layout file (devices, optionally start and room) or
+    a generated name (layout-unseen-N, -kK); the preset's episodes, beside the zero action and the oracle"""
     out: Unset[Path] = None
     """output directory (default: runs/benchmarks/TARGET)"""
     phase_control: Unset[PhaseControl] = None
@@ -205,7 +208,7 @@ def benchmark_command(args: list[str]) -> None:
     a = parse(BenchmarkArgs, args, "uavris benchmark", doc, default=default)
     output_dir(a.out)
     _, md = benchmark(a.target, a.preset, a.cells, a.out, resolve_device(a.device), progress=a.progress,
-                      system=a.system, phase_control=a.phase_control)
+                      system=a.system, phase_control=a.phase_control, layout=a.layout)
     print(md.read_text(), end="")
     print(f"-> {md}")
 
@@ -222,7 +225,11 @@ class SweepArgs:
     system.nx, ...) or system.tx-power-dbm, system.ris-size (n x n), system.devices (generated halls);
     VALUES start:stop:step (stop included) or v1,v2,..."""
     scenario: Unset[ScenarioName] = None
-    """the start in the paper's hall (default fig2; a devices sweep uses each generated hall's own)"""
+    """the start in the paper's hall (default fig2, or --layout's start; a devices sweep uses each generated hall's
+    own)"""
+    layout: Unset[str] = None
+    """the hall: paper, layout-train-N / layout-unseen-N (-kK: K devices), or a YAML layout file (devices,
+    optionally start and room): its devices, room and start in every cell (default: the paper's hall)"""
     episodes: int = 16
     """evaluation episodes per cell and policy (seeds 1,000,000 ..., the same in every cell)"""
     halls: int = 4
@@ -253,20 +260,22 @@ def sweep_command(args: list[str]) -> None:
     """
     import hashlib
 
+    from uavris.cli.options import layout_defaults
     from uavris.experiments.tools.sweep import parse_axis, sweep
 
-    a = parse(SweepArgs, args, "uavris sweep", sweep_command.__doc__ or "")
+    system, hall = layout_defaults(args, SystemConfig(), "uavris sweep")
+    a = parse(SweepArgs, args, "uavris sweep", sweep_command.__doc__ or "", default=SweepArgs((), system=system))
     if not a.param:
         raise UsageError("sweep: give one or two --param NAME VALUES (see uavris sweep --help)")
     axes = [parse_axis(name, spec) for name, spec in a.param]
     if a.out is None:
-        whole = repr((a.targets, a.param, a.scenario, a.episodes, a.halls, a.system.to_dict())).encode()
+        whole = repr((a.targets, a.param, a.scenario, a.layout, a.episodes, a.halls, a.system.to_dict())).encode()
         name = "-".join(ax.name for ax in axes) + "-" + hashlib.sha256(whole).hexdigest()[:8]
         out = Path("runs/sweeps") / name
     else:
         out = a.out
     output_dir(out)
-    paths = sweep(a.targets, axes, out, base=a.system, scenario=a.scenario, episodes=a.episodes, halls=a.halls,
+    paths = sweep(a.targets, axes, out, base=a.system, scenario=a.scenario or hall, episodes=a.episodes, halls=a.halls,
                   workers=a.workers, backend=a.backend, progress=a.progress)
     print("wrote " + ", ".join(str(p) for p in paths))
 

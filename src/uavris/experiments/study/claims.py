@@ -147,11 +147,13 @@ def judge_comparison(scores: dict[str, Sequence[float]], track: str = "paper", b
     else:
         v = NOT_RESOLVED
     n = len(scores["ddpg"])
-    above = ", ".join(f"{a.upper()} {d['mean']:+.2f} [{d['ci_low']:+.2f}, {d['ci_high']:+.2f}]"
+    above = ", ".join(f"{a.upper()} {d['mean']:+.2f} " + ("(no interval: one seed)" if math.isnan(d["ci_low"]) else
+                                                          f"[{d['ci_low']:+.2f}, {d['ci_high']:+.2f}]")
                       for a, d in others.items())
+    seeds = ", ".join(f"{a.upper()} {len(s)}" for a, s in scores.items())
     return Judgement("ddpg-best", track, v, others[closest]["mean"], others[closest]["ci_low"],
                      others[closest]["ci_high"], n, "training seeds per algorithm",
-                     f"DDPG minus each algorithm{budget}, final evaluation over {n} seeds (Welch): {above}")
+                     f"DDPG minus each algorithm{budget} (seeds: {seeds}; Welch): {above}")
 
 
 def comparison_scores(cdir: Path, steps: int | None = None) -> dict[str, list[float]]:
@@ -343,13 +345,15 @@ def judge_studies(outs: Sequence[Path], budgets: Sequence[tuple[Path, int]] = ()
     out: list[Judgement] = []
     compare = next((d for s in studies if (d := s.done("compare"))), None)
     if any(TRACK_SPECS["paper"] in s.rc.tracks for s in studies):
-        out.append(judge_comparison(comparison_scores(compare), budget=f" at {studies[0].rc.compare_steps:,} steps")
+        out.append(judge_comparison(comparison_scores(compare),
+                                    budget=f", final evaluation at {studies[0].rc.compare_steps:,} steps")
                    if compare else Judgement("ddpg-best", "paper", NOT_TESTED, text="no finished comparison"))
     for cdir, steps in budgets:
         scores = comparison_scores(Path(cdir), steps)
         if not scores:
             raise UavrisError(f"{cdir}: no run of the comparison was evaluated at {steps:,} steps")
-        out.append(judge_comparison(scores, budget=f" at {steps:,} steps ({', '.join(scores)})"))
+        out.append(judge_comparison(scores, budget=f", first evaluation at or after {steps:,} steps of "
+                                                   f"{Path(cdir).name}"))
     for name in TRACKS:
         track = TRACK_SPECS[name]
         ran = [s for s in studies if track in s.rc.tracks]

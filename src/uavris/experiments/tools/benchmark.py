@@ -46,6 +46,11 @@ class Cell:
 
     name: str
     kind: str  # "scenario" or "layout"
+    ref: str | None = None  # what resolves the layout when it is not the name (a YAML file's path)
+
+    @property
+    def hall(self) -> str:
+        return self.ref or self.name
 
 
 def protocol_cells(preset: str, cells: Cells = "all") -> list[Cell]:
@@ -64,21 +69,23 @@ def _episodes(path: Path) -> np.ndarray:
 
 def benchmark(target: str, preset: str = "quick", cells: Cells = "all", out: Path | None = None,
               device: str = "cpu", progress: bool = False, system: SystemConfig | None = None,
-              phase_control: str | None = None) -> tuple[list[dict[str, Any]], Path]:
+              phase_control: str | None = None, layout: str | None = None) -> tuple[list[dict[str, Any]], Path]:
     """Score ``target`` (whatever ``uavris evaluate`` takes) and the references in every cell.
 
     Writes OUT/CELL/ (each policy's per-episode CSV and summary JSON, as ``uavris evaluate``
     writes them) and OUT/benchmark.{csv,json,md}. Returns the rows and the markdown path.
+    ``layout`` (a hall :func:`~uavris.layouts.resolve_layout` reads) is the one cell instead.
     """
     check_preset(preset)
     episodes = STUDY[preset]["eval_episodes"]
     resolved = resolve_target(target)
     system = system or resolved.own_system()
-    todo = protocol_cells(preset, cells)
+    # --layout: the user's own hall (its devices and start) instead of the protocol's cells
+    todo = [Cell(Path(layout).stem, "layout", layout)] if layout is not None else protocol_cells(preset, cells)
     for cell in todo:  # every cell fits the target's system before any rollout: one line, nothing written
         try:
             if cell.kind == "layout":
-                resolve_layout(cell.name, system).resolve(system)
+                resolve_layout(cell.hall, system).resolve(system)
             else:
                 get_scenario(cell.name).validate_for(system)
         except ConfigError as e:
@@ -103,7 +110,7 @@ def _cell(target: Target, cell: Cell, episodes: int, out: Path, system: SystemCo
     """The target, the zero action and the oracle in one cell, each written under ``out``."""
     # a scenario of the paper is a start in the paper's hall, whatever hall the target was trained in
     place = dict(scenario=cell.name, layout="paper") if cell.kind == "scenario" else dict(scenario=None,
-                                                                                           layout=cell.name)
+                                                                                           layout=cell.hall)
     paths = {}
     for key, who in (("target", target), (ZERO_ACTION, ZERO_ACTION), (ORACLE, ORACLE)):
         pc = phase_control if key == "target" else None

@@ -117,7 +117,7 @@ def parse_axis(name: str, spec: str) -> Axis:
 
 
 def cell_systems(base: SystemConfig, axes: Sequence[Axis], point: Sequence[float], halls: int,
-                 scenario: str | None) -> list[tuple[SystemConfig, Any]]:
+                 scenario: str | Any | None) -> list[tuple[SystemConfig, Any]]:
     """The (system, start) pairs a cell is evaluated in: one, or ``halls`` generated halls of
     the cell's number of devices (``devices`` axis); checked before any job runs."""
     from uavris.layouts import LayoutGenerator
@@ -160,7 +160,7 @@ def sweep_cell(target: str, system: dict[str, Any], scenario: dict[str, Any], ep
 
 
 def sweep(targets: Sequence[str], axes: Sequence[Axis], out: Path, *, base: SystemConfig | None = None,
-          scenario: str | None = None, episodes: int = 16, halls: int = 4, workers: int = 1,
+          scenario: str | Any | None = None, episodes: int = 16, halls: int = 4, workers: int = 1,
           backend: str = "local", progress: bool = False) -> list[Path]:
     """Every ``target`` in every cell of the grid of ``axes`` (one or two), written to ``out``
     (module docstring); returns the paths of the CSV and the figures."""
