@@ -222,3 +222,11 @@ def test_sweep_and_benchmark_fly_your_own_hall(tmp_path: Path) -> None:
     [row] = json.loads((tmp_path / "b" / "benchmark.json").read_text())["cells"]
     want = evaluate(reference_policy("zero-action", system), system, start, 8, 1_000_000).avg_sum_rate.mean()
     assert row["cell"] == "hall" and row["zero_action"] == pytest.approx(want, rel=1e-12)
+
+
+def test_the_plan_maps_colour_scale_holds_the_target() -> None:
+    from uavris.experiments.tools.plan import colour_limits
+
+    rates = np.array([[30.0, np.nan], [45.5, 50.2]])
+    assert colour_limits(rates, 52.12) == (30.0, 52.12)  # the map: 50.2 at most, the target 52.12
+    assert colour_limits(rates, 40.0) == (30.0, 50.2)

@@ -117,9 +117,11 @@ def plan_figure(system: SystemConfig, plan: dict[str, Any], xs: NDArray, ys: NDA
     learned = plan.get("planner", "exact") != "exact"
     fig, ax = plt.subplots(figsize=(4.8, 4.2))
     cmap = plt.get_cmap("viridis").with_extremes(bad="0.85")  # grey: inside a safety ball, no place to be
-    mesh = ax.pcolormesh(xs, ys, rates.T, shading="nearest", cmap=cmap)
+    vmin, vmax = colour_limits(rates, plan["expected_sum_rate"])
+    mesh = ax.pcolormesh(xs, ys, rates.T, shading="nearest", cmap=cmap, vmin=vmin, vmax=vmax)
     ax.grid(False)
-    fig.colorbar(mesh, ax=ax, label="learned value V (bps/Hz)" if learned else "expected sum rate (bps/Hz)")
+    bar = fig.colorbar(mesh, ax=ax, label="learned value V (bps/Hz)" if learned else "expected sum rate (bps/Hz)")
+    bar.ax.axhline(plan["expected_sum_rate"], color="#d62728", lw=1.2)  # the target's, with its attitude
     users = np.asarray(system.users)
     altitude = plan["target"][2]
     ring = np.linspace(0, 2 * np.pi, 90)
@@ -142,8 +144,17 @@ def plan_figure(system: SystemConfig, plan: dict[str, Any], xs: NDArray, ys: NDA
     ax.set_title(f"{plan['layout']['name']}: {what} at z = {altitude:.2f} m (level RIS)\n"
                  f"target {np.round(target, 2).tolist()}: {plan['expected_sum_rate']:.2f} bps/Hz, "
                  f"{plan['travel_s']:.1f} s from the start", fontsize=8)
-    ax.legend(fontsize=7, loc="upper right", framealpha=0.7)
+    # below the map, where it hides no device
+    ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.14), ncol=3, frameon=False)
     return save_figure(fig, stem)
+
+
+def colour_limits(rates: NDArray, target_rate: float) -> tuple[float, float]:
+    """The map's colour scale: the map's range, stretched to hold the target's rate (the map is
+    drawn level, the target may carry a refined attitude worth more)."""
+    finite = rates[np.isfinite(rates)]
+    low, high = (float(finite.min()), float(finite.max())) if finite.size else (target_rate, target_rate)
+    return min(low, target_rate), max(high, target_rate)
 
 
 def plan_hall(layout: Layout, system: SystemConfig, out: Path, grid_step: float, progress: bool = True,
