@@ -12,6 +12,9 @@ import pytest
 
 from uavris.cli import main
 
+HALL = ("devices:\n  - [5, 5, 1]\n  - [25, 8, 1]\n  - [20, 20, 0.5]\n  - [6, 18, 1]\n"
+        "start: [12, 12, 4]\nroom: [30, 24, 6]\n")  # a hall of one's own, smaller than the paper's
+
 
 def _rows(path: Path) -> list[dict[str, str]]:
     with open(path, newline="") as f:
@@ -158,6 +161,16 @@ def test_a_named_scenario_is_the_papers_hall_for_a_model_trained_in_another(tmp_
     assert main(["benchmark", str(run), "--preset", "smoke", "--cells", "scenarios", "--out", str(tmp_path / "b"),
                  "--no-progress"]) == 0
     rows = json.loads((tmp_path / "b" / "benchmark.json").read_text())["cells"]
+    capsys.readouterr()
+    hall = tmp_path / "hall.yaml"
+    hall.write_text(HALL)  # a 30 x 24 x 6 m hall: outside the 40 x 40 x 8 m one it was trained in
+    assert main(["evaluate", str(run), "--layout", str(hall), "--episodes", "2", "--out", str(tmp_path / "h"),
+                 "--no-progress", "--no-references"]) == 0
+    err = capsys.readouterr().err
+    assert "uavris: warning: run was trained in a 40 x 40 x 8 m hall and flies a 30 x 24 x 6 m one" in err
+    assert main(["evaluate", str(run), "--layout", "layout-unseen-1", "--episodes", "2", "--out",
+                 str(tmp_path / "h"), "--no-progress", "--no-references"]) == 0
+    assert "warning" not in capsys.readouterr().err  # another hall of the same room: no warning
     paper = SystemConfig()
     for row in rows:  # the zero action of each cell is the paper hall's, computed here independently
         want = evaluate(reference_policy("zero-action", paper), paper, row["cell"], 8, 1_000_000).avg_sum_rate.mean()
@@ -195,8 +208,6 @@ def test_the_simulator_installs_without_the_training_stack(tmp_path: Path) -> No
     assert proc.stderr.strip().splitlines()[-1].startswith("uavris: error: this needs the training stack")
     assert "Traceback" not in proc.stderr and "oracle in fig2" in proc.stdout
 
-
-HALL = "devices:\n  - [5, 5, 1]\n  - [25, 8, 1]\n  - [20, 20, 0.5]\n  - [6, 18, 1]\nstart: [12, 12, 4]\nroom: [30, 24, 6]\n"
 
 
 def test_sweep_and_benchmark_fly_your_own_hall(tmp_path: Path) -> None:

@@ -149,8 +149,12 @@ def _evaluate_row(first: EvaluateArgs, args: list[str], doc: str) -> None:
 
 
 def _print_evaluation(what: str, summary: dict, path: Path) -> None:
+    import sys
+
     from uavris.experiments.display.tables import rate_interval
 
+    if summary.get("warning"):
+        print(f"uavris: warning: {summary['warning']}", file=sys.stderr)
     print(f"{what} in {summary['scenario']} ({summary['hall']}): average sum rate {summary['mean']:.2f} bps/Hz "
           f"(95% CI {rate_interval(summary['ci_low'], summary['ci_high'])}, IQM {summary['iqm']:.2f}, "
           f"{summary['episodes']} episodes) -> {path}")

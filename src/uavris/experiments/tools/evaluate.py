@@ -113,6 +113,9 @@ def evaluate_target(target: str | Target | Row, scenario: str | Scenario | None,
                "scenario": where.name, "hall": hall_name(evaluated, layout, where.name), "start": list(where.start),
                "seed": seed,
                "phase_control": phase_control or "as trained", **res.summary(), "system": evaluated.to_dict()}
+    outside = outside_training(row, evaluated, file_token(row, study_row))
+    if outside:
+        summary["warning"] = outside
     if refs:
         summary["references"] = {name: r.summary() for name, r in refs.items()}
         oracle = summary["references"][ORACLE]["mean"]
@@ -130,6 +133,22 @@ def evaluate_target(target: str | Target | Row, scenario: str | Scenario | None,
     return summary, stem.with_suffix(".json")
 
 
+def outside_training(row: Row, system: SystemConfig, name: str) -> str | None:
+    """One line when a trained model flies a hall outside what it was trained in (another room,
+    or a device beyond the training room's extent): its numbers are an extrapolation."""
+    trained = row.target is not None and row.target.kind in ("dt", "expert") or bool(row.members)
+    if not trained:
+        return None
+    own = row.own_system()
+    beyond = any(c > r + 1e-9 for u in system.users for c, r in zip(u, own.room))
+    if tuple(own.room) == tuple(system.room) and not beyond:
+        return None
+    size = " x ".join(f"{v:g}" for v in own.room)
+    here = " x ".join(f"{v:g}" for v in system.room)
+    return (f"{name} was trained in a {size} m hall and flies a {here} m one here"
+            + (" with devices beyond its training room" if beyond else "") + ": an extrapolation")
+
+
 def hall_name(system: SystemConfig, layout: str | Layout | None, site: str) -> str:
     """The hall a result was made in, as the result records it (its devices are in its
     ``system``): the paper's, the layout named, or the hall of the site evaluated."""
@@ -139,7 +158,7 @@ def hall_name(system: SystemConfig, layout: str | Layout | None, site: str) -> s
         return f"hall {Path(layout).name if layout.endswith(('.yaml', '.yml')) else layout}"
     if isinstance(layout, Layout):
         return f"hall {layout.name}"
-    return f"hall of {site}, {system.num_users} devices" if site not in SCENARIOS else \
+    return f"{system.num_users} devices of layout {site}" if site not in SCENARIOS else \
         f"{system.num_users} devices of --system.users"
 
 
