@@ -7,7 +7,7 @@ STAMP := $(VENV)/.installed
 # The docs builds are strict and not --quiet: --quiet would hide the warnings --strict fails on.
 export NO_MKDOCS_2_WARNING := 1
 
-.PHONY: run test demo docs bench clean
+.PHONY: run test test-lowest demo docs bench clean
 
 # constraints.txt: the exact versions that reproduce the study (pyproject.toml holds the ranges)
 $(STAMP): pyproject.toml constraints.txt
@@ -25,6 +25,19 @@ test: $(STAMP)
 	$(VENV)/bin/ruff check src tests benchmarks
 	$(VENV)/bin/mkdocs build --strict
 	$(PY) -m pytest -q -n 2 --dist loadfile
+
+# The lowest numpy pyproject.toml allows, under the physics, environment, oracle and statistics tests: a venv
+# whose own numpy (2.3.5) comes before the lock's, every other package the lock's (.ci/run runs it after make test).
+LOWEST := .venv-lowest
+test-lowest: $(STAMP)
+	rm -rf $(LOWEST) && $(PYTHON) -m venv $(LOWEST)
+	$(LOWEST)/bin/python -m pip install --quiet --no-deps 'numpy==2.3.5'
+	$(PY) -c "import sysconfig; print(sysconfig.get_paths()['purelib'])" > "$$($(LOWEST)/bin/python -c "import sysconfig; print(sysconfig.get_paths()['purelib'])")/zz_lock.pth"
+	echo "$(CURDIR)/src" >> "$$($(LOWEST)/bin/python -c "import sysconfig; print(sysconfig.get_paths()['purelib'])")/zz_lock.pth"
+	$(LOWEST)/bin/python -c "import numpy; assert numpy.__version__ == '2.3.5', numpy.__version__"
+	$(LOWEST)/bin/python -m pytest -q -p no:cacheprovider -m "not slow" tests/test_channel.py tests/test_geometry.py \
+		tests/test_reflection.py tests/test_pairing.py tests/test_motion.py tests/test_env.py tests/test_hybrid_env.py \
+		tests/test_oracle.py tests/test_stats.py tests/test_claims.py tests/test_regime_and_search.py tests/test_safety.py
 
 docs: $(STAMP)
 	$(VENV)/bin/mkdocs build --strict

@@ -339,9 +339,11 @@ def judge_studies(outs: Sequence[Path], budgets: Sequence[tuple[Path, int]] = ()
     (comparison, environment steps): the comparison's runs judged at that budget too
     (``uavris compare-algorithms --steps N --eval-every B``)."""
     studies = [_Study.read(Path(o)) for o in outs]
-    seeds = [s.rc.seed for s in studies]
-    if len(set(seeds)) != len(seeds) and len(studies) > 1:
-        raise UavrisError(f"the studies share a seed ({seeds}): run each with its own --seed")
+    pooled = [s for s in studies if any(not t.layouts for t in s.rc.tracks)]  # the seeds of the scenario tracks
+    seeds = [s.rc.seed for s in pooled]
+    if len(set(seeds)) != len(seeds):
+        raise UavrisError(f"the studies of the paper and strong tracks share a seed ({seeds}): run each with its "
+                          "own --seed")
     out: list[Judgement] = []
     compare = next((d for s in studies if (d := s.done("compare"))), None)
     if any(TRACK_SPECS["paper"] in s.rc.tracks for s in studies):
