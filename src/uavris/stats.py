@@ -96,14 +96,19 @@ def verdict(low: float, high: float) -> str:
     return HOLDS if low > 0 else REFUTED if high < 0 else NOT_RESOLVED
 
 
+def judged(differences: ArrayLike) -> dict[str, float]:
+    """Per-unit differences (already paired): ``n``, ``mean``, the Student-t 95% interval of
+    the mean and its ``verdict`` on "the difference is > 0"."""
+    out = over_units(differences)
+    return {**out, "verdict": verdict(out["ci_low"], out["ci_high"])}
+
+
 def paired_difference(a: ArrayLike, b: ArrayLike) -> dict[str, float]:
-    """``a - b`` unit by unit (the same halls, seeds or episodes in both): ``n``, ``mean`` and
-    the Student-t 95% interval of the mean difference, and its ``verdict``."""
+    """``a - b`` unit by unit (the same halls, seeds or episodes in both), :func:`judged`."""
     a, b = np.asarray(a, dtype=np.float64), np.asarray(b, dtype=np.float64)
     if a.shape != b.shape or a.ndim != 1:
         raise ValueError(f"paired samples must be 1-D of one length, got {a.shape} and {b.shape}")
-    out = over_units(a - b)
-    return {**out, "verdict": verdict(out["ci_low"], out["ci_high"])}
+    return judged(a - b)
 
 
 def welch_difference(a: ArrayLike, b: ArrayLike, confidence: float = 0.95) -> dict[str, float]:

@@ -314,16 +314,10 @@ def plan_target(config: SystemConfig, start: tuple[float, float, float], setting
     best = int(np.argmax(vals))
     q, att, r_best = cands[best].copy(), level.copy(), float(r[best])
     pos_step, att_step = s.refine_step, c.attitude_step_rad
-    eye = np.eye(3)
     for _ in range(s.max_refinements):
         if pos_step < s.min_step:
             break
-        nq = np.concatenate([q + pos_step * eye, q - pos_step * eye, np.repeat(q[None], 6 if att_step > 0 else 0, 0)])
-        na = np.concatenate([np.repeat(att[None], 6, 0)] + ([att + att_step * eye, att - att_step * eye]
-                                                          if att_step > 0 else []))
-        ok = feasible(c, nq)
-        if c.front_margin_deg is not None:  # the attitude safety layer: no pose it would not let the UAV hold
-            ok &= ph.worst_elevation(na, nq, np.asarray(c.users)) >= np.sin(np.radians(c.front_margin_deg))
+        nq, na, ok = pattern_neighbours(c, q, att, pos_step, att_step)
         if not ok.any():
             pos_step, att_step = pos_step / 2, att_step / 2
             continue
@@ -337,6 +331,22 @@ def plan_target(config: SystemConfig, start: tuple[float, float, float], setting
     runners_up = [cands[i] for i in np.argsort(-vals, kind="stable")[:FINALIST_CANDIDATES] if i != 0]
     finalists = [(start_q, level), (q, att), *((p, level) for p in runners_up)]
     return check_finalists(c, s, start_q, finalists, valued, table)
+
+
+def pattern_neighbours(c: SystemConfig, q: NDArray, att: NDArray, pos_step: float, att_step: float
+                       ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.bool_]]:
+    """The pattern search's neighbours of the pose ``(q, att)``: the 6 positions ``+-pos_step``
+    per axis (attitude kept) and the 6 attitudes ``+-att_step`` per angle (position kept; none
+    when ``att_step`` is 0), and which of them may be held: inside the flight region, outside
+    every safety ball and, under the attitude safety layer, with every device in front."""
+    eye = np.eye(3)
+    nq = np.concatenate([q + pos_step * eye, q - pos_step * eye, np.repeat(q[None], 6 if att_step > 0 else 0, 0)])
+    na = np.concatenate([np.repeat(att[None], 6, 0)] + ([att + att_step * eye, att - att_step * eye]
+                                                      if att_step > 0 else []))
+    ok = feasible(c, nq)
+    if c.front_margin_deg is not None:  # the attitude safety layer: no pose it would not let the UAV hold
+        ok &= ph.worst_elevation(na, nq, np.asarray(c.users)) >= np.sin(np.radians(c.front_margin_deg))
+    return nq, na, ok
 
 
 def check_finalists(c: SystemConfig, s: PlanSettings, start_q: NDArray, finalists: list[tuple[NDArray, NDArray]],

@@ -13,7 +13,8 @@ R) / T`` with ``R`` the expected sum rate with optimised phases at the pose
 2. at the ``top`` best by value (at least ``grid_step`` apart), every attitude of a grid of
    yaw, pitch and roll (``attitudes_deg`` each);
 3. a pattern search in position and attitude from each of the ``refine`` best, down to
-   ``min_step``.
+   ``min_step``, over the planner's own neighbours (:func:`.planner.pattern_neighbours`: the
+   attitude safety layer's limit included where the system has one).
 
 Its draws are not the planner's (``seed``), so the oracle is not judged on its own common
 random numbers; :func:`plan_gap` then values both poses and staying on ``batches`` fresh
@@ -36,6 +37,7 @@ from uavris.agents.oracle.planner import (
     Plan,
     expected_optimised_rate,
     feasible,
+    pattern_neighbours,
     rate_batches,
     travel_slots,
 )
@@ -124,12 +126,9 @@ def exhaustive_plan(config: SystemConfig, start: tuple[float, float, float],
 
 def _pattern_search(c: SystemConfig, s: SearchSettings, q: NDArray, att: NDArray, vq: float,
                     value: Callable[[NDArray, NDArray], NDArray]) -> tuple[NDArray, NDArray, float]:
-    pos_step, att_step = s.refine_step, math.radians(c.attitude_step_deg)
-    eye = np.eye(3)
+    pos_step, att_step = s.refine_step, c.attitude_step_rad
     while pos_step >= s.min_step:
-        nq = np.concatenate([q + pos_step * eye, q - pos_step * eye, np.repeat(q[None], 6, 0)])
-        na = np.concatenate([np.repeat(att[None], 6, 0), att + att_step * eye, att - att_step * eye])
-        ok = feasible(c, nq)
+        nq, na, ok = pattern_neighbours(c, q, att, pos_step, att_step)
         if not ok.any():
             pos_step, att_step = pos_step / 2, att_step / 2
             continue

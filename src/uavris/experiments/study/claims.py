@@ -33,7 +33,7 @@ from uavris.experiments.study.pipeline import build_pipeline
 from uavris.experiments.study.rows import read_study
 from uavris.experiments.study.tracks import TRACK_SPECS, TRACKS, Track, zero_shot_only
 from uavris.io import atomic_write_text, read_csv, read_json, write_json
-from uavris.stats import HOLDS, NOT_RESOLVED, REFUTED, paired_difference, steps_to_level, welch_difference
+from uavris.stats import HOLDS, NOT_RESOLVED, REFUTED, judged, paired_difference, steps_to_level, welch_difference
 
 WITHIN = 0.05  # "nearly the same performance" (paper Sec. IV-C): within 5% of the expert's mean
 CLAIMS: dict[str, str] = {
@@ -101,12 +101,18 @@ def episode_rates(edir: Path, row: str) -> np.ndarray:
     return np.array([float(r["avg_sum_rate"]) for r in read_csv(edir / f"{row}.csv")])
 
 
+def _imitation_samples(run_dir: Path) -> float:
+    """The environment interactions of an expert's imitation rollouts (0 without imitation)."""
+    imitation = run_dir / "imitation.csv"
+    return float(read_csv(imitation)[-1]["samples"]) if imitation.exists() else 0.0
+
+
 def expert_curve(run_dir: Path) -> tuple[np.ndarray, np.ndarray]:
     """An expert's periodic evaluations against the environment interactions it had used: an
     expert that imitated the oracle first interacted for its imitation rollouts (the states it
     labelled), so its evaluations sit after those."""
     imitation = run_dir / "imitation.csv"
-    offset = float(read_csv(imitation)[-1]["samples"]) if imitation.exists() else 0.0
+    offset = _imitation_samples(run_dir)
     evals = read_csv(run_dir / "evals.csv") if (run_dir / "evals.csv").exists() else []
     x = offset + np.array([float(r["env_steps"]) for r in evals])
     y = np.array([float(r["mean"]) for r in evals])
@@ -126,9 +132,7 @@ def run_interactions(run_dir: Path) -> float:
     x, _ = expert_curve(run_dir)
     steps = float(read_json(run_dir / "timing.json").get("env_steps", 0)) if (run_dir / "timing.json").exists() \
         else 0.0
-    imitation = run_dir / "imitation.csv"
-    offset = float(read_csv(imitation)[-1]["samples"]) if imitation.exists() else 0.0
-    return max(offset + steps, float(x[-1]) if x.size else 0.0)
+    return max(_imitation_samples(run_dir) + steps, float(x[-1]) if x.size else 0.0)
 
 
 # ------------------------------------------------------------------------------ the comparison (Fig. 2)
@@ -165,12 +169,35 @@ def comparison_scores(cdir: Path, steps: int | None = None) -> dict[str, list[fl
         for r in read_csv(cdir / "final_per_run.csv"):
             scores.setdefault(r["algo"], []).append(float(r["final_eval_mean"]))
         return scores
-    for run in sorted((cdir / "runs").iterdir()):
-        at = [float(r["mean"]) for r in read_csv(run / "evals.csv") if float(r["env_steps"]) >= steps] \
-            if (run / "evals.csv").exists() else []
-        if at:  # the first evaluation at or after the budget (PPO evaluates at the end of a rollout)
-            scores.setdefault(run.name.rsplit("-s", 1)[0], []).append(at[0])
+    for algo, curves in eval_curves(cdir).items():
+        for x, y in curves:
+            at = y[x >= steps]
+            if at.size:  # the first evaluation at or after the budget (PPO evaluates at the end of a rollout)
+                scores.setdefault(algo, []).append(float(at[0]))
     return scores
+
+
+def eval_curves(cdir: Path) -> dict[str, list[tuple[np.ndarray, np.ndarray]]]:
+    """Each algorithm's runs in a comparison, in seed order: their periodic evaluations
+    (environment steps, mean over the episodes); a run without any yet is left out."""
+    runs: dict[str, list[tuple[np.ndarray, np.ndarray]]] = {}
+    for run in sorted((Path(cdir) / "runs").iterdir()):
+        rows = read_csv(run / "evals.csv") if (run / "evals.csv").exists() else []
+        if rows:
+            runs.setdefault(run.name.rsplit("-s", 1)[0], []).append(
+                (np.array([float(r["env_steps"]) for r in rows]), np.array([float(r["mean"]) for r in rows])))
+    return runs
+
+
+def fig2_zero_action() -> float:
+    """The zero action's mean in ``fig2`` of the paper's system on the comparison's 32 episodes."""
+    from uavris.agents.evaluation import evaluate
+    from uavris.agents.references import ZERO_ACTION, reference_policy
+    from uavris.config import SystemConfig
+    from uavris.presets import EVAL_SEED
+
+    return float(evaluate(reference_policy(ZERO_ACTION, SystemConfig()), SystemConfig(), "fig2", 32,
+                          EVAL_SEED).avg_sum_rate.mean())
 
 
 # ------------------------------------------------------------------------------ the scenario tracks
@@ -218,16 +245,14 @@ def judge_scenario_track(studies: Sequence[_Study], track: Track) -> list[Judgem
                                                                                   "fewer-total")]
     seeds = sorted({u["seed"] for u in units})
     unit = f"(seed, scenario) pairs: seeds {seeds} x {sorted({u['site'] for u in units})}"
-    zs, tr, ft, ex, fewer, total, censored = [], [], [], [], [], [], 0
+    zs, ft, fewer, total, censored = [], [], [], [], 0
     for u in units:
         edir, res = u["edir"], u["res"]
         z = episode_rates(edir, "dt-zero-shot")
         _, t = _stronger(edir, res, u["transfers"])
         zs.append(float(np.mean(z - t)))
-        tr.append(0.0)
         f, e = episode_rates(edir, "dt-finetuned"), episode_rates(edir, "expert")
         ft.append(float(np.mean(f - (1 - WITHIN) * e)))
-        ex.append(0.0)
         fx, _ = finetune_curve(u["finetune"])
         x, y = expert_curve(u["expert"])
         need = steps_to_level(x, y, float(res["dt-finetuned"]["mean"]))
@@ -239,13 +264,13 @@ def judge_scenario_track(studies: Sequence[_Study], track: Track) -> list[Judgem
     note = (f"; the expert never reached the level in {censored} of {len(units)} units (its budget counted, a lower "
             "bound)") if censored else ""
     return [
-        _judged("zero-shot", name, paired_difference(zs, tr), unit,
+        _judged("zero-shot", name, judged(zs), unit,
                 "zero-shot DT minus the stronger transferred expert, bps/Hz, paired on the evaluation episodes"),
-        _judged("near-expert", name, paired_difference(ft, ex), unit,
+        _judged("near-expert", name, judged(ft), unit,
                 f"fine-tuned DT minus {1 - WITHIN:.0%} of the expert trained in the scenario, bps/Hz"),
-        _judged("fewer", name, paired_difference(fewer, [0.0] * len(fewer)), unit,
+        _judged("fewer", name, judged(fewer), unit,
                 "interactions the expert needed to reach the fine-tuned DT's level minus fine-tuning's" + note),
-        _judged("fewer-total", name, paired_difference(total, [0.0] * len(total)), unit,
+        _judged("fewer-total", name, judged(total), unit,
                 "the same minus the pre-training's interactions (its experts' training and the dataset)" + note),
     ]
 
@@ -293,21 +318,21 @@ def judge_deployment(study: _Study, from_scratch: Sequence[dict[str, float]] = (
         if fine is not None:
             ft.append(float(np.mean(fine - (1 - WITHIN) * episode_rates(edir, "oracle-safe"))))
     unit = f"{len(names)} unseen halls"
-    out = [_judged("zero-shot", "deployment", paired_difference(zs, np.zeros(len(zs))), unit,
+    out = [_judged("zero-shot", "deployment", judged(zs), unit,
                    "zero-shot DT (return-conditioned, safety layer, mean of its seeds) minus the nearest training "
                    "hall's oracle plan, bps/Hz")] if len(zs) else \
         [Judgement("zero-shot", "deployment", NOT_TESTED, text="no unseen hall evaluated")]
     if goal and len(goal) == len(zs):
-        out.append(_judged("zero-shot", "deployment", paired_difference(goal, np.zeros(len(goal))), unit,
+        out.append(_judged("zero-shot", "deployment", judged(goal), unit,
                            "the same for the goal-conditioned DT told the learned planner's place (uavris's "
                            "controller; the cell's second entry)"))
     if len(ft) == len(names) and ft:
-        out.append(_judged("near-expert", "deployment", paired_difference(ft, np.zeros(len(ft))), unit,
+        out.append(_judged("near-expert", "deployment", judged(ft), unit,
                            f"DT fine-tuned in the hall minus {1 - WITHIN:.0%} of the oracle (the track's expert), "
                            "both under the safety layer, bps/Hz"))
     elif from_scratch:
         near = [h["level"] - (1 - WITHIN) * h["oracle"] for h in from_scratch]
-        out.append(_judged("near-expert", "deployment", paired_difference(near, np.zeros(len(near))),
+        out.append(_judged("near-expert", "deployment", judged(near),
                            f"{len(near)} unseen halls (benchmarks/from_scratch.py)",
                            f"DT fine-tuned by trying places (mean of its seeds) minus {1 - WITHIN:.0%} of the oracle "
                            "(the track's expert), both under the safety layer, bps/Hz"))
@@ -382,17 +407,10 @@ def claims_table(judgements: Sequence[Judgement]) -> list[str]:
     return markdown_table(("claim", *tracks), rows, "l" + "l" * len(tracks))
 
 
-def budget_table(cdir: Path, budgets: Sequence[int]) -> list[str]:
+def budget_table(cdir: Path, budgets: Sequence[int], zero: float) -> list[str]:
     """Each algorithm of a comparison at each budget: its seeds' mean with the Student-t 95% CI,
-    and against doing nothing (the zero action's mean on the same episodes): "above" holds where
-    the CI of the seeds' scores minus that mean excludes zero upwards (markdown lines)."""
-    from uavris.agents.evaluation import evaluate
-    from uavris.agents.references import ZERO_ACTION, reference_policy
-    from uavris.config import SystemConfig
-    from uavris.presets import EVAL_SEED
-
-    zero = float(evaluate(reference_policy(ZERO_ACTION, SystemConfig()), SystemConfig(), "fig2", 32,
-                          EVAL_SEED).avg_sum_rate.mean())
+    and against doing nothing (``zero``, the zero action's mean on the same episodes): "above"
+    holds where the CI of the seeds' scores minus that mean excludes zero upwards (markdown lines)."""
     rows = []
     for steps in budgets:
         for algo, scores in comparison_scores(Path(cdir), steps).items():
@@ -405,23 +423,15 @@ def budget_table(cdir: Path, budgets: Sequence[int]) -> list[str]:
                              "above the zero action"), rows, "lrrrlll")]
 
 
-def budget_figure(cdir: Path, stem: Path) -> list[Path]:
+def budget_figure(cdir: Path, stem: Path, zero: float) -> list[Path]:
     """The periodic evaluations of a comparison's runs against environment steps (log axis):
-    each seed thin, the mean of the seeds that reached a step thick, beside the zero action,
-    hovering with optimised phases and the oracle on the same episodes (PNG and PDF)."""
-    from uavris.agents.evaluation import evaluate
-    from uavris.agents.references import REFERENCES, reference_policy
-    from uavris.config import SystemConfig
+    each seed thin, the mean of the seeds that reached a step thick, beside the zero action
+    (``zero``, on the same episodes) (PNG and PDF)."""
+    from uavris.agents.references import REFERENCES, ZERO_ACTION
     from uavris.experiments.display.plots import plt, reference_lines, save_figure
-    from uavris.presets import EVAL_SEED
 
     fig, ax = plt.subplots(figsize=(5.4, 3.6))
-    runs: dict[str, list[tuple[np.ndarray, np.ndarray]]] = {}
-    for run in sorted((Path(cdir) / "runs").iterdir()):
-        rows = read_csv(run / "evals.csv") if (run / "evals.csv").exists() else []
-        if rows:
-            runs.setdefault(run.name.rsplit("-s", 1)[0], []).append(
-                (np.array([float(r["env_steps"]) for r in rows]), np.array([float(r["mean"]) for r in rows])))
+    runs = eval_curves(cdir)
     for i, (algo, curves) in enumerate(sorted(runs.items())):
         for x, y in curves:
             ax.plot(x, y, "-", color=f"C{i}", lw=0.6, alpha=0.5)
@@ -429,11 +439,8 @@ def budget_figure(cdir: Path, stem: Path) -> list[Path]:
         mean = [np.mean([y[j] for x, y in curves if x.size > j]) for j in range(longest.size)]
         seeds = f"{len(curves)} seed{'s' * (len(curves) != 1)}"
         ax.plot(longest, mean, "-", color=f"C{i}", lw=1.8, label=f"{algo.upper()} (mean of {seeds}; thin: each)")
-    system = SystemConfig()
     # hovering with optimised phases (36 bps/Hz) and the oracle (43) are far above: named in the page, not drawn
-    refs = {k: (REFERENCES[k].label, float(evaluate(reference_policy(k, system), system, "fig2", 32, EVAL_SEED)
-                                           .avg_sum_rate.mean())) for k in ("zero-action",)}
-    reference_lines(ax, refs)
+    reference_lines(ax, {ZERO_ACTION: (REFERENCES[ZERO_ACTION].label, zero)})
     ax.set_xscale("log")
     ticks = [t for t in (12_500, 25_000, 50_000, 100_000, 200_000, 400_000, 800_000, 1_600_000)
              if t <= max(c[0].max() for cs in runs.values() for c in cs) * 1.01]
@@ -463,9 +470,10 @@ def write_claims(outs: Sequence[Path], dest: Path, budgets: Sequence[tuple[Path,
         else:
             lines.append(f"- {j.track}, {j.claim}: not tested: {j.text}.")
     if budgets:
-        figs = budget_figure(budgets[0][0], Path(dest) / "budget")
+        zero = fig2_zero_action()
+        figs = budget_figure(budgets[0][0], Path(dest) / "budget", zero)
         lines += ["", "## The comparison at each budget", "", f"![budget]({figs[0].name})", "",
-                  *budget_table(budgets[0][0], [b for _, b in budgets])]
+                  *budget_table(budgets[0][0], [b for _, b in budgets], zero)]
     lines += ["", f"Studies: {', '.join(str(o) for o in outs)}" + (f"; comparison {budgets[0][0]}" if budgets else "")
               + (f"; from scratch: {from_scratch}" if from_scratch else "") + ".", ""]
     path = Path(dest) / "claims.md"
