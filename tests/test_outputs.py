@@ -241,3 +241,23 @@ def test_the_plan_maps_colour_scale_holds_the_target() -> None:
     rates = np.array([[30.0, np.nan], [45.5, 50.2]])
     assert colour_limits(rates, 52.12) == (30.0, 52.12)  # the map: 50.2 at most, the target 52.12
     assert colour_limits(rates, 40.0) == (30.0, 50.2)
+
+
+def test_benchmark_and_claims_never_replace_another_invocations_results(tmp_path: Path,
+                                                                        capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "b"
+    base = ["--preset", "smoke", "--cells", "scenarios", "--system.horizon", "10", "--out", str(out), "--no-progress"]
+    assert main(["benchmark", "zero-action", *base]) == 0
+    before = {p: p.read_bytes() for p in out.rglob("*") if p.is_file()}
+    capsys.readouterr()
+    assert main(["benchmark", "hover-optimizer", *base]) == 2  # another target into the same --out
+    assert "holds the benchmark of zero-action" in capsys.readouterr().err
+    assert {p: p.read_bytes() for p in out.rglob("*") if p.is_file()} == before
+    assert main(["benchmark", "zero-action", *base]) == 0  # the same benchmark again: its own files
+    claims = tmp_path / "c"
+    claims.mkdir()
+    (claims / "claims.json").write_text(json.dumps({"inputs": {"studies": ["runs/a"], "budgets": [],
+                                                               "from_scratch": None}, "judgements": []}))
+    assert main(["claims", str(tmp_path / "other-study"), "--out", str(claims)]) == 2
+    assert "holds the claims of other studies (runs/a)" in capsys.readouterr().err
+    assert not (claims / "claims.md").exists()

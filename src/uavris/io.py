@@ -109,6 +109,18 @@ def read_json(path: str | Path) -> Any:
     return _read(path, json.load, (json.JSONDecodeError,), "JSON")
 
 
+def other_inputs(path: str | Path, inputs: Any, key: str | None = None) -> Any:
+    """What the result file ``path`` was made from (the whole JSON, or its ``key``) when that is
+    not ``inputs``; None when the file does not exist or was made from the same: a command that
+    writes its results into a folder refuses to replace another invocation's (sweep, benchmark,
+    claims)."""
+    if not Path(path).exists():
+        return None
+    stored = read_json(path)
+    stored = stored.get(key) if key is not None and isinstance(stored, dict) else stored
+    return None if to_plain(stored) == to_plain(inputs) else stored
+
+
 def write_csv(path: str | Path, header: Sequence[str], rows: Iterable[Sequence[Any] | Mapping[str, Any]]) -> None:
     """A CSV file of ``rows`` under ``header``; a row is a sequence in header order or a
     mapping from the header's names (a log's record)."""

@@ -32,7 +32,7 @@ from uavris.experiments.study.config import ReproduceConfig
 from uavris.experiments.study.pipeline import build_pipeline
 from uavris.experiments.study.rows import read_study
 from uavris.experiments.study.tracks import TRACK_SPECS, TRACKS, Track, zero_shot_only
-from uavris.io import atomic_write_text, read_csv, read_json, write_json
+from uavris.io import atomic_write_text, other_inputs, read_csv, read_json, write_json
 from uavris.stats import HOLDS, NOT_RESOLVED, REFUTED, judged, paired_difference, steps_to_level, welch_difference
 
 WITHIN = 0.05  # "nearly the same performance" (paper Sec. IV-C): within 5% of the expert's mean
@@ -455,7 +455,14 @@ def budget_figure(cdir: Path, stem: Path, zero: float) -> list[Path]:
 
 def write_claims(outs: Sequence[Path], dest: Path, budgets: Sequence[tuple[Path, int]] = (),
                  from_scratch: Path | None = None) -> Path:
-    """Judge (:func:`judge_studies`) and write ``dest/claims.md`` and ``dest/claims.json``; the markdown's path."""
+    """Judge (:func:`judge_studies`) and write ``dest/claims.md`` and ``dest/claims.json`` (its
+    inputs and judgements); the markdown's path. Claims of other inputs in ``dest``: one line."""
+    inputs = {"studies": [str(o) for o in outs], "budgets": [[str(d), b] for d, b in budgets],
+              "from_scratch": str(from_scratch) if from_scratch else None}
+    old = other_inputs(Path(dest) / "claims.json", inputs, "inputs")
+    if old is not None:
+        raise UavrisError(f"{dest} holds the claims of other studies ({', '.join(old.get('studies', []))}); give "
+                          "this one another --out (nothing there is replaced)")
     halls = read_json(from_scratch)["halls"] if from_scratch is not None else ()
     judgements = judge_studies(outs, budgets, halls)
     lines = ["# The paper's claims, judged", "",
@@ -478,5 +485,5 @@ def write_claims(outs: Sequence[Path], dest: Path, budgets: Sequence[tuple[Path,
               + (f"; from scratch: {from_scratch}" if from_scratch else "") + ".", ""]
     path = Path(dest) / "claims.md"
     atomic_write_text(path, "\n".join(lines))
-    write_json(Path(dest) / "claims.json", [asdict(j) for j in judgements])
+    write_json(Path(dest) / "claims.json", {"inputs": inputs, "judgements": [asdict(j) for j in judgements]})
     return path

@@ -29,7 +29,7 @@ from uavris.experiments.display.progress import progress_bar
 from uavris.experiments.display.tables import interval, markdown_table, num, pct, signed
 from uavris.experiments.tools.evaluate import evaluate_target
 from uavris.experiments.tools.targets import Target, resolve_target
-from uavris.io import atomic_write_text, read_csv, write_csv, write_json
+from uavris.io import atomic_write_text, other_inputs, read_csv, write_csv, write_json
 from uavris.layouts import resolve_layout
 from uavris.presets import EVAL_SEED, STUDY, check_preset
 from uavris.stats import over_units, t_interval
@@ -91,12 +91,18 @@ def benchmark(target: str, preset: str = "quick", cells: Cells = "all", out: Pat
         except ConfigError as e:
             raise ConfigError(f"benchmark cell {cell.name} does not fit the system: {e}") from None
     out = Path(out) if out is not None else Path("runs/benchmarks") / Path(target.replace(":", "_")).name
+    inputs = {"target": target, "preset": preset, "cells": [c.name for c in todo], "system": system.to_dict(),
+              "phase_control": phase_control}
+    old = other_inputs(out / "benchmark.json", inputs, "inputs")
+    if old is not None:
+        raise ConfigError(f"{out} holds the benchmark of {old.get('target') if isinstance(old, dict) else 'another'} "
+                          "target or protocol; give this one another --out (nothing there is replaced)")
     rows = []
     with progress_bar(len(todo), "benchmark", "cell", progress) as bar:
         for cell in todo:
             rows.append(_cell(resolved, cell, episodes, out / cell.name, system, phase_control, device))
             bar.update(1)
-    summary = {"target": target, "preset": preset, "episodes": episodes, "seed": EVAL_SEED,
+    summary = {"inputs": inputs, "target": target, "preset": preset, "episodes": episodes, "seed": EVAL_SEED,
                "system": system.to_dict(), "cells": rows, "over": _over(rows)}
     write_csv(out / "benchmark.csv", COLUMNS, ([r[c] for c in COLUMNS] for r in rows))
     write_json(out / "benchmark.json", summary)

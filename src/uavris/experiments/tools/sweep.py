@@ -45,7 +45,7 @@ from uavris.errors import ConfigError, UavrisError
 from uavris.experiments.display.plots import plt, save_figure
 from uavris.experiments.display.progress import progress_bar
 from uavris.experiments.engine.jobs import Job, run_jobs
-from uavris.io import read_json, to_plain, write_csv, write_json
+from uavris.io import other_inputs, read_json, to_plain, write_csv, write_json
 from uavris.presets import EVAL_SEED
 from uavris.runs.lock import locked
 from uavris.stats import over_units, t_interval
@@ -186,9 +186,8 @@ def sweep(targets: Sequence[str], axes: Sequence[Axis], out: Path, *, base: Syst
     places = {point: cell_systems(base, axes, point, halls, scenario) for point in grid}  # every cell checked first
     spec = {"targets": list(targets), "axes": [to_plain(a) for a in axes], "episodes": episodes, "seed": EVAL_SEED,
             "halls": halls, "scenario": scenario, "system": base.to_dict()}
-    made = Path(out) / "sweep.json"
-    if made.exists() and to_plain(read_json(made)) != to_plain(spec):
-        old = read_json(made)
+    old = other_inputs(Path(out) / "sweep.json", spec)
+    if old is not None:
         raise ConfigError(f"{out} holds a sweep of other parameters ({', '.join(a['name'] for a in old['axes'])} "
                           f"over {', '.join(old['targets'])}); give this one another --out (its cells would be kept, "
                           "its table and figure replaced)")
