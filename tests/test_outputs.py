@@ -111,29 +111,60 @@ def test_an_output_folder_that_cannot_be_written_is_one_line_before_any_work(
     assert "average sum rate" not in captured.out and "report" not in captured.out
 
 
+HELD = '''
+import os
+import time
+
+import numpy as np
+
+HOLD = {hold!r}
+
+
+def held(obs):
+    """Hovers (phases by the optimiser), after waiting while the file HOLD exists: a cell that
+    cannot end before Ctrl-C."""
+    while os.path.exists(HOLD):
+        time.sleep(0.05)
+    return np.zeros((obs.shape[0], 6), dtype=np.float32)
+
+
+held.phase_control = "optimizer"
+'''
+
+
 def test_ctrl_c_in_a_sweep_leaves_one_line_and_a_resumable_state(tmp_path: Path) -> None:
+    """Ctrl-C while cells run: one line, exit 130, the finished cells kept and no table; the rerun
+    reuses them. The cells of ``held`` wait on a file until the rerun, so the interrupt always
+    finds the sweep unfinished (a sweep of quick cells could end before the signal on a loaded
+    machine: the race this test once lost)."""
     import signal
     import subprocess
     import sys
     import time
 
+    hold = tmp_path / "hold"
+    hold.touch()
+    (tmp_path / "held.py").write_text(HELD.format(hold=str(hold)))
     out = tmp_path / "s"
-    args = [sys.executable, "-m", "uavris", "sweep", "hover-optimizer", "oracle", "--param", "system.nx",
-            "2,3,4,5", "--episodes", "4", "--workers", "2", "--out", str(out), "--no-progress"]
+    args = [sys.executable, "-m", "uavris", "sweep", "zero-action", str(tmp_path / "held.py") + ":held", "--param",
+            "system.nx", "2,3", "--episodes", "2", "--workers", "2", "--out", str(out), "--no-progress"]
     proc = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
-    deadline = time.time() + 120
-    while not list((out / "cells").glob("*.json")) and time.time() < deadline:  # some cells done, others running
+    deadline = time.time() + 300
+    while not list((out / "cells").glob("*.json")) and time.time() < deadline:  # a zero-action cell done
         time.sleep(0.2)
+    assert proc.poll() is None, proc.communicate()  # the held cells are still running
     os.killpg(proc.pid, signal.SIGINT)  # Ctrl-C reaches the whole process group, the workers included
     _, err = proc.communicate(timeout=120)
     assert proc.returncode == 130, err
     lines = [x for x in err.splitlines() if x.strip()]
     assert lines == ["uavris: interrupted; rerun the same command to continue (what finished is reused)"], err
     done = {p.name for p in (out / "cells").glob("*.json")}
-    assert done and not (out / "sweep.csv").exists()
+    assert 1 <= len(done) <= 2 and not (out / "sweep.csv").exists()  # zero-action cells only
+    hold.unlink()
     rerun = subprocess.run(args, capture_output=True, text=True, timeout=600)
     assert rerun.returncode == 0, rerun.stderr
-    assert done <= {p.name for p in (out / "cells").glob("*.json")} and (out / "sweep.csv").exists()
+    assert done < {p.name for p in (out / "cells").glob("*.json")} and (out / "sweep.csv").exists()
+    assert len(list((out / "cells").glob("*.json"))) == 4
 
 
 @pytest.mark.slow

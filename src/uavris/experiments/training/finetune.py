@@ -199,13 +199,33 @@ def _evaluation(row: dict[str, Any]) -> dict[str, float]:
     return {"mean": row["eval_mean"], "ci_low": row["eval_ci_low"], "ci_high": row["eval_ci_high"]}
 
 
-class _Places:
-    """Where a goal-conditioned DT is told to go while it fine-tunes: the learned planner's
-    place at first, then, with places to try (the start and the best places by ``V``), the one
-    whose episodes did best, paired within each episode seed (the rollouts of a seed share
-    every channel and pairing draw, so their difference is the place's), over all rounds."""
+def paired_place_scores(places: NDArray, goals: NDArray, seeds: NDArray, returns: NDArray
+                        ) -> tuple[NDArray[np.intp], NDArray[np.float64]]:
+    """Each episode's place (the one nearest its goal) and paired score: its return minus the
+    mean return of its seed's episodes (they share every channel and pairing draw, so the
+    difference is the place's)."""
+    places, goals = np.asarray(places, dtype=np.float64), np.asarray(goals, dtype=np.float64)
+    seeds, score = np.asarray(seeds), np.array(returns, dtype=np.float64)
+    for s in np.unique(seeds):
+        score[seeds == s] -= score[seeds == s].mean()
+    return np.argmin(np.linalg.norm(places[None] - goals[:, None], axis=-1), axis=1), score
 
-    def __init__(self, cfg: FinetuneConfig, system: SystemConfig, start: tuple[float, float, float]) -> None:
+
+class Places:
+    """Where a goal-conditioned DT is told to go while it fine-tunes: the learned planner's
+    place at first (``chosen``), then, with places to try (``places``: the start and the best
+    places by ``V``), the one whose episodes did best by :func:`paired_place_scores`, summed
+    over all rounds (the highest mean paired score)."""
+
+    def __init__(self, chosen: NDArray, places: NDArray | None) -> None:
+        self.chosen = np.asarray(chosen, dtype=np.float64)
+        self.places = None if places is None else np.asarray(places, dtype=np.float64)
+        n = 0 if self.places is None else len(self.places)
+        self.total, self.count = np.zeros(n), np.zeros(n)
+
+    @classmethod
+    def from_value(cls, cfg: FinetuneConfig, system: SystemConfig, start: tuple[float, float, float]) -> Places:
+        """The learned value ``cfg.value``'s place, and with ``cfg.places`` the places to try."""
         from uavris.agents.place.checkpoint import load_value
         from uavris.agents.place.planner import learned_plan, places_to_try
 
@@ -213,23 +233,18 @@ class _Places:
             raise ConfigError("a goal-conditioned DT fine-tunes with a learned value to tell its goal "
                               "(FinetuneConfig.value)")
         value, _ = load_value(cfg.value)
-        self.chosen = np.asarray(learned_plan(value, system, start).target, dtype=np.float64)
-        self.places = places_to_try(value, system, start, cfg.places) if cfg.places else None
-        n = 0 if self.places is None else len(self.places)
-        self.total, self.count = np.zeros(n), np.zeros(n)
+        return cls(learned_plan(value, system, start).target,
+                   places_to_try(value, system, start, cfg.places) if cfg.places else None)
 
     def update(self, cands: Sequence[Trajectory]) -> None:
         """Add a round's candidates' paired scores to their places', and choose the best place."""
         if self.places is None:
             return
-        ret = np.array([tr.episode_return for tr in cands])
-        seeds = np.array([tr.seed for tr in cands])
-        for s in np.unique(seeds):
-            ret[seeds == s] -= ret[seeds == s].mean()
-        for tr, score in zip(cands, ret):
-            i = int(np.argmin(np.linalg.norm(self.places - np.asarray(tr.goal), axis=1)))
-            self.total[i] += score
-            self.count[i] += 1
+        place, score = paired_place_scores(self.places, np.array([tr.goal for tr in cands]),
+                                           np.array([tr.seed for tr in cands]),
+                                           np.array([tr.episode_return for tr in cands]))
+        np.add.at(self.total, place, score)  # episode by episode, in order
+        np.add.at(self.count, place, 1.0)
         self.chosen = self.places[int(np.argmax(self.total / np.maximum(self.count, 1)))].copy()
 
     def state(self) -> dict[str, Any]:
@@ -267,7 +282,7 @@ def finetune(cfg: FinetuneConfig, run_dir: str | Path, *, resume: bool = False, 
                   "system": system.to_dict(), "observation_layout": layout_as_lists(system),
                   "pretrained_model": str(cfg.model), "target_return": float(target)}
 
-    places = _Places(cfg, system, scenario.start) if model.cfg.goal else None
+    places = Places.from_value(cfg, system, scenario.start) if model.cfg.goal else None
 
     def dt_policy(sigma: float = 0.0, noise_seed: int | None = None, goals: Any = None) -> DTBatchPolicy:
         if places is not None and goals is None:
