@@ -37,7 +37,8 @@ test-lowest: $(STAMP)
 	$(LOWEST)/bin/python -c "import numpy; assert numpy.__version__ == '2.3.5', numpy.__version__"
 	$(LOWEST)/bin/python -m pytest -q -p no:cacheprovider -m "not slow" tests/test_channel.py tests/test_geometry.py \
 		tests/test_reflection.py tests/test_pairing.py tests/test_motion.py tests/test_env.py tests/test_hybrid_env.py \
-		tests/test_oracle.py tests/test_stats.py tests/test_claims.py tests/test_regime_and_search.py tests/test_safety.py
+		tests/test_oracle.py tests/test_stats.py tests/test_claims.py tests/test_regime.py tests/test_oracle_gap.py \
+		tests/test_safety.py
 
 docs: $(STAMP)
 	$(VENV)/bin/mkdocs build --strict

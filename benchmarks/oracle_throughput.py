@@ -4,7 +4,7 @@ Measurements, in this one process pinned to a single CPU with BLAS/OpenMP limite
 thread:
 
 1. The optimiser against 0.1.0's. ``optimize_phases`` (default settings) and the frozen
-   numpy optimiser of uavris 0.1.0 (``benchmarks/_phase_optimizer_v010.py``, its default
+   numpy optimiser of uavris 0.1.0 (read from git history by ``benchmarks/_v010.py``, its default
    settings) on the same ``--slots`` seeded slots (default 1024: default-system slots at
    random poses over the flight region, tilts up to 0.4 rad, the default pairing draw, so
    about half have two active pairs), reported separately for the two-pair slots, the
@@ -64,10 +64,10 @@ import shlex  # noqa: E402
 import sys  # noqa: E402
 import time  # noqa: E402
 
-import _phase_optimizer_v010 as v010  # noqa: E402  (benchmarks/_phase_optimizer_v010.py)
 import numpy as np  # noqa: E402
 import scipy  # noqa: E402
 from _machine import cpu_model, pin_to_one_core  # noqa: E402  (benchmarks/_machine.py)
+from _v010 import optimizer_v010  # noqa: E402  (benchmarks/_v010.py)
 from numpy.typing import NDArray  # noqa: E402
 
 import uavris  # noqa: E402
@@ -194,6 +194,7 @@ def main(argv: list[str] | None = None) -> int:
           "L-BFGS iterations, 10 polish steps; 0.1.0: batched numpy, 2 + 4 starts, same levels, iterations, polish")
     print(flush=True)
 
+    v010 = optimizer_v010()
     h, cos, pairing = make_slots(config, slots, SEED)
     optimize_slot_phases(config, h[:8], cos[:8], pairing[:8])  # compile (or load the cache) and warm up
     v010.optimize_slot_phases(config, h[:8], cos[:8], pairing[:8])

@@ -95,11 +95,11 @@ def seconds_per_pretrain_step(steps: int) -> float:
     return (time.perf_counter() - t0) / steps
 
 
-def main() -> None:
+def main(argv: list[str] | None = None) -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--steps", type=int, default=4000, help="timed env steps per algorithm (default 4000)")
     p.add_argument("--workers", type=int, nargs="+", default=[1, 2, 8, 32], help="worker counts to tabulate")
-    args = p.parse_args()
+    args = p.parse_args(argv)
     pinning = pin_to_one_core()
     torch.set_num_threads(1)
     print(f"# expected wall clock of `reproduce --preset paper`\n\n- cpu: {cpu_model()}; {pinning}; torch threads 1"

@@ -66,13 +66,13 @@ def run_smoke(backend: str, workers: int) -> float:
         return time.perf_counter() - t0
 
 
-def main() -> None:
+def main(argv: list[str] | None = None) -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--backends", nargs="+", default=["local", "ray"], choices=["local", "ray"])
     p.add_argument("--jobs", type=int, default=4, help="training jobs per configuration (default 4)")
     p.add_argument("--steps", type=int, default=8000, help="env steps per training job (default 8000)")
     p.add_argument("--no-smoke", action="store_true", help="skip the end-to-end smoke measurement")
-    args = p.parse_args()
+    args = p.parse_args(argv)
     if args.jobs < 1 or args.steps < 1:
         p.error("--jobs and --steps must be >= 1")
     print(f"# reproduce scaling: 1 vs 2 workers\n\n- cpu: {cpu_model()}, {os.cpu_count()} cores\n"

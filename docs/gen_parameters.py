@@ -4,7 +4,7 @@ One row per field of the dataclass, in its order: the field, its default (the da
 own value) and its meaning, which is the field's inline comment in ``src/uavris/config.py``
 (read with :mod:`ast` and :mod:`tokenize`, never typed here). A field without a comment
 whose default is itself a config (``propulsion``) takes the first line of that class's
-docstring. The README holds this output; ``tests/test_docs.py`` fails when they differ.
+docstring. docs/environment.md holds this output; ``tests/test_docs.py`` fails when they differ.
 
 Usage: ``python docs/gen_parameters.py``.
 """

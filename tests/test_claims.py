@@ -1,4 +1,4 @@
-"""The paper's claims, judged (issue 37): the verdict rule on worked cases against SciPy, the
+"""The paper's claims, judged: the verdict rule on worked cases against SciPy, the
 interactions-to-level count on a hand-made learning curve, and the claims table of a study
 against an independent recomputation from its evaluation files."""
 

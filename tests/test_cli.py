@@ -20,7 +20,8 @@ from uavris.cli import claims as cli_claims
 from uavris.cli import evaluation as cli_evaluation
 from uavris.cli import training as cli_training
 from uavris.cli.claims import ClaimsArgs
-from uavris.cli.evaluation import BenchmarkArgs, CollectArgs, DemoArgs, EvaluateArgs, PlanArgs, PlotArgs, SweepArgs
+from uavris.cli.evaluation import BenchmarkArgs, EvaluateArgs, SweepArgs
+from uavris.cli.tools import CollectArgs, DemoArgs, PlanArgs, PlotArgs
 from uavris.cli.training import CompareArgs, FinetuneArgs, PretrainArgs, ReproduceArgs, TrainArgs
 
 # Arguments that make each command parse up to its numeric flags (paths that exist are

@@ -1,4 +1,4 @@
-"""The cost model of the study's jobs (issue 24, item 8): each expected cost worked by hand
+"""The cost model of the study's jobs: each expected cost worked by hand
 from the unit costs the module documents, and the scalings it claims (a DT step grows with
 the slots it reads times width squared times depth, on top of a fixed overhead)."""
 

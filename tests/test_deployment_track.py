@@ -76,7 +76,7 @@ def test_the_main_rows_are_the_controllers_under_the_safety_layer():
              "dt-goal-finetuned", "dt-goal-finetuned@s1"}
     safe = {"dt-zero-shot-safe", "dt-zero-shot-safe@s1", "dt-ensemble-safe", "dt-finetuned-safe", "bc-safe",
             "bc-safe@s1", "dt-goal-safe", "dt-goal-safe@s1", "dt-goal-finetuned-safe", "dt-goal-finetuned-safe@s1"}
-    [transfer] = [k for k in main if k.startswith("transfer-")]
+    [transfer] = [k for k, r in main.items() if r.kind == "transfer"]
     refs = {"zero-action", "hover-optimizer", "oracle"}
     planners = {"plan-learned", "plan-semi"}  # the learned planner's place flown by the oracle's controller
     assert set(main) == safe | refs | planners | {"oracle-safe", transfer}
@@ -91,7 +91,8 @@ def test_the_main_rows_are_the_controllers_under_the_safety_layer():
     ensemble = full["dt-ensemble-level"]
     assert ensemble.level and [m.path for m in ensemble.members] == [Path("/models/pretrain/model"),
                                                                      Path("/models/pretrain-s1/model")]
-    assert main[transfer].plan_of == {t.name: t for t in train}[transfer[len("transfer-"):]]
+    assert main[transfer].plan_of == {t.name: t for t in train}[main[transfer].facts()["plan_of"]]
+    assert main[transfer].rank == 0 and {r.kind for k, r in main.items() if k in refs} == {"reference"}
     assert main["dt-zero-shot-safe@s1"].label_for() == "zero-shot DT, seed 1, safety layer"
     # the goal-conditioned DT is told the learned planner's place; its fine-tuned form keeps its own
     value = Path("/models/value/value")
@@ -128,8 +129,8 @@ def test_the_nearest_training_halls_plan_is_the_one_at_the_smallest_distance(dep
         other = "-other-" in r.name  # the ablation's halls of another generator: zero-shot only
         unseen = gen.layout("other" if other else "unseen", int(r.name.rsplit("-", 1)[1]))
         nearest = min(train, key=lambda t: layout_distance(unseen, t))  # independent of transfer_sources
-        [key] = [k for k in r.result if k.startswith("transfer-")]
-        assert key == f"transfer-{nearest.name}" and "(nearest)" in r.result[key]["label"]
+        [key] = [k for k, v in r.result.items() if v["kind"] == "transfer"]
+        assert r.result[key]["plan_of"] == nearest.name and r.result[key]["rank"] == 0
         assert {"dt-zero-shot", "bc", "dt-flat", "dt-mixed", "bc-mixed", "dt-zero-shot-n1", "hover-optimizer",
                 "oracle", "dt-zero-shot-safe", "bc-safe", "oracle-safe"} <= set(r.result)
         assert other != ("dt-finetuned" in r.result and "dt-finetuned-safe" in r.result)
@@ -209,7 +210,7 @@ def test_uavris_evaluate_reproduces_a_row_of_the_report_by_name(deployment_run, 
     [stage] = [p for p in (out / "stages").glob("deploy-evaluate-layout-unseen-0-*") if "-k3-" not in p.name]
     result = read_json(stage / "stage.json")["result"]
     if key == "transfer":
-        [key] = [k for k in result if k.startswith("transfer-")]
+        [key] = [k for k, v in result.items() if v["kind"] == "transfer"]
     assert main(["evaluate", str(out), "--row", key, "--layout", "layout-unseen-0", "--out", str(tmp_path),
                  "--no-progress"]) == 0
     [path] = tmp_path.glob(f"{key}-layout-unseen-0-seed1000000-n2-*.json")
@@ -235,3 +236,79 @@ def test_a_row_of_the_study_in_a_hall_of_ones_own(deployment_run, tmp_path, caps
     assert main([*args, "--row", "dt-finetuned-safe"]) == 2  # fine-tuned only in the study's unseen halls
     err = capsys.readouterr().err.strip()
     assert err.count("\n") == 0 and "no such row" in err and "dt-ensemble-safe" in err
+
+
+SPINNING = '''
+import numpy as np
+
+
+def spinning(obs):
+    """Pitches the RIS 10 degrees every slot (phases by the optimiser): devices fall behind it."""
+    a = np.zeros((obs.shape[0], 6), dtype=np.float32)
+    a[:, 4] = 1.0
+    return a
+
+
+spinning.phase_control = "optimizer"
+'''
+
+
+def test_a_row_added_in_one_place_is_in_the_tables_the_decomposition_and_the_claims(deployment_run, tmp_path,
+                                                                                     monkeypatch):
+    """Adding a row to the study is one edit of tracks._learned_rows (here: a controller of one's
+    own that spins the RIS): the report finds it, by what its stage results record, in the table
+    of every row, the per-hall table, the decomposition and the claim that no learned row blocks
+    a device, in every group of halls."""
+    from uavris.experiments.study import tracks
+    from uavris.experiments.tools.targets import Row, resolve_target
+
+    out, _ = deployment_run
+    copy = tmp_path / "run"
+    shutil.copytree(out, copy)
+    (tmp_path / "spin.py").write_text(SPINNING)
+    added = Row("dt-spinning", "a spinning controller", resolve_target(f"{tmp_path / 'spin.py'}:spinning"))
+    learned_rows = tracks._learned_rows
+    monkeypatch.setattr(tracks, "_learned_rows", lambda *a, **k: [*learned_rows(*a, **k), (added, False)])
+    pretrained = {p.name: p.stat().st_mtime_ns for p in (copy / "stages").glob("deploy-pretrain-*/stage.json")}
+    report = reproduce(RC, copy, workers=1, progress=False).read_text()
+    # only the evaluations (their rows are in their keys) and the report are made again
+    assert {p.name: p.stat().st_mtime_ns for p in (copy / "stages").glob("deploy-pretrain-*/stage.json")} == pretrained
+    section = report[report.index("## Deployment track"):]
+    groups = section.split("\n### Halls of")  # the study's halls, the other generator's, 3 devices
+    assert len(groups) == 3
+    for group in groups:
+        lines = group.splitlines()
+        assert any(line.startswith("| a spinning controller |") for line in lines)  # table of every row
+        header = next(line for line in lines if line.startswith("| layout |"))
+        assert "a spinning controller" in header  # the per-hall table's column
+        decomposition = group[group.index("### Where the gap to the oracle is"):]
+        assert "\n| a spinning controller |" in decomposition
+    claims = [line for line in report.splitlines() if "**no learned row blocks a device" in line]
+    assert len(claims) == 3 and all("above the limit: " in c and "a spinning controller" in c for c in claims)
+
+
+def test_a_study_of_three_devices_treats_its_own_halls_as_its_own(tmp_path):
+    """A deployment study whose system has 3 devices: its generated halls (named ...-k3) are its
+    own, fine-tuned there and reported in the main table, not as halls of another count."""
+    from uavris.config import SystemConfig
+
+    three = SystemConfig(users=((10.0, 10.0, 1.0), (30.0, 12.0, 0.5), (20.0, 30.0, 1.2)))
+    rc = ReproduceConfig("smoke", track="deployment", eval_episodes=2, dt_seeds=1, train_layouts=2, scaling=(1,),
+                         mixed_layouts=1, ablation=True, system=three)
+    pipeline = build_pipeline(rc, tmp_path, StudyContext(1, "local", None))
+    _, unseen = rc.sites(TRACK_SPECS["deployment"])
+    own = [w for w in unseen if w.split == "unseen"]
+    assert [w.name for w in own] == ["layout-unseen-0-k3", "layout-unseen-1-k3"] and {w.devices for w in own} == {3}
+    for w in own:
+        assert {f"deploy-finetune-{w.name}", f"deploy-{places_stage(w.name, 0)}"} <= set(pipeline.stages)
+    report = reproduce(rc, tmp_path, workers=1, progress=False).read_text()
+    assert "## Failures" not in report
+    for w in own:
+        result = read_json(next((tmp_path / "stages").glob(f"deploy-evaluate-{w.name}-*")) / "stage.json")["result"]
+        assert {"dt-finetuned-safe", "dt-goal-finetuned-safe", "dt-flat"} <= set(result)
+    assert "### Halls of 3 devices" not in report and "### Any number of devices" not in report
+    main = report[report.index("## Deployment track"):report.index("### Halls of another generator")]
+    table = main[main.index("\n| layout |"):].splitlines()[3:]  # the per-hall table's rows
+    per_hall = [line.split("|")[1].strip() for line in table[:table.index("")]]
+    assert per_hall == ["layout-unseen-0-k3", "layout-unseen-1-k3"]
+    assert "- deployment track: **fine-tuned DT under the attitude safety layer >= 98%" in report

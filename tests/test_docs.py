@@ -1,5 +1,6 @@
-"""The README's tables are the code's: the parameter table is docs/gen_parameters.py's output, the
-spaces' sizes are SystemConfig's, the command table is the CLI's; its links lead to files."""
+"""The README's and the docs' tables are the code's: the parameter table is docs/gen_parameters.py's
+output, the spaces' sizes are SystemConfig's, the command table is the CLI's; the README's links
+lead to files; the source tree page is the tree."""
 
 from __future__ import annotations
 
@@ -34,11 +35,10 @@ def generated() -> str:
     return proc.stdout
 
 
-@pytest.mark.parametrize("page", [README, DOCS / "environment.md"], ids=lambda p: p.name)
-def test_parameter_table_is_generated(page: Path, generated: str) -> None:
-    """The page's SystemConfig table is exactly what ``python docs/gen_parameters.py`` prints
-    (a field, default or comment changed in src/uavris/config.py: rerun the script)."""
-    assert _table(page.read_text(encoding="utf-8"), TABLE_HEADER) == generated
+def test_parameter_table_is_generated(generated: str) -> None:
+    """The environment page's SystemConfig table is exactly what ``python docs/gen_parameters.py``
+    prints (a field, default or comment changed in src/uavris/config.py: rerun the script)."""
+    assert _table((DOCS / "environment.md").read_text(encoding="utf-8"), TABLE_HEADER) == generated
 
 
 def test_generated_table_is_the_dataclass(generated: str) -> None:
@@ -118,3 +118,61 @@ def test_readme_links_lead_to_files() -> None:
 def test_readme_has_no_layout_section() -> None:
     """"Layouts" are halls in uavris; the source tree is docs/architecture.md's "Source tree"."""
     assert not re.search(r"^#+ Layout\b", README.read_text(encoding="utf-8"), flags=re.M)
+
+
+# ------------------------------------------------------------------------------ docs/architecture.md
+def _architecture_tree() -> dict[str, list[str]]:
+    """The package tree of docs/architecture.md: each folder (relative to src/uavris, "" the
+    top) with its entries in the page's order (files and sub-folders)."""
+    text = (ROOT / "docs" / "architecture.md").read_text()
+    block = text.split("```\nsrc/uavris/\n", 1)[1].split("```", 1)[0]
+    tree: dict[str, list[str]] = {"": []}
+    stack: list[str] = []
+    for line in block.splitlines():
+        name = line.strip().split()[0]
+        depth = (len(line) - len(line.lstrip())) // 2 - 1
+        del stack[depth:]
+        folder = "/".join(stack)
+        tree.setdefault(folder, []).append(name.rstrip("/"))
+        if name.endswith("/"):
+            stack.append(name.rstrip("/"))
+            tree.setdefault("/".join(stack), [])
+    return tree
+
+
+def _imports(path: Path) -> set[str]:
+    """The uavris modules ``path`` imports (anywhere in it), as paths relative to src/uavris."""
+    import ast
+
+    out = set()
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.ImportFrom) and node.level == 0 and (node.module or "").startswith("uavris"):
+            names = [f"{node.module}.{a.name}" for a in node.names] + [node.module]
+        elif isinstance(node, ast.Import):
+            names = [a.name for a in node.names if a.name.startswith("uavris")]
+        else:
+            continue
+        out |= {"/".join(n.split(".")[1:]) for n in names}
+    return out
+
+
+def test_the_source_tree_page_names_every_module_and_its_layers_hold():
+    tree = _architecture_tree()
+    package = ROOT / "src" / "uavris"
+    listed = {f"{folder}/{name}".lstrip("/") for folder, names in tree.items() for name in names}
+    files = {str(p.relative_to(package)) for p in package.rglob("*.py") if p.name != "__init__.py"}
+    folders = {str(p.parent.relative_to(package)) for p in package.rglob("__init__.py") if p.parent != package}
+    assert listed == files | folders, (sorted((files | folders) - listed), sorted(listed - files - folders))
+    for folder, names in tree.items():
+        rank = {name.removesuffix(".py"): i for i, name in enumerate(names)}
+        for i, name in enumerate(names):
+            here = package / folder / name
+            for source in ([here] if name.endswith(".py") else here.rglob("*.py")):
+                for target in _imports(source):
+                    parts = target.split("/")
+                    depth = len([p for p in folder.split("/") if p])
+                    if parts[:depth] != [p for p in folder.split("/") if p] or len(parts) <= depth:
+                        continue  # outside this folder: its own level's rule covers it
+                    entry = parts[depth]
+                    if entry in rank:
+                        assert rank[entry] <= i, f"{source.relative_to(package)} imports {target}, listed below it"

@@ -1,4 +1,4 @@
-"""The job runner when a worker process dies (issue 24, item 8): the job that killed its
+"""The job runner when a worker process dies: the job that killed its
 worker is reported failed with its log, the jobs beside it finish with their own results,
 and the runner goes on. Jobs are standard-library functions, which every worker (a spawned
 process, a Ray worker) can import."""
@@ -57,7 +57,7 @@ def test_a_dying_ray_worker_fails_its_own_job_and_no_other(tmp_path: Path):
 
 @pytest.mark.slow
 def test_ray_runs_a_job_again_when_its_worker_is_lost_but_not_when_it_fails(tmp_path: Path):
-    """Issue 38: a lost worker (a preempted node, here a process that exits) is a system failure that
+    """A lost worker (a preempted node, here a process that exits) is a system failure that
     Ray retries, and the job resumes; an error of the job itself is its result, run once."""
     pytest.importorskip("ray")
     marker, count = tmp_path / "first-attempt", tmp_path / "attempts"

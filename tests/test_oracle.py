@@ -14,7 +14,8 @@ from uavris.agents.oracle import (
     oracle_policy,
 )
 from uavris.agents.oracle.lookahead import move, pose_score
-from uavris.agents.oracle.planner import feasible, pairing_distribution, plan_target, travel_slots
+from uavris.agents.oracle.objective import feasible, pairing_distribution, travel_slots
+from uavris.agents.oracle.planner import plan_target
 from uavris.agents.references import reference_policy
 from uavris.config import SCENARIOS
 from uavris.env.simulator import BatchedSimulator, decode_action
@@ -324,7 +325,7 @@ def test_many_devices_sample_the_pairings_stratified_by_the_number_of_active_pai
     """K = 6 has 330 pairings: 24 are drawn, an equal share for each number m of active pairs,
     each m keeping its probability 1/3; every drawn pairing is a valid one (disjoint links,
     exactly m of them). K = 4's 24 are enumerated, as before."""
-    from uavris.agents.oracle.planner import pairing_distribution
+    from uavris.agents.oracle.objective import pairing_distribution
     from uavris.config import SystemConfig
 
     six = SystemConfig(users=tuple((4.0 + 6.0 * k, 4.0 + 5.0 * k, 1.0) for k in range(6)))
@@ -339,7 +340,7 @@ def test_many_devices_sample_the_pairings_stratified_by_the_number_of_active_pai
     assert len(probs4) == 24 and len({m.tobytes() for m in mats4}) == 24  # every K = 4 pairing, once
 
 
-# A hall a user brought (issue 36): 6 devices, where the planner once valued a corner at 52.12
+# A hall a user brought: 6 devices, where the planner once valued a corner at 52.12
 # bps/Hz that measured 48.05, below staying at the start (50.03): the winner's curse.
 USER_HALL = ("user-6", ((4, 4, 1.0), (10, 5, 0.8), (25, 4, 1.2), (26, 19, 1.0), (15, 20, 0.5), (5, 18, 1.5)),
              (15, 12, 4.0), (30, 24, 6))
@@ -377,7 +378,7 @@ def test_the_plan_states_an_unbiased_value_with_its_standard_error():
     valuation of that pose on 8 more batches of fresh draws; and the planning draws' own value
     of the corner they favoured is above the fresh valuation of it by many errors (the bias the
     check removes)."""
-    from uavris.agents.oracle.planner import assessed_rate, rate_batches
+    from uavris.agents.oracle.objective import assessed_rate, rate_batches
 
     system, where = _halls_of_every_count()[-1]
     plan = plan_target(system, where.start)

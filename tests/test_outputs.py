@@ -1,4 +1,4 @@
-"""Issue 38: results are never lost (two targets into one --out) and every slot can be exported."""
+"""Results are never lost (two targets into one --out) and every slot can be exported."""
 
 from __future__ import annotations
 
@@ -170,7 +170,7 @@ def test_ctrl_c_in_a_sweep_leaves_one_line_and_a_resumable_state(tmp_path: Path)
 @pytest.mark.slow
 def test_a_named_scenario_is_the_papers_hall_for_a_model_trained_in_another(tmp_path: Path,
                                                                             capsys: pytest.CaptureFixture[str]):
-    """Issue 38: a model trained in a generated hall, evaluated at --scenario fig2 and benchmarked in
+    """A model trained in a generated hall, evaluated at --scenario fig2 and benchmarked in
     unseen1/unseen2, flies the paper's hall (the references there are the report's), and says so."""
     from uavris.agents.evaluation import evaluate
     from uavris.agents.references import reference_policy
@@ -209,7 +209,7 @@ def test_a_named_scenario_is_the_papers_hall_for_a_model_trained_in_another(tmp_
 
 
 def test_the_simulator_installs_without_the_training_stack(tmp_path: Path) -> None:
-    """Issue 38: `pip install uavris` (no extra) brings the simulator, the environments, the
+    """`pip install uavris` (no extra) brings the simulator, the environments, the
     references and their commands; a command that needs torch says so in one line. Simulated by
     an import hook that hides what the `train` extra installs."""
     import subprocess
@@ -242,7 +242,7 @@ def test_the_simulator_installs_without_the_training_stack(tmp_path: Path) -> No
 
 
 def test_sweep_and_benchmark_fly_your_own_hall(tmp_path: Path) -> None:
-    """Issue 38: --layout on sweep and benchmark is the hall's devices, room and start, as in evaluate."""
+    """--layout on sweep and benchmark is the hall's devices, room and start, as in evaluate."""
     from uavris.agents.evaluation import evaluate
     from uavris.agents.references import reference_policy
     from uavris.config import SystemConfig

@@ -1,5 +1,5 @@
 """The learned value of a pose, the learned planner, the goal-conditioned controller and
-fine-tuning that tries places (issue 36; docs/study.md, the deployment track)."""
+fine-tuning that tries places (docs/places.md)."""
 
 from __future__ import annotations
 
@@ -15,7 +15,8 @@ from uavris.agents.dt.goals import FixedGoals
 from uavris.agents.dt.policy import DTBatchPolicy
 from uavris.agents.dt.training import TrainingWindows, make_optimizer, model_for_data, train_steps
 from uavris.agents.dt.trajectories import record_episodes
-from uavris.agents.oracle.planner import Plan, expected_optimised_rate, feasible
+from uavris.agents.oracle.objective import expected_optimised_rate, feasible
+from uavris.agents.oracle.planner import Plan
 from uavris.agents.oracle.policy import PlannedFlight
 from uavris.agents.place.checkpoint import load_value, save_value
 from uavris.agents.place.labels import hall_labels

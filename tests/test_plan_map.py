@@ -1,4 +1,4 @@
-"""The rate map of ``uavris plan`` checked by its data, not its file size (issue 24, item 5):
+"""The rate map of ``uavris plan`` checked by its data, not its file size:
 undefined exactly where the UAV may not be (inside a safety ball, outside the flight
 region, computed here from the distances), drawn as computed, and consistent with the plan:
 no grid pose beats the plan's target, the pose next to the target is about as good, and the

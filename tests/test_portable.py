@@ -1,4 +1,4 @@
-"""Same bits on any machine (issue 30): the phase optimiser's compiled kernels give the same result
+"""Same bits on any machine: the phase optimiser's compiled kernels give the same result
 whatever CPU numba compiles them for. Two fresh processes, two empty numba caches, one compiling
 for this machine's CPU and one for a generic x86-64 (no AVX, no FMA); the phases and sum rates of
 the same slots must agree bit for bit. (With fast-math, reassociated sums and fused multiply-adds

@@ -1,4 +1,4 @@
-"""The progress bar of ``reproduce``: its ETA and its end (issue 24, item 9).
+"""The progress bar of ``reproduce``: its ETA and its end.
 
 The ETA is checked against schedules worked by hand and against a study simulated here with
 a scheduler of the test's own (first come, first served, not the runner's order), whose jobs

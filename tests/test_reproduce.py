@@ -1,7 +1,6 @@
 """End to end: `uavris reproduce --preset smoke`, both tracks (one comparison seed, 4 evaluation
 episodes, 2 trajectories per expert to keep CI at a few minutes), killed once and resumed."""
 
-import csv
 import dataclasses
 import re
 import shutil
@@ -9,9 +8,8 @@ import threading
 import time
 from pathlib import Path
 
-import numpy as np
 import pytest
-from scipy import stats as sps
+from report_check import check_deployment_claims, check_deployment_report, check_track_claims, mean_ci
 
 from uavris.config import SystemConfig
 from uavris.errors import UavrisError
@@ -98,7 +96,7 @@ def test_report_numbers_come_from_evaluation_files(smoke_run):
             assert len(per_episode) == 4
             assert abs(sum(per_episode) / 4 - summary["mean"]) < 1e-9
             # the CI over episodes (what "95% CIs overlap" and "vs zero action" read) is Student's t
-            assert (summary["ci_low"], summary["ci_high"]) == pytest.approx(_mean_ci(per_episode)[1:], rel=1e-9)
+            assert (summary["ci_low"], summary["ci_high"]) == pytest.approx(mean_ci(per_episode)[1:], rel=1e-9)
             assert f"| {summary['label']} | {summary['mean']:.2f} |" in text
         oracle = result["oracle"]["mean"]
         assert f"| {result['expert']['mean'] / oracle:.0%} |" in text
@@ -157,239 +155,6 @@ def test_uavris_evaluate_reproduces_a_scenario_tracks_row(smoke_run, tmp_path, t
 # ---------------------------------------------------------------------- the report against its stage files
 # Recomputed here from the stages' results with SciPy, by the rules the report states, not by the
 # report's own functions.
-def _mean_ci(x) -> tuple[float, float, float]:
-    """Mean and Student-t 95% interval of a sample (a sample without spread: a point)."""
-    x = np.asarray(x, dtype=float)
-    if sps.sem(x) == 0:
-        return x.mean(), x.mean(), x.mean()
-    lo, hi = sps.t.interval(0.95, len(x) - 1, loc=x.mean(), scale=sps.sem(x))
-    return x.mean(), lo, hi
-
-
-def _zero(lo: float, hi: float) -> str:
-    return "above zero" if lo > 0 else "below zero" if hi < 0 else "includes zero"
-
-
-def _pct3(m: tuple[float, float, float]) -> str:
-    return f"{m[0]:.1%} [{m[1]:.1%}, {m[2]:.1%}]"
-
-
-def _num3(m: tuple[float, float, float]) -> str:
-    return f"{m[0]:+.2f} [{m[1]:+.2f}, {m[2]:+.2f}]"
-
-
-def _table(text: str, header: str) -> list[list[str]]:
-    """The body rows of the table whose header line starts with ``header``, as cells."""
-    lines = text.splitlines()
-    i = next(i for i, line in enumerate(lines) if line.startswith(header))
-    rows = []
-    for line in lines[i + 2:]:
-        if not line.startswith("|"):
-            break
-        rows.append([c.strip() for c in line.strip().strip("|").split("|")])
-    return rows
-
-
-# DT minus another policy, per layout (the report's paired differences)
-DEPLOYMENT_PAIRS = (("dt-zero-shot", "hover-optimizer"), ("dt-zero-shot", "nearest"),
-                    ("dt-ensemble", "hover-optimizer"), ("dt-ensemble", "nearest"), ("dt-zero-shot", "transfers"),
-                    ("dt-zero-shot", "bc"), ("dt-zero-shot", "dt-flat"), ("dt-mixed", "bc-mixed"),
-                    ("dt-finetuned", "dt-zero-shot"), ("dt-zero-shot-safe", "hover-optimizer"),
-                    ("dt-zero-shot-safe", "nearest"), ("dt-zero-shot-safe", "dt-zero-shot"),
-                    ("dt-ensemble-safe", "hover-optimizer"), ("dt-ensemble-safe", "nearest"),
-                    ("dt-finetuned-safe", "dt-zero-shot-safe"), ("dt-zero-shot-safe", "dt-zero-shot-level"),
-                    ("dt-zero-shot-safe", "bc-safe"), ("dt-goal-safe", "hover-optimizer"), ("dt-goal-safe", "nearest"),
-                    ("dt-goal-safe", "dt-zero-shot-safe"), ("plan-learned", "hover-optimizer"),
-                    ("dt-goal-finetuned-safe", "dt-goal-safe"))
-LEARNED = ("dt-zero-shot", "dt-ensemble", "dt-finetuned", "bc", "dt-zero-shot-safe", "dt-ensemble-safe",
-           "dt-finetuned-safe", "bc-safe", "dt-zero-shot-level", "dt-ensemble-level", "dt-flat", "dt-mixed", "bc-mixed",
-           "dt-goal", "dt-goal-safe", "dt-goal-finetuned", "dt-goal-finetuned-safe", "plan-learned", "plan-semi")
-# issue 36's targets of the rows that choose a place: (row, mean, worst hall); in zero-shot-only halls, the count's
-PLACE_TARGETS = (("dt-goal-safe", 0.97, 0.92), ("plan-semi", 0.99, None), ("dt-goal-finetuned-safe", 0.985, 0.95))
-
-
-def check_deployment_report(results: dict[str, dict], text: str, where: str = "deployment track") -> None:
-    """The deployment track's tables and claims in ``text`` against ``{layout: stage result}``;
-    ``where`` heads the claims of this group of halls."""
-    scores = {}
-    for layout, result in results.items():
-        seeds: dict[str, list[float]] = {}
-        for key, s in result.items():
-            if not key.startswith("transfer-"):
-                seeds.setdefault(key.split("@s")[0], []).append(s["mean"])
-        row = {k: sum(v) / len(v) for k, v in seeds.items()}  # a learned row: the mean over its seeds
-        [row["nearest"]] = [s["mean"] for k, s in result.items() if k.startswith("transfer-")
-                            and "(nearest)" in s["label"]]
-        transfers = [s["mean"] for k, s in result.items() if k.startswith("transfer-")]
-        if len(transfers) > 1:
-            row["transfers"], row["best-transfer"] = sum(transfers) / len(transfers), max(transfers)
-        scores[layout] = row
-    layouts = list(scores)
-    keys = [k for k in scores[layouts[0]] if all(k in scores[lay] for lay in layouts)]
-    frac = {k: [scores[lay][k] / scores[lay]["oracle"] for lay in layouts] for k in keys}
-    stat = {k: _mean_ci(frac[k]) for k in keys}
-
-    # per layout: every policy's score and fraction of the oracle (cells compared as a multiset)
-    per_layout = {r[0]: r[1:] for r in _table(text, "| layout |")}
-    assert set(per_layout) == set(layouts)
-    for lay in layouts:
-        want = [f"{scores[lay][k]:.2f} ({scores[lay][k] / scores[lay]['oracle']:.0%})" for k in keys]
-        assert sorted(per_layout[lay]) == sorted(want), lay
-    # over layouts: fraction of the oracle, mean [t CI], mean score, worst layout
-    summary = _table(text, "| policy | fraction of oracle")
-    want = [[_pct3(stat[k]), f"{np.mean([scores[lay][k] for lay in layouts]):.2f}", f"{min(frac[k]):.1%}"]
-            for k in keys]
-    assert sorted(r[1:] for r in summary) == sorted(want)
-    # paired differences per layout, their mean [t CI] and what the CI says about zero
-    diffs = {}
-    for a, b in DEPLOYMENT_PAIRS:
-        if a in keys and b in keys:
-            d = [scores[lay][a] - scores[lay][b] for lay in layouts]
-            diffs[(a, b)] = _mean_ci(d)
-            diffs[(a, b)] = (*diffs[(a, b)], _zero(*diffs[(a, b)][1:]), [f"{x:+.2f}" for x in d])
-    table = _table(text, "| difference |")
-    assert sorted(r[1:] for r in table) == sorted([*v[4], _num3(v[:3]), v[3]] for v in diffs.values())
-
-    claims = [line for line in text.splitlines() if line.startswith(f"- {where}: **")]
-    expected = _check_score_claims(claims, where, keys, stat, diffs)
-    expected += _check_place_claims(claims, where, keys, stat, diffs, frac)
-    # blocking: every learned row's share of slots with a device behind the RIS, its seeds averaged per layout
-    blocked = {}
-    for layout, result in results.items():
-        for key, s in result.items():
-            blocked.setdefault(key.split("@s")[0], {}).setdefault(layout, []).append(s["behind_share"])
-    share = {k: np.mean([np.mean(v) for v in by.values()]) for k, by in blocked.items() if k in LEARNED}
-    expected += 1
-    [claim] = [c for c in claims if c.startswith(f"- {where}: **no learned row blocks a device")]
-    assert f"**: {'holds' if max(share.values()) <= 0.01 else 'does not hold'} (" in claim, claim
-    assert len(claims) == expected >= 5
-
-
-def _check_place_claims(claims: list[str], where: str, keys: list[str], stat: dict, diffs: dict, frac: dict) -> int:
-    """Issue 36's targets against the recomputed statistics; how many claims there are."""
-    if where != "deployment track":  # zero-shot halls: the count target, >= 96% and above hovering
-        if "dt-goal-safe" not in keys:
-            return 0
-        [claim] = [c for c in claims if c.startswith(f"- {where}: **the learned planner's place flown by")]
-        hover = diffs[("dt-goal-safe", "hover-optimizer")]
-        holds = stat["dt-goal-safe"][0] >= 0.96 and hover[1] > 0
-        assert f"**: {'holds' if holds else 'does not hold'} ({_pct3(stat['dt-goal-safe'])}; minus hovering " \
-               f"{_num3(hover[:3])} bps/Hz, {hover[3]})." in claim, claim
-        return 1
-    count = 0
-    for key, mean, worst in PLACE_TARGETS:
-        if key not in keys:
-            continue
-        count += 1
-        [claim] = [c for c in claims if f">= {mean:.1%} of the oracle" in c and c.startswith(f"- {where}: **")]
-        holds = stat[key][0] >= mean and (worst is None or min(frac[key]) >= worst)
-        if key == "dt-goal-safe":
-            holds = holds and diffs[(key, "hover-optimizer")][1] > 0 and diffs[(key, "nearest")][1] > 0
-        assert f"**: {'holds' if holds else 'does not hold'} ({_pct3(stat[key])} of the oracle, worst hall " \
-               f"{min(frac[key]):.1%}" in claim, claim
-    return count
-
-
-def _check_score_claims(claims: list[str], where: str, keys: list[str], stat: dict, diffs: dict) -> int:
-    """The deployment claims about scores (targets, fine-tuning, paired differences) against the
-    recomputed statistics; how many there are."""
-    expected = 0
-    for key, what in (("dt-zero-shot", "zero-shot DT"), ("dt-ensemble", "zero-shot DT ensemble (one controller)"),
-                      ("dt-zero-shot-safe", "zero-shot DT under the attitude safety layer"),
-                      ("dt-ensemble-safe", "zero-shot DT ensemble under the attitude safety layer")):
-        if key not in keys:
-            continue
-        expected += 1
-        [claim] = [c for c in claims if c.startswith(f"- {where}: **{what} >= ")]
-        target = int(re.search(r">= (\d+)% of the oracle", claim).group(1)) / 100
-        hover, near = diffs[(key, "hover-optimizer")], diffs[(key, "nearest")]
-        holds = stat[key][0] >= target and hover[1] > 0 and near[1] > 0
-        assert f"**: {'holds' if holds else 'does not hold'} (" in claim, claim
-        assert (f"({_pct3(stat[key])} of the oracle; minus hovering {_num3(hover[:3])} bps/Hz, {hover[3]}; minus "
-                f"nearest {_num3(near[:3])} bps/Hz, {near[3]})." in claim), claim
-    for ft, zs, what in (("dt-finetuned", "dt-zero-shot", "fine-tuned DT"),
-                         ("dt-finetuned-safe", "dt-zero-shot-safe", "fine-tuned DT under the attitude safety layer")):
-        if ft not in keys:
-            continue
-        expected += 1
-        [claim] = [c for c in claims if c.startswith(f"- {where}: **{what} >= ")]
-        target = int(re.search(r">= (\d+)% of the oracle", claim).group(1)) / 100
-        holds = stat[ft][0] >= target and stat[ft][0] >= stat[zs][0]
-        gain = diffs[(ft, zs)]
-        assert f"**: {'holds' if holds else 'does not hold'} (" in claim, claim
-        assert f"(fine-tuned {_pct3(stat[ft])}; fine-tuned minus zero-shot {_num3(gain[:3])} bps/Hz)." in claim, claim
-    for pair, what in ((("dt-zero-shot", "bc"), "**return conditioning on demonstrations of one quality"),
-                       (("dt-zero-shot-safe", "bc-safe"), "**return conditioning under the attitude safety layer"),
-                       (("dt-mixed", "bc-mixed"), "**return conditioning on mixed-quality data"),
-                       (("dt-zero-shot", "dt-flat"), "**the device-set encoder")):
-        if pair in diffs:
-            expected += 1
-            [claim] = [c for c in claims if c.startswith(f"- {where}: {what}")]
-            assert claim.endswith(f"**: {_num3(diffs[pair][:3])} bps/Hz per layout, {diffs[pair][3]}."), claim
-    return expected
-
-
-def _cell(diffs) -> str:
-    """The claims table's cell for per-unit differences, by the stated rule, with SciPy's t interval."""
-    diffs = np.asarray(diffs, dtype=float)
-    if diffs.size < 2:
-        return f"**not resolved**: {diffs.mean():+,.2f}"
-    ci = sps.ttest_1samp(diffs, 0.0).confidence_interval(0.95)
-    word = "holds" if ci.low > 0 else "refuted" if ci.high < 0 else "not resolved"
-    return f"**{word}**: {diffs.mean():+,.2f} [{ci.low:+,.2f}, {ci.high:+,.2f}]"
-
-
-def _episodes(stage: Path, row: str) -> np.ndarray:
-    with open(stage / f"{row}.csv", newline="") as f:
-        return np.array([float(r["avg_sum_rate"]) for r in csv.DictReader(f)])
-
-
-def check_deployment_claims(stages: list[Path], text: str) -> None:
-    """The claims table's deployment cell of the zero-shot claim: the return- and the
-    goal-conditioned DT (safety layer, mean of the seeds per episode) minus the nearest training
-    hall's plan, per unseen hall of the study's own generator and count."""
-    table = _table(text, "| claim | paper | strong | deployment |")
-    [row] = [r for r in table if r[0].startswith("the zero-shot DT scores above")]
-    cells = []
-    for variant in ("dt-zero-shot-safe", "dt-goal-safe"):
-        diffs = []
-        for stage in stages:
-            res = read_json(stage / "stage.json")["result"]
-            keys = [k for k, s in res.items() if s.get("variant") == variant]
-            [near] = [k for k in res if k.startswith("transfer-")]
-            diffs.append(np.mean(np.mean([_episodes(stage, k) for k in keys], axis=0) - _episodes(stage, near)))
-        cells.append(_cell(diffs))
-    assert row[3] == " / ".join(cells), (row[3], cells)
-
-
-def check_track_claims(stages: dict[tuple[str, str], Path], compare_dir: Path, text: str) -> None:
-    """The claims table's paper and strong cells in ``text`` against their evaluation stages'
-    per-episode files (``{(track, scenario): stage dir}``) and the comparison's runs."""
-    assert len(stages) == 4
-    table = _table(text, "| claim | paper | strong |")
-    rows = {r[0]: r[1:] for r in table}
-    with open(compare_dir / "final_per_run.csv", newline="") as f:
-        runs = list(csv.DictReader(f))
-    by_algo = {}
-    for r in runs:
-        by_algo.setdefault(r["algo"], []).append(float(r["final_eval_mean"]))
-    gaps = {a: np.mean(by_algo["ddpg"]) - np.mean(v) for a, v in by_algo.items() if a != "ddpg"}
-    [ddpg] = [v for k, v in rows.items() if k.startswith("DDPG trains the best")]
-    assert ddpg[0] == f"**not resolved**: {min(gaps.values()):+,.2f}"  # one seed per algorithm: no interval
-    for col, track in enumerate(("paper", "strong")):
-        zs, near = [], []
-        for (t, _scenario), stage in sorted(stages.items()):
-            if t != track:
-                continue
-            res = read_json(stage / "stage.json")["result"]
-            top = max((k for k in res if k.startswith("transfer-")), key=lambda k: res[k]["mean"])
-            zs.append(np.mean(_episodes(stage, "dt-zero-shot") - _episodes(stage, top)))
-            near.append(np.mean(_episodes(stage, "dt-finetuned") - 0.95 * _episodes(stage, "expert")))
-        [z] = [v for k, v in rows.items() if k.startswith("the zero-shot DT scores above")]
-        [n] = [v for k, v in rows.items() if k.startswith("the fine-tuned DT is within 5%")]
-        assert z[col] == _cell(zs) and n[col] == _cell(near), (track, z, n)
-
-
 @pytest.mark.slow
 def test_rerun_after_kill_skips_finished_stages(smoke_run):
     out, _, first_done = smoke_run
@@ -416,11 +181,11 @@ def test_changed_parameter_invalidates_exactly_its_dependents(tmp_path):
     evaluations = {f"deploy-evaluate-layout-{split}-{j}" for split in ("unseen", "other") for j in (0, 1)}
     places = {f"deploy-finetune-places-layout-unseen-{j}{s}" for j in (0, 1) for s in ("", "-s1")}
     assert deploy == {"deploy-dataset", "deploy-dataset-mixed", "deploy-finetune-layout-unseen-0",
-                      "deploy-finetune-layout-unseen-1", "deploy-values", "deploy-value"} | evaluations | places | {
-                          f"deploy-{m}{s}" for m in models for s in ("", "-s1")}
+                      "deploy-finetune-layout-unseen-1", "deploy-value-labels", "deploy-value"} | evaluations | \
+        places | {f"deploy-{m}{s}" for m in models for s in ("", "-s1")}
     assert changed(trajectories=3) == dt | {f"strong-{n}" for n in dt}
     # the learned value's labels come from their own halls, its fit from them and the demonstrations' plans
-    assert changed(layout_trajectories=3) == deploy - {"deploy-values"}
+    assert changed(layout_trajectories=3) == deploy - {"deploy-value-labels"}
     # the paper track's experts follow the comparison (they are its winner's)
     assert changed(compare_seeds=2) == {"compare", "experts-train", "experts-unseen"} | dt
     assert changed(expert_algo="ppo") == {"experts-train", "experts-unseen"} | dt

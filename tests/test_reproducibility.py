@@ -36,7 +36,7 @@ def test_compiled_and_cached_kernels_give_the_same_bits(tmp_path):
     with the helpers inlined into their caller (inline="always") both paths run the same
     code. Before, LLVM inlined them only when compiling (fast-math then reassociated across
     the calls), and a cached load linked them separately: the study's numbers depended on
-    whether a job's process had compiled the kernels or not (docs/study.md, section 22)."""
+    whether a job's process had compiled the kernels or not (docs/study.md, section 3)."""
     fresh = _solve(str(tmp_path))  # empty cache: compiled here, then written
     assert any(tmp_path.rglob("*.nbi"))
     cached = _solve(str(tmp_path))  # loaded from the cache

@@ -1,6 +1,6 @@
 """A value that sets a size (grid poses, episodes, trajectories, halls, seeds) is refused above a
 stated bound: one line, exit 2, nothing written; a mistyped 0.01 or 10^9 never starts a run that
-exhausts memory (issue 24, item 11)."""
+exhausts memory."""
 
 from __future__ import annotations
 

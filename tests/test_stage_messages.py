@@ -1,5 +1,5 @@
 """What a (re)run prints about its stages: a stage finished earlier is "done earlier" with the
-time it took then, never a time this invocation spent (issue 24, item 10)."""
+time it took then, never a time this invocation spent."""
 
 from __future__ import annotations
 

@@ -13,10 +13,11 @@ from uavris.experiments.study.report.deployment import (
     HOVER_OPTIMIZER,
     NEAREST,
     ORACLE,
-    ROWS,
     _excludes_zero,
     deployment_section,
     layout_scores,
+    row_labels,
+    row_order,
     seed_scores,
 )
 from uavris.stats import bootstrap_ci, iqm, over_units, summarize, t_band, t_interval, versus
@@ -73,7 +74,7 @@ def test_t_band_is_scipys_t_interval_at_every_point():
 
 
 def test_t_band_of_three_seeds_is_wider_than_their_range():
-    # the under-coverage issue 37 names: a bootstrap band of 3 seeds lies inside their range
+    # the under-coverage of a bootstrap band over few seeds: a bootstrap band of 3 seeds lies inside their range
     curves = np.array([[1.0, 2.0], [2.0, 4.0], [3.0, 3.0]])
     _, low, high = t_band(curves)
     assert np.all(low < curves.min(axis=0)) and np.all(high > curves.max(axis=0))
@@ -109,25 +110,43 @@ def test_excludes_zero_states_its_rule(low, high, want):
     assert _excludes_zero({"mean": 0.0, "ci_low": low, "ci_high": high}) == want
 
 
+REFERENCE_KEYS = ("zero-action", "hover-optimizer", "oracle")
+
+
+def _facts(key, label=None, kind=None, seed=None, variant=None, **more):
+    """A row's summary as an evaluation stage records it (Row.facts beside its numbers)."""
+    kind = kind or ("reference" if key in REFERENCE_KEYS else "learned")
+    return {"label": label or key, "name": variant or key, "kind": kind, "variant": variant or key, "seed": seed,
+            "rank": None, "training_halls": None, "plan_of": None, "front_margin_deg": None, "level": False, **more}
+
+
 def _result(**means):
-    return {k: {"mean": v, "label": k} for k, v in means.items()}
+    return {k: {"mean": v, **_facts(k)} for k, v in means.items()}
 
 
 def _seeded(variant, *means):
-    return {f"{variant}@s{s}" if s else variant: {"mean": m, "label": variant, "variant": variant, "seed": s}
+    return {f"{variant}@s{s}" if s else variant: {"mean": m, **_facts(f"{variant}@s{s}" if s else variant,
+                                                                      variant + (f", seed {s}" if s else ""),
+                                                                      seed=s, variant=variant)}
             for s, m in enumerate(means)}
+
+
+def _transfer(mean, src, rank, plan=True):
+    return {"mean": mean, **_facts(f"transfer-{src}", f"{'oracle plan' if plan else 'expert'} of {src}", "transfer",
+                                   rank=rank, plan_of=src if plan else None)}
 
 
 def test_layout_scores_average_seeds_per_layout_and_summarise_transfers():
     res = {"h0": {**_seeded("dt-zero-shot", 30.0, 34.0, 35.0), **_result(oracle=40.0),
-                  "transfer-a": {"mean": 20.0, "label": "oracle plan of a (nearest), 3.0 m"},
-                  "transfer-b": {"mean": 28.0, "label": "transferred from b"}}}
+                  "transfer-b": _transfer(28.0, "b", 1), "transfer-a": _transfer(20.0, "a", 0)}}
     row = layout_scores(res)["h0"]
     assert row["dt-zero-shot"] == pytest.approx(33.0)  # (30 + 34 + 35) / 3
     assert seed_scores(res)["h0"]["dt-zero-shot"] == {0: 30.0, 1: 34.0, 2: 35.0}
-    assert row[NEAREST] == 20.0 and row["transfer-mean"] == 24.0 and row["transfer-best"] == 28.0
-    one = {"h0": {**_result(oracle=40.0), "transfer-a": {"mean": 20.0, "label": "x (nearest)"}}}
+    assert row[NEAREST] == 20.0 and row["transfer-mean"] == 24.0 and row["transfer-best"] == 28.0  # rank 0 nearest
+    one = {"h0": {**_result(oracle=40.0), "transfer-a": _transfer(20.0, "a", 0)}}
     assert "transfer-mean" not in layout_scores(one)["h0"]  # one transferred policy is its own mean
+    assert row_order(res) == ["dt-zero-shot", "oracle", NEAREST, "transfer-mean", "transfer-best"]
+    assert row_labels(res)[NEAREST] == "oracle plan of the nearest training layout, flown here"
 
 
 def _scores(dt, hover, near, bc, oracle):
@@ -135,8 +154,14 @@ def _scores(dt, hover, near, bc, oracle):
             for i, (d, h, n, b, o) in enumerate(zip(dt, hover, near, bc, oracle))}
 
 
+def _section(scores, **kw):
+    """The deployment section of made-up scores, each row under its own key."""
+    keys = list(next(iter(scores.values())))
+    return deployment_section(scores, {k: k for k in keys}, keys, None, None, **kw)
+
+
 def _zero_shot_claim(scores) -> str:
-    return next(c for c in deployment_section(scores, {}, None, None)[1] if "**zero-shot DT >=" in c)
+    return next(c for c in _section(scores)[1] if "**zero-shot DT >=" in c)
 
 
 def test_the_zero_shot_claim_holds_only_by_its_stated_rule():
@@ -144,7 +169,7 @@ def test_the_zero_shot_claim_holds_only_by_its_stated_rule():
     # 96-97% of the oracle, above hovering and the nearest plan in every hall by 2-3 bps/Hz
     good = _scores([39.0, 40.5, 39.5, 41.5], [36.0, 38.0, 37.5, 38.5], [37.0, 38.0, 36.5, 39.0],
                    [39.0, 40.5, 39.5, 41.5], oracle)
-    _, claims = deployment_section(good, {}, None, None)
+    _, claims = _section(good)
     claim = next(c for c in claims if "**zero-shot DT >=" in c)
     assert ": holds (" in claim
     frac = np.mean([39.0 / 40, 40.5 / 42, 39.5 / 41, 41.5 / 43])
@@ -165,7 +190,7 @@ def test_the_zero_shot_claim_holds_only_by_its_stated_rule():
 def test_the_return_conditioning_verdict_is_the_paired_ci():
     oracle = [40.0, 42.0, 41.0, 43.0]
     s = _scores([39.0, 40.5, 39.5, 41.5], [36.0] * 4, [37.0] * 4, [38.0, 39.0, 38.5, 40.0], oracle)
-    _, claims = deployment_section(s, {}, None, None)
+    _, claims = _section(s)
     claim = next(c for c in claims if "return conditioning on demonstrations" in c)
     d = np.array([1.0, 1.5, 1.0, 1.5])
     lo, hi = sps.t.interval(0.95, 3, loc=d.mean(), scale=sps.sem(d))
@@ -227,11 +252,11 @@ def _results():
         res = {}
         for key, seeds in HALLS.items():
             if len(seeds) == 1:
-                res[key] = {"mean": seeds[0][j], "label": key}
+                res[key] = {"mean": seeds[0][j], **_facts(key)}
             else:
                 res.update(_seeded(key, *(values[j] for values in seeds)))
-        res["transfer-a"] = {"mean": TRANSFERS["transfer-a"][j], "label": "oracle plan of a (nearest), 2.0 m"}
-        res["transfer-b"] = {"mean": TRANSFERS["transfer-b"][j], "label": "oracle plan of b"}
+        res["transfer-a"] = _transfer(TRANSFERS["transfer-a"][j], "a", 0)
+        res["transfer-b"] = _transfer(TRANSFERS["transfer-b"][j], "b", 1)
         out[f"hall-{j}"] = res
     return out
 
@@ -245,8 +270,11 @@ def _by_hand():
 
 
 def test_the_deployment_section_against_numbers_worked_here():
-    lines, claims = deployment_section(layout_scores(_results()), {}, None, None, seeds=seed_scores(_results()))
-    rows, labels = _by_hand(), dict(ROWS)
+    results = _results()
+    labels = row_labels(results)
+    lines, claims = deployment_section(layout_scores(results), labels, row_order(results), None, None,
+                                       seeds=seed_scores(results))
+    rows = _by_hand()
     oracle = np.array(ORACLES)
     assert rows["dt-zero-shot"].tolist() == [38.5, 47.5, 19.25]
     # over halls: fraction of the oracle, mean [t CI], mean score, worst hall
@@ -308,14 +336,14 @@ def test_the_finetuned_claim_states_its_rule(finetuned, zero_shot, holds):
     oracle = [50.0, 100.0]  # 49 / 50 and 98 / 100 are both the double nearest 0.98
     scores = {f"h{i}": {"dt-zero-shot": zero_shot * o, "dt-finetuned": finetuned * o, HOVER_OPTIMIZER: 0.5 * o,
                         NEAREST: 0.5 * o, ORACLE: o} for i, o in enumerate(oracle)}
-    _, claims = deployment_section(scores, {}, None, None)
+    _, claims = _section(scores)
     [claim] = [c for c in claims if "**fine-tuned DT >= 98% of the oracle and not below zero-shot**" in c]
     assert f"**: {'holds' if holds else 'does not hold'} (fine-tuned {finetuned:.1%} [" in claim
 
 
 def test_one_layout_resolves_nothing():
     scores = {"h0": {"dt-zero-shot": 48.0, HOVER_OPTIMIZER: 40.0, NEAREST: 30.0, "bc": 20.0, ORACLE: 50.0}}
-    _, claims = deployment_section(scores, {}, None, None)
+    _, claims = _section(scores)
     zero_shot = next(c for c in claims if "**zero-shot DT >= 96%" in c)
     # 96% of the oracle, 8 and 18 bps/Hz above the others, but one hall gives no interval: not shown
     assert ": does not hold (96.0% [n/a, n/a] of the oracle" in zero_shot
@@ -332,8 +360,8 @@ def test_a_row_added_to_the_study_shows_under_its_own_label():
 
     results = _results()
     for j, res in enumerate(results.values()):
-        res["dt-new"] = {"mean": 30.0 + j, "label": "my new controller", "variant": "dt-new", "seed": None}
-    lines, _ = deployment_section(layout_scores(results), {"dt-new": "my new controller"}, None, None,
+        res["dt-new"] = {"mean": 30.0 + j, **_facts("dt-new", "my new controller")}
+    lines, _ = deployment_section(layout_scores(results), row_labels(results), row_order(results), None, None,
                                   seeds=seed_scores(results))
     table = {r[0]: r[1:] for r in _rows(lines, "| policy | fraction of oracle")}
     fractions = np.array([30.0, 31.0, 32.0]) / np.array(ORACLES)
@@ -342,5 +370,5 @@ def test_a_row_added_to_the_study_shows_under_its_own_label():
         for v in res.values():
             v.update(end_rate_level=v["mean"], end_rate_own=v["mean"], behind_share=0.0)
         res["oracle"]["plan_rate_level"] = res["oracle"]["mean"]
-    lines, _ = decomposition_section(results, {"dt-new": "my new controller"})
+    lines, _ = decomposition_section(results, row_labels(results))
     assert any(line.startswith("| my new controller |") for line in lines)

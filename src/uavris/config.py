@@ -211,13 +211,13 @@ class SystemConfig(DictConfig):
     z_max: float = 8.0  # the UAV's highest altitude, m (at most the room's height)
     safety_distance: float = 3.0  # least UAV-device distance, m (docs/model.md, defaults table)
     front_margin_deg: float | None = None  # attitude safety layer: every device kept this far (deg) in front of the RIS
-    min_device_spacing: float = 5.0  # least horizontal distance between two devices, m (docs/study.md, section 21)
+    min_device_spacing: float = 5.0  # least horizontal distance between two devices, m (docs/study.md, section 2)
     energy_budget_j: float = 8000.0  # propulsion energy budget E_max of an episode, J
     max_active_pairs: int | None = None  # most D2D pairs active in a slot; None: floor(K/2)
     angle_dependent_reflection: bool = True  # False: r = r_pre (ideal RIS)
     learn_amplitudes: bool = False  # True: N extra action entries set |r_pre| in [0, 1]
     channel_ref_distance: float = 10.0  # observation scale for channels, m
-    observe_devices: bool = False  # True: the observation ends with the device positions (docs/study.md, section 21)
+    observe_devices: bool = False  # True: the observation ends with the device positions (docs/study.md, section 2)
     propulsion: PropulsionParams = field(default_factory=PropulsionParams)
 
     def __post_init__(self) -> None:

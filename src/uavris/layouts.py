@@ -3,7 +3,7 @@
 The paper's study varies only the UAV's start, and every start of it has the same best
 pose, so nothing there needs generalising. A layout moves the devices, and with them the
 best pose: the setting in which a policy that memorised one deployment fails and one that
-generalises pays (docs/study.md, section 21).
+generalises pays (docs/study.md, section 2).
 
 Lives here: :class:`Layout` (devices, start and optionally the room, with what it makes of
 a base system), :class:`Site` (a resolved layout or a scenario: a system and a start under a
@@ -30,7 +30,7 @@ A layout file (YAML)::
 from __future__ import annotations
 
 import re
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Sequence
 
@@ -52,7 +52,7 @@ from uavris.config import (
 START_HEIGHT = 4.5  # m: the paper's starting altitude (every scenario of its Sec. V)
 SPLITS: tuple[str, ...] = ("train", "unseen", "other")
 # The "other" split: unseen halls of another generator, so that a result tuned to the study's
-# generator shows (issue 29): devices further from the walls and from each other, higher, and
+# generator shows (docs/study.md, section 2): devices further from the walls and from each other, higher, and
 # a start anywhere over the floor instead of its middle half.
 OTHER_SPLIT = dict(wall_margin=5.0, spacing=9.0, heights=(0.6, 1.9), start_span=(0.1, 0.9))
 # A generated hall's name: its split and index, and its number of devices where that is not
@@ -64,12 +64,16 @@ _FILE_KEYS = {"name", "room", "devices", "users", "start"}
 
 @dataclass(frozen=True)
 class Layout:
-    """A deployment: the devices (``users``), the UAV's start and, for a hall of its own, the room."""
+    """A deployment: the devices (``users``), the UAV's start and, for a hall of its own, the
+    room; a generated hall also carries its generator's ``split`` (:data:`SPLITS`)."""
 
     name: str
     users: tuple[Vec3, ...]
     start: Vec3
     room: Vec3 | None = None  # None: the base system's room
+    # set by LayoutGenerator (None: the paper's hall, a user's); where a hall came from, not what it is, so a
+    # generated hall written to a file and read back is the same hall
+    split: str | None = field(default=None, compare=False)
 
     def __post_init__(self) -> None:
         # Lists from YAML or the CLI become tuples of floats, so a layout is hashable and exact.
@@ -103,7 +107,13 @@ class Layout:
             raise ConfigError(f"layout {self.name!r}: {e}") from None
         return system, scenario
 
+    @property
+    def devices(self) -> int:
+        """The number of D2D devices."""
+        return len(self.users)
+
     def to_dict(self) -> dict[str, Any]:
+        """The layout file's fields (module docstring): what a user's hall is; the split is the generator's."""
         out: dict[str, Any] = {"name": self.name, "devices": [list(u) for u in self.users], "start": list(self.start)}
         if self.room is not None:
             out["room"] = list(self.room)
@@ -117,21 +127,29 @@ PAPER_LAYOUT = Layout("paper", PAPER_USERS, SCENARIOS["fig2"].start)
 class Site(DictConfig):
     """Where a policy flies: a system (the hall and its devices) and the UAV's start, under a
     name: a scenario of the paper's hall (``unseen1``: a start), a generated hall
-    (``layout-unseen-3``: devices and start) or a user's (a resolved :class:`Layout`)."""
+    (``layout-unseen-3``: devices and start, and the generator's ``split``) or a user's (a
+    resolved :class:`Layout`). What a site is (its device count, its split) is read from these
+    fields, never from its name."""
 
     name: str
     system: SystemConfig
     start: Vec3 | None = None  # None: the named scenario's start (uavris.config.SCENARIOS)
+    split: str | None = None  # a generated hall's split (SPLITS); None: a scenario, the paper's hall, a user's
 
     @property
     def scenario(self) -> Scenario:
         return scenario_at(self.name, self.start)
 
+    @property
+    def devices(self) -> int:
+        """The number of D2D devices in the hall."""
+        return self.system.num_users
+
     @classmethod
     def of(cls, layout: Layout, base: SystemConfig) -> Site:
         """The site of ``layout`` on ``base`` (checked as :meth:`Layout.resolve` checks it)."""
         system, where = layout.resolve(base)
-        return cls(layout.name, system, where.start)
+        return cls(layout.name, system, where.start, layout.split)
 
 
 def default_start(system: SystemConfig, room: Sequence[float] | None = None) -> Vec3:
@@ -142,7 +160,7 @@ def default_start(system: SystemConfig, room: Sequence[float] | None = None) -> 
 
 @dataclass(frozen=True)
 class LayoutGenerator:
-    """Random halls of ``devices`` D2D devices (docs/study.md, section 21).
+    """Random halls of ``devices`` D2D devices (docs/study.md, section 2).
 
     Layout ``j`` of split ``s`` ("train" or "unseen") is drawn from its own random stream,
     keyed by ``(seed, s, j)``: the same layout from the same seed, whatever else is drawn,
@@ -195,7 +213,7 @@ class LayoutGenerator:
         for _ in range(1000):
             start = (*(float(v) for v in rng.uniform(span[0] * room[:2], span[1] * room[:2])), z)
             if min(np.linalg.norm(np.asarray(users) - start, axis=1)) >= base.safety_distance:
-                return Layout(name, users, start)
+                return Layout(name, users, start, split=split)
         raise ConfigError(f"could not place a start outside the safety balls of {name}")
 
     def _devices(self, rng: np.random.Generator, lo_xy: np.ndarray, hi_xy: np.ndarray, heights: tuple[float, float],

@@ -62,7 +62,7 @@ FINETUNE: dict[str, dict[str, Any]] = {
     "paper": dict(rounds=10, epochs_per_round=5, eval_episodes=100, **_FT_PAPER),
 }
 
-# The learned value of a pose (uavris.agents.place, issue 36): the labels (training halls per
+# The learned value of a pose (uavris.agents.place, docs/places.md): the labels (training halls per
 # device count, labelled poses per hall; uavris.experiments.training.values.ValueLabelsConfig)
 # and the fit (ValueFitConfig: the network's width and its gradient steps).
 VALUE: dict[str, dict[str, Any]] = {
@@ -70,7 +70,7 @@ VALUE: dict[str, dict[str, Any]] = {
     "quick": dict(counts=(3, 4, 5, 6, 7, 8), halls=32, poses=48, width=64, steps=3000),
     "paper": dict(counts=(3, 4, 5, 6, 7, 8), halls=256, poses=96, width=128, steps=20_000),
 }
-# Fine-tuning that tries places (a goal-conditioned DT, issue 36): the start and this many of
+# Fine-tuning that tries places (a goal-conditioned DT, docs/places.md): the start and this many of
 # the learned planner's best places, one per candidate episode (rollouts_per_seed a multiple
 # of places + 1: each episode seed tries every place; the track's fine-tuning table otherwise).
 PLACES_FINETUNE: dict[str, dict[str, Any]] = {
@@ -91,20 +91,20 @@ STRONG_IMITATION: dict[str, dict[str, Any]] = {
 
 # The study (``uavris reproduce``, uavris.experiments.study.config.ReproduceConfig):
 # evaluation episodes per policy, comparison seeds per algorithm and environment steps per run,
-# expert trajectories per training scenario (the paper: 500). quick: 3 seeds (5 before the
-# strong track) and 25,000 steps (250 episodes; 50,000 before 2026-11-25): the study must fit
-# 30 minutes on 2 cores and the comparison took 31 of its 86 core-minutes at 50,000 steps. Its
+# expert trajectories per training scenario (the paper: 500). quick: 3 seeds and 25,000 steps
+# (250 episodes): the study must fit 30 minutes on 2 cores, and at 50,000 steps the comparison
+# took 31 of its 86 core-minutes (docs/changelog.md). Its
 # curves still rise at 25,000 steps (PPO crosses the zero action between 100,000 and 400,000:
 # docs/results/budget.md), so the quick comparison's verdicts hold at that budget only; paper
 # keeps 5 seeds and the paper's ~25,000 episodes.
-# The deployment track (docs/study.md section 21): generated training halls with the planning
+# The deployment track (docs/study.md section 2): generated training halls with the planning
 # oracle's demonstrations (episodes per hall: layout_trajectories), unseen halls, the smaller
 # training sets of the data curve (zero-shot score against the number of training halls; the
 # full set is its last point), pre-training seeds of every learned row, and the halls of the
 # mixed-quality dataset (the oracle, another hall's plan, hovering, a noisy oracle: where
 # return conditioning can matter). quick: 512 halls x 2 episodes, about as many episodes as
 # the paper track's dataset (8 scenarios x 100), spread over many halls (docs/study.md
-# section 21 measures the split).
+# section 2 measures the split).
 STUDY: dict[str, dict[str, Any]] = {
     "smoke": dict(compare_seeds=2, compare_steps=640, eval_episodes=8, trajectories=4, layout_trajectories=2,
                   train_layouts=3, unseen_layouts=2, scaling=(1,), dt_seeds=2, mixed_layouts=2),
@@ -122,17 +122,17 @@ DEMONSTRATION_CHUNK = 64  # halls per demonstration job (a job writes its part o
 # the preset's model; the smoke preset keeps its tiny model in every track).
 # - strong and deployment: the DT reads 10 slots instead of the DT paper's 20: 1.7x cheaper
 #   per step, and the zero-shot scores of the quick report stay within their CIs (docs/study.md,
-#   section 22). The paper track keeps the DT paper's model.
+#   section 3). The paper track keeps the DT paper's model.
 # - deployment: learning rate 3e-4 instead of the DT paper's 1e-4: at the quick budget (1,500
 #   steps) the DT fitted its 32 training layouts to 91% of the oracle with 1e-4 and to 98% with
 #   3e-4. Width 64 and 2 blocks instead of 128 and 3: zero-shot within a point of the larger
-#   model on 512 halls, 3.3x cheaper to train (docs/study.md, section 21). The device-set
+#   model on 512 halls, 3.3x cheaper to train (docs/study.md, section 2). The device-set
 #   encoder reads a hall as a set of devices (the ablation sets the flat one beside it).
 # - deployment fine-tuning, in each of the 16 unseen halls: 40 candidates (8 seeds x 5) and 25
 #   elites instead of 80 and 50, and 8 episodes for the per-round curve (the evaluation stage
 #   scores the result on the study's episodes): at 80/50 it added +0.3 points [-0.7, +1.4] over
-#   the zero-shot DT under the safety layer in the quick run of 2026-11-25, for a quarter of the
-#   study's time (docs/halls.md). The other tracks' fine-tuning evaluates on the study's episodes.
+#   the zero-shot DT under the safety layer in a quick run, for a quarter of the study's time
+#   (docs/halls.md). The other tracks' fine-tuning evaluates on the study's episodes.
 _SHORT_CONTEXT = dict(model=dict(context=10))
 _DEPLOYMENT_DT = dict(learning_rate=3e-4, model=dict(context=10, width=64, depth=2, state_encoder="devices"))
 TRACK_PRETRAIN: dict[str, dict[str, dict[str, Any]]] = {

@@ -10,6 +10,7 @@ Commands:
   finetune-dt         fine-tune it online in a scenario (Algorithm 1, stage 2)
   reproduce           the whole study in three tracks, with figures and report
   claims              the paper's claims judged in every track of one or more studies
+  from-scratch        fine-tuning against an expert trained from scratch in a study's new halls
   plot                learning curves of one or more runs (PNG and PDF)
   plan                where the UAV should go in a hall: the oracle's plan and a rate map
   sweep               the sum rate of policies over a grid of one or two system parameters
@@ -19,7 +20,7 @@ Lives here: dispatch to a command and the one rule for failures: any bad input (
 that does not parse, a value out of range, a path that is missing or of the wrong kind, a
 corrupt file) prints one line ``uavris: error: ...`` on stderr and exits with code 2; a
 traceback means a bug. Not here: the flags of each command (:mod:`.training`,
-:mod:`.evaluation`), which are the fields of the library's config dataclasses.
+:mod:`.evaluation`, :mod:`.tools`, :mod:`.claims`), which are the fields of the library's config dataclasses.
 """
 
 from __future__ import annotations
@@ -44,15 +45,16 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "evaluate": ("evaluation", "evaluate_command"),
     "benchmark": ("evaluation", "benchmark_command"),
     "compare-algorithms": ("training", "compare_command"),
-    "collect": ("evaluation", "collect_command"),
+    "collect": ("tools", "collect_command"),
     "pretrain-dt": ("training", "pretrain_command"),
     "finetune-dt": ("training", "finetune_command"),
     "reproduce": ("training", "reproduce_command"),
     "claims": ("claims", "claims_command"),
-    "plot": ("evaluation", "plot_command"),
-    "plan": ("evaluation", "plan_command"),
+    "from-scratch": ("claims", "from_scratch_command"),
+    "plot": ("tools", "plot_command"),
+    "plan": ("tools", "plan_command"),
     "sweep": ("evaluation", "sweep_command"),
-    "demo": ("evaluation", "demo_command"),
+    "demo": ("tools", "demo_command"),
 }
 
 

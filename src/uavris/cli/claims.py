@@ -1,7 +1,8 @@
-"""The command that judges the paper's claims: ``uavris claims``.
+"""The commands that judge the paper's claims: ``uavris claims``, and ``uavris from-scratch`` (what it may read).
 
-Lives here: its flags (:class:`ClaimsArgs`) and :func:`claims_command`. Not here: the
-judging (:mod:`uavris.experiments.study.claims`).
+Lives here: their flags (:class:`ClaimsArgs`, :class:`FromScratchArgs`), :func:`claims_command`
+and :func:`from_scratch_command`. Not here: the judging (:mod:`uavris.experiments.study.claims`),
+the measurement (:mod:`uavris.experiments.study.from_scratch`).
 """
 
 from __future__ import annotations
@@ -13,6 +14,7 @@ from typing import Annotated
 import tyro
 
 from uavris.cli.parsing import Unset, UsageError, output_dir, parse
+from uavris.experiments.study.from_scratch import FromScratchConfig
 
 
 @dataclass(frozen=True)
@@ -27,7 +29,7 @@ class ClaimsArgs:
     budgets: tuple[int, ...] = ()
     """environment steps at which --budget-comparison's runs are judged (each a multiple of its --eval-every)"""
     from_scratch: Unset[Path] = None
-    """benchmarks/from_scratch.py --json's file: the deployment track's fine-tuning against an expert from scratch"""
+    """uavris from-scratch's file: the deployment track's fine-tuning against an expert trained from scratch"""
 
 
 def claims_command(args: list[str]) -> None:
@@ -50,3 +52,39 @@ def claims_command(args: list[str]) -> None:
     path = write_claims(list(a.studies), a.out, [(a.budget_comparison, b) for b in a.budgets], a.from_scratch)
     print(path.read_text().split("\n\n", 2)[1])
     print(f"wrote {path}")
+
+
+@dataclass(frozen=True)
+class FromScratchArgs:
+    study: Annotated[Path, tyro.conf.Positional, tyro.conf.arg(metavar="OUT")]
+    """output directory of uavris reproduce --track deployment --ablation (its fine-tuning that tries places)"""
+    config: FromScratchConfig = FromScratchConfig()
+    """what is measured"""
+    out: Path = Path("runs/from-scratch.json")
+    """where the per-hall numbers are written (uavris claims --from-scratch reads them)"""
+
+
+def from_scratch_command(args: list[str]) -> None:
+    """Fewer interactions, measured: in a study's first unseen halls, fine-tuning against hybrid
+    PPO trained there from scratch (under the safety layer, evaluated every --config.eval-every
+    steps on the study's episodes, at most --config.steps): the interactions each needs to reach
+    the fine-tuned DT's level. Hours on one core per hall at the defaults; the file is rewritten
+    after every hall.
+    """
+    from uavris.experiments.display.tables import markdown_table
+    from uavris.experiments.study.from_scratch import from_scratch
+
+    a = parse(FromScratchArgs, args, "uavris from-scratch", from_scratch_command.__doc__ or "")
+    output_dir(a.out.parent)
+    rows: list[tuple[str, ...]] = []
+
+    def report(h: dict) -> None:
+        rows.append((h["hall"], f"{h['zero_shot']:.2f}", f"{h['level']:.2f}", f"{h['finetune_interactions']:,.0f}",
+                     f"{h['expert_best']:.2f}", f"{h['expert_to_level']:,.0f}" if h["reached"] else
+                     f"not within {h['expert_steps']:,}", f"{h['expert_wall_s']:.0f}"))
+        print("\n".join(markdown_table(("hall", "zero-shot level", "fine-tuned level", "fine-tuning's interactions",
+                                        "expert's best", "expert reaches the level after", "expert's training (s)"),
+                                       rows, "lrrrrrr")), flush=True)
+
+    from_scratch(a.study, a.config, a.out, report)
+    print(f"wrote {a.out}")

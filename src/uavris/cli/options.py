@@ -58,7 +58,7 @@ def check_run_options(opts: RunOptions, run_dir: Path) -> str:
 
 
 LAYOUT_HELP = ("the hall: paper (the paper's devices), layout-train-N / layout-unseen-N (generated; -kK: K "
-               "devices, docs/model.md section 21) or a YAML layout file (devices, optionally start and room); it "
+               "devices, docs/study.md section 2) or a YAML layout file (devices, optionally start and room); it "
                "sets --system.users (and --system.room) and the start (unless --scenario is given); default: the "
                "devices of --system.users")
 

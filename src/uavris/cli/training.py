@@ -306,7 +306,7 @@ def reproduce_command(args: list[str]) -> None:
     evaluate-unseen1/2 (experts: the comparison's winner). Strong track (learned motion,
     optimised phases, experts imitating the oracle): the same stages prefixed strong-.
     Deployment track (the planning oracle's demonstrations in generated halls, docs/study.md
-    section 21): deploy-dataset, deploy-values (the learned value's labels) and deploy-value (its
+    section 2): deploy-dataset, deploy-value-labels (the learned value's labels) and deploy-value (its
     fit), deploy-pretrain, deploy-bc (behaviour cloning) and deploy-goal (the goal-conditioned
     DT) for each pre-training seed, and deploy-evaluate-LAYOUT per unseen layout; with
     --ablation also fine-tuning that tries places (deploy-finetune-places-LAYOUT, per seed), the

@@ -230,10 +230,10 @@ def device_scale(config: SystemConfig) -> float:
 
 def device_observation(users: NDArray[np.float64], pos: NDArray[np.float64], scale: float) -> NDArray[np.float64]:
     """The devices as the UAV sees them: ``(q_k - q_U) / scale`` in the layout's order,
-    flattened to ``(n, 3K)`` (docs/study.md, section 21). Relative, so that a hall moved as a
+    flattened to ``(n, 3K)`` (docs/study.md, section 2). Relative, so that a hall moved as a
     whole looks the same from the same relative pose; in the layout's order, so that device
     ``k`` of this slice is device ``k`` of the channels and the pairing (an order-free policy
-    reads the three together per device: :class:`uavris.agents.dt.model.DeviceSetEncoder`)."""
+    reads the three together per device: :class:`uavris.agents.dt.encoders.DeviceSetEncoder`)."""
     rel = (users[None] - pos[:, None]) / scale  # (n, K, 3)
     return rel.reshape(len(pos), -1)
 

@@ -20,7 +20,7 @@
   rate map), :mod:`~.tools.run_curves` (learning curves), :mod:`~.tools.demo`.
 - :mod:`.study`: ``uavris reproduce``: :mod:`~.study.config`, :mod:`~.study.tracks` (and
   their rows), :mod:`~.study.pipeline`, :mod:`~.study.workers`, :mod:`~.study.reproduce`,
-  :mod:`~.study.rows` (a study's row evaluated again) and :mod:`~.study.report`.
+  :mod:`~.study.finished` (a study's directory opened: its stages, results and rows) and :mod:`~.study.report`.
 
 Each room imports only the rooms listed before it (``display`` and ``engine`` import no
 other). Lives here: nothing at package level; import from the modules. Not here: the

@@ -3,7 +3,7 @@
 Lives here: :func:`pairing_from_uniforms` (the simulator's, fed by :mod:`.streams`) and
 :func:`sample_pairing`. Not here: the rates of the active pairs (:mod:`.rates`) and the
 pairing's probabilities, which the oracles use
-(:func:`uavris.agents.oracle.planner.pairing_distribution`,
+(:func:`uavris.agents.oracle.objective.pairing_distribution`,
 :func:`uavris.agents.oracle.lookahead.link_activity`).
 """
 

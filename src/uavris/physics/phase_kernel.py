@@ -22,13 +22,13 @@ LN2 = math.log(2.0)
 # No fast-math: every operation is IEEE, in the order written, so that the kernels give the
 # same bits whatever CPU numba compiles them for (vector widths, FMA contraction and
 # reassociated sums would otherwise differ between, say, an AVX-512 Xeon and an AMD EPYC:
-# docs/study.md, section 22). Elementwise loops still vectorise; only the sums do not.
+# docs/study.md, section 3). Elementwise loops still vectorise; only the sums do not.
 FAST = False
 # The helpers are inlined into their caller by numba itself (inline="always"), so that the
 # caller's machine code is the same whether this process compiles it or loads it from
 # numba's cache. Left to LLVM, they were inlined (and fast-math reassociated across them)
 # only when compiling, while a cached load linked them separately: the same slot got other
-# bits in a process that had compiled the kernels (docs/study.md, section 22).
+# bits in a process that had compiled the kernels (docs/study.md, section 3).
 
 
 @njit(cache=True, fastmath=FAST, inline="always")

@@ -320,7 +320,7 @@ def optimize_phases(channels: ArrayLike, cos_theta: ArrayLike, pairing: ArrayLik
             below the best single-pair co-phasing. Other slots: the full method. An option,
             not a default: on the study's own rollouts even the previous slot's full solution
             as the warm start loses 1.8-4.6% of the sum rate (the NLoS draw of every slot
-            moves the nulls), measured by ``benchmarks/warm_start.py``.
+            moves the nulls), measured by ``benchmarks/findings/warm_start.py``.
         warm_iterations: L-BFGS iterations per level of a warm start.
         warm_levels: the continuation of a warm start (multiples of ``sigma^2``; default the
             true problem only).

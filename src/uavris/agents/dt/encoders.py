@@ -5,7 +5,7 @@ choice between them (:data:`StateEncoder`, :func:`make_state_encoder`) and the s
 normalisation the device encoder needs (:func:`pooled_over_devices`, laid out for another
 number of devices by :func:`stats_for_devices`). Not here: the model
 that reads the tokens (:mod:`.model`), the observation itself
-(:mod:`uavris.env.simulator`, docs/model.md section 15 and docs/study.md section 21).
+(:mod:`uavris.env.simulator`, docs/model.md section 15 and docs/study.md section 2).
 
 - ``"flat"`` (the DT paper's): one linear map of the whole normalised observation. It has
   no notion that a hall is a set of devices: list a layout's devices in another order and

@@ -7,7 +7,7 @@ goal (:class:`FixedGoals`, :class:`PlannedGoals`), which a
 the planners that choose a goal (:mod:`uavris.agents.oracle.planner`,
 :mod:`uavris.agents.place.planner`), the model that reads it (:mod:`.model`).
 
-Why a goal (issue 36): return conditioning on expert data collapses to behaviour cloning
+Why a goal (docs/places.md): return conditioning on expert data collapses to behaviour cloning
 (measured: the DT and BC tie); what is left of the gap to the oracle in a new hall is the
 place, so the controller is told the place and learns to fly there (each demonstration's
 own plan target is its goal), and the place is chosen by a planner.

@@ -148,7 +148,7 @@ class DTBatchPolicy:
 class DTEnsemble:
     """Several pre-trained DTs acting as one: the mean of their actions (each model's history
     holds the executed mean action and the same returns). Models of several pre-training seeds
-    fail in different halls (docs/study.md section 21); their mean action is one controller
+    fail in different halls (docs/study.md section 2); their mean action is one controller
     whose failures do not move with the seed. An episodic batch policy like :class:`DTBatchPolicy`."""
 
     def __init__(self, members: list[DTBatchPolicy]) -> None:

@@ -3,7 +3,9 @@
 :func:`oracle_policy` (the planning oracle) is the reference of every report;
 :func:`greedy_oracle_policy` is the one-step-lookahead oracle of earlier releases, kept for
 comparison. Modules: :mod:`.lookahead` (the local move choice and its expected-rate score),
-:mod:`.planner` (the global plan), :mod:`.policy` (the batch policies).
+:mod:`.objective` (what a plan is worth: R of a pose, the episode value of a trip), :mod:`.planner` (the
+global plan), :mod:`.search` (a wider search of the same objective, to measure the plan's gap),
+:mod:`.policy` (the batch policies).
 
 Lives here: the re-exports of those modules (:class:`PlanningOracle`, :func:`plan_target`,
 :class:`Plan`, :class:`PlanSettings`, :func:`choose_moves`, ...). Not here: the per-slot
@@ -18,7 +20,8 @@ from uavris.agents.oracle.lookahead import (
     expected_sum_rate,
     link_activity,
 )
-from uavris.agents.oracle.planner import Plan, PlanSettings, expected_optimised_rate, plan_target
+from uavris.agents.oracle.objective import expected_optimised_rate
+from uavris.agents.oracle.planner import Plan, PlanSettings, plan_target
 from uavris.agents.oracle.policy import PlanningOracle, greedy_oracle_policy, oracle_policy
 
 __all__ = ["Plan", "PlanSettings", "PlanningOracle", "candidate_moves", "choose_moves", "default_braking_slots",

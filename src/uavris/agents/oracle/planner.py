@@ -1,29 +1,23 @@
 """The planning oracle's global stage: where the system is best, and whether it is worth the trip.
 
-Lives here: the expected sum rate with optimised phases at a pose (:func:`expected_optimised_rate`),
-the plan (:func:`plan_target`) and the travel-time model it uses. Not here: the per-slot
-controller that executes the plan (:mod:`.policy`).
+Lives here: the plan (:func:`plan_target`, :class:`Plan`, :class:`PlanSettings`), its screen
+(:func:`screen`), pattern search (:func:`pattern_neighbours`) and check of the finalists on
+fresh draws (:func:`check_finalists`). Not here: what a plan is worth, ``R`` of a pose and the
+episode value of a trip (:mod:`.objective`); the per-slot controller that executes the plan
+(:mod:`.policy`).
 
 Method (docs/model.md, "The oracle"):
 
-1. **Value of a pose.** ``R(q, zeta)`` = expected sum rate of a hovering UAV at position
-   ``q`` and attitude ``zeta`` whose phases are re-optimised every slot
-   (:func:`uavris.physics.phase_opt.optimize_slot_phases`). The expectation over the
-   pairing is exact: every pairing the model can draw is enumerated with its probability
-   (24 for K = 4: 12 single links and 12 pairs of links); the expectation over the NLoS
-   draw is a Monte-Carlo mean over ``nlos_draws`` draws. The draws are the same at every pose
-   (common random numbers), so two poses are compared on the same channels and pairings
-   and the map is smooth in the pose.
+1. **Value of a pose.** ``R(q, zeta)`` (:func:`.objective.expected_optimised_rate`), on
+   ``nlos_draws`` NLoS draws, the same at every pose (common random numbers).
 2. **Screen.** The interference-free score of the lookahead
    (:func:`.lookahead.expected_sum_rate`, microseconds per pose) on a grid of spacing
    ``grid_step`` over the flight region outside the safety balls, level RIS. Its local
    maxima (26-neighbourhood) are the candidate regions; the ``candidates`` best and the
    start itself are valued with ``R``.
 3. **Choice.** A candidate's value is the expected average sum rate of the episode if the
-   UAV flies there and hovers: ``(t R_route + (T - t) R(target)) / T`` with ``t`` the slots
-   the trip takes from rest (:func:`travel_slots`, the controller's own motion along a
-   straight line) and ``R_route = min(R(start), R(target))`` for the slots in flight. The
-   best value wins; the start (stay where you are) is a candidate too.
+   UAV flies there and hovers (:func:`.objective.episode_value`). The best value wins; the
+   start (stay where you are) is a candidate too.
 4. **Refinement.** Pattern search on ``R`` from the chosen target: the 6 position
    neighbours at ``+-step`` per axis and the 6 attitude neighbours at ``+-attitude step``
    per angle are valued in one batch, the best improving one is taken, and the steps are
@@ -35,7 +29,7 @@ Method (docs/model.md, "The oracle"):
    below staying at the start). The finalists (the start, the refined target and the best
    three candidates unrefined) are valued again on ``check_batches`` independent batches of fresh
    draws (each its own pairing sample, where the pairings are sampled, and its own NLoS
-   draw: :func:`rate_batches`), and a move is taken only when its plan value beats staying
+   draw: :func:`.objective.rate_batches`), and a move is taken only when its plan value beats staying
    by more than one standard error of the paired difference. The plan's numbers
    (``rate``, ``start_rate``, ``value``, ``rate_se``) come from a second fresh set, so the
    value stated for the chosen pose is not the maximum of anything: it is unbiased.
@@ -52,7 +46,6 @@ budget cannot end an episode before the UAV arrives, and the plan ignores it bey
 
 from __future__ import annotations
 
-import itertools
 import math
 from dataclasses import dataclass
 from typing import Any
@@ -63,16 +56,17 @@ from scipy import ndimage
 
 from uavris import physics as ph
 from uavris.agents.oracle.lookahead import pose_score
+from uavris.agents.oracle.objective import (
+    ASSESS_SEED,
+    CHECK_SEED,
+    episode_value,
+    expected_optimised_rate,
+    feasible,
+    feasible_grid,
+    rate_batches,
+    trip_slots,
+)
 from uavris.config import SystemConfig
-from uavris.physics import streams
-from uavris.physics.phase_opt import optimize_slot_phases
-
-# Above this many pairings (K = 4 has 24) the expectation samples this many (stratified by the
-# number of active pairs, common random numbers) instead of enumerating them: the cost of a
-# pose then grows with K only through the optimiser's cost per slot (measured in
-# benchmarks/oracle_throughput.py, with the sampled value's error against 256 samples).
-MAX_ENUMERATED_PAIRINGS = 24
-ARRIVAL_TOLERANCE = 0.05  # m: the trip is over within this distance of the target, at rest
 
 
 @dataclass(frozen=True)
@@ -118,46 +112,6 @@ class Plan:
     rate_se: float = 0.0  # standard error of ``rate`` (the fresh batches'), bps/Hz
 
 
-def pairing_distribution(config: SystemConfig, seed: int = 0, limit: int = MAX_ENUMERATED_PAIRINGS
-                         ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Every pairing the model draws, with its probability: ``(C,)`` and ``(C, K, K)``.
-
-    The model (docs/model.md section 10) draws ``m`` uniformly in ``{1, ..., m_max}`` and then a
-    uniformly random set of ``m`` disjoint ordered links (a random permutation, paired in
-    order). When there are more than ``limit`` sets, ``limit`` pairings are drawn from the
-    model instead (counter-based, ``seed``), stratified by ``m``: an equal share of the draws
-    for each ``m``, weighted ``1 / (m_max x its draws)``, so every ``m`` keeps its probability.
-    """
-    k, m_max = config.num_users, config.pairs_upper
-    counts = [math.perm(k, 2 * m) // math.factorial(m) for m in range(1, m_max + 1)]
-    if sum(counts) > limit:
-        per = np.full(m_max, limit // m_max)
-        per[:limit % m_max] += 1  # the remainder to the smallest m
-        bits = streams.raw_bits(streams.seed_key(seed), limit * k)
-        u = streams.uniforms(bits).reshape(limit, k)
-        m = np.repeat(np.arange(1, m_max + 1), per)
-        # u_count in the middle of m's bin of pairing_from_uniforms: exactly m pairs
-        pairing = ph.pairing_from_uniforms((m - 0.5) / m_max, u, m_max)
-        return 1.0 / (m_max * per[m - 1]), pairing
-    probs, mats = [], []
-    for m, count in zip(range(1, m_max + 1), counts):
-        sets = sorted({frozenset(zip(p[0::2], p[1::2])) for p in itertools.permutations(range(k), 2 * m)}, key=sorted)
-        for links in sets:
-            mat = np.zeros((k, k))
-            for tx, rx in links:
-                mat[tx, rx] = 1.0
-            mats.append(mat)
-            probs.append(1.0 / (m_max * count))
-    return np.array(probs), np.stack(mats)
-
-
-def nlos_draws(config: SystemConfig, draws: int, seed: int) -> NDArray[np.complex128]:
-    """``draws`` NLoS realisations ``(draws, K, N)`` of CN(0, 1), counter-based from ``seed``."""
-    k, n = config.num_users, config.num_elements
-    bits = streams.raw_bits(streams.seed_key(seed + 1), draws * k * n)
-    return streams.complex_normals(bits).reshape(draws, k, n)
-
-
 # The cheap estimate of R that ranks poses with PlanSettings(exact=False): one NLoS draw, and
 # the optimiser from its co-phasing starts only, with a two-level continuation of 20
 # iterations; the chosen pose and the start are then valued by R. Measured on the 11 named
@@ -170,104 +124,17 @@ RANK_DRAWS = 1
 RANK_OPTIMISER = dict(restarts=0, noise_levels=(1e3, 1.0), iterations=20)
 
 
-def expected_optimised_rate(config: SystemConfig, position: NDArray, attitude: NDArray, *, draws: int = 2,
-                            seed: int = 0, **optimiser: Any) -> NDArray[np.float64]:
-    """``R`` of poses ``(P, 3)``, ``(P, 3)``: expected sum rate with per-slot optimised phases, ``(P,)``.
-
-    Exact over the pairing, ``draws`` NLoS draws (the same for every pose), see the module
-    docstring; ``optimiser`` settings go to :func:`uavris.physics.phase_opt.optimize_phases`.
-    """
-    c = config
-    pos = np.atleast_2d(np.asarray(position, dtype=np.float64))
-    att = np.broadcast_to(np.asarray(attitude, dtype=np.float64), pos.shape)
-    probs, pairing = pairing_distribution(c, seed)
-    w = nlos_draws(c, draws, seed)
-    u, v, cos_t, dist = ph.incidence(pos, np.asarray(c.users, dtype=np.float64), ph.ris_axes(att))  # (P, K)
-    h = ph.rician_channels(u[:, None], v[:, None], cos_t[:, None], dist[:, None], w[None],
-                           rician_factor=c.rician_factor, pathloss_exponent=c.pathloss_exponent, nx=c.nx, ny=c.ny,
-                           spacing=c.element_spacing)  # (P, D, K, N)
-    shape = (len(pos), draws, len(probs))
-    sol = optimize_slot_phases(c, np.broadcast_to(h[:, :, None], shape + h.shape[-2:]),
-                               np.broadcast_to(cos_t[:, None, None], shape + cos_t.shape[-1:]),
-                               np.broadcast_to(pairing, shape + pairing.shape[-2:]), seed=seed, **optimiser)
-    return np.einsum("pdc,c->p", sol.sum_rate, probs) / draws
-
-
-# Seed offsets of the fresh batches of step 5: the finalists are chosen on one set and the plan's
-# numbers stated on another, both independent of the planning's common random numbers.
-CHECK_SEED, ASSESS_SEED = 10_000, 20_000
 FINALIST_CANDIDATES = 3  # the best candidates by the planning value, unrefined, among the finalists beside the refined
-
-
-def rate_batches(config: SystemConfig, position: NDArray, attitude: NDArray, batches: int, seed: int
-                 ) -> NDArray[np.float64]:
-    """``R`` of poses ``(P, 3)``, ``(P, 3)`` on ``batches`` independent batches of draws, ``(P, B)``:
-    batch ``b`` has its own pairing sample (where the pairings are sampled; all of them where
-    they are enumerated) and its own NLoS draw, from seed ``seed + 2 b`` (its two streams), the
-    same for every pose. The batches' mean is ``R``; their spread is its standard error's."""
-    return np.stack([expected_optimised_rate(config, position, attitude, draws=1, seed=seed + 2 * b)
-                     for b in range(batches)], axis=-1)
-
-
-def assessed_rate(config: SystemConfig, position: NDArray, attitude: NDArray, batches: int = 8, seed: int = 0
-                  ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """``R`` of poses and its standard error, ``(P,)`` each, on the fresh draws a plan states its
-    numbers with (:data:`ASSESS_SEED`): independent of every draw a plan is chosen on, so the
-    value of a chosen pose is unbiased, and two poses assessed together are paired."""
-    x = rate_batches(config, np.atleast_2d(position), np.atleast_2d(attitude), batches, seed + ASSESS_SEED)
-    return x.mean(axis=-1), x.std(axis=-1, ddof=1) / math.sqrt(batches)
-
-
-def feasible(config: SystemConfig, position: NDArray) -> NDArray[np.bool_]:
-    """Positions ``(..., 3)`` inside the flight region and outside every safety ball."""
-    q = np.asarray(position, dtype=np.float64)
-    inside = np.all((q >= np.asarray(config.region_low)) & (q <= np.asarray(config.region_high)), axis=-1)
-    return inside & np.all(ph.separation(q, config.users) >= config.safety_distance, axis=-1)
 
 
 def screen(config: SystemConfig, step: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Local maxima of the interference-free score on a grid over the feasible region, best first:
     positions ``(M, 3)`` and scores ``(M,)``."""
-    lo, hi = np.asarray(config.region_low), np.asarray(config.region_high)
-    axes = [np.linspace(lo[i], hi[i], max(2, int(round((hi[i] - lo[i]) / step)) + 1)) for i in range(3)]
-    grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1)
-    score = np.where(feasible(config, grid), pose_score(config, grid, np.zeros(3)), -np.inf)
+    grid, ok = feasible_grid(config, step, flat=False)
+    score = np.where(ok, pose_score(config, grid, np.zeros(3)), -np.inf)
     peak = (score == ndimage.maximum_filter(score, size=3, mode="constant", cval=-np.inf)) & np.isfinite(score)
     order = np.argsort(-score[peak], kind="stable")
     return grid[peak][order], score[peak][order]
-
-
-def approach_speed(config: SystemConfig, remaining: NDArray, speed: NDArray) -> NDArray[np.float64]:
-    """Speed to have at the end of this slot so that the UAV can still stop at the target.
-
-    With the kinematics of eq. (9) the slot covers ``(v + v') dt / 2`` and braking at
-    ``a_max`` from ``v'`` then covers ``v'^2 / (2 a_max)``; ``v'`` solves
-    ``v'^2 / (2 a) + (v + v') dt / 2 = remaining``, clipped to ``[0, v_max]``. ``speed`` is
-    the current speed towards the target.
-    """
-    c = config
-    a, dt = c.a_max, c.slot_s
-    disc = a * a * dt * dt + 8.0 * a * np.asarray(remaining) - 4.0 * a * dt * np.asarray(speed)
-    v_next = 0.5 * (-a * dt + np.sqrt(np.maximum(disc, 0.0)))
-    return np.clip(v_next, 0.0, c.v_max)
-
-
-def travel_slots(config: SystemConfig, distance: NDArray | float) -> NDArray[np.int64]:
-    """Slots the approach controller needs to cover ``distance`` (m) in a straight line from
-    rest and come to rest within ``ARRIVAL_TOLERANCE``: its own discrete motion, in 1-D."""
-    c = config
-    left = np.atleast_1d(np.asarray(distance, dtype=np.float64)).copy()
-    speed = np.zeros_like(left)
-    slots = np.zeros(left.shape, dtype=np.int64)
-    for _ in range(c.horizon):
-        moving = (left > ARRIVAL_TOLERANCE) | (speed > 0.5 * c.a_max * c.slot_s)
-        if not moving.any():
-            break
-        a = np.clip((approach_speed(c, left, speed) - speed) / c.slot_s, -c.a_max, c.a_max)
-        left = left - (speed * c.slot_s + 0.5 * a * c.slot_s**2)
-        speed = speed + a * c.slot_s
-        slots += moving
-    return slots
 
 
 def plan_target(config: SystemConfig, start: tuple[float, float, float], settings: PlanSettings = PlanSettings(),
@@ -304,13 +171,7 @@ def plan_target(config: SystemConfig, start: tuple[float, float, float], setting
     peaks, _ = screen(c, s.grid_step)
     cands = np.concatenate([start_q[None], peaks[:s.candidates]])
     r = rate(cands, level)
-    t = travel_slots(c, np.linalg.norm(cands - start_q, axis=1))
-
-    def value(r_target: NDArray | float, slots: NDArray | int) -> NDArray[np.float64]:
-        slots = np.minimum(slots, c.horizon)
-        return (slots * np.minimum(r[0], r_target) + (c.horizon - slots) * np.asarray(r_target)) / c.horizon
-
-    vals = value(r, t)
+    vals = episode_value(c.horizon, trip_slots(c, start_q, cands), r[0], r)
     best = int(np.argmax(vals))
     q, att, r_best = cands[best].copy(), level.copy(), float(r[best])
     pos_step, att_step = s.refine_step, c.attitude_step_rad
@@ -359,11 +220,10 @@ def check_finalists(c: SystemConfig, s: PlanSettings, start_q: NDArray, finalist
         if not any(np.array_equal(q, u) and np.array_equal(att, a) for u, a in unique):
             unique.append((q, att))
     pos, att = np.stack([u for u, _ in unique]), np.stack([a for _, a in unique])
-    slots = np.minimum(travel_slots(c, np.linalg.norm(pos - start_q, axis=1)), c.horizon)
+    slots = trip_slots(c, start_q, pos)
 
     def episode(x: NDArray, t: NDArray) -> NDArray[np.float64]:  # (F, B) rates, the start's first -> plan values
-        t = t[:, None]
-        return (t * np.minimum(x[:1], x) + (c.horizon - t) * x) / c.horizon
+        return episode_value(c.horizon, t[:, None], x[:1], x)
 
     b = s.check_batches
     moves = episode(rate_batches(c, pos, att, b, s.seed + CHECK_SEED), slots)

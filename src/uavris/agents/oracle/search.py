@@ -4,10 +4,10 @@ Lives here: :func:`exhaustive_plan` (the best pose a dense search finds for a st
 :func:`plan_gap` (the oracle's plan against it, both valued on the same fresh draws). Not
 here: the oracle's own planner (:mod:`.planner`), whose objective this searches.
 
-The objective is the planner's (docs/model.md, "The oracle"): the expected episode average
-of flying from rest at ``start`` to a pose and hovering there, ``(t min(R_start, R) + (T - t)
-R) / T`` with ``R`` the expected sum rate with optimised phases at the pose
-(:func:`.planner.expected_optimised_rate`) and ``t`` the trip's slots. The search:
+The objective is the planner's (:mod:`.objective`, docs/model.md, "The oracle"): the
+expected episode average of flying from rest at ``start`` to a pose and hovering there
+(:func:`.objective.episode_value`), with ``R`` the expected sum rate with optimised phases at
+the pose (:func:`.objective.expected_optimised_rate`). The search:
 
 1. every feasible position of a grid (``grid_step`` across, ``z_step`` in height), level;
 2. at the ``top`` best by value (at least ``grid_step`` apart), every attitude of a grid of
@@ -32,15 +32,16 @@ import numpy as np
 from numpy.typing import NDArray
 
 from uavris import physics as ph
-from uavris.agents.oracle.planner import (
+from uavris.agents.oracle.objective import (
     ASSESS_SEED,
-    Plan,
+    episode_value,
     expected_optimised_rate,
-    feasible,
-    pattern_neighbours,
+    feasible_grid,
     rate_batches,
-    travel_slots,
+    top_apart,
+    trip_slots,
 )
+from uavris.agents.oracle.planner import Plan, pattern_neighbours
 from uavris.config import SystemConfig
 
 Valuer = Callable[[NDArray[np.float64], NDArray[np.float64]], NDArray[np.float64]]  # R of (P, 3) positions, attitudes
@@ -67,21 +68,6 @@ class Found:
     poses_valued: int
 
 
-def episode_value(config: SystemConfig, start: NDArray, r_start: float, positions: NDArray, rates: NDArray
-                  ) -> NDArray[np.float64]:
-    """The planner's objective: the episode average of flying from ``start`` to each position and hovering."""
-    t = np.minimum(travel_slots(config, np.linalg.norm(np.atleast_2d(positions) - start, axis=-1)), config.horizon)
-    return (t * np.minimum(r_start, rates) + (config.horizon - t) * rates) / config.horizon
-
-
-def _grid(config: SystemConfig, step: float, z_step: float) -> NDArray[np.float64]:
-    lo, hi = np.asarray(config.region_low), np.asarray(config.region_high)
-    axes = [np.linspace(lo[i], hi[i], max(2, int(round((hi[i] - lo[i]) / s)) + 1))
-            for i, s in enumerate((step, step, z_step))]
-    grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
-    return grid[feasible(config, grid)]
-
-
 def exhaustive_plan(config: SystemConfig, start: tuple[float, float, float],
                     settings: SearchSettings = SearchSettings(), valuer: Valuer | None = None) -> Found:
     """The best pose for ``start`` that the search of the module docstring finds (``valuer``: R
@@ -97,19 +83,15 @@ def exhaustive_plan(config: SystemConfig, start: tuple[float, float, float],
     def value(q: NDArray, att: NDArray) -> NDArray[np.float64]:
         nonlocal count
         count += len(q)
-        return episode_value(c, start_q, r_start, q, rate_of(q, att))
+        return episode_value(c.horizon, trip_slots(c, start_q, np.atleast_2d(q)), r_start, rate_of(q, att))
 
     start_q = np.asarray(start, dtype=np.float64)
     level = np.zeros(3)
     r_start = float(rate_of(start_q[None], level[None])[0])
-    grid = np.concatenate([start_q[None], _grid(c, s.grid_step, s.z_step)])
+    places, ok = feasible_grid(c, s.grid_step, s.z_step)
+    grid = np.concatenate([start_q[None], places[ok]])
     v = value(grid, np.zeros_like(grid))
-    chosen: list[int] = []
-    for i in np.argsort(-v, kind="stable"):  # the best, at least a grid step apart
-        if all(np.linalg.norm(grid[i] - grid[j]) >= s.grid_step - 1e-9 for j in chosen):
-            chosen.append(int(i))
-        if len(chosen) == s.top:
-            break
+    chosen = top_apart(v, grid, s.top, s.grid_step - 1e-9)  # the best, at least a grid step apart
     angles = np.radians(np.array(list(itertools.product(s.attitudes_deg, repeat=3))))
     poses = [(grid[i], a) for i in chosen for a in angles]
     q_all = np.array([p for p, _ in poses])
@@ -161,8 +143,7 @@ def plan_gap(config: SystemConfig, start: tuple[float, float, float], plan: Plan
     q = np.stack([start_q, plan.target, found.target])
     att = np.stack([np.zeros(3), plan.attitude, found.attitude])
     r = rate_batches(config, q, att, batches, seed + ASSESS_SEED + 5_000)  # (3, B)
-    t = np.minimum(travel_slots(config, np.linalg.norm(q - start_q, axis=1)), config.horizon)[:, None]
-    v = (t * np.minimum(r[0], r) + (config.horizon - t) * r) / config.horizon
+    v = episode_value(config.horizon, trip_slots(config, start_q, q)[:, None], r[0], r)
     d = v[2] - v[1]
     return Gap(float(v[1].mean()), float(v[2].mean()), float(v[0].mean()), float(d.mean()),
                float(d.std(ddof=1) / math.sqrt(batches)))

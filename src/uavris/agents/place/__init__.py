@@ -1,4 +1,4 @@
-"""Where the UAV should be: a learned value of a pose and the planner built on it (issue 36).
+"""Where the UAV should be: a learned value of a pose and the planner built on it (docs/places.md).
 
 Modules: :mod:`.value` (``V(devices, position)``, a set encoder trained on the planner's
 ``R``), :mod:`.labels` (poses of training halls and their ``R``), :mod:`.planner` (the

@@ -10,7 +10,7 @@ mostly near the floor of the region, close to a pair of devices), a third around
 best points of the planner's cheap screen (:func:`uavris.agents.oracle.planner.screen`:
 within 2 m of its best local maxima), so that the labels are dense where the argmax is,
 each outside the safety balls. ``R`` is the planner's own value
-(:func:`~uavris.agents.oracle.planner.expected_optimised_rate`: the pairings, 2 NLoS draws,
+(:func:`~uavris.agents.oracle.objective.expected_optimised_rate`: the pairings, 2 NLoS draws,
 the optimiser every slot, level), its common random numbers seeded per hall: a hall's
 labels are consistent among themselves, and the noise of different halls' is independent,
 so a network fitted over many halls averages it out.
@@ -21,7 +21,8 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from uavris.agents.oracle.planner import expected_optimised_rate, feasible, screen
+from uavris.agents.oracle.objective import expected_optimised_rate, feasible
+from uavris.agents.oracle.planner import screen
 from uavris.config import SystemConfig
 
 LOW_BAND = 1.5  # m above the region's floor: the low third of the poses

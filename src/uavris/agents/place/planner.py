@@ -1,4 +1,4 @@
-"""The learned planner: where to go in a hall, from the argmax of the learned value ``V`` (issue 36).
+"""The learned planner: where to go in a hall, from the argmax of the learned value ``V`` (docs/places.md).
 
 Lives here: :class:`PlaceSettings` and :func:`learned_plan`: ``V`` over a grid of the flight
 region outside the safety balls, the exact planner's travel-time rule (a place's value is
@@ -20,7 +20,8 @@ from typing import ClassVar
 import numpy as np
 from numpy.typing import NDArray
 
-from uavris.agents.oracle.planner import Plan, PlanSettings, check_finalists, feasible, travel_slots
+from uavris.agents.oracle.objective import episode_value, feasible, feasible_grid, top_apart, travel_slots, trip_slots
+from uavris.agents.oracle.planner import Plan, PlanSettings, check_finalists
 from uavris.agents.oracle.policy import fly_to, motion_entries
 from uavris.agents.place.value import PoseValue, predict
 from uavris.config import SystemConfig
@@ -48,10 +49,8 @@ class PlaceSettings:
 def place_grid(config: SystemConfig, step: float) -> NDArray[np.float64]:
     """The feasible positions ``(M, 3)`` of a grid of spacing ``step`` over the flight region
     (inside it, outside every safety ball): the places the learned planner reads."""
-    lo, hi = np.asarray(config.region_low), np.asarray(config.region_high)
-    axes = [np.linspace(lo[i], hi[i], max(2, int(round((hi[i] - lo[i]) / step)) + 1)) for i in range(3)]
-    grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
-    return grid[feasible(config, grid)]
+    grid, ok = feasible_grid(config, step)
+    return grid[ok]
 
 
 def place_values(model: PoseValue, config: SystemConfig, start: NDArray, places: NDArray
@@ -61,19 +60,7 @@ def place_values(model: PoseValue, config: SystemConfig, start: NDArray, places:
     users = np.asarray(config.users, dtype=np.float64)
     v = predict(model, users, places)
     v0 = float(predict(model, users, np.asarray(start, dtype=np.float64)[None])[0])
-    t = np.minimum(travel_slots(config, np.linalg.norm(places - start, axis=1)), config.horizon)
-    return (t * np.minimum(v0, v) + (config.horizon - t) * v) / config.horizon, v0
-
-
-def top_places(values: NDArray, places: NDArray, k: int, separation: float) -> list[int]:
-    """Indices of the ``k`` best places by ``values``, each at least ``separation`` from the better ones."""
-    chosen: list[int] = []
-    for i in np.argsort(-values, kind="stable"):
-        if all(np.linalg.norm(places[i] - places[j]) >= separation for j in chosen):
-            chosen.append(int(i))
-            if len(chosen) == k:
-                break
-    return chosen
+    return episode_value(config.horizon, trip_slots(config, start, places), v0, v), v0
 
 
 def ranked_places(model: PoseValue, config: SystemConfig, start: NDArray, settings: PlaceSettings = PlaceSettings()
@@ -86,7 +73,7 @@ def ranked_places(model: PoseValue, config: SystemConfig, start: NDArray, settin
     # the finer grid around the coarse grid's best places (V is smooth: its argmax lies near them)
     step, reach = settings.fine_step, settings.grid_step
     offsets = np.stack(np.meshgrid(*[np.arange(-reach, reach + 1e-9, step)] * 3, indexing="ij"), -1).reshape(-1, 3)
-    near = np.concatenate([coarse[i] + offsets for i in top_places(values, coarse, settings.fine_places,
+    near = np.concatenate([coarse[i] + offsets for i in top_apart(values, coarse, settings.fine_places,
                                                                    settings.separation)])
     near = near[feasible(config, near)]
     fine, _ = place_values(model, config, start_q, near)
@@ -104,7 +91,7 @@ def learned_plan(model: PoseValue, config: SystemConfig, start: tuple[float, flo
     places, values, v0 = ranked_places(model, config, start_q, settings)
     level = np.zeros(3)
     if settings.top_k:
-        best = top_places(values, places, settings.top_k, settings.separation)
+        best = top_apart(values, places, settings.top_k, settings.separation)
         checks = PlanSettings(check_batches=settings.check_batches)
         table = tuple((tuple(float(x) for x in places[i]), float("nan"), float(values[i])) for i in best)
         finalists = [(start_q, level), *((places[i], level) for i in best)]
@@ -125,7 +112,7 @@ def places_to_try(model: PoseValue, config: SystemConfig, start: tuple[float, fl
     ``(count + 1, 3)``: what fine-tuning that tries places flies to (one place per episode)."""
     start_q = np.asarray(start, dtype=np.float64)
     places, values, _ = ranked_places(model, config, start_q, settings)
-    return np.concatenate([start_q[None], places[top_places(values, places, count, settings.separation)]])
+    return np.concatenate([start_q[None], places[top_apart(values, places, count, settings.separation)]])
 
 
 class LearnedPlanner:

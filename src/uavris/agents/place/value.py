@@ -5,11 +5,11 @@ device), :class:`ValueLabels` (poses, their halls and ``R``) and :func:`fit_valu
 training). Not here: the labels' making (:mod:`.labels`), the argmax over a hall and the
 planner built on it (:mod:`.planner`), checkpoints (:mod:`.checkpoint`).
 
-``R(q)`` (:func:`uavris.agents.oracle.planner.expected_optimised_rate`) is the expected sum
+``R(q)`` (:func:`uavris.agents.oracle.objective.expected_optimised_rate`) is the expected sum
 rate of a UAV hovering level at ``q`` with the optimiser's phases every slot: tens of
 milliseconds a pose (hundreds with 8 devices), so the planner can value only a few dozen
 poses of a hall. ``V`` learns it from the devices as seen from the pose, and answers a whole
-hall's grid in milliseconds; its argmax is a place (issue 36: fit the value of a pose,
+hall's grid in milliseconds; its argmax is a place (docs/places.md: fit the value of a pose,
 which is smooth and unimodal in its input, and take its argmax, rather than regress the
 place, which averages the modes).
 

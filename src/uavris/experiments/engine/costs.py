@@ -7,8 +7,8 @@ them, the order in which the job runner starts jobs (:mod:`.jobs`, :mod:`.stages
 longest chain first) and the progress bar of ``reproduce`` (each job weighs its cost).
 
 The unit costs were measured on the project machine (2-core AMD EPYC, one job per core,
-quick preset, 2026-11; recalibrated on 2026-11-25 from the job times of a whole quick
-study on a fresh clone, its ``schedule.json``): an SB3 env step with the quick networks (64 x 64) from the 50,000-
+quick preset; recalibrated from the job times of a whole quick study on a fresh clone, its
+``schedule.json``): an SB3 env step with the quick networks (64 x 64) from the 50,000-
 step comparison jobs, the paper preset's 256 x 256 networks from
 ``benchmarks/paper_wallclock.py``; a simulated slot with a learned policy, with and
 without the per-slot phase optimiser; a DT gradient step at the DT paper's size (batch 64
@@ -37,7 +37,7 @@ DT_STEP_S = 0.2
 DT_REFERENCE = 64 * 20 * 128 * 128 * 3
 # What a gradient step costs whatever the model's size (the sampling of windows, the optimiser,
 # the autograd bookkeeping): small models are dominated by it. And the device-set encoder's
-# per-device and pair networks, per state it reads (docs/study.md, section 21).
+# per-device and pair networks, per state it reads (docs/study.md, section 2).
 DT_STEP_OVERHEAD_S = 0.015
 DEVICE_ENCODER_STATE_S = 2.5e-5
 

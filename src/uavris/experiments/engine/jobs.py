@@ -74,7 +74,7 @@ def configure_threads(torch_now: bool = True) -> None:
     numbers independent of the machine: a BLAS reduction split over another number of threads
     rounds differently, and OpenBLAS sizes its pool by the CPUs the process may use, so the
     same job pinned to one core and free on two gave different bits (docs/study.md,
-    section 22). The environment variables make processes started from this one
+    section 3). The environment variables make processes started from this one
     (the job runner's workers) start with one thread too.
     """
     import os
@@ -95,7 +95,7 @@ def configure_threads(torch_now: bool = True) -> None:
 def machine() -> str:
     """The machine a study or benchmark ran on, for its report: CPU model, CPUs, Python, numpy
     and torch versions (a verdict that flips with the CPU is not a finding: docs/study.md
-    section 22)."""
+    section 3)."""
     import os
     import platform
 

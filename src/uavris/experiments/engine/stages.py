@@ -34,7 +34,8 @@ class Stage:
     """One step of a pipeline: ``run(stage_dir, deps)`` with ``deps`` mapping names to dirs;
     ``costs``: the expected seconds of each of its jobs on one core (:mod:`.costs`), which
     order the jobs; ``progress_s``: the work the progress bar expects of it, when that is
-    not their sum (a stage whose jobs are not known yet)."""
+    not their sum (a stage whose jobs are not known yet); ``group``: what the stage belongs
+    to, for its reader (a study's track), not part of its key."""
 
     name: str
     config: dict[str, Any]
@@ -42,6 +43,7 @@ class Stage:
     deps: tuple[str, ...] = ()
     costs: tuple[float, ...] = ()
     progress_s: float | None = None
+    group: str = ""
     key: str = field(default="", init=False)
 
     def duration(self, workers: int) -> float:

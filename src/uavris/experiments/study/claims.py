@@ -24,14 +24,12 @@ from typing import Any, Sequence
 
 import numpy as np
 
+from uavris.agents.references import ORACLE
 from uavris.errors import UavrisError
 from uavris.experiments.display.tables import markdown_table
-from uavris.experiments.engine.scheduling import StudyContext
-from uavris.experiments.engine.stages import Pipeline
-from uavris.experiments.study.config import ReproduceConfig
-from uavris.experiments.study.pipeline import build_pipeline
-from uavris.experiments.study.rows import read_study
+from uavris.experiments.study.finished import Study
 from uavris.experiments.study.tracks import TRACK_SPECS, TRACKS, Track, zero_shot_only
+from uavris.experiments.tools.targets import variant_key
 from uavris.io import atomic_write_text, other_inputs, read_csv, read_json, write_json
 from uavris.stats import HOLDS, NOT_RESOLVED, REFUTED, judged, paired_difference, steps_to_level, welch_difference
 
@@ -77,25 +75,6 @@ def _judged(claim: str, track: str, diff: dict[str, Any], unit: str, text: str) 
 
 
 # ------------------------------------------------------------------------------ reading a study
-@dataclass
-class _Study:
-    out: Path
-    rc: ReproduceConfig
-    pipeline: Pipeline
-
-    @classmethod
-    def read(cls, out: Path) -> _Study:
-        rc = read_study(out)
-        return cls(Path(out), rc, build_pipeline(rc, Path(out), StudyContext(1, "local", None)))
-
-    def done(self, name: str) -> Path | None:
-        return self.pipeline.directory(name) if name in self.pipeline.stages and self.pipeline.is_done(name) else None
-
-    def result(self, track: Track, site: str) -> tuple[Path, dict[str, Any]] | None:
-        d = self.done(track.stage(f"evaluate-{site}"))
-        return (d, read_json(d / "stage.json")["result"]) if d else None
-
-
 def episode_rates(edir: Path, row: str) -> np.ndarray:
     """The per-episode average sum rates of ``row`` in the evaluation stage ``edir``."""
     return np.array([float(r["avg_sum_rate"]) for r in read_csv(edir / f"{row}.csv")])
@@ -180,11 +159,13 @@ def comparison_scores(cdir: Path, steps: int | None = None) -> dict[str, list[fl
 def eval_curves(cdir: Path) -> dict[str, list[tuple[np.ndarray, np.ndarray]]]:
     """Each algorithm's runs in a comparison, in seed order: their periodic evaluations
     (environment steps, mean over the episodes); a run without any yet is left out."""
+    from uavris.experiments.training.train_expert import load_run_config
+
     runs: dict[str, list[tuple[np.ndarray, np.ndarray]]] = {}
-    for run in sorted((Path(cdir) / "runs").iterdir()):
+    for run in sorted((Path(cdir) / "runs").iterdir(), key=lambda r: load_run_config(r).seed):
         rows = read_csv(run / "evals.csv") if (run / "evals.csv").exists() else []
         if rows:
-            runs.setdefault(run.name.rsplit("-s", 1)[0], []).append(
+            runs.setdefault(load_run_config(run).algo, []).append(
                 (np.array([float(r["env_steps"]) for r in rows]), np.array([float(r["mean"]) for r in rows])))
     return runs
 
@@ -201,33 +182,32 @@ def fig2_zero_action() -> float:
 
 
 # ------------------------------------------------------------------------------ the scenario tracks
-def _scenario_units(studies: Sequence[_Study], track: Track) -> list[dict[str, Any]]:
+def _scenario_units(studies: Sequence[Study], track: Track) -> list[dict[str, Any]]:
     """One unit per (study seed, unseen scenario) with the evaluation and fine-tuning finished."""
     units = []
     for st in studies:
-        if track not in st.rc.tracks:
+        if track not in st.config.tracks:
             continue
-        _, unseen = st.rc.sites(track)
+        _, unseen = st.sites(track)
         train_cost = _pretraining_interactions(st, track)
         for w in unseen:
-            found = st.result(track, w.name)
+            found = st.evaluation(track, w.name)
             ft = st.done(track.stage(f"finetune-{w.name}"))
             experts = st.done(track.stage("experts-unseen"))
             if found is None or ft is None or experts is None:
                 continue
             edir, res = found
-            transfers = [k for k in res if k.startswith("transfer-")]
-            units.append({"seed": st.rc.seed, "site": w.name, "edir": edir, "res": res, "transfers": transfers,
+            transfers = [k for k, v in res.items() if v["kind"] == "transfer"]
+            units.append({"seed": st.config.seed, "site": w.name, "edir": edir, "res": res, "transfers": transfers,
                           "finetune": ft / "model", "expert": experts / "runs" / w.name, "pretraining": train_cost})
     return units
 
 
-def _pretraining_interactions(st: _Study, track: Track) -> float:
+def _pretraining_interactions(st: Study, track: Track) -> float:
     """The interactions behind the DT's pre-training: its training experts' and the dataset's rollouts."""
     experts = st.done(track.stage("experts-train"))
-    dataset = st.done(track.stage("dataset"))
     total = sum(run_interactions(d) for d in sorted((experts / "runs").iterdir())) if experts else float("nan")
-    slots = read_json(dataset / "stage.json")["result"].get("slots") if dataset else None
+    slots = (st.result(track.stage("dataset")) or {}).get("slots")
     return total + float(slots) if slots is not None else float("nan")
 
 
@@ -236,7 +216,7 @@ def _stronger(edir: Path, res: dict[str, Any], keys: Sequence[str]) -> tuple[str
     return key, episode_rates(edir, key)
 
 
-def judge_scenario_track(studies: Sequence[_Study], track: Track) -> list[Judgement]:
+def judge_scenario_track(studies: Sequence[Study], track: Track) -> list[Judgement]:
     """The Fig. 3 claims in the paper's unseen scenarios, over (seed, scenario) units."""
     units = _scenario_units(studies, track)
     name = track.name
@@ -276,8 +256,9 @@ def judge_scenario_track(studies: Sequence[_Study], track: Track) -> list[Judgem
 
 
 # ------------------------------------------------------------------------------ the deployment track
-DEPLOYMENT_DT = "dt-zero-shot-safe"  # the paper's DT (return-conditioned) under the track's safety layer
-GOAL_DT = "dt-goal-safe"  # the goal-conditioned DT told the learned planner's place (issue 36)
+DEPLOYMENT_DT = variant_key("dt-zero-shot", safe=True)  # the paper's DT (return-conditioned) under the safety layer
+GOAL_DT = variant_key("dt-goal", safe=True)  # the goal-conditioned DT told the learned planner's place
+FINETUNED_DTS = (variant_key("dt-goal-finetuned", safe=True), variant_key("dt-finetuned", safe=True))
 
 
 def _seeds_mean(edir: Path, res: dict[str, Any], variant: str) -> np.ndarray | None:
@@ -286,25 +267,25 @@ def _seeds_mean(edir: Path, res: dict[str, Any], variant: str) -> np.ndarray | N
     return np.mean([episode_rates(edir, k) for k in keys], axis=0) if keys else None
 
 
-def judge_deployment(study: _Study, from_scratch: Sequence[dict[str, float]] = ()) -> list[Judgement]:
+def judge_deployment(study: Study, from_scratch: Sequence[dict[str, float]] = ()) -> list[Judgement]:
     """The Fig. 3 claims over the unseen halls (the unit), each hall's learned rows averaged
     over the pre-training seeds. The transferred expert is the nearest training hall's oracle
     plan; the expert trained where the DT is deployed is the oracle (whose demonstrations the
     DT learned from), and fine-tuning the one that tries places (``--ablation``).
     ``from_scratch``: per hall, ``expert_to_level`` and ``finetune_interactions`` measured by
-    ``benchmarks/from_scratch.py`` (an expert trained from scratch in the hall)."""
+    ``uavris from-scratch`` (:mod:`.from_scratch`: an expert trained from scratch in the hall)."""
     track = TRACK_SPECS["deployment"]
-    _, unseen = study.rc.sites(track)
+    _, unseen = study.sites(track)
     zs, goal, ft, names = [], [], [], []
     for w in unseen:
-        if zero_shot_only(w.name):
+        if zero_shot_only(w, study.config.system):
             continue
-        found = study.result(track, w.name)
+        found = study.evaluation(track, w.name)
         if found is None:
             continue
         edir, res = found
         dt = _seeds_mean(edir, res, DEPLOYMENT_DT)
-        transfer = [k for k in res if k.startswith("transfer-")]
+        transfer = [k for k, v in res.items() if v["kind"] == "transfer" and v["rank"] == 0]
         if dt is None or not transfer:
             continue
         names.append(w.name)
@@ -312,11 +293,9 @@ def judge_deployment(study: _Study, from_scratch: Sequence[dict[str, float]] = (
         told = _seeds_mean(edir, res, GOAL_DT)
         if told is not None:
             goal.append(float(np.mean(told - episode_rates(edir, transfer[0]))))
-        fine = _seeds_mean(edir, res, "dt-goal-finetuned-safe")
-        if fine is None:
-            fine = _seeds_mean(edir, res, "dt-finetuned-safe")
+        fine = next((f for f in (_seeds_mean(edir, res, v) for v in FINETUNED_DTS) if f is not None), None)
         if fine is not None:
-            ft.append(float(np.mean(fine - (1 - WITHIN) * episode_rates(edir, "oracle-safe"))))
+            ft.append(float(np.mean(fine - (1 - WITHIN) * episode_rates(edir, variant_key(ORACLE, safe=True)))))
     unit = f"{len(names)} unseen halls"
     out = [_judged("zero-shot", "deployment", judged(zs), unit,
                    "zero-shot DT (return-conditioned, safety layer, mean of its seeds) minus the nearest training "
@@ -333,7 +312,7 @@ def judge_deployment(study: _Study, from_scratch: Sequence[dict[str, float]] = (
     elif from_scratch:
         near = [h["level"] - (1 - WITHIN) * h["oracle"] for h in from_scratch]
         out.append(_judged("near-expert", "deployment", judged(near),
-                           f"{len(near)} unseen halls (benchmarks/from_scratch.py)",
+                           f"{len(near)} unseen halls (uavris from-scratch)",
                            f"DT fine-tuned by trying places (mean of its seeds) minus {1 - WITHIN:.0%} of the oracle "
                            "(the track's expert), both under the safety layer, bps/Hz"))
     else:
@@ -342,38 +321,37 @@ def judge_deployment(study: _Study, from_scratch: Sequence[dict[str, float]] = (
     if from_scratch:
         need = [h["expert_to_level"] for h in from_scratch]
         spent = [h["finetune_interactions"] for h in from_scratch]
-        unit_fs = f"{len(need)} unseen halls (benchmarks/from_scratch.py)"
+        unit_fs = f"{len(need)} unseen halls (uavris from-scratch)"
         out.append(_judged("fewer", "deployment", paired_difference(need, spent), unit_fs,
                            "interactions hybrid PPO from scratch needed to reach the fine-tuned level (its 200,000 "
                            "steps where it never did: a lower bound) minus fine-tuning's"))
-        pre = float(read_json(study.done(track.stage("dataset")) / "stage.json")["result"]["slots"])
+        pre = float(study.result(track.stage("dataset"))["slots"])
         out.append(_judged("fewer-total", "deployment", paired_difference(np.subtract(need, pre), spent), unit_fs,
                            f"the same minus the {pre:,.0f} interactions of the oracle's demonstrations"))
     else:
-        out += [Judgement(c, "deployment", NOT_TESTED, text="needs benchmarks/from_scratch.py's measurement")
+        out += [Judgement(c, "deployment", NOT_TESTED, text="needs the measurement of uavris from-scratch")
                 for c in ("fewer", "fewer-total")]
     return out
 
 
 # ------------------------------------------------------------------------------ every track
-def judge_studies(outs: Sequence[Path], budgets: Sequence[tuple[Path, int]] = (),
+def judge_studies(studies: Sequence[Study], budgets: Sequence[tuple[Path, int]] = (),
                   from_scratch: Sequence[dict[str, float]] = ()) -> list[Judgement]:
-    """Every claim in every track the studies in ``outs`` ran: the paper and strong tracks over
+    """Every claim in every track the ``studies`` ran: the paper and strong tracks over
     every study that ran them (one seed each: run them with ``--seed 0``, ``1``, ``2``), the
     deployment track from the first study that ran it (its seeds are within it). ``budgets``:
     (comparison, environment steps): the comparison's runs judged at that budget too
     (``uavris compare-algorithms --steps N --eval-every B``)."""
-    studies = [_Study.read(Path(o)) for o in outs]
-    pooled = [s for s in studies if any(not t.layouts for t in s.rc.tracks)]  # the seeds of the scenario tracks
-    seeds = [s.rc.seed for s in pooled]
+    pooled = [s for s in studies if any(not t.layouts for t in s.config.tracks)]  # the seeds of the scenario tracks
+    seeds = [s.config.seed for s in pooled]
     if len(set(seeds)) != len(seeds):
         raise UavrisError(f"the studies of the paper and strong tracks share a seed ({seeds}): run each with its "
                           "own --seed")
     out: list[Judgement] = []
     compare = next((d for s in studies if (d := s.done("compare"))), None)
-    if any(TRACK_SPECS["paper"] in s.rc.tracks for s in studies):
+    if any(TRACK_SPECS["paper"] in s.config.tracks for s in studies):
         out.append(judge_comparison(comparison_scores(compare),
-                                    budget=f", final evaluation at {studies[0].rc.compare_steps:,} steps")
+                                    budget=f", final evaluation at {studies[0].config.compare_steps:,} steps")
                    if compare else Judgement("ddpg-best", "paper", NOT_TESTED, text="no finished comparison"))
     for cdir, steps in budgets:
         scores = comparison_scores(Path(cdir), steps)
@@ -383,7 +361,7 @@ def judge_studies(outs: Sequence[Path], budgets: Sequence[tuple[Path, int]] = ()
                                                    f"{Path(cdir).name}"))
     for name in TRACKS:
         track = TRACK_SPECS[name]
-        ran = [s for s in studies if track in s.rc.tracks]
+        ran = [s for s in studies if track in s.config.tracks]
         if not ran:
             continue
         if name != "paper":
@@ -464,7 +442,7 @@ def write_claims(outs: Sequence[Path], dest: Path, budgets: Sequence[tuple[Path,
         raise UavrisError(f"{dest} holds the claims of other studies ({', '.join(old.get('studies', []))}); give "
                           "this one another --out (nothing there is replaced)")
     halls = read_json(from_scratch)["halls"] if from_scratch is not None else ()
-    judgements = judge_studies(outs, budgets, halls)
+    judgements = judge_studies([Study.open(o) for o in outs], budgets, halls)
     lines = ["# The paper's claims, judged", "",
              "\n".join(claims_table(judgements)), "",
              "Each cell: the verdict, the mean paired difference over the units and its 95% CI (Student's t; "

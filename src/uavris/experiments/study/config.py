@@ -86,7 +86,7 @@ class ReproduceConfig(DictConfig):
     def trajectories_for(self, track: Track) -> int:
         """Expert trajectories (or the oracle's demonstrations) per training deployment of
         ``track``: a generated hall gets few (many halls, few episodes each: docs/study.md
-        section 21), a scenario of the paper's hall many."""
+        section 2), a scenario of the paper's hall many."""
         return self.layout_trajectories if track.layouts else self.trajectories
 
     @property

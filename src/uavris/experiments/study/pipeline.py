@@ -22,12 +22,16 @@ Stages (each in ``OUT/stages/NAME-KEY``, keyed by its configuration and its inpu
 
 Stages 2-7 exist once per track: the paper track as above, and the strong track (learned
 motion, optimised phases) with the same names prefixed ``strong-``. The deployment track
-(``deploy-``) is the same pipeline with other parameters: its dataset is the planning
-oracle's demonstrations in many generated halls (``deploy-dataset``), its learned rows are
-over several pre-training seeds (``deploy-pretrain``, ``deploy-bc``, each with ``-sK``
-copies), and it deploys to unseen halls. With ``--ablation`` the ablation's rows join them
-(``-pretrain-nN``, the data curve; ``-flat``; ``deploy-dataset-mixed`` with ``-mixed-dt`` and
-``-mixed-bc``), over the same seeds. Stages whose inputs
+(``deploy-``) is the same pipeline with other parameters (:mod:`.tracks`): its dataset is the
+planning oracle's demonstrations in many generated halls (``deploy-dataset``); the learned
+value of a pose is labelled (``deploy-value-labels``) and fitted (``deploy-value``,
+:mod:`.places`); its learned rows are over several pre-training seeds (``deploy-pretrain``,
+``deploy-bc``, ``deploy-goal`` (the goal-conditioned DT), each with ``-sK`` copies), and it
+deploys to unseen halls (``deploy-evaluate-LAYOUT``). With ``--ablation`` the ablation's rows
+join them (``-pretrain-nN``, the data curve; ``-flat``; ``deploy-dataset-mixed`` with
+``-mixed-dt`` and ``-mixed-bc``), over the same seeds, with the fine-tuning of the
+return-conditioned DT (``deploy-finetune-LAYOUT``) and fine-tuning that tries places
+(``deploy-finetune-places-LAYOUT[-sK]``) in the halls of the study's own. Stages whose inputs
 are ready run at the same time, and all their jobs share the study's workers, so the tracks
 interleave.
 """
@@ -54,7 +58,7 @@ from uavris.experiments.engine.jobs import Job
 from uavris.experiments.engine.scheduling import StudyContext
 from uavris.experiments.engine.stages import Pipeline, Stage
 from uavris.experiments.study.config import AUTO, ReproduceConfig
-from uavris.experiments.study.places import places_finetune_stages, value_stages
+from uavris.experiments.study.places import PlaceStages
 from uavris.experiments.study.tracks import (
     REFERENCE_ROWS,
     Track,
@@ -67,6 +71,7 @@ from uavris.experiments.study.tracks import (
     zero_shot_only,
 )
 from uavris.experiments.study.workers import (
+    RESULTS_FORMAT,
     dataset_job,
     demonstrations_job,
     evaluate_job,
@@ -89,12 +94,11 @@ def build_pipeline(rc: ReproduceConfig, out: Path, ctx: StudyContext) -> Pipelin
     track's experts, then every track's dataset, pre-training, fine-tuning and evaluation."""
     stages = []
     if any(t.name == "paper" for t in rc.tracks):
-        stages.append(_compare_stage(rc, ctx))
+        stages.append(dataclasses.replace(_compare_stage(rc, ctx), group="compare"))
     tracks = track_stages(rc, ctx)
-    for t in tracks:
-        stages += t.experts()
-    for t in tracks:
-        stages += t.dt()
+    for part in ("experts", "dt"):
+        for t in tracks:
+            stages += [dataclasses.replace(st, group=t.track.name) for st in getattr(t, part)()]
     return Pipeline(out, stages)
 
 
@@ -123,7 +127,7 @@ def _run_compare(rc: ReproduceConfig, ctx: StudyContext, d: Path, deps: dict[str
     return {"rows": summary["rows"], "expert": summary["expert"], "expert_choice": summary["expert_choice"]}
 
 
-class TrackStages:
+class TrackStages(PlaceStages):
     """The stages of one track: experts, dataset, pre-training, fine-tuning, evaluation.
 
     Each ``*_stage`` method returns a :class:`~uavris.experiments.engine.stages.Stage`
@@ -146,9 +150,8 @@ class TrackStages:
                        *(["value"] if track.places else [])]
         # the return-conditioned DT's fine-tuning: the paper's; where the track tries places, the ablation's
         self.finetunes_returns = not track.places or rc.ablation
-        # fine-tuning that tries places: the ablation's too (quick run of 2026-11-26, docs/places.md: it ended
-        # below the zero-shot goal-conditioned DT it started from, -0.29 [-0.44, -0.14] bps/Hz over 16 halls,
-        # for 48 fine-tuning runs, about 14 core-minutes)
+        # fine-tuning that tries places: the ablation's too (docs/places.md: in a quick run it ended below the
+        # zero-shot goal-conditioned DT it started from, for 48 fine-tuning runs, about 14 core-minutes)
         self.tries_places = track.places and rc.ablation
 
     # ------------------------------------------------------------------ experts
@@ -214,8 +217,8 @@ class TrackStages:
             stages.append(Stage(self.t(m.stage), cfg.to_dict(), partial(self._run_pretrain, m),
                                 (self.t(m.dataset),), (pretrain_cost(cfg),)))
         if self.track.places:
-            stages += value_stages(self) + (places_finetune_stages(self) if self.tries_places else [])
-        for w in (w for w in self.unseen if not zero_shot_only(w.name) and self.finetunes_returns):
+            stages += self.value_stages() + (self.places_finetune_stages() if self.tries_places else [])
+        for w in (w for w in self.unseen if not zero_shot_only(w, self.rc.system) and self.finetunes_returns):
             ft = self.finetune_config("<pretrain>", w)
             stages.append(Stage(self.t(f"finetune-{w.name}"), ft.to_dict(), partial(self._run_finetune, w),
                                 (self.t("pretrain"),),
@@ -296,19 +299,20 @@ class TrackStages:
                                 (cfg.to_dict(), str(d / "model"), self.ctx.device), d / "job.log",
                                 finetune_cost(cfg, self.horizon, self.control, self.model))
 
-    def finetunes(self, site: str) -> list[str]:
-        """The fine-tuning stages of ``site`` (none in a hall of the other generator)."""
-        if zero_shot_only(site):
+    def finetunes(self, site: Site) -> list[str]:
+        """The fine-tuning stages of ``site`` (none in a hall evaluated zero-shot only)."""
+        if zero_shot_only(site, self.rc.system):
             return []
-        places = [places_stage(site, m.seed) for m in self.models if m.row == "dt-goal" and self.tries_places]
-        return [*([f"finetune-{site}"] if self.finetunes_returns else []), *places]
+        places = [places_stage(site.name, m.seed) for m in self.models if m.row == "dt-goal" and self.tries_places]
+        return [*([f"finetune-{site.name}"] if self.finetunes_returns else []), *places]
 
     def _evaluate_stage(self, where: Site) -> Stage:
         sources = transfer_sources(self.track, where, self.train)
-        keys = [*self.inputs, *self.finetunes(where.name)]
+        keys = [*self.inputs, *self.finetunes(where)]
         rows = self._rows(where, sources, {k: Path() for k in keys})
         cost = evaluate_cost(len(rows) - len(REFERENCE_ROWS), self.rc.eval_episodes, self.horizon, self.control)
         config = {"episodes": self.rc.eval_episodes, "seed": EVAL_SEED, "track": self.track.name,
+                  "format": RESULTS_FORMAT,
                   "rows": [r.key for r in rows], "transfer_from": [s for s, _ in sources],
                   **({"front_margin_deg": self.track.front_margin_deg} if self.track.front_margin_deg else {})}
         return Stage(self.t(f"evaluate-{where.name}"), config, partial(self._run_evaluate, where, sources, keys, cost),
@@ -320,7 +324,7 @@ class TrackStages:
     def rows_in(self, site: Site, pipeline: Pipeline) -> list[Row]:
         """The rows of this track in any ``site`` (a user's hall included), reading the models of
         ``pipeline``'s stage directories; a fine-tuned row only where the study fine-tuned."""
-        keys = [*self.inputs, *(k for k in self.finetunes(site.name) if self.t(k) in pipeline.stages)]
+        keys = [*self.inputs, *(k for k in self.finetunes(site) if self.t(k) in pipeline.stages)]
         return self._rows(site, transfer_sources(self.track, site, self.train),
                           {k: pipeline.directory(self.t(k)) for k in keys})
 

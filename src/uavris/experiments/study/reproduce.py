@@ -20,8 +20,8 @@ from uavris.experiments.engine.forecast import expected_schedule
 from uavris.experiments.engine.jobs import BACKENDS
 from uavris.experiments.engine.scheduling import StudyContext
 from uavris.experiments.study.config import AUTO, ReproduceConfig
+from uavris.experiments.study.finished import STUDY_FILE, Study
 from uavris.experiments.study.pipeline import build_pipeline
-from uavris.experiments.study.rows import STUDY_FILE
 from uavris.io import write_json, write_yaml
 from uavris.runs.lock import locked
 
@@ -78,7 +78,7 @@ def reproduce(rc: ReproduceConfig, out: str | Path, *, workers: int = 2, backend
 
 def _run(rc: ReproduceConfig, out: Path, pipeline: Any, ctx: StudyContext, force: Sequence[str], bar: Any,
          progress: bool, workers: int) -> Path:
-    write_yaml(out / STUDY_FILE, rc.to_dict())  # what `uavris evaluate OUT --row KEY` reads (.rows)
+    write_yaml(out / STUDY_FILE, rc.to_dict())  # what Study.open reads (uavris evaluate OUT --row KEY, claims)
     ctx.plan(pipeline)
     t0, origin = time.perf_counter(), time.time()
     try:
@@ -92,7 +92,7 @@ def _run(rc: ReproduceConfig, out: Path, pipeline: Any, ctx: StudyContext, force
 
     write_json(out / "schedule.json", {"workers": workers, "origin": origin, "jobs": ctx.schedule(origin),
                                        "eta": ctx.etas(origin)})
-    report = write_report(out, rc, pipeline, records, time.perf_counter() - t0, origin)
+    report = write_report(Study(out, rc, pipeline), records, time.perf_counter() - t0, origin)
     bar.close()
     failed = [r for r in records if r.status == "failed"]
     if failed or ctx.failures:

@@ -22,7 +22,7 @@ adding a row to the study is an edit of :func:`track_rows`. Not here: the pipeli
   those experts' trajectories (motion actions) and deployed with optimised phases.
   Why this recipe: docs/study.md, "Strong track".
 - **deployment**: the strong track's recipe over generated halls (docs/study.md, section
-  21). Both tracks above vary only the UAV's start in the paper's hall, where every start
+  2). Both tracks above vary only the UAV's start in the paper's hall, where every start
   has the same best pose; here each training and each unseen deployment is a layout of its
   own (:class:`uavris.layouts.LayoutGenerator`), the observation holds the devices as the
   UAV sees them (``SystemConfig.observe_devices``), and beside the DT stand every
@@ -34,7 +34,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import re
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Sequence
@@ -51,12 +50,10 @@ from uavris.presets import STRONG_IMITATION
 
 TRANSFER_NEIGHBOURS = 2
 # The attitude safety layer's margin in the deployment track's "safe" rows: every device at least
-# this far in front of the RIS plane (SystemConfig.front_margin_deg; docs/study.md section 21).
+# this far in front of the RIS plane (SystemConfig.front_margin_deg; docs/study.md section 2).
 SAFE_MARGIN_DEG = 1.0
 SEMI_TOP_K = 3  # the semi-amortised learned planner: its top places valued by R
 REFERENCE_ROWS = (ZERO_ACTION, HOVER_OPTIMIZER, ORACLE)  # every evaluation stage scores them beside its rows
-# the learned controllers: under the attitude safety layer in a track with a margin (track_rows)
-PROTECTED = ("dt-zero-shot", "dt-ensemble", "dt-finetuned", "bc", "dt-goal", "dt-goal-finetuned")
 TRACKS: tuple[str, ...] = ("paper", "strong", "deployment")
 
 
@@ -75,7 +72,7 @@ class Track:
     seeded: bool = False  # every learned row over several pre-training seeds (ReproduceConfig.dt_seeds)
     ablation: bool = False  # an ablation on demand (--ablation): the data curve, the flat encoder, mixed-quality data
     front_margin_deg: float | None = None  # the DT rows also under the attitude safety layer with this margin
-    places: bool = False  # a learned value of a pose, a DT told its place, fine-tuning that tries places (issue 36)
+    places: bool = False  # a learned value of a pose, a DT told its place, fine-tuning by places (docs/places.md)
 
     def stage(self, name: str) -> str:
         return self.prefix + name
@@ -113,22 +110,10 @@ def sites(track: Track, system: SystemConfig, train_layouts: int, unseen_layouts
     return made("train", train_layouts), made("unseen", unseen_layouts) + made("other", other_layouts) + sum(counts, [])
 
 
-def is_other_hall(name: str) -> bool:
-    """A hall of the other generator."""
-    return name.startswith("layout-other-")
-
-
-def hall_devices(name: str) -> int | None:
-    """The device count a generated hall's name states (``...-kK``), None where it states none
-    (the study's own count)."""
-    found = re.search(r"-k(\d+)$", name)
-    return int(found.group(1)) if found else None
-
-
-def zero_shot_only(name: str) -> bool:
-    """A hall the study evaluates zero-shot only (no fine-tuning there): the other generator's
-    and those of another device count."""
-    return is_other_hall(name) or hall_devices(name) is not None
+def zero_shot_only(site: Site, system: SystemConfig) -> bool:
+    """A hall a study on ``system`` evaluates zero-shot only (no fine-tuning there): one of the
+    other generator's, or one of another device count than the study's."""
+    return site.split == "other" or site.devices != system.num_users
 
 
 def strong_expert_config(scenario: str, seed: int, preset: str, eval_episodes: int, system: SystemConfig,
@@ -176,10 +161,11 @@ def track_rows(track: Track, site: Site, sources: list[tuple[str, float]], dirs:
     layer) is scored under it, and the oracle under it too (what the margin costs). The same
     policies without the layer, and every zero-shot DT with its attitude held level, are the
     ``ablation``'s rows (what the layer adds, and the alternative of never tilting)."""
-    rows = _learned_rows(track, site, sources, dirs, models, train)
+    learned = _learned_rows(track, site, sources, dirs, models, train)
+    rows = [r for r, _ in learned]
     margin = track.front_margin_deg
     if margin is not None:
-        protected = [r for r in rows if r.name in PROTECTED]
+        protected = [r for r, deployed in learned if deployed]
         safe = [r.replace(front_margin_deg=margin) for r in (*protected, Row.reference(ORACLE))]
         if ablation:
             rows = rows + safe + [r.replace(level=True) for r in protected if r.name in ("dt-zero-shot", "dt-ensemble")]
@@ -189,43 +175,49 @@ def track_rows(track: Track, site: Site, sources: list[tuple[str, float]], dirs:
 
 
 def _learned_rows(track: Track, site: Site, sources: list[tuple[str, float]], dirs: dict[str, Path],
-                  models: Sequence[TrainedModel], train: Sequence[Site]) -> list[Row]:
-    rows = []
+                  models: Sequence[TrainedModel], train: Sequence[Site]) -> list[tuple[Row, bool]]:
+    """The rows before the references, each with whether it is a learned controller the track
+    deploys (under the safety layer where the track has one): the DT, behaviour cloning, their
+    fine-tuning and ensemble, not the ablation's models nor a learned place flown by the oracle."""
+    rows: list[tuple[Row, bool]] = []
     if track.unseen_experts:
-        rows.append(Row("expert", "expert trained in the scenario",
-                        Target.of_model(dirs["experts-unseen"] / "runs" / site.name, "expert")))
+        rows.append((Row("expert", "expert trained in the scenario",
+                         Target.of_model(dirs["experts-unseen"] / "runs" / site.name, "expert"), kind="expert"), False))
     if f"finetune-{site.name}" in dirs:
-        rows.append(Row("dt-finetuned", "fine-tuned DT", Target.of_model(dirs[f"finetune-{site.name}"] / "model")))
+        rows.append((Row("dt-finetuned", "fine-tuned DT", Target.of_model(dirs[f"finetune-{site.name}"] / "model")),
+                     True))
     seeded = len({m.seed for m in models}) > 1
     value = Target.of_model(dirs["value"] / "value", "value") if "value" in dirs else None
-    if hall_devices(site.name) is not None:  # a flat encoder's weights read one device count only
+    if train and site.devices != train[0].devices:  # a flat encoder's weights read its training halls' count only
         models = [m for m in models if dict(m.model).get("state_encoder") != "flat"]
     for m in models:
         goal = {"goal_from": value} if m.row == "dt-goal" else {}
-        rows.append(Row(m.row, m.label, Target.of_model(dirs[m.stage] / "model"), seed=m.seed if seeded else None,
-                        **goal))
+        rows.append((Row(m.row, m.label, Target.of_model(dirs[m.stage] / "model"), seed=m.seed if seeded else None,
+                         training_halls=m.halls, **goal), not m.ablation))
     for m in models:  # fine-tuned by trying places in this hall: it keeps the place it chose
         stage = places_stage(site.name, m.seed)
         if m.row == "dt-goal" and stage in dirs:
-            rows.append(Row("dt-goal-finetuned", "goal-conditioned DT, fine-tuned by trying places",
-                            Target.of_model(dirs[stage] / "model"), seed=m.seed if seeded else None))
+            rows.append((Row("dt-goal-finetuned", "goal-conditioned DT, fine-tuned by trying places",
+                             Target.of_model(dirs[stage] / "model"), seed=m.seed if seeded else None), True))
     if value is not None:
-        rows += [Row("plan-learned", "learned planner's place (V's argmax), flown by the oracle's controller",
-                     value),
-                 Row("plan-semi", f"learned planner's top {SEMI_TOP_K} places valued by R, flown by the oracle's "
-                     "controller", dataclasses.replace(value, top_k=SEMI_TOP_K))]
+        rows += [(Row("plan-learned", "learned planner's place (V's argmax), flown by the oracle's controller",
+                      value), False),
+                 (Row("plan-semi", f"learned planner's top {SEMI_TOP_K} places valued by R, flown by the oracle's "
+                      "controller", dataclasses.replace(value, top_k=SEMI_TOP_K)), False)]
     dts = [Target.of_model(dirs[m.stage] / "model") for m in models if m.row == "dt-zero-shot"]
     if len(dts) > 1:
-        rows.append(Row("dt-ensemble", f"zero-shot DT, ensemble of the {len(dts)} seeds' models (mean action)",
-                        members=tuple(dts)))
+        rows.append((Row("dt-ensemble", f"zero-shot DT, ensemble of the {len(dts)} seeds' models (mean action)",
+                         members=tuple(dts)), True))
     halls = {d.name: d for d in train}
     for rank, (src, dist) in enumerate(sources):
         near = " (nearest)" if track.layouts and rank == 0 else ""
         if track.demonstrations:
-            rows.append(Row(f"transfer-{src}", f"oracle plan of {src}{near}, {dist:.1f} m", plan_of=halls[src]))
+            rows.append((Row(f"transfer-{src}", f"oracle plan of {src}{near}, {dist:.1f} m", plan_of=halls[src],
+                             kind="transfer", rank=rank), False))
             continue
         label = f"transferred from {src}{near}" + (f", {dist:.1f} m" if track.layouts else "")
-        rows.append(Row(f"transfer-{src}", label, Target.of_model(dirs["experts-train"] / "runs" / src, "expert")))
+        rows.append((Row(f"transfer-{src}", label, Target.of_model(dirs["experts-train"] / "runs" / src, "expert"),
+                         kind="transfer", rank=rank), False))
     return rows
 
 
@@ -247,6 +239,8 @@ class TrainedModel:
     row: str  # "dt-zero-shot", "bc", "dt-zero-shot-n32", ...
     label: str
     seed: int = 0
+    ablation: bool = False  # one of the ablation's models (not deployed: no safety-layer row of its own)
+    halls: int | None = None  # a model of the data curve: the training halls it saw
 
     def pretrain_fields(self, track_fields: dict[str, Any]) -> dict[str, Any]:
         """The PretrainConfig fields of this model on top of its track's (:data:`uavris.presets.TRACK_PRETRAIN`)."""
@@ -265,19 +259,23 @@ def trained_models(track: Track, train: Sequence[str], scaling: Sequence[int], s
     mixed-quality dataset (``mixed-dt``, ``mixed-bc``).
     """
     bc = (("condition_on_return", False),)
-    Kind = tuple[str, str, tuple[tuple[str, Any], ...], tuple[tuple[str, Any], ...], str, str]
-    kinds: list[Kind] = [("pretrain", "dataset", (), (), "dt-zero-shot", "zero-shot DT")]
+    kinds = [TrainedModel("pretrain", "dataset", (), (), "dt-zero-shot", "zero-shot DT")]
     if track.behaviour_cloning:
-        kinds.append(("bc", "dataset", (), bc, "bc", "behaviour cloning (the DT without return conditioning)"))
+        kinds.append(TrainedModel("bc", "dataset", (), bc, "bc", "behaviour cloning (the DT without return "
+                                  "conditioning)"))
     if track.places:  # told a goal rather than a return: each demonstration's own plan target in training
-        kinds.append(("goal", "dataset", (), (("goal", True), ("condition_on_return", False)), "dt-goal",
-                      "goal-conditioned DT, told the learned planner's place"))
+        kinds.append(TrainedModel("goal", "dataset", (), (("goal", True), ("condition_on_return", False)), "dt-goal",
+                                  "goal-conditioned DT, told the learned planner's place"))
     if ablation and track.ablation:
         if track.layouts:
-            kinds += [(f"pretrain-n{n}", "dataset", (("scenarios", tuple(train[:n])),), (), f"dt-zero-shot-n{n}",
-                       f"zero-shot DT, {n} training layout{'s' * (n != 1)}") for n in scaling]
-        kinds += [("flat", "dataset", (), (("state_encoder", "flat"),), "dt-flat", "zero-shot DT, flat encoder"),
-                  ("mixed-dt", "dataset-mixed", (), (), "dt-mixed", "zero-shot DT, mixed-quality data"),
-                  ("mixed-bc", "dataset-mixed", (), bc, "bc-mixed", "behaviour cloning, mixed-quality data")]
-    return [TrainedModel(stage if k == 0 else f"{stage}-s{k}", data, fields, model, row, label, k)
-            for stage, data, fields, model, row, label in kinds for k in range(max(1, seeds))]
+            kinds += [TrainedModel(f"pretrain-n{n}", "dataset", (("scenarios", tuple(train[:n])),), (),
+                                   f"dt-zero-shot-n{n}", f"zero-shot DT, {n} training layout{'s' * (n != 1)}",
+                                   ablation=True, halls=n) for n in scaling]
+        kinds += [TrainedModel("flat", "dataset", (), (("state_encoder", "flat"),), "dt-flat",
+                               "zero-shot DT, flat encoder", ablation=True),
+                  TrainedModel("mixed-dt", "dataset-mixed", (), (), "dt-mixed", "zero-shot DT, mixed-quality data",
+                               ablation=True),
+                  TrainedModel("mixed-bc", "dataset-mixed", (), bc, "bc-mixed", "behaviour cloning, mixed-quality data",
+                               ablation=True)]
+    return [dataclasses.replace(m, stage=m.stage if k == 0 else f"{m.stage}-s{k}", seed=k)
+            for m in kinds for k in range(max(1, seeds))]

@@ -100,6 +100,12 @@ def finetune_job(cfg_dict: dict[str, Any], out: str, device: str = "cpu") -> dic
     return read_done(model_dir)
 
 
+# The evaluation stages' results: 2 records each row's facts (uavris.experiments.tools.targets.Row.facts),
+# which the report and the claims read; part of the stages' keys, so that a study of the earlier format is
+# evaluated again rather than read without them.
+RESULTS_FORMAT = 2
+
+
 def evaluate_job(out: str, site: Site, track: str, episodes: int, rows: Sequence[Row]) -> dict[str, Any]:
     """Every row of a track in one unseen site on the same seeded episodes (see :func:`evaluate_rows`)."""
     return evaluate_rows(Path(out), site, TRACK_SPECS[track], episodes, rows)
@@ -107,13 +113,16 @@ def evaluate_job(out: str, site: Site, track: str, episodes: int, rows: Sequence
 
 class _Whereabouts:
     """What :func:`evaluate_rows` records of an evaluation besides the rates, slot by slot:
-    the share of slots in which a device is behind the RIS plane (docs/model.md section 3), and
-    each episode's last pose."""
+    the share of slots in which a device is behind the RIS plane (docs/model.md section 3),
+    each episode's last pose, and every slot (``log``; its ``on_step`` is the rollout's too)."""
 
     def __init__(self, system: Any, episodes: int) -> None:
+        from uavris.experiments.tools.trajectory import SlotLog
+
         self.users = np.asarray(system.users, dtype=np.float64)
         self.behind, self.slots = 0, 0
         self.pos, self.att = np.zeros((episodes, 3)), np.zeros((episodes, 3))
+        self.log = SlotLog(EVAL_SEED + np.arange(episodes))
 
     def __call__(self, sim: Any, obs: Any, executed: Any, alive: Any) -> None:
         from uavris import physics as ph
@@ -121,6 +130,7 @@ class _Whereabouts:
         self.behind += int((ph.worst_elevation(sim.att, sim.pos, self.users) <= 0.0)[alive].sum())
         self.slots += int(alive.sum())
         self.pos[alive], self.att[alive] = sim.pos[alive], sim.att[alive]
+        self.log.on_slot(sim, obs, executed, alive)
 
     def end_pose(self) -> tuple[Any, Any]:
         """The episodes' median last position and attitude (angles in [-pi, pi))."""
@@ -131,8 +141,8 @@ def _decomposition(system: Any, rec: _Whereabouts) -> dict[str, Any]:
     """Where a policy ended and what that pose is worth: the expected sum rate with optimised
     phases (the planner's R, on the fresh draws plans state their numbers with, so that it
     pairs with the oracle's target's) at its median end position, level and with its own
-    attitude, and the share of its slots with a device behind the RIS (docs/study.md section 21)."""
-    from uavris.agents.oracle.planner import assessed_rate
+    attitude, and the share of its slots with a device behind the RIS (docs/study.md section 2)."""
+    from uavris.agents.oracle.objective import assessed_rate
 
     pos, att = rec.end_pose()
     (level, own), _ = assessed_rate(system, np.stack([pos, pos]), np.stack([np.zeros(3), att]))
@@ -145,13 +155,16 @@ def evaluate_rows(out: Path, site: Site, track: Track, episodes: int, rows: Sequ
     """Every row (:func:`~.tracks.track_rows`: the learned rows and the references) in ``site``,
     each in its own system (:meth:`~uavris.experiments.tools.targets.Row.system`: under the
     safety layer where the row says so), on episodes ``EVAL_SEED ..``; per-episode CSVs in
-    ``out``, named by the rows' keys. In the deployment track every summary also holds the
+    ``out``, named by the rows' keys, and the first episode slot by slot in ``out/slots`` (what
+    the report draws). Each summary records what its row is (:meth:`Row.facts
+    <uavris.experiments.tools.targets.Row.facts>`). In the deployment track every summary also holds the
     decomposition of :func:`_decomposition`, and the oracle's its plan's target
     (:func:`oracle_target`).
     """
     from uavris.agents.evaluation import evaluate
     from uavris.agents.references import ORACLE
     from uavris.experiments.tools.evaluate import write_results
+    from uavris.experiments.tools.trajectory import write_slots
     from uavris.stats import summarize
 
     result: dict[str, Any] = {}
@@ -159,9 +172,10 @@ def evaluate_rows(out: Path, site: Site, track: Track, episodes: int, rows: Sequ
         system = row.system(site.system)
         loaded = row.load(system)
         rec = _Whereabouts(system, episodes)
-        res = evaluate(loaded.policy, system, site.scenario, episodes, EVAL_SEED, on_slot=rec)
-        summary = {"policy": row.key, "label": row.label_for(loaded.expert_kind), "variant": row.variant,
-                   "seed": row.seed, "scenario": site.name, "track": track.name, **res.summary(),
+        res = evaluate(loaded.policy, system, site.scenario, episodes, EVAL_SEED, on_slot=rec, on_step=rec.log.on_step)
+        write_slots(rec.log, out / "slots" / f"{row.key}.csv", EVAL_SEED)  # the first episode: the report draws it
+        summary = {"policy": row.key, "label": row.label_for(loaded.expert_kind), **row.facts(),
+                   "scenario": site.name, "track": track.name, **res.summary(),
                    **{f"boot_{k}": v for k, v in summarize(res.avg_sum_rate).items()},
                    **(_decomposition(system, rec) if track.layouts else {})}
         write_results(res, summary, out / row.key)
@@ -182,7 +196,7 @@ def oracle_target(where: Site, oracle: Any = None) -> dict[str, Any]:
     (``plan_rate``, with its standard error) and level (``plan_rate_level``, what
     :func:`_decomposition`'s place gap compares an end position with, on the same draws)."""
     from uavris.agents.oracle import PlanningOracle
-    from uavris.agents.oracle.planner import assessed_rate
+    from uavris.agents.oracle.objective import assessed_rate
 
     plan = (oracle or PlanningOracle()).plan(where.system, where.scenario.start)
     (level,), _ = assessed_rate(where.system, plan.target, np.zeros(3))
@@ -191,13 +205,13 @@ def oracle_target(where: Site, oracle: Any = None) -> dict[str, Any]:
 
 
 def value_accuracy(where: Site, value: Any, oracle: Any) -> dict[str, Any]:
-    """How well a learned value ``V`` knows ``where`` (issue 36): Spearman's rank correlation of
+    """How well a learned value ``V`` knows ``where`` (docs/places.md): Spearman's rank correlation of
     ``V`` with ``R`` over the level poses the planning ``oracle`` valued there with ``R``
     (``value_rank_correlation``), and ``R`` at ``V``'s argmax, level, on the draws a plan states
     its numbers with (``value_target_rate_level``: the oracle's ``plan_rate_level`` is its match)."""
     from scipy.stats import spearmanr
 
-    from uavris.agents.oracle.planner import assessed_rate
+    from uavris.agents.oracle.objective import assessed_rate
     from uavris.agents.place.planner import learned_plan
     from uavris.agents.place.value import predict
 

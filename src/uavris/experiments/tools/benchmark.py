@@ -6,7 +6,7 @@ the zero action and the oracle in every cell. Not here: resolving and evaluating
 (:mod:`uavris.experiments.tools.evaluate`, the code ``uavris evaluate`` runs, so a cell's numbers
 equal ``uavris evaluate TARGET --scenario S`` / ``--layout L`` on the same episodes).
 
-The protocol is the report's (docs/study.md, section 21): the preset's evaluation episodes
+The protocol is the report's (docs/study.md, section 2): the preset's evaluation episodes
 (:data:`~uavris.presets.STUDY`) from :data:`~uavris.presets.EVAL_SEED`, the unseen scenarios
 of the paper in the paper's hall, and the preset's unseen layouts of the study's generator
 (seed 0). Fractions of the oracle are per cell; over layouts, their mean with a Student-t 95%

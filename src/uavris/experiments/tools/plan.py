@@ -25,7 +25,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from uavris.agents.oracle import PlanSettings, expected_optimised_rate, plan_target
-from uavris.agents.oracle.planner import feasible
+from uavris.agents.oracle.objective import feasible
 from uavris.agents.place.planner import PlaceSettings, learned_plan
 from uavris.agents.place.value import PoseValue, predict
 from uavris.config import SystemConfig

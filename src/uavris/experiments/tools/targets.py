@@ -35,6 +35,9 @@ from uavris.errors import ConfigError, UavrisError
 from uavris.layouts import Site
 
 TargetKind = Literal["reference", "user", "dt", "expert", "value"]
+# What a row of a report is: a learned controller or place (the DT family, behaviour cloning, the learned
+# planner), the expert trained where it is deployed, a policy transferred from a training deployment, a reference.
+RowKind = Literal["learned", "expert", "transfer", "reference"]
 BASELINE_PREFIX = "baseline:"
 _MODULE = re.compile(r"[A-Za-z_][\w]*(\.[A-Za-z_][\w]*)*")
 
@@ -191,7 +194,10 @@ class Row:
     (the report averages a row over its seeds). A goal-conditioned controller is told where to
     go by ``goal_from`` (:meth:`Target.goal_source`: the learned planner or the oracle; a model
     fine-tuned in a hall keeps the place it chose there). Its :attr:`key`,
-    ``NAME[-level][-safe][@sK]``, names it in a stage's results, its files and ``uavris evaluate --row``.
+    ``NAME[-level][-safe][@sK]``, names it in a stage's results, its files and ``uavris evaluate --row``;
+    what it is (``kind``, a transfer's ``rank`` by distance, a data-curve model's
+    ``training_halls``, and the fields above) the stage results record beside its numbers
+    (:meth:`facts`), and a report reads them there, never from the key.
     """
 
     name: str  # the row without its variants: "dt-zero-shot", "bc", "transfer-layout-train-5", "oracle"
@@ -203,6 +209,9 @@ class Row:
     front_margin_deg: float | None = None
     level: bool = False
     goal_from: Target | None = None
+    kind: RowKind = "learned"
+    rank: int | None = None  # a transferred policy's rank by the distance of its deployment (0: the nearest)
+    training_halls: int | None = None  # a model of the data curve: the training halls it saw
 
     def __post_init__(self) -> None:
         if sum((self.target is not None, bool(self.members), self.plan_of is not None)) != 1:
@@ -211,12 +220,19 @@ class Row:
     @classmethod
     def reference(cls, name: str, **how: Any) -> Row:
         """The reference ``name`` (:data:`uavris.agents.references.REFERENCES`) as a row."""
-        return cls(name, REFERENCES[name].label, Target.of_reference(name), **how)
+        return cls(name, REFERENCES[name].label, Target.of_reference(name), kind="reference", **how)
 
     @property
     def variant(self) -> str:
         """The row over all its seeds: its name with how it is evaluated."""
-        return self.name + "-level" * self.level + "-safe" * (self.front_margin_deg is not None)
+        return variant_key(self.name, self.front_margin_deg is not None, self.level)
+
+    def facts(self) -> dict[str, Any]:
+        """What the row is, as the stage results record it beside its numbers."""
+        return {"name": self.name, "kind": self.kind, "variant": self.variant, "seed": self.seed,
+                "front_margin_deg": self.front_margin_deg, "level": self.level, "rank": self.rank,
+                "training_halls": self.training_halls,
+                "plan_of": self.plan_of.name if self.plan_of is not None else None}
 
     @property
     def key(self) -> str:
@@ -266,6 +282,12 @@ class Row:
 
             loaded = dataclasses.replace(loaded, policy=LevelAttitude(loaded.policy))
         return loaded
+
+
+def variant_key(name: str, safe: bool = False, level: bool = False) -> str:
+    """The key of row ``name`` over all its seeds, evaluated under the safety layer (``safe``)
+    or with its attitude held level (:attr:`Row.variant`)."""
+    return name + "-level" * level + "-safe" * safe
 
 
 def as_row(target: str | Path | Target | Row) -> Row:

@@ -44,8 +44,10 @@ class SlotLog:
         self._slot += 1
 
 
-def write_slots(log: SlotLog, path: Path) -> Path:
-    write_csv(path, SLOT_COLUMNS, sorted(log.rows, key=lambda r: (r[0], r[1])))  # episode by episode
+def write_slots(log: SlotLog, path: Path, episode: int | None = None) -> Path:
+    """The slots as CSV (:data:`SLOT_COLUMNS`), episode by episode; only episode seed ``episode``'s where given."""
+    rows = [r for r in log.rows if episode is None or r[0] == episode]
+    write_csv(path, SLOT_COLUMNS, sorted(rows, key=lambda r: (r[0], r[1])))
     return path
 
 

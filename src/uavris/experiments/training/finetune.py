@@ -158,7 +158,7 @@ def _candidates(cfg: FinetuneConfig, h: int, dt_policy: Callable[..., DTBatchPol
     ``level_rollouts`` of each seed's rollouts hold the attitude level
     (:class:`~uavris.agents.policy.LevelAttitude`): not only noise around the model's own path
     but the alternative to its tilts, recorded as flown, which the paired elites keep where it
-    pays (issue 29: a tilt that puts a device behind the RIS)."""
+    pays (a tilt that puts a device behind the RIS: docs/study.md, section 2)."""
     from uavris.agents.policy import LevelAttitude
 
     noise_seed = int(np.random.SeedSequence([cfg.seed, h]).generate_state(1)[0])

@@ -20,33 +20,35 @@ from uavris.agents.references import HOVER_OPTIMIZER, ORACLE, ZERO_ACTION
 from uavris.config import UNSEEN_SCENARIOS, get_scenario
 from uavris.experiments.display.tables import fraction, interval, markdown_table, num
 from uavris.experiments.engine.jobs import machine
-from uavris.experiments.engine.stages import Pipeline, StageRecord
+from uavris.experiments.engine.stages import StageRecord
 from uavris.experiments.study.claims import claims_table, judge_studies
+from uavris.experiments.study.finished import Study
 from uavris.experiments.study.report.decomposition import counts_section, decomposition_section, value_section
 from uavris.experiments.study.report.deployment import (
     NEAREST,
-    ROWS,
     deployment_section,
     layout_scores,
     layouts_figure,
+    row_facts,
+    row_labels,
+    row_order,
     scaling_figure,
     seed_scores,
 )
 from uavris.experiments.study.report.figures import fig3, interactions_figure, trajectory_figure
 from uavris.experiments.study.report.schedule import schedule_figure, stage_table
-from uavris.experiments.study.tracks import Track, hall_devices, is_other_hall, zero_shot_only
+from uavris.experiments.study.tracks import Track, zero_shot_only
 from uavris.experiments.training.compare import fig2_table
 from uavris.io import atomic_write_text, read_json
 from uavris.presets import EVAL_SEED
-from uavris.runs import is_finished
 from uavris.stats import versus
 
 
 class _Report:
-    def __init__(self, out: Path, rc: Any, pipeline: Pipeline, records: Sequence[StageRecord]) -> None:
-        self.out, self.rc, self.pipeline = out, rc, pipeline
+    def __init__(self, study: Study, records: Sequence[StageRecord]) -> None:
+        self.study, self.out, self.rc = study, study.out, study.config
         self.ok = {r.name for r in records if r.status in ("done", "skipped")}
-        self.figs = out / "figures"
+        self.figs = study.out / "figures"
         self.figs.mkdir(parents=True, exist_ok=True)
         self.lines: list[str] = []
         self.claims: list[str] = []
@@ -58,10 +60,10 @@ class _Report:
     def fig2(self) -> None:
         self.add("", "## Algorithm comparison (paper Fig. 2, paper track)", "")
         if "compare" not in self.ok:
-            self.add("Not available: the `compare` stage did not finish." if "compare" in self.pipeline.stages
+            self.add("Not available: the `compare` stage did not finish." if "compare" in self.study.pipeline.stages
                      else "Not run: the paper track was not selected.")
             return
-        cdir = self.pipeline.directory("compare")
+        cdir = self.study.directory("compare")
         for ext in ("png", "pdf"):
             if (cdir / f"learning_curves.{ext}").exists():
                 shutil.copyfile(cdir / f"learning_curves.{ext}", self.figs / f"fig2_learning_curves.{ext}")
@@ -87,7 +89,7 @@ class _Report:
             if name not in self.ok:
                 self.add(f"Not available: the `{name}` stage did not finish.", "")
                 continue
-            edir = self.pipeline.directory(name)
+            edir = self.study.directory(name)
             stem = f"{track.prefix}fig3{label}_{scenario}"
             fig3(scenario, edir, self.figs / stem, track.name)
             res = read_json(edir / "stage.json")["result"]
@@ -102,18 +104,17 @@ class _Report:
                   "-" if key == ZERO_ACTION else versus(s["ci_low"], s["ci_high"], zero), fraction(s["mean"], oracle))
                  for key, s in res.items()], "lrlrllr"), "")
             self._claims(track, scenario, res)
-            finetuned = self.pipeline.directory(track.stage(f"finetune-{scenario}")) / "model"
-            if i == 0 and is_finished(finetuned):
+            slots = edir / "slots" / "dt-finetuned.csv"  # the evaluation's first episode, slot by slot
+            if i == 0 and slots.exists():
                 tstem = f"{track.prefix}trajectory_{scenario}"
-                trajectory_figure(scenario, finetuned,
-                                  self.rc.system, self.figs / tstem, EVAL_SEED)
+                trajectory_figure(scenario, slots, self.rc.system, self.figs / tstem, EVAL_SEED)
                 self.add(f"![trajectory, {track.name} track](figures/{tstem}.png)", "")
         return results
 
     def _claims(self, track: Track, scenario: str, res: dict[str, dict[str, Any]]) -> None:
         """The figure behind the "fewer interactions" claim (judged in the claims table)."""
-        fdir = self.pipeline.directory(track.stage(f"finetune-{scenario}"))
-        xdir = self.pipeline.directory(track.stage("experts-unseen"))
+        fdir = self.study.directory(track.stage(f"finetune-{scenario}"))
+        xdir = self.study.directory(track.stage("experts-unseen"))
         if (fdir / "model" / "finetune.csv").exists() and (xdir / "runs" / scenario / "evals.csv").exists():
             istem = f"{track.prefix}interactions_{scenario}"
             interactions_figure(scenario, fdir / "model", xdir / "runs" / scenario, self.figs / istem,
@@ -129,17 +130,19 @@ class _Report:
         for w in unseen:
             name = track.stage(f"evaluate-{w.name}")
             if name in self.ok:
-                results[w.name] = read_json(self.pipeline.directory(name) / "stage.json")["result"]
+                results[w.name] = read_json(self.study.directory(name) / "stage.json")["result"]
         missing = [w.name for w in unseen if w.name not in results]
         if missing:
             self.add(f"Not available for {len(missing)} of {len(unseen)} unseen layouts (their evaluation stage did "
                      f"not finish): {', '.join(missing)}.", "")
-        study = {lay: res for lay, res in results.items() if not zero_shot_only(lay)}
-        other = {lay: res for lay, res in results.items() if is_other_hall(lay)}
+        done = [w for w in unseen if w.name in results]
+        own = self.rc.system.num_users
+        study = {w.name: results[w.name] for w in done if not zero_shot_only(w, self.rc.system)}
+        other = {w.name: results[w.name] for w in done if w.split == "other"}
         counts: dict[int, dict[str, Any]] = {}
-        for lay, res in results.items():
-            if hall_devices(lay) is not None:
-                counts.setdefault(hall_devices(lay), {})[lay] = res
+        for w in done:
+            if w.split != "other" and w.devices != own:
+                counts.setdefault(w.devices, {})[w.name] = results[w.name]
         if study:
             self._deployment_group(track, study)
         if other:
@@ -147,7 +150,7 @@ class _Report:
                      "The same models and rows, zero-shot, in unseen halls drawn by another generator (devices further "
                      "from the walls and from each other, higher, starts anywhere over the floor: "
                      "`uavris.layouts.OTHER_SPLIT`): a result tuned to the study's generator would show here.", "")
-            self._deployment_group(track, other, "deployment track, another generator's halls", "-other")
+            self._deployment_group(track, other, "deployment track, another generator's halls", "-other", True)
         if counts:
             self.add(*counts_section({self.rc.system.num_users: study, **counts}))
             for k, group in sorted(counts.items()):
@@ -155,36 +158,31 @@ class _Report:
                          f"The same models and rows, zero-shot, in unseen halls of {k} devices (the DTs were "
                          f"pre-trained on halls of {self.rc.system.num_users}; the learned value on halls of "
                          "several counts).", "")
-                self._deployment_group(track, group, f"deployment track, {k} devices", f"-k{k}")
+                self._deployment_group(track, group, f"deployment track, {k} devices", f"-k{k}", True)
 
     def _deployment_group(self, track: Track, results: dict[str, dict[str, Any]],
-                          where: str = "deployment track", suffix: str = "") -> None:
-        """One group of unseen halls (its figures' names end in ``suffix``): its tables,
-        figures, decomposition and claims."""
+                          where: str = "deployment track", suffix: str = "", zero_shot_only: bool = False) -> None:
+        """One group of unseen halls (its figures' names end in ``suffix``; ``zero_shot_only``:
+        halls the study does not fine-tune in): its tables, figures, decomposition and claims."""
         scores = layout_scores(results)
-        first = next(iter(results.values()))
-        curve_keys = [k for k, v in first.items() if v["variant"].startswith("dt-zero-shot-n") and not v["seed"]]
-        # a row the report has no name for goes by its own label (seed 0's, where it has seeds)
-        labels = {k: v["label"] for k, v in first.items()
-                  if k == v["variant"] and k not in dict(ROWS) and not k.startswith("transfer-")}
-        if any(v["label"].startswith("oracle plan of") for k, v in first.items() if k.startswith("transfer-")):
-            labels[NEAREST] = "oracle plan of the nearest training layout, flown here"
+        facts, labels, order = row_facts(results), row_labels(results), row_order(results)
+        curve_keys = [k for k in order if k in facts and facts[k]["training_halls"] is not None]
         stem = f"{track.prefix}layouts{suffix}"
-        layouts_figure(scores, labels, self.figs / stem)
-        curve = {int(k.rsplit("n", 1)[1]): [scores[lay][k] / scores[lay][ORACLE] for lay in scores]
+        layouts_figure(scores, labels, [k for k in order if k not in curve_keys], self.figs / stem,
+                       [k for k in order if k in facts and facts[k]["kind"] == "learned"])
+        curve = {facts[k]["training_halls"]: [scores[lay][k] / scores[lay][ORACLE] for lay in scores]
                  for k in curve_keys}
         scaling = None
         if curve:
             curve[self.rc.train_layouts] = [scores[lay]["dt-zero-shot"] / scores[lay][ORACLE] for lay in scores]
             refs = {label: [scores[lay][k] / scores[lay][ORACLE] for lay in scores]
-                    for k, label in ((HOVER_OPTIMIZER, "hover, optimiser's phases"),
-                                     (NEAREST, labels.get(NEAREST, "nearest layout's expert")))
+                    for k, label in ((HOVER_OPTIMIZER, "hover, optimiser's phases"), (NEAREST, labels[NEAREST]))
                     if all(k in scores[lay] for lay in scores)}
             scaling = f"{track.prefix}scaling{suffix}"
             scaling_figure(curve, refs, self.figs / scaling)
-        lines, claims = deployment_section(scores, labels, f"figures/{stem}.png",
+        lines, claims = deployment_section(scores, labels, order, f"figures/{stem}.png",
                                            f"figures/{scaling}.png" if scaling else None, where, self.rc.seed,
-                                           seed_scores(results))
+                                           seed_scores(results), zero_shot_only)
         self.add(*lines)
         self.claims += claims
         lines, claims = decomposition_section(results, labels, where)
@@ -204,7 +202,7 @@ class _Report:
                 ("zero action (hover)", ZERO_ACTION), ("hover, optimiser's phases", HOVER_OPTIMIZER),
                 ("oracle", ORACLE)]
         def cell(res: dict[str, Any], key: str | None) -> str:
-            item = (max((v for k, v in res.items() if k.startswith("transfer")), key=lambda v: v["mean"])
+            item = (max((v for v in res.values() if v["kind"] == "transfer"), key=lambda v: v["mean"])
                     if key is None else res[key])
             return f"{item['mean']:.2f} ({fraction(item['mean'], res[ORACLE]['mean'])})"
 
@@ -237,9 +235,9 @@ def finetuning_effect(zero_shot: dict[str, float], finetuned: dict[str, float]) 
     return f"fine-tuning moved it within the 95% CIs ({zs:.2f} -> {ft:.2f}); one fine-tuning run, one seed"
 
 
-def claims_section(out: Path) -> list[str]:
+def claims_section(study: Study) -> list[str]:
     """The claim x track table of this study (:mod:`uavris.experiments.study.claims`) and what each cell compares."""
-    judgements = judge_studies([out])
+    judgements = judge_studies([study])
     lines = [*claims_table(judgements), "", "A claim **holds** where the 95% CI of its paired difference over the unit "
              "(a seed and scenario; an unseen hall) excludes zero the claimed way, is **refuted** where it excludes "
              "zero the other way, and is **not resolved** otherwise. One study has one seed of the paper and strong "
@@ -248,9 +246,11 @@ def claims_section(out: Path) -> list[str]:
                     for j in judgements]
 
 
-def write_report(out: Path, rc: Any, pipeline: Pipeline, records: Sequence[StageRecord], wall_s: float,
-                 origin: float = math.nan) -> Path:
-    rep = _Report(out, rc, pipeline, records)
+def write_report(study: Study, records: Sequence[StageRecord], wall_s: float, origin: float = math.nan) -> Path:
+    """``study``'s report (``OUT/report.md``) and figures (``OUT/figures``), its stages' ``records``
+    being this invocation's (run or skipped); returns the report's path."""
+    rep = _Report(study, records)
+    out, rc = study.out, study.config
     rep.add(f"# uavris reproduction of the paper, preset `{rc.preset}`", "",
             f"Everything below is read from the stage files under `{out / 'stages'}`; rerunning `uavris reproduce` "
             "with the same parameters skips finished stages. Evaluation: deterministic policies on "
@@ -260,10 +260,11 @@ def write_report(out: Path, rc: Any, pipeline: Pipeline, records: Sequence[Stage
             "level, all phases equal) and the oracle (`uavris.agents.oracle`: optimised phases every slot, motion "
             "planned over the whole room; docs/model.md section 19). 'vs zero action' says whether the policy's 95% "
             "CI lies above or below the zero action's mean ('tie': not resolved).",
-            "", f"Machine: {machine()}.", "", "## The paper's claims, judged", "", *claims_section(out), "",
+            "", f"Machine: {machine()}.", "", "## The paper's claims, judged", "", *claims_section(study), "",
             "## Stages", "")
     schedule = read_json(out / "schedule.json") if (out / "schedule.json").exists() else {"jobs": [], "workers": 1}
-    if schedule_figure(schedule["jobs"], int(schedule["workers"]), rep.figs / "schedule"):
+    groups = {name: st.group for name, st in study.pipeline.stages.items()}
+    if schedule_figure(schedule["jobs"], int(schedule["workers"]), rep.figs / "schedule", groups):
         rep.add("![schedule](figures/schedule.png)", "")
     rep.add(*stage_table(records, schedule["jobs"], origin))
     rep.add("", f"Total wall clock of this invocation: {wall_s / 60:.1f} min. Stages run as soon as their inputs "

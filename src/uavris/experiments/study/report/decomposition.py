@@ -9,9 +9,9 @@ Not here: the numbers, which the evaluation stages record
 (:func:`uavris.experiments.study.workers.evaluate_rows`), and the rest of the deployment
 section (:mod:`.deployment`).
 
-Definitions (docs/study.md section 21), with R the planner's expected sum rate with
+Definitions (docs/study.md section 2), with R the planner's expected sum rate with
 optimised phases at a pose, on the fresh draws a plan states its numbers with
-(:func:`uavris.agents.oracle.planner.assessed_rate`: every pose on the same draws, none of
+(:func:`uavris.agents.oracle.objective.assessed_rate`: every pose on the same draws, none of
 them the draws the plan was chosen on, so the target's R is not biased upwards):
 
 - **place gap** = R(the oracle's target, level) - R(the row's median end position, level):
@@ -31,27 +31,27 @@ import numpy as np
 
 from uavris.agents.references import HOVER_OPTIMIZER, ORACLE, ZERO_ACTION
 from uavris.experiments.display.tables import markdown_table, pct, signed, with_ci
-from uavris.experiments.study.report.deployment import ROWS, layout_scores, new_rows
+from uavris.experiments.study.report.deployment import ORACLE_SAFE, layout_scores, row_facts, row_labels, row_order
 from uavris.stats import over_units
 
-BLOCKING_LIMIT = 0.01  # no learned row blocks a device in more than this share of its slots (issue 29)
-LEARNED = ("dt-zero-shot", "dt-ensemble", "dt-finetuned", "bc", "dt-zero-shot-safe", "dt-ensemble-safe",
-           "dt-finetuned-safe", "bc-safe", "dt-zero-shot-level", "dt-ensemble-level", "dt-flat", "dt-mixed", "bc-mixed")
+BLOCKING_LIMIT = 0.01  # no learned row blocks a device in more than this share of its slots (docs/study.md, section 2)
 
 
 def decomposition_section(results: dict[str, dict[str, Any]], labels: dict[str, str],
                           where: str = "deployment track") -> tuple[list[str], list[str]]:
     """The decomposition's lines and its claim (headed ``where``), from the evaluation stages'
-    ``results`` (``{layout: {policy: summary}}``); nothing when the summaries hold no decomposition."""
+    ``results`` (``{layout: {policy: summary}}``): every learned row (the data curve's aside) and
+    the oracle; nothing when the summaries hold no decomposition."""
     layouts = list(results)
     if not layouts or "end_rate_level" not in next(iter(results.values()))[ORACLE]:
         return [], []
     level, own = layout_scores(results, "end_rate_level"), layout_scores(results, "end_rate_own")
     blocked = layout_scores(results, "behind_share")
     target = {lay: float(results[lay][ORACLE]["plan_rate_level"]) for lay in layouts}
-    labels = {**dict(ROWS), **labels}
-    added = [k for k in new_rows(level[layouts[0]]) if not k.startswith("dt-zero-shot-n")]  # a row added to the study
-    keys = [k for k in (*LEARNED, *added, ORACLE, "oracle-safe") if all(k in level[lay] for lay in layouts)]
+    facts = row_facts(results)
+    learned = [k for k in row_order(results)
+               if k in facts and facts[k]["kind"] == "learned" and facts[k]["training_halls"] is None]
+    keys = [k for k in (*learned, ORACLE, ORACLE_SAFE) if all(k in level[lay] for lay in layouts)]
     place = {k: [target[lay] - level[lay][k] for lay in layouts] for k in keys}
     tilt = {k: [level[lay][k] - own[lay][k] for lay in layouts] for k in keys}
     block = {k: [blocked[lay][k] for lay in layouts] for k in keys}
@@ -62,28 +62,28 @@ def decomposition_section(results: dict[str, dict[str, Any]], labels: dict[str, 
              "(every pair with it is lost). Means over layouts; a learned row is the mean of its seeds' models.", ""]
     lines += markdown_table(
         ("policy", "place gap (bps/Hz)", "attitude gap (bps/Hz)", "blocked, mean", "blocked, worst layout"),
-        [(labels.get(k, k), signed(float(np.mean(place[k]))), signed(float(np.mean(tilt[k]))),
+        [(labels[k], signed(float(np.mean(place[k]))), signed(float(np.mean(tilt[k]))),
           pct(float(np.mean(block[k]))), pct(float(np.max(block[k])))) for k in keys], "lrrrr")
     per_hall = [k for k in ("dt-zero-shot", "dt-zero-shot-safe") if k in keys]
     if per_hall:
         lines += ["", "Per layout (place gap / attitude gap in bps/Hz, blocked slots):", ""]
-        lines += markdown_table(("layout", *(labels.get(k, k) for k in per_hall)), [
+        lines += markdown_table(("layout", *(labels[k] for k in per_hall)), [
             (lay, *(f"{signed(place[k][i])} / {signed(tilt[k][i])}, {pct(block[k][i])}" for k in per_hall))
             for i, lay in enumerate(layouts)], "l" + "r" * len(per_hall))
-    learned = [k for k in keys if k in LEARNED or k in added]
+    learned = [k for k in keys if k in learned]
     worst = max(learned, key=lambda k: float(np.mean(block[k])), default=None)
     if worst is None:
         return lines, []
     over = [k for k in learned if float(np.mean(block[k])) > BLOCKING_LIMIT]
     claim = (f"- {where}: **no learned row blocks a device in more than {BLOCKING_LIMIT:.0%} of its slots**: "
-             f"{'holds' if not over else 'does not hold'} (most: {labels.get(worst, worst)}, "
+             f"{'holds' if not over else 'does not hold'} (most: {labels[worst]}, "
              f"{pct(float(np.mean(block[worst])))} of its slots on average"
-             + (f"; above the limit: {', '.join(labels.get(k, k) for k in over)}" if over else "") + ").")
+             + (f"; above the limit: {', '.join(labels[k] for k in over)}" if over else "") + ").")
     return lines, [claim]
 
 
 def value_section(results: dict[str, dict[str, Any]], labels: dict[str, str]) -> list[str]:
-    """The learned value's accuracy in the unseen halls (issue 36), for every row that records
+    """The learned value's accuracy in the unseen halls (docs/places.md), for every row that records
     it (:func:`uavris.experiments.study.workers.value_accuracy`): the rank correlation of ``V``
     with ``R`` over the poses the oracle valued, and ``R`` at ``V``'s argmax against ``R`` at the
     oracle's target (both level, on the same fresh draws), mean and worst hall."""
@@ -92,13 +92,12 @@ def value_section(results: dict[str, dict[str, Any]], labels: dict[str, str]) ->
             if all("value_rank_correlation" in results[lay].get(k, {}) for lay in layouts)]
     if not keys:
         return []
-    labels = {**dict(ROWS), **labels}
     rows = []
     for k in keys:
         rho = [float(results[lay][k]["value_rank_correlation"]) for lay in layouts]
         share = [float(results[lay][k]["value_target_rate_level"]) / float(results[lay][ORACLE]["plan_rate_level"])
                  for lay in layouts]
-        rows.append((labels.get(k, k), f"{np.mean(rho):.3f}", f"{np.min(rho):.3f}", pct(float(np.mean(share))),
+        rows.append((labels[k], f"{np.mean(rho):.3f}", f"{np.min(rho):.3f}", pct(float(np.mean(share))),
                      pct(float(np.min(share)))))
     return ["", "### The learned value of a pose in the unseen halls", "",
             "Rank correlation (Spearman) of V with R over the level poses the oracle valued in each hall; R at V's "
@@ -111,21 +110,19 @@ COUNT_ROWS = ("dt-goal-safe", "plan-learned", "plan-semi", "dt-zero-shot-safe", 
 
 
 def counts_section(groups: dict[int, dict[str, dict[str, Any]]]) -> list[str]:
-    """Any number of devices (issue 36): per device count (``groups``: ``{K: {layout: results}}``),
+    """Any number of devices (docs/places.md): per device count (``groups``: ``{K: {layout: results}}``),
     each row's fraction of the oracle, mean [95% CI over halls], and the place row minus
     hovering with optimised phases (paired, bps/Hz)."""
     scores = {k: layout_scores(g) for k, g in groups.items() if g}
     if len(scores) < 2:
         return []
     keys = [r for r in COUNT_ROWS if all(r in s[lay] for s in scores.values() for lay in s)]
-    labels = dict(ROWS)
-    first = next(iter(groups[min(scores)].values()))
-    labels.update({k: v["label"] for k, v in first.items() if k == v["variant"] and k not in labels})
+    labels = row_labels(groups[min(scores)])
 
     def frac(k: int, r: str) -> str:
         return with_ci(over_units([scores[k][lay][r] / scores[k][lay][ORACLE] for lay in scores[k]]), pct)
 
-    rows = [(labels.get(r, r), *(frac(k, r) for k in sorted(scores))) for r in keys]
+    rows = [(labels[r], *(frac(k, r) for k in sorted(scores))) for r in keys]
     if "dt-goal-safe" in keys:
         rows.append(("place row minus hovering with optimised phases (bps/Hz)",
                      *(with_ci(over_units([scores[k][lay]["dt-goal-safe"] - scores[k][lay][HOVER_OPTIMIZER]

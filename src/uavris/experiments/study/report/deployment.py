@@ -7,7 +7,7 @@ over layouts (:func:`uavris.stats.over_units`) and paired differences,
 :func:`scaling_figure`). Not here: the evaluations (written by
 :func:`uavris.experiments.study.workers.evaluate_rows`) and the other tracks' report.
 
-Statistics (docs/study.md, section 21): a policy's score in a layout is its mean average sum
+Statistics (docs/study.md, section 2): a policy's score in a layout is its mean average sum
 rate over the evaluation episodes, and its fraction of the oracle there. Across layouts:
 the mean and Student's t 95% interval over the unseen layouts (each layout one sample);
 paired differences (DT minus another policy) are taken per layout first, on the same
@@ -22,35 +22,25 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from uavris.agents.references import HOVER_OPTIMIZER, ORACLE, ZERO_ACTION
+from uavris.agents.references import HOVER_OPTIMIZER, ORACLE
 from uavris.experiments.display.plots import REFERENCE_STYLE, plt, save_figure
 from uavris.experiments.display.tables import MISSING, markdown_table, pct, signed, with_ci
+from uavris.experiments.tools.targets import variant_key
 from uavris.stats import over_units
 
-# Targets of the deployment track (issue 29; docs/study.md, section 21).
+# Targets of the deployment track (docs/study.md, section 2).
 ZERO_SHOT_TARGET, FINETUNED_TARGET = 0.96, 0.98
-# Targets of the rows that choose a place (issue 36): (row, mean, worst hall, what it is)
+# Targets of the rows that choose a place (docs/places.md): (row, mean, worst hall, what it is)
 PLACE_TARGETS: tuple[tuple[str, float, float | None, str], ...] = (
     ("dt-goal-safe", 0.97, 0.92, "zero-shot: the learned planner's place, flown by the goal-conditioned DT"),
     ("plan-semi", 0.99, None, "the semi-amortised planner's place (top places valued by R)"),
     ("dt-goal-finetuned-safe", 0.985, 0.95, "the goal-conditioned DT fine-tuned by trying places"))
-COUNT_TARGET = 0.96  # at every device count, the zero-shot place row (issue 36)
+COUNT_TARGET = 0.96  # at every device count, the zero-shot place row (docs/places.md)
+# The transferred policies of a hall, summarised by the report: the nearest deployment's, their mean, their best.
 NEAREST, MEAN_TRANSFER, BEST_TRANSFER = "transfer-nearest", "transfer-mean", "transfer-best"
-ROWS: tuple[tuple[str, str], ...] = (
-    ("dt-zero-shot", "zero-shot DT"), ("dt-ensemble", "zero-shot DT, ensemble of the seeds' models (mean action)"),
-    ("dt-finetuned", "fine-tuned DT"),
-    ("dt-zero-shot-safe", "zero-shot DT, attitude safety layer"),
-    ("dt-ensemble-safe", "zero-shot DT ensemble, attitude safety layer"),
-    ("dt-finetuned-safe", "fine-tuned DT, attitude safety layer"),
-    ("bc", "behaviour cloning (same data, model and budget)"),
-    ("bc-safe", "behaviour cloning, attitude safety layer"), ("dt-flat", "zero-shot DT, flat encoder (same data)"),
-    ("dt-mixed", "zero-shot DT, mixed-quality data"), ("bc-mixed", "behaviour cloning, mixed-quality data"),
-    (NEAREST, "expert of the nearest training layout"),
-    (MEAN_TRANSFER, "transferred experts, mean"), (BEST_TRANSFER, "transferred experts, best (chosen afterwards)"),
-    (ZERO_ACTION, "zero action (hover)"), (HOVER_OPTIMIZER, "hover, optimiser's phases"), (ORACLE, "oracle"),
-    ("oracle-safe", "oracle under the attitude safety layer"),
-    ("dt-zero-shot-level", "zero-shot DT, attitude held level"),
-    ("dt-ensemble-level", "zero-shot DT ensemble, attitude held level"))
+TRANSFER_LABELS = {NEAREST: "expert of the nearest training layout", MEAN_TRANSFER: "transferred experts, mean",
+                   BEST_TRANSFER: "transferred experts, best (chosen afterwards)"}
+ORACLE_SAFE = variant_key(ORACLE, safe=True)
 PAIRS: tuple[tuple[str, str], ...] = (("dt-zero-shot", HOVER_OPTIMIZER), ("dt-zero-shot", NEAREST),
                                       ("dt-ensemble", HOVER_OPTIMIZER), ("dt-ensemble", NEAREST),
                                       ("dt-zero-shot-safe", HOVER_OPTIMIZER), ("dt-zero-shot-safe", NEAREST),
@@ -66,13 +56,41 @@ PAIRS: tuple[tuple[str, str], ...] = (("dt-zero-shot", HOVER_OPTIMIZER), ("dt-ze
                                       ("dt-goal-finetuned-safe", "dt-goal-safe"))
 
 
-def new_rows(row: dict[str, float]) -> list[str]:
-    """The rows of a layout's scores the report has no name of its own for, in the results' order
-    with the data curve's points last by their number of halls: a row added to the study
-    (:func:`uavris.experiments.study.tracks.track_rows`) shows under its own label."""
-    new = [k for k in row if k not in dict(ROWS) and not k.startswith("transfer-")]
-    curve = sorted((k for k in new if k.startswith("dt-zero-shot-n")), key=lambda k: int(k.rsplit("n", 1)[1]))
-    return [k for k in new if k not in curve] + curve
+def row_facts(results: dict[str, dict[str, Any]]) -> dict[str, dict[str, Any]]:
+    """What each row of a group of halls is, by its variant (the key its seeds are averaged
+    under), as the evaluation stages recorded it (:meth:`uavris.experiments.tools.targets.Row.facts`):
+    its first hall's summary of the row, of its first pre-training seed where it has several."""
+    out: dict[str, dict[str, Any]] = {}
+    for v in next(iter(results.values())).values():
+        if not v["seed"]:
+            out.setdefault(v["variant"], v)
+    return out
+
+
+def row_labels(results: dict[str, dict[str, Any]]) -> dict[str, str]:
+    """Each row's label, as the study names it (its first seed's has no seed in it), and the
+    transferred policies' summaries'."""
+    facts = row_facts(results)
+    labels = {k: v["label"] for k, v in facts.items() if v["kind"] != "transfer"}
+    plans = any(v["plan_of"] is not None for v in facts.values() if v["kind"] == "transfer")
+    return {**labels, **TRANSFER_LABELS,
+            **({NEAREST: "oracle plan of the nearest training layout, flown here"} if plans else {})}
+
+
+def row_order(results: dict[str, dict[str, Any]]) -> list[str]:
+    """The report's rows in the order the study evaluated them, the transferred policies as
+    their summaries (where the first of them stood) and the data curve's models last, by their
+    number of training halls."""
+    facts = row_facts(results)
+    order: list[str] = []
+    for k, v in facts.items():
+        if v["kind"] == "transfer":
+            if NEAREST not in order:
+                order += [NEAREST, MEAN_TRANSFER, BEST_TRANSFER]
+        elif v["training_halls"] is None:
+            order.append(k)
+    return order + sorted((k for k, v in facts.items() if v["training_halls"] is not None),
+                          key=lambda k: facts[k]["training_halls"])
 
 
 def layout_scores(results: dict[str, dict[str, Any]], field: str = "mean") -> dict[str, dict[str, float]]:
@@ -84,12 +102,12 @@ def layout_scores(results: dict[str, dict[str, Any]], field: str = "mean") -> di
     out = {}
     for layout, res in results.items():
         res = {k: {**v, "mean": v[field]} for k, v in res.items() if field in v}
-        row = {k: float(v["mean"]) for k, v in res.items() if not k.startswith("transfer-") and v.get("seed") is None}
+        row = {k: float(v["mean"]) for k, v in res.items() if v["kind"] != "transfer" and v["seed"] is None}
         for variant, by_seed in _seeded(res).items():  # seed 0 last: the order the means were first taken in
             row[variant] = float(np.mean([x for s, x in by_seed.items() if s] + [by_seed[0]]))
-        transfers = {k: v for k, v in res.items() if k.startswith("transfer-")}
+        transfers = {k: v for k, v in res.items() if v["kind"] == "transfer"}
         if transfers:
-            nearest = next((v for v in transfers.values() if "(nearest)" in v["label"]), None)
+            nearest = next((v for v in transfers.values() if v["rank"] == 0), None)
             if nearest is not None:
                 row[NEAREST] = float(nearest["mean"])
             if len(transfers) > 1:  # one transferred policy (the nearest hall's) is its own mean and best
@@ -107,7 +125,7 @@ def seed_scores(results: dict[str, dict[str, Any]]) -> dict[str, dict[str, dict[
 def _seeded(res: dict[str, dict[str, Any]]) -> dict[str, dict[int, float]]:
     out: dict[str, dict[int, float]] = {}
     for v in res.values():
-        if v.get("seed") is not None:
+        if v["seed"] is not None:
             out.setdefault(v["variant"], {})[int(v["seed"])] = float(v["mean"])
     return out
 
@@ -118,17 +136,17 @@ def _excludes_zero(s: dict[str, float]) -> str:
     return "above zero" if s["ci_low"] > 0 else "below zero" if s["ci_high"] < 0 else "includes zero"
 
 
-def deployment_section(scores: dict[str, dict[str, float]], labels: dict[str, str], figure: str | None,
-                       scaling: str | None, where: str = "deployment track", first_seed: int = 0,
-                       seeds: dict[str, dict[str, dict[int, float]]] | None = None) -> tuple[list[str], list[str]]:
-    """The report's lines for the deployment track and its claims (each a bullet, headed ``where``);
-    the seed table (``seeds``: :func:`seed_scores`) names the pre-training seeds from the
-    study's ``first_seed``."""
+def deployment_section(scores: dict[str, dict[str, float]], labels: dict[str, str], order: Sequence[str],
+                       figure: str | None, scaling: str | None, where: str = "deployment track", first_seed: int = 0,
+                       seeds: dict[str, dict[str, dict[int, float]]] | None = None, zero_shot_only: bool = False
+                       ) -> tuple[list[str], list[str]]:
+    """The report's lines for a group of the deployment track's halls and its claims (each a
+    bullet, headed ``where``): the rows of ``order`` (:func:`row_order`) under ``labels``
+    (:func:`row_labels`); the seed table (``seeds``: :func:`seed_scores`) names the
+    pre-training seeds from the study's ``first_seed``; halls evaluated ``zero_shot_only`` are
+    judged by the count target (:func:`_place_claims`)."""
     layouts = list(scores)
-    labels = {**dict(ROWS), **labels}
-    rows = [(k, labels[k]) for k, _ in ROWS if all(k in scores[lay] for lay in layouts)]
-    extra = [k for k in new_rows(scores[layouts[0]]) if all(k in scores[lay] for lay in layouts)]
-    rows += [(k, labels.get(k, k)) for k in extra]
+    rows = [(k, labels[k]) for k in order if all(k in scores[lay] for lay in layouts)]
     frac = {k: [scores[lay][k] / scores[lay][ORACLE] for lay in layouts] for k, _ in rows}
     lines = [f"Unseen layouts: {len(layouts)}; the unit of generalisation is the layout: means and 95% CIs are "
              "over layouts (Student's t), each layout's score being its mean over the evaluation episodes.", ""]
@@ -165,13 +183,13 @@ def deployment_section(scores: dict[str, dict[str, float]], labels: dict[str, st
                             "l" + "r" * len(layouts) + "ll")
     if scaling:
         lines += ["", f"![zero-shot score against the number of training layouts]({scaling})"]
-    claims = _claims(summary, diffs, labels) + _place_claims(summary, diffs, frac, where != "deployment track")
-    return lines, [c.replace("- deployment track: ", f"- {where}: ", 1) for c in claims]
+    claims = _claims(summary, diffs) + _place_claims(summary, diffs, frac, zero_shot_only)
+    return lines, [f"- {where}: {c}" for c in claims]
 
 
 def _place_claims(summary: dict[str, dict[str, float]], diffs: dict[tuple[str, str], dict[str, float]],
                   frac: dict[str, list[float]], zero_shot_only: bool) -> list[str]:
-    """Issue 36's targets, each judged on this group of halls: a row's mean and worst hall as
+    """The place rows' targets (docs/places.md), each judged on this group of halls: a row's mean and worst hall as
     fractions of the oracle, and (zero-shot) above hovering with optimised phases and the
     nearest training hall's plan, paired CIs over halls excluding zero. In a group evaluated
     zero-shot only (another generator's or another device count's halls): the count target."""
@@ -180,7 +198,7 @@ def _place_claims(summary: dict[str, dict[str, float]], diffs: dict[tuple[str, s
         own, hover = summary.get("dt-goal-safe"), diffs.get(("dt-goal-safe", HOVER_OPTIMIZER))
         if own is not None and hover is not None:
             holds = own["mean"] >= COUNT_TARGET and hover["ci_low"] > 0
-            out.append(f"- deployment track: **the learned planner's place flown by the goal-conditioned DT >= "
+            out.append(f"**the learned planner's place flown by the goal-conditioned DT >= "
                        f"{COUNT_TARGET:.0%} of the oracle and above hovering with optimised phases**: "
                        f"{'holds' if holds else 'does not hold'} ({with_ci(own, pct)}; minus hovering "
                        f"{with_ci(hover, signed)} bps/Hz, {_excludes_zero(hover)}).")
@@ -200,13 +218,12 @@ def _place_claims(summary: dict[str, dict[str, float]], diffs: dict[tuple[str, s
         target = f">= {mean:.1%} of the oracle" + (f", no hall below {worst:.0%}" if worst is not None else "")
         if key == "dt-goal-safe":
             target += ", above hovering with optimised phases and the nearest training hall's plan"
-        out.append(f"- deployment track: **{what} {target}**: {'holds' if holds else 'does not hold'} "
+        out.append(f"**{what} {target}**: {'holds' if holds else 'does not hold'} "
                    f"({with_ci(own, pct)} of the oracle, worst hall {pct(low)}{extra}).")
     return out
 
 
-def _claims(summary: dict[str, dict[str, float]], diffs: dict[tuple[str, str], dict[str, float]],
-            labels: dict[str, str]) -> list[str]:
+def _claims(summary: dict[str, dict[str, float]], diffs: dict[tuple[str, str], dict[str, float]]) -> list[str]:
     out = []
     for key, what in (("dt-zero-shot", "zero-shot DT"), ("dt-ensemble", "zero-shot DT ensemble (one controller)"),
                       ("dt-zero-shot-safe", "zero-shot DT under the attitude safety layer"),
@@ -215,7 +232,7 @@ def _claims(summary: dict[str, dict[str, float]], diffs: dict[tuple[str, str], d
         if own is None or near is None or hover is None:
             continue
         holds = own["mean"] >= ZERO_SHOT_TARGET and hover["ci_low"] > 0 and near["ci_low"] > 0
-        out.append(f"- deployment track: **{what} >= {ZERO_SHOT_TARGET:.0%} of the oracle, above hovering with "
+        out.append(f"**{what} >= {ZERO_SHOT_TARGET:.0%} of the oracle, above hovering with "
                    f"optimised phases and above the nearest training hall's expert (paired CIs over layouts "
                    f"excluding zero)**: {'holds' if holds else 'does not hold'} ({with_ci(own, pct)} of the oracle; "
                    f"minus hovering {with_ci(hover, signed)} bps/Hz, {_excludes_zero(hover)}; minus nearest "
@@ -227,7 +244,7 @@ def _claims(summary: dict[str, dict[str, float]], diffs: dict[tuple[str, str], d
         if ft is None or zs is None:
             continue
         holds = ft["mean"] >= FINETUNED_TARGET and ft["mean"] >= zs["mean"]
-        out.append(f"- deployment track: **{what} >= {FINETUNED_TARGET:.0%} of the oracle and not below "
+        out.append(f"**{what} >= {FINETUNED_TARGET:.0%} of the oracle and not below "
                    f"zero-shot**: {'holds' if holds else 'does not hold'} (fine-tuned {with_ci(ft, pct)}; "
                    "fine-tuned minus "
                    f"zero-shot {with_ci(gain, signed) if gain else 'n/a'} bps/Hz).")
@@ -241,28 +258,29 @@ def _claims(summary: dict[str, dict[str, float]], diffs: dict[tuple[str, str], d
                                                        "data)")):
         d = diffs.get((a, b))
         if d is not None:
-            out.append(f"- deployment track: **{what}**: {with_ci(d, signed)} bps/Hz per layout, {_excludes_zero(d)}.")
+            out.append(f"**{what}**: {with_ci(d, signed)} bps/Hz per layout, {_excludes_zero(d)}.")
     return out
 
 
-def layouts_figure(scores: dict[str, dict[str, float]], labels: dict[str, str], stem: Path) -> list[Path]:
-    """Every policy's fraction of the oracle in every unseen layout (dots), with the mean over
-    layouts and its 95% CI (bar)."""
+def layouts_figure(scores: dict[str, dict[str, float]], labels: dict[str, str], order: Sequence[str],
+                   stem: Path, learned: Sequence[str] = ()) -> list[Path]:
+    """Every policy of ``order`` but the oracle as a fraction of the oracle in every unseen layout
+    (dots, the ``learned`` rows in blue), with the mean over layouts and its 95% CI (bar)."""
     layouts = list(scores)
-    keys = [k for k, _ in ROWS if k != ORACLE and all(k in scores[lay] for lay in layouts)]
+    keys = [k for k in order if k != ORACLE and all(k in scores[lay] for lay in layouts)]
     fig, ax = plt.subplots(figsize=(5.6, 0.45 * len(keys) + 1.2))
     rng = np.random.default_rng(0)
     for i, k in enumerate(keys):
         f = np.array([scores[lay][k] / scores[lay][ORACLE] for lay in layouts])
         s = over_units(f)
         y = len(keys) - 1 - i
-        color = REFERENCE_STYLE.get(k, ("#1f77b4" if k.startswith("dt") else "#7f7f7f", "-"))[0]
+        color = REFERENCE_STYLE.get(k, ("#1f77b4" if k in learned else "#7f7f7f", "-"))[0]
         ax.scatter(f, y + rng.uniform(-0.15, 0.15, f.size), s=12, color=color, alpha=0.7, zorder=3)
         ax.errorbar(s["mean"], y, xerr=[[s["mean"] - s["ci_low"]], [s["ci_high"] - s["mean"]]]
                     if not math.isnan(s["ci_low"]) else None, fmt="|", color="k", ms=14, capsize=3, zorder=4)
     ax.axvline(1.0, color="k", ls=":", lw=1.0)
     ax.set_yticks(range(len(keys)))
-    ax.set_yticklabels([labels.get(k, dict(ROWS).get(k, k)) for k in reversed(keys)], fontsize=7)
+    ax.set_yticklabels([labels[k] for k in reversed(keys)], fontsize=7)
     ax.set_xlabel("fraction of the oracle in the unseen layout")
     ax.set_title(f"deployment track: {len(layouts)} unseen layouts (dots), mean and 95% CI over layouts (bars)",
                  fontsize=8)

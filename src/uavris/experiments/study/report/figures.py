@@ -12,7 +12,6 @@ from typing import Any
 
 import numpy as np
 
-from uavris.agents.dt.policy import load_dt_policy
 from uavris.agents.references import REFERENCES
 from uavris.config import get_scenario
 from uavris.experiments.display.plots import REFERENCE_STYLE, plt, reference_lines, save_figure
@@ -37,8 +36,9 @@ def fig3(scenario: str, stage_dir: Path, stem: Path, track: str) -> list[Path]:
             refs[key] = (REFERENCES[key].label, summary["mean"])
             continue
         y = [float(r["avg_sum_rate"]) for r in read_csv(csv)]
-        color, ls = KIND_STYLE.get("transfer" if key.startswith("transfer") else key, ("k", "-"))
-        if key.startswith("transfer"):
+        transfer = summary["kind"] == "transfer"
+        color, ls = KIND_STYLE.get("transfer" if transfer else key, ("k", "-"))
+        if transfer:
             ls = next(transfer_styles)
         ax.plot(np.arange(1, len(y) + 1), y, ls, color=color, lw=1.1, alpha=0.9 if ls == "-" else 0.7,
                 label=f"{summary['label']} ({summary['mean']:.2f})")
@@ -73,27 +73,16 @@ def interactions_figure(scenario: str, finetune_dir: Path, expert_dir: Path, ste
     return save_figure(fig, stem), info
 
 
-def trajectory_figure(scenario: str, model_dir: Path, system: Any, stem: Path, seed: int) -> list[Path]:
-    """3-D view of one evaluation episode of a DT: UAV path, RIS normal every few slots, devices
-    and their safety balls (as circles at the floor of the region)."""
+def trajectory_figure(scenario: str, slots: Path, system: Any, stem: Path, seed: int) -> list[Path]:
+    """3-D view of one evaluation episode of a DT, as its evaluation stage recorded it slot by
+    slot (``slots``: :func:`uavris.experiments.tools.trajectory.write_slots`): UAV path, RIS
+    normal every few slots, devices and their safety balls (as circles at the floor of the region)."""
     from uavris import physics as ph
-    from uavris.env.rollout import rollout
 
-    policy = load_dt_policy(model_dir).policy
-    pos, normals, sims = [], [], []
-
-    def pose(sim: Any) -> None:
-        pos.append(sim.pos[0].copy())
-        normals.append(ph.ris_axes(sim.att[0])[:, 2])
-
-    def track(sim: Any, obs: Any, executed: Any, alive: Any) -> None:
-        sims[:] = [sim]
-        if alive[0]:
-            pose(sim)
-
-    rollout(policy, system, scenario, [seed], on_slot=track)
-    pose(sims[0])  # the hook sees the state before each step; the path ends where the last step left it
-    pos, normals = np.array(pos), np.array(normals)
+    rows = read_csv(slots)
+    pos = np.array([[float(r[c]) for c in ("x", "y", "z")] for r in rows])
+    normals = np.array([ph.ris_axes(np.radians([float(r[c]) for c in ("yaw_deg", "pitch_deg", "roll_deg")]))[:, 2]
+                        for r in rows])
     fig = plt.figure(figsize=(4.8, 4.0))
     ax = fig.add_subplot(projection="3d")
     users = np.array(system.users)

@@ -16,14 +16,7 @@ from uavris.experiments.display.plots import plt, save_figure
 from uavris.experiments.display.tables import markdown_table
 from uavris.experiments.engine.stages import StageRecord
 
-TRACK_COLORS = {"compare": "#7f7f7f", "strong": "#2ca02c", "deploy": "#ff7f0e", "paper": "#1f77b4"}
-
-
-def _track(stage: str) -> str:
-    for prefix in ("compare", "strong", "deploy"):
-        if stage.startswith(prefix):
-            return prefix
-    return "paper"
+TRACK_COLORS = {"compare": "#7f7f7f", "paper": "#1f77b4", "strong": "#2ca02c", "deployment": "#ff7f0e"}
 
 
 def _minutes(t: float, origin: float) -> str:
@@ -46,14 +39,16 @@ def stage_table(records: Sequence[StageRecord], jobs: Sequence[dict[str, Any]], 
                           "lllrrrl")
 
 
-def schedule_figure(jobs: Sequence[dict[str, Any]], workers: int, stem: Path) -> list[Path] | None:
-    """Every job of the invocation as a bar on its worker's row (minutes), coloured by track."""
+def schedule_figure(jobs: Sequence[dict[str, Any]], workers: int, stem: Path, groups: dict[str, str]
+                    ) -> list[Path] | None:
+    """Every job of the invocation as a bar on its worker's row (minutes), coloured by the track
+    its stage belongs to (``groups``: each stage's :attr:`~uavris.experiments.engine.stages.Stage.group`)."""
     placed = [j for j in jobs if j["worker"] is not None and not math.isnan(j["start"])]
     if not placed:
         return None
     fig, ax = plt.subplots(figsize=(6.4, 0.5 * workers + 1.4))
     for j in placed:
-        color = TRACK_COLORS[_track(j["stage"])]
+        color = TRACK_COLORS.get(groups.get(j["stage"], ""), "k")
         ax.barh(j["worker"], (j["end"] - j["start"]) / 60, left=j["start"] / 60, height=0.7, color=color,
                 edgecolor="k" if j["ok"] else "r", lw=0.3)
     for name, color in TRACK_COLORS.items():

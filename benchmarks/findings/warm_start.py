@@ -1,5 +1,7 @@
 """Does a warm-started phase optimiser pay along a trajectory? Single core.
 
+Feeds docs/performance.md.
+
 The per-slot optimiser (:func:`uavris.physics.phase_opt.optimize_slot_phases`) solves
 every slot from scratch: one co-phasing start per active link and 2 random starts, a
 noise continuation over 7 levels (1e6 ... 1 times sigma^2), 30 L-BFGS iterations each,
@@ -34,13 +36,14 @@ always exits 0: it is a report, not a test.
 
 Run from the repository root::
 
-    .venv/bin/python benchmarks/warm_start.py            # ~1 minute
-    .venv/bin/python benchmarks/warm_start.py --quick    # ~20 seconds: 2 episodes per rollout, 1 timing
+    .venv/bin/python benchmarks/findings/warm_start.py            # ~1 minute
+    .venv/bin/python benchmarks/findings/warm_start.py --quick    # ~20 seconds: 2 episodes per rollout, 1 timing
 """
 
 from __future__ import annotations
 
 import os
+import pathlib
 
 # Limit numerical libraries to one thread before numpy (and its BLAS) is imported.
 THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS")
@@ -56,7 +59,9 @@ from dataclasses import dataclass  # noqa: E402
 from typing import Any  # noqa: E402
 
 import numpy as np  # noqa: E402
-from _machine import cpu_model, pin_to_one_core, table  # noqa: E402  (benchmarks/_machine.py)
+
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1]))  # benchmarks/, for _machine.py
+from _machine import cpu_model, pin_to_one_core, table  # noqa: E402
 from numpy.typing import NDArray  # noqa: E402
 
 import uavris  # noqa: E402

@@ -1,12 +1,14 @@
 """How far the progress bar's ETA of a finished `uavris reproduce` run was from the truth.
 
+Feeds docs/timings.md.
+
 ``reproduce`` records, once a minute, the ETA its bar showed (the replay of what is left,
 :mod:`uavris.experiments.engine.forecast`) and tqdm's own rate-based ETA (the work left over the
 rate so far) in ``OUT/schedule.json``; the run's true end is its last job's. This prints,
 per sample after ``--after`` minutes, both ETAs against the truth, and the worst factor of
 each (max of ETA/truth and truth/ETA): ours against tqdm's, measured in the same run.
 
-    .venv/bin/python benchmarks/progress_eta.py runs/quick
+    .venv/bin/python benchmarks/findings/progress_eta.py runs/quick
 """
 
 from __future__ import annotations
@@ -23,11 +25,11 @@ def factor(eta: float | None, truth: float) -> float:
     return max(eta / truth, truth / eta)
 
 
-def main() -> None:
+def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("run", type=Path, help="the output folder of a finished reproduce run")
     ap.add_argument("--after", type=float, default=5.0, help="minutes of the run not judged (default 5)")
-    args = ap.parse_args()
+    args = ap.parse_args(argv)
     sched = json.loads((args.run / "schedule.json").read_text())
     if not sched.get("eta"):
         raise SystemExit(f"{args.run / 'schedule.json'} has no ETA samples (a run older than the ETA record)")

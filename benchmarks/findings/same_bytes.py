@@ -1,6 +1,8 @@
 """Are two study outputs the same? Every stage file of ``A/stages`` against ``B/stages``.
 
-Usage: ``python benchmarks/same_bytes.py runs/w1 runs/w2``
+Feeds docs/reproducing.md.
+
+Usage: ``python benchmarks/findings/same_bytes.py runs/w1 runs/w2``
 
 Issue 18's check: the same command with ``--workers 1`` (pinned to one core) and
 ``--workers 2`` must write the same files. Compared: every file of every stage directory
@@ -141,7 +143,18 @@ def same(a: Path, b: Path, roots: tuple[Path, Path]) -> bool:
     return False
 
 
-def main(a_root: Path, b_root: Path) -> int:
+def main(argv: list[str] | None = None) -> int:
+    import argparse
+
+    parser = argparse.ArgumentParser(description=(__doc__ or "").splitlines()[0])
+    parser.add_argument("a", type=Path, metavar="OUT_A", help="a study's output directory")
+    parser.add_argument("b", type=Path, metavar="OUT_B", help="another, made by the same command")
+    args = parser.parse_args(argv)
+    return compare(args.a, args.b)
+
+
+def compare(a_root: Path, b_root: Path) -> int:
+    """Print every difference between the stage files of two studies; 1 where any differs."""
     sa, sb = a_root / "stages", b_root / "stages"
     stages_a = {p.name for p in sa.iterdir() if p.is_dir()}
     stages_b = {p.name for p in sb.iterdir() if p.is_dir()}
@@ -173,6 +186,4 @@ def main(a_root: Path, b_root: Path) -> int:
 
 
 if __name__ == "__main__":
-    if len(sys.argv) != 3:
-        sys.exit("usage: python benchmarks/same_bytes.py OUT_A OUT_B")
-    sys.exit(main(Path(sys.argv[1]), Path(sys.argv[2])))
+    sys.exit(main())

@@ -1,5 +1,7 @@
 """How far the oracle is from the best a much wider search finds: its optimality gap, per hall.
 
+Feeds docs/results/oracle-gap.md.
+
 In this one process pinned to a single CPU, on ``--halls`` unseen halls (default 8) of
 ``LayoutGenerator(devices=K)`` for each ``K`` of ``--devices`` (default 4), from each hall's
 start (the deployment track's unseen halls, ``layout-unseen-J``):
@@ -17,12 +19,14 @@ batches), and the oracle as a fraction of the best found; then the mean gap over
 its Student-t 95% CI (the hall the unit). The ratio this benchmark states: the oracle's value
 over the search's, and the search's time over the planner's.
 
-Run: ``python benchmarks/oracle_gap.py`` (about 2-3 min per 4-device hall on one core).
+Run: ``python benchmarks/findings/oracle_gap.py`` (about 2-3 min per 4-device hall on one core).
 """
 
 from __future__ import annotations
 
 import os
+import pathlib
+import sys
 
 for _variable in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS"):
     os.environ[_variable] = "1"
@@ -30,7 +34,8 @@ for _variable in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", 
 import argparse  # noqa: E402
 import time  # noqa: E402
 
-from _machine import cpu_model, pin_to_one_core, table  # noqa: E402  (benchmarks/_machine.py)
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1]))  # benchmarks/, for _machine.py
+from _machine import cpu_model, pin_to_one_core, table  # noqa: E402
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -1,5 +1,7 @@
 """Where the rate comes from: the study's main rows split by the number of active pairs, and their energy.
 
+Feeds docs/results/rate-sources.md.
+
 For the deployment track of a finished study (``--study``), in its first ``--halls`` unseen
 halls (default 16), each row of ``--rows`` is evaluated again as the report evaluates it
 (``uavris evaluate OUT --row KEY --layout HALL --trajectory``: the study's models, episodes
@@ -9,12 +11,14 @@ for every row), the mean sum rate in each kind of slot, the average sum rate, an
 propulsion energy of an episode (J). The two-link slots are where interference decides the
 rate (docs/model.md, "The regime"), the one-link slots where the received power does.
 
-Run: ``python benchmarks/rate_sources.py --study runs/quick`` (about 5 min on one core).
+Run: ``python benchmarks/findings/rate_sources.py --study runs/quick`` (about 5 min on one core).
 """
 
 from __future__ import annotations
 
 import os
+import pathlib
+import sys
 
 for _variable in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS"):
     os.environ[_variable] = "1"
@@ -24,7 +28,9 @@ import tempfile  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
-from _machine import cpu_model, pin_to_one_core, table  # noqa: E402  (benchmarks/_machine.py)
+
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1]))  # benchmarks/, for _machine.py
+from _machine import cpu_model, pin_to_one_core, table  # noqa: E402
 
 ROWS = ("dt-goal-safe", "dt-zero-shot-safe", "bc-safe", "plan-learned", "oracle-safe", "hover-optimizer",
         "zero-action")
@@ -40,14 +46,15 @@ def main(argv: list[str] | None = None) -> int:
     import torch
 
     torch.set_num_threads(1)
-    from uavris.experiments.study.rows import read_study, study_row
-    from uavris.experiments.study.tracks import TRACK_SPECS
+    from uavris.experiments.study.finished import Study
+    from uavris.experiments.study.tracks import zero_shot_only
     from uavris.experiments.tools.evaluate import evaluate_target
     from uavris.presets import EVAL_SEED
 
-    rc = read_study(args.study)
-    _, unseen = rc.sites(TRACK_SPECS["deployment"])
-    halls = [w for w in unseen if w.name.count("-") == 2][:args.halls]  # the study's own device count
+    study = Study.open(args.study)
+    rc = study.config
+    _, unseen = study.sites("deployment")
+    halls = [w for w in unseen if not zero_shot_only(w, rc.system)][:args.halls]  # the study's own halls
     print(f"# where the rate comes from\n- cpu: {cpu_model()}; {pinning}\n- study: {args.study}; "
           f"{len(halls)} unseen halls x {rc.eval_episodes} episodes per row\n", flush=True)
     rows = [("row", "slots with 1 link", "rate in them", "slots with 2 links", "rate in them", "average sum rate",
@@ -55,7 +62,7 @@ def main(argv: list[str] | None = None) -> int:
     for key in args.rows:
         parts = []
         for site in halls:
-            row = study_row(args.study, key, "deployment", site)
+            row = study.row(key, "deployment", site)
             with tempfile.TemporaryDirectory() as tmp:
                 summary, _ = evaluate_target(row, site.scenario, rc.eval_episodes, EVAL_SEED, out=Path(tmp),
                                              system=site.system, trajectory=True, references=False)

@@ -1,5 +1,7 @@
-"""Issue 31, "What broke or misled": each rough edge of the command line and the library,
-reproduced as it was reported and checked against what a user expects."""
+"""The command line with halls of one's own and its messages: the flags that set a hall
+(--system.room, --layout) and in which order, every cell checked before the first runs,
+results of two systems kept apart, bad input named as the user knows it, and intervals
+printed as a user reads them."""
 
 from __future__ import annotations
 
@@ -113,7 +115,7 @@ def test_benchmark_checks_every_cell_before_the_first_runs(hall_run: Path, tmp_p
 
 def test_benchmark_checks_the_layout_cells_too(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """A safety distance no start in the 40 m hall keeps: one line naming the layout cell, nothing
-    written (this held before issue 31 too: the generator refuses such a hall; a guard)."""
+    written (the generator refuses such a hall; a guard)."""
     out = tmp_path / "bench"
     err = _one_line(capsys, main(["benchmark", "zero-action", "--preset", "smoke", "--cells", "layouts",
                                   "--system.safety-distance", "30", "--out", str(out), "--no-progress"]))

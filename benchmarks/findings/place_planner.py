@@ -1,5 +1,7 @@
 """The learned planner against the exact planner: the value lost and the time per hall, same run.
 
+Feeds docs/places.md.
+
 Measurements, in this one process pinned to a single CPU with BLAS/OpenMP and torch limited
 to one thread, on ``--halls`` unseen halls (default 8) of ``LayoutGenerator(devices=K)`` for
 each ``K`` of ``--devices`` (default 4 and 8), from each hall's start:
@@ -12,17 +14,19 @@ each ``K`` of ``--devices`` (default 4 and 8), from each hall's start:
   start valued by ``R``, default 3).
 
 Value: ``R`` of each plan's target (the exact plan with its attitude, the learned ones level)
-on the fresh draws plans state their numbers with (:func:`~uavris.agents.oracle.planner.assessed_rate`,
+on the fresh draws plans state their numbers with (:func:`~uavris.agents.oracle.objective.assessed_rate`,
 every target of a hall on the same draws), as a fraction of the exact plan's. Time: wall
 seconds per hall. Targets (issue 36): the semi-amortised planner >= 99% of the exact plan's
 value at >= 20x less time per hall.
 
-Run: ``python benchmarks/place_planner.py --value runs/quick/stages/deploy-value-*/value``.
+Run: ``python benchmarks/findings/place_planner.py --value runs/quick/stages/deploy-value-*/value``.
 """
 
 from __future__ import annotations
 
 import os
+import pathlib
+import sys
 
 THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS")
 for _variable in THREAD_VARIABLES:
@@ -32,7 +36,9 @@ import argparse  # noqa: E402
 import time  # noqa: E402
 
 import numpy as np  # noqa: E402
-from _machine import cpu_model, pin_to_one_core, table  # noqa: E402  (benchmarks/_machine.py)
+
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1]))  # benchmarks/, for _machine.py
+from _machine import cpu_model, pin_to_one_core, table  # noqa: E402
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -47,7 +53,7 @@ def main(argv: list[str] | None = None) -> int:
 
     torch.set_num_threads(1)
     from uavris.agents.oracle import plan_target
-    from uavris.agents.oracle.planner import assessed_rate
+    from uavris.agents.oracle.objective import assessed_rate
     from uavris.agents.place.checkpoint import load_value
     from uavris.agents.place.planner import PlaceSettings, learned_plan
     from uavris.config import SystemConfig

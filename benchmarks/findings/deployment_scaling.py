@@ -1,4 +1,6 @@
 """How the deployment track's generalisation grows with data: zero-shot score in unseen
+
+Feeds docs/halls.md.
 layouts against the number of training layouts.
 
 Runs the study's own deployment track (``uavris reproduce --track deployment``) with
@@ -14,30 +16,33 @@ tables) is in ``OUT/report.md``. Rerunning with more points reuses what is finis
 Run on an otherwise idle machine (quick preset, points 4-32: about 35 minutes on 2 cores;
 the paper preset is the same curve with the paper's budgets)::
 
-    .venv/bin/python benchmarks/deployment_scaling.py
-    .venv/bin/python benchmarks/deployment_scaling.py --preset paper --points 4 8 16 32
+    .venv/bin/python benchmarks/findings/deployment_scaling.py
+    .venv/bin/python benchmarks/findings/deployment_scaling.py --preset paper --points 4 8 16 32
 """
 
 from __future__ import annotations
 
 import argparse
 import os
+import pathlib
+import sys
 import time
 from pathlib import Path
 
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
-from _machine import cpu_model  # noqa: E402  (benchmarks/_machine.py)
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1]))  # benchmarks/, for _machine.py
+from _machine import cpu_model  # noqa: E402
 
 
-def main() -> None:
+def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--preset", default="quick", choices=("smoke", "quick", "paper"))
     parser.add_argument("--points", type=int, nargs="+", default=[4, 8, 16, 32], help="training-layout counts")
     parser.add_argument("--unseen", type=int, default=None, help="unseen layouts (default: the preset's)")
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--out", type=Path, default=None, help="study folder (default runs/scaling-PRESET)")
-    args = parser.parse_args()
+    args = parser.parse_args(argv)
 
     from uavris.agents.references import HOVER_OPTIMIZER, ORACLE
     from uavris.experiments.engine.scheduling import StudyContext

@@ -1,0 +1,97 @@
+"""A study's output directory, opened: ``Study.open(OUT)``, the one way to read a study once it ran.
+
+Lives here: :class:`Study` (its configuration, its pipeline, a stage's directory and result by
+the stage's name, a track's sites and its evaluation in a site, a row of a track in any site)
+and :data:`STUDY_FILE`, which :func:`uavris.experiments.study.reproduce.reproduce` writes before
+any stage runs. ``uavris evaluate OUT --row KEY``, ``uavris claims``, the report and the
+benchmarks that read a study all open it here; a stage's key stays the pipeline's business
+(:mod:`uavris.experiments.engine.stages`). Not here: running a study (:mod:`.reproduce`),
+what a row is (:mod:`.tracks`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from uavris.errors import UavrisError
+from uavris.experiments.engine.scheduling import StudyContext
+from uavris.experiments.engine.stages import Pipeline
+from uavris.experiments.study.config import ReproduceConfig
+from uavris.experiments.study.pipeline import TrackStages, build_pipeline, track_stages
+from uavris.experiments.study.tracks import TRACK_SPECS, Track
+from uavris.experiments.tools.targets import Row
+from uavris.io import read_json, read_yaml
+from uavris.layouts import Site
+
+STUDY_FILE = "study.yaml"  # a study's ReproduceConfig, written by reproduce() before any stage runs
+
+
+@dataclass(frozen=True)
+class Study:
+    """A study's output directory ``out``: what it was asked to be (``config``) and its stages
+    (``pipeline``), finished or not."""
+
+    out: Path
+    config: ReproduceConfig
+    pipeline: Pipeline
+
+    @classmethod
+    def open(cls, out: str | Path, ctx: StudyContext | None = None) -> Study:
+        """The study in ``out``; one line when it holds none."""
+        path = Path(out) / STUDY_FILE
+        if not path.is_file():
+            raise UavrisError(f"{out} is not a study's output directory (no {STUDY_FILE}: written by uavris "
+                              "reproduce)")
+        config = ReproduceConfig.from_dict(read_yaml(path))
+        return cls(Path(out), config, build_pipeline(config, Path(out), ctx or StudyContext(1, "local", None)))
+
+    def directory(self, stage: str) -> Path:
+        """The directory of stage ``stage`` (by its name), finished or not."""
+        if stage not in self.pipeline.stages:
+            raise UavrisError(f"the study in {self.out} has no stage {stage!r}")
+        return self.pipeline.directory(stage)
+
+    def done(self, stage: str) -> Path | None:
+        """The directory of stage ``stage`` where it finished (None where it did not, or is not a stage here)."""
+        return self.pipeline.directory(stage) if stage in self.pipeline.stages and self.pipeline.is_done(stage) \
+            else None
+
+    def result(self, stage: str) -> dict[str, Any] | None:
+        """What a finished stage returned (its ``stage.json``'s result), None where it did not finish."""
+        d = self.done(stage)
+        return read_json(d / "stage.json")["result"] if d else None
+
+    def sites(self, track: Track | str) -> tuple[list[Site], list[Site]]:
+        """The training and the unseen sites of ``track`` in this study."""
+        return self.config.sites(TRACK_SPECS[track] if isinstance(track, str) else track)
+
+    def evaluation(self, track: Track, site: str) -> tuple[Path, dict[str, Any]] | None:
+        """The evaluation stage of ``track`` in ``site`` (its directory and result), where it finished."""
+        name = track.stage(f"evaluate-{site}")
+        d = self.done(name)
+        return (d, read_json(d / "stage.json")["result"]) if d else None
+
+    def track(self, name: str) -> TrackStages:
+        """The stages of track ``name``; one line naming the tracks the study ran."""
+        found = [t for t in track_stages(self.config, StudyContext(1, "local", None)) if t.track.name == name]
+        if not found:
+            raise UavrisError(f"--track {name}: the study in {self.out} ran "
+                              f"{', '.join(t.name for t in self.config.tracks)}")
+        return found[0]
+
+    def row(self, key: str, track: str, site: Site) -> Row:
+        """The row ``key`` of ``track`` in ``site`` (one of the study's halls or a user's), its
+        models read from the study's stage directories; one line naming the rows there are, or
+        the stage not finished."""
+        rows = {r.key: r for r in self.track(track).rows_in(site, self.pipeline)}
+        if key not in rows:
+            raise UavrisError(f"--row {key}: no such row of the {track} track in {site.name}; its rows: "
+                              f"{', '.join(rows)}")
+        row = rows[key]
+        for target in (*([row.target] if row.target is not None else []), *row.members):
+            if target.path is not None and not target.path.exists():
+                raise UavrisError(f"--row {key}: {target.path} does not exist yet (its stage has not finished; "
+                                  f"rerun uavris reproduce --out {self.out})")
+        return row

@@ -1,0 +1,40 @@
+"""The planners' objective and the search that measures the oracle's gap: the episode value of a
+trip worked by hand, and the search finding a known optimum of a made-up R."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from uavris.agents.oracle.objective import episode_value, trip_slots
+from uavris.agents.oracle.search import SearchSettings, exhaustive_plan
+from uavris.config import SystemConfig
+
+
+def test_the_search_finds_a_known_optimum():
+    # A made-up R with one peak at a known pose, and the start on it: the objective's maximum is there
+    # (moving only loses rate), and the search must find it within its last step.
+    cfg = SystemConfig()
+    best_q, best_a = np.array([20.3, 17.6, 5.2]), np.radians([13.0, -7.0, 4.0])
+
+    def valuer(q, att):
+        return 50.0 - np.sum((q - best_q) ** 2, axis=-1) - 100.0 * np.sum((att - best_a) ** 2, axis=-1)
+
+    found = exhaustive_plan(cfg, tuple(best_q), SearchSettings(grid_step=4.0, top=4, refine=2), valuer)
+    assert np.linalg.norm(found.target - best_q) < 0.07
+    off = (found.attitude - best_a + np.pi) % (2 * np.pi) - np.pi  # attitudes are wrapped angles
+    assert np.degrees(np.abs(off)).max() < 0.7
+    assert found.value == pytest.approx(50.0, abs=0.01)
+
+
+def test_the_episode_value_of_a_trip_worked_by_hand():
+    # 100 slots: 10 in flight at the lower of the two poses' rates, 90 hovering at the target's
+    assert episode_value(100, 10, 10.0, 40.0) == pytest.approx(37.0)
+    assert episode_value(100, 10, 40.0, 10.0) == pytest.approx(10.0)  # a worse target: 10 all along
+    assert episode_value(100, 0, 10.0, 40.0) == 40.0  # no trip
+    assert episode_value(100, 250, 10.0, 40.0) == pytest.approx(10.0)  # a trip longer than the episode
+    got = episode_value(100, np.array([[0], [50]]), np.array([20.0, 20.0]), np.array([[20.0, 20.0], [30.0, 10.0]]))
+    assert got.tolist() == [[20.0, 20.0], [25.0, 10.0]]  # (50 x 20 + 50 x 30) / 100; batches broadcast
+    cfg = SystemConfig()
+    far = trip_slots(cfg, np.zeros(3), np.array([[0.0, 0.0, 0.0], [1e4, 0.0, 0.0]]))
+    assert far.tolist() == [0, cfg.horizon]  # no trip; a trip beyond reach takes the whole episode
