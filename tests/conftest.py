@@ -13,6 +13,9 @@ from uavris.config import SystemConfig  # noqa: E402 - after the hypothesis prof
 from uavris.experiments.engine.jobs import configure_threads  # noqa: E402
 
 configure_threads()  # one thread per test process, as in every worker and the command line (engine.jobs)
+# The seal of uavris's own pickles (uavris.runs.seal): one key for the tests and every process they start,
+# none written to the user's home (test_seal_key_is_made_once_and_kept_private tests the key file).
+os.environ.setdefault("UAVRIS_SEAL_KEY", "5eed" * 16)
 
 # Decision Transformer tests: short episodes keep rollouts cheap; the layout does not depend on T.
 SHORT = SystemConfig(horizon=16)

@@ -18,10 +18,11 @@ import pytest
 from uavris.cli import COMMANDS, main
 from uavris.cli import claims as cli_claims
 from uavris.cli import evaluation as cli_evaluation
+from uavris.cli import tools as cli_tools
 from uavris.cli import training as cli_training
-from uavris.cli.claims import ClaimsArgs
+from uavris.cli.claims import ClaimsArgs, FromScratchArgs
 from uavris.cli.evaluation import BenchmarkArgs, EvaluateArgs, SweepArgs
-from uavris.cli.tools import CollectArgs, DemoArgs, PlanArgs, PlotArgs
+from uavris.cli.tools import CollectArgs, DemoArgs, ExportArgs, PlanArgs, PlotArgs
 from uavris.cli.training import CompareArgs, FinetuneArgs, PretrainArgs, ReproduceArgs, TrainArgs
 
 # Arguments that make each command parse up to its numeric flags (paths that exist are
@@ -39,10 +40,12 @@ BASE = {
     "benchmark": ["benchmark", "zero-action", "--cells", "scenarios"],
     "plot": ["plot"],
     "sweep": ["sweep", "zero-action", "--param", "system.nx", "2,4"],
+    "from-scratch": ["from-scratch", "no-study-here"],
 }
 ARGS = {"train": TrainArgs, "evaluate": EvaluateArgs, "compare-algorithms": CompareArgs, "collect": CollectArgs,
         "pretrain-dt": PretrainArgs, "finetune-dt": FinetuneArgs, "reproduce": ReproduceArgs, "demo": DemoArgs,
-        "plan": PlanArgs, "benchmark": BenchmarkArgs, "plot": PlotArgs, "sweep": SweepArgs, "claims": ClaimsArgs}
+        "plan": PlanArgs, "benchmark": BenchmarkArgs, "plot": PlotArgs, "sweep": SweepArgs, "claims": ClaimsArgs,
+        "from-scratch": FromScratchArgs, "export": ExportArgs}
 BAD_INT = ["-1", "abc", "1.5"]
 BAD_FLOAT = ["nan", "inf", "-inf", "abc"]
 # Float fields for which a negative value is meaningful (so only nan/inf/text are wrong).
@@ -123,8 +126,10 @@ def _check_one_line(capsys: pytest.CaptureFixture[str], code: int, what: str) ->
 def _args_class(command: str) -> type:
     """The dataclass a command parses, found from the CLI's own command table (its module, and
     the class the command's function parses: ``<first word>Args`` by the CLI's convention)."""
-    module = {"training": cli_training, "evaluation": cli_evaluation, "claims": cli_claims}[COMMANDS[command][0]]
-    return getattr(module, command.split("-")[0].capitalize() + "Args")
+    module = {"training": cli_training, "evaluation": cli_evaluation, "claims": cli_claims,
+              "tools": cli_tools}[COMMANDS[command][0]]
+    first, whole = command.split("-")[0].capitalize(), "".join(w.capitalize() for w in command.split("-"))
+    return getattr(module, first + "Args", None) or getattr(module, whole + "Args")
 
 
 def test_fuzz_surface_is_wide() -> None:

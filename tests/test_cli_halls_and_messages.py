@@ -203,9 +203,12 @@ def test_python_evaluate_names_its_own_argument() -> None:
 def _bench_summary(fractions: list[float]) -> dict:
     from uavris.experiments.tools.benchmark import _over
 
-    cells = [{"cell": f"layout-unseen-{j}", "kind": "layout", "mean": 10 * f, "ci_low": 9 * f, "ci_high": 11 * f,
-              "zero_action": 5.0, "oracle": 10.0, "fraction_of_oracle": f, "minus_zero_action": 10 * f - 5,
-              "minus_zero_action_low": 9 * f - 5, "minus_zero_action_high": 11 * f - 5}
+    cells = [{"cell": f"layout-unseen-{j}", "kind": "layout", "mean": 10 * f, "ci_low": 9 * f - 6, "ci_high": 11 * f,
+              "zero_action": 5.0, "hover_optimizer": 8.0, "oracle": 10.0, "fraction_of_oracle": f,
+              "minus_zero_action": 10 * f - 5, "minus_zero_action_low": 9 * f - 5, "minus_zero_action_high": 11 * f - 5,
+              "minus_hover_optimizer": 10 * f - 8, "minus_hover_optimizer_low": 9 * f - 8,
+              "minus_hover_optimizer_high": 11 * f - 8, "minus_oracle": 10 * f - 10, "minus_oracle_low": 9 * f - 10,
+              "minus_oracle_high": 11 * f - 10}
              for j, f in enumerate(fractions)]
     return {"target": "t", "preset": "smoke", "episodes": 8, "seed": EVAL_SEED, "cells": cells, "over": _over(cells)}
 
@@ -226,6 +229,11 @@ def test_the_benchmark_prints_an_interval_over_cells_from_three_on() -> None:
     three = benchmark_table(_bench_summary(x))
     row = next(line for line in three.splitlines() if "mean over 3 layouts" in line)
     assert f"70.0% [{100 * (0.7 - half):.1f}, {100 * (0.7 + half):.1f}]" in row, row
+    # a cell's rate interval is bounded below at 0 (9 x 0.5 - 6 < 0); its paired differences beside it
+    cell = next(line for line in three.splitlines() if line.startswith("| layout-unseen-0 "))
+    assert "5.00 [0.00, 5.50]" in cell and "-3.00 [-3.50, -2.50]" in cell and "-5.00 [-5.50, -4.50]" in cell, cell
+    one = benchmark_table(_bench_summary([0.5]))
+    assert "mean over" not in one  # one cell is its own row, never "the mean over 1 layouts"
 
 
 def test_demo_prints_intervals_in_brackets_never_below_zero(capsys: pytest.CaptureFixture[str]) -> None:
@@ -277,3 +285,25 @@ def test_demo_header_says_when_the_energy_budget_ends_an_episode(budget: str | N
     assert slots < 100
     assert (f"T = 100 slots of 0.5 s, or until the {label} J energy budget is spent (hovering: slot {slots})"
             in header), header
+
+
+@pytest.mark.parametrize("args, message", [
+    (["evaluate", "zero-action", "--scenario", "fig2", "--layout", "layout-unseen-1"],
+     "--scenario fig2 is a start in the paper's hall and --layout layout-unseen-1 a hall"),
+    (["evaluate", "zero-action", "--scenario", "fig2", "--track", "strong"], "--track chooses the track of --row"),
+    (["benchmark", "zero-action", "--cells", "scenarios", "--layout", "layout-unseen-1"],
+     "--cells scenarios chooses among the protocol's cells"),
+    (["sweep", "oracle", "hover-optimizer", "oracle", "--param", "system.nx", "2,4"], "oracle named more than once"),
+    (["sweep", "oracle", "--param", "system.devices", "3,4", "--layout", "layout-unseen-1"],
+     "sweeps generated halls of each count"),
+    (["sweep", "oracle", "--param", "system.nx", "2,4", "--scenario", "fig2", "--layout", "layout-unseen-1"],
+     "is a start in the paper's hall"),
+])
+def test_flags_that_conflict_are_one_line_and_write_nothing(args: list[str], message: str, tmp_path: Path,
+                                                            monkeypatch: pytest.MonkeyPatch,
+                                                            capsys: pytest.CaptureFixture[str]) -> None:
+    monkeypatch.chdir(tmp_path)
+    assert main([*args, "--no-progress"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and message in err, err
+    assert not any(tmp_path.rglob("*")), list(tmp_path.rglob("*"))

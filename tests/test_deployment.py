@@ -212,3 +212,17 @@ def test_plan_draws_any_hall(tmp_path, capsys):
             assert out.with_suffix(f".{ext}").stat().st_size > 5000
         printed = capsys.readouterr().out
         assert f"{plan['expected_sum_rate']:.2f} +- " in printed and f"{plan['travel_s']:.1f} s" in printed
+
+
+def test_plan_refuses_a_hall_beyond_its_device_limit_in_one_line(tmp_path, capsys):
+    """A hall of 17 devices would plan for minutes without a word: one line with the limit and
+    the expected time, nothing written."""
+    from uavris.cli import main
+    from uavris.experiments.tools.plan import MAX_PLAN_DEVICES
+    from uavris.layouts import LayoutGenerator, write_layout
+
+    many = write_layout(tmp_path / "many.yaml", LayoutGenerator(devices=MAX_PLAN_DEVICES + 1).layout("unseen", 0))
+    assert main(["plan", str(many), "--out", str(tmp_path / "p"), "--no-progress"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and f"at most {MAX_PLAN_DEVICES} devices" in err and "min" in err, err
+    assert not list(tmp_path.glob("p*"))

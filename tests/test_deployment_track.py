@@ -312,3 +312,43 @@ def test_a_study_of_three_devices_treats_its_own_halls_as_its_own(tmp_path):
     per_hall = [line.split("|")[1].strip() for line in table[:table.index("")]]
     assert per_hall == ["layout-unseen-0-k3", "layout-unseen-1-k3"]
     assert "- deployment track: **fine-tuned DT under the attitude safety layer >= 98%" in report
+
+
+def test_the_studys_controller_leaves_the_study_in_one_directory(deployment_run, tmp_path, capsys):
+    """The goal-conditioned DT with its learned planner, exported by `uavris export`: evaluate,
+    benchmark and sweep take its directory and give the numbers of `evaluate OUT --row`
+    in the same hall, on the same episodes; plan --controller plans with its learned value."""
+    from uavris.cli import main
+
+    out, _ = deployment_run
+    ctl = tmp_path / "ctl"
+    assert main(["export", str(out), "--row", "dt-goal-safe", "--out", str(ctl)]) == 0
+    assert not list(ctl.rglob("*.zip")) and not list(ctl.rglob("*.pkl"))  # weights and JSON only
+    common = ["--layout", "layout-unseen-0", "--episodes", "8", "--no-progress", "--no-references"]
+    assert main(["evaluate", str(out), "--row", "dt-goal-safe", *common, "--out", str(tmp_path / "row")]) == 0
+    assert main(["evaluate", str(ctl), *common, "--out", str(tmp_path / "ctl-e")]) == 0
+    [want] = [read_json(p) for p in (tmp_path / "row").glob("*.json")]
+    [got] = [read_json(p) for p in (tmp_path / "ctl-e").glob("*.json")]
+    assert got["mean"] == want["mean"] and got["system"]["front_margin_deg"] == 1.0
+    # benchmark (the smoke protocol's 8 episodes) of the directory and of the study's row: the same cell
+    for name, target in (("b-ctl", [str(ctl)]), ("b-row", [str(out), "--row", "dt-goal-safe"])):
+        assert main(["benchmark", *target, "--preset", "smoke", "--layout", "layout-unseen-0", "--out",
+                     str(tmp_path / name), "--no-progress"]) == 0
+        [cell] = read_json(tmp_path / name / "benchmark.json")["cells"]
+        assert cell["mean"] == pytest.approx(want["mean"], abs=1e-12), name
+    # a sweep of one cell in that hall (the default Rician factor): the same episodes' mean
+    assert main(["sweep", str(ctl), "--layout", "layout-unseen-0", "--param", "system.rician-factor", "8",
+                 "--episodes", "8", "--workers", "1", "--out", str(tmp_path / "s"), "--no-progress"]) == 0
+    [cell] = [read_json(p) for p in (tmp_path / "s" / "cells").glob("*.json")]
+    assert cell["mean"] == pytest.approx(want["mean"], abs=1e-12)
+    # plan --controller: the learned planner of its row, as plan --learned with the study's value
+    [value] = (out / "stages").glob("deploy-value-*/value")
+    for name, flags in (("p-ctl", ["--controller", str(ctl)]), ("p-v", ["--learned", str(value)])):
+        assert main(["plan", "layout-unseen-0", *flags, "--system.observe-devices", "--out", str(tmp_path / name),
+                     "--no-progress"]) == 0
+    assert read_json(tmp_path / "p-ctl.json")["target"] == read_json(tmp_path / "p-v.json")["target"]
+    [stage] = [p for p in (out / "stages").glob("deploy-evaluate-layout-unseen-0-*") if "-k3-" not in p.name]
+    [transfer] = [k for k, v in read_json(stage / "stage.json")["result"].items() if v["kind"] == "transfer"]
+    capsys.readouterr()
+    assert main(["export", str(out), "--row", transfer, "--out", str(tmp_path / "t")]) == 2
+    assert "plan of" in capsys.readouterr().err  # another hall's plan: no controller of its own

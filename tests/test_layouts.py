@@ -139,6 +139,8 @@ BAD_LAYOUTS = [
     ("devices: [[10, 10], [30, 30, 1]]", "device D1 of"),
     ("devices: [[10, 10, 1], [30, 30, 1, 2]]", "device D2 of"),
     ("devices: [[10, 10, x], [30, 30, 1]]", "users[0] (device D1) must be a point [x, y, z]"),
+    ("devices: [[true, 10, 1], [30, 30, 1]]", "users[0] (device D1) must be a point [x, y, z]"),  # not 1.0
+    ("devices: [[10, 10, 1], [30, 30, 1]]\nstart: [15, \"20\", 4.5]", "start must be a point [x, y, z]"),
     ("devices: []", "devices must be a non-empty list"),
     ("devices: [[10, 10, 1]]", "users must be a list of at least 2 positions"),
     ("name: no devices", "give the device positions as 'devices'"),

@@ -199,6 +199,13 @@ def test_a_named_scenario_is_the_papers_hall_for_a_model_trained_in_another(tmp_
                  "--no-progress", "--no-references"]) == 0
     err = capsys.readouterr().err
     assert "uavris: warning: run was trained in a 40 x 40 x 8 m hall and flies a 30 x 24 x 6 m one" in err
+    # benchmark and sweep say it too, once
+    assert main(["benchmark", str(run), "--preset", "smoke", "--layout", str(hall), "--out", str(tmp_path / "hb"),
+                 "--no-progress"]) == 0
+    assert capsys.readouterr().err.count("was trained in a 40 x 40 x 8 m hall and flies a 30 x 24 x 6 m one") == 1
+    assert main(["sweep", str(run), "--layout", str(hall), "--param", "system.rician-factor", "4,8", "--episodes",
+                 "2", "--workers", "1", "--out", str(tmp_path / "hs"), "--no-progress"]) == 0
+    assert capsys.readouterr().err.count("was trained in a 40 x 40 x 8 m hall and flies a 30 x 24 x 6 m one") == 1
     assert main(["evaluate", str(run), "--layout", "layout-unseen-1", "--episodes", "2", "--out",
                  str(tmp_path / "h"), "--no-progress", "--no-references"]) == 0
     assert "warning" not in capsys.readouterr().err  # another hall of the same room: no warning
@@ -232,6 +239,12 @@ def test_the_simulator_installs_without_the_training_stack(tmp_path: Path) -> No
         "from uavris.cli import main\n"
         "assert main(['evaluate', 'oracle', '--scenario', 'fig2', '--episodes', '1', '--out', sys.argv[1],\n"
         "             '--no-progress']) == 0\n"
+        "assert main(['plan', '--help']) == 0\n"
+        "assert main(['plan', 'layout-unseen-1', '--grid-step', '10', '--out', sys.argv[1] + '/plan',\n"
+        "             '--no-progress']) == 0\n"
+        "assert main(['sweep', 'zero-action', 'hover-optimizer', '--param', 'system.nx', '2,4', '--episodes', '1',\n"
+        "             '--workers', '1', '--out', sys.argv[1] + '/sweep', '--no-progress']) == 0\n"
+        "assert main(['demo', '--episodes', '2']) == 0\n"
         "sys.exit(main(['train', '--preset', 'smoke', '--out', sys.argv[1] + '/run']))\n")
     proc = subprocess.run([sys.executable, str(script), str(tmp_path / "o")], capture_output=True, text=True,
                           timeout=300)
@@ -292,3 +305,70 @@ def test_benchmark_and_claims_never_replace_another_invocations_results(tmp_path
     assert main(["claims", str(tmp_path / "other-study"), "--out", str(claims)]) == 2
     assert "holds the claims of other studies (runs/a)" in capsys.readouterr().err
     assert not (claims / "claims.md").exists()
+
+
+# ------------------------------------------------------------------------------ nothing written outside --out
+def _files(root: Path) -> set[Path]:
+    return {p for p in root.rglob("*") if p.is_file()}
+
+
+@pytest.mark.parametrize("name", ["../../../../escape/hall", "lab/2F", "..", ".hidden", "a b", "/abs/hall"])
+def test_a_hostile_hall_name_is_one_line_and_nothing_is_written(name: str, tmp_path: Path,
+                                                               capsys: pytest.CaptureFixture[str]) -> None:
+    work = tmp_path / "a" / "b"
+    work.mkdir(parents=True)
+    (work / "h.yaml").write_text(f"name: {json.dumps(name)}\n" + HALL)
+    before = _files(tmp_path)
+    for args in (["evaluate", "zero-action", "--layout", str(work / "h.yaml"), "--episodes", "1", "--out",
+                  str(work / "out"), "--no-progress"],
+                 ["plan", str(work / "h.yaml"), "--grid-step", "4", "--no-progress"]):
+        cwd = os.getcwd()
+        os.chdir(work)  # plan's default --out is relative: runs/plans/NAME
+        try:
+            assert main(args) == 2
+        finally:
+            os.chdir(cwd)
+        err = capsys.readouterr().err.strip()
+        assert err.count("\n") == 0 and "layout name" in err and "letters, digits" in err, err
+    assert _files(tmp_path) == before  # nothing written, inside --out or out of it
+
+
+def test_names_that_become_file_names_stay_one_part_of_a_name_inside_out(tmp_path: Path) -> None:
+    """A hall named with a dot and a policy in a file, each evaluated into --out: every file it
+    writes is inside --out, the policy's and the hall's names whole (no suffix cut at a dot)."""
+    (tmp_path / "hall.yaml").write_text("name: lab.v2\n" + HALL)
+    (tmp_path / "control.py").write_text("import numpy as np\n\ndef still(obs):\n"
+                                         "    return np.zeros((obs.shape[0], 22), dtype=np.float32)\n")
+    out = tmp_path / "out"
+    for target in ("zero-action", f"{tmp_path / 'control.py'}:still"):
+        assert main(["evaluate", target, "--layout", str(tmp_path / "hall.yaml"), "--episodes", "1", "--out",
+                     str(out), "--no-progress", "--no-references"]) == 0
+    written = _files(tmp_path) - {tmp_path / "hall.yaml", tmp_path / "control.py"}
+    assert written and all(out in p.parents for p in written)
+    names = sorted(p.name for p in written)
+    assert any(n.startswith("zero-action-lab_v2-seed") and n.endswith(".json") for n in names), names
+    assert any(n.startswith("control_py_still-lab_v2-seed") and n.endswith(".json") for n in names), names
+
+
+def test_ctrl_c_while_the_command_line_starts_is_one_line(tmp_path: Path) -> None:
+    """Ctrl-C during `uavris`'s imports (here raised by an import hook when the environments load,
+    as a signal would arrive there) ends with the one line every later interrupt gives, no traceback."""
+    import subprocess
+    import sys
+
+    script = tmp_path / "starting.py"
+    script.write_text(
+        "import importlib.abc, sys\n"
+        "class Interrupt(importlib.abc.MetaPathFinder):\n"
+        "    def find_spec(self, name, path, target=None):\n"
+        "        if name == 'uavris.env':\n"
+        "            raise KeyboardInterrupt\n"
+        "sys.meta_path.insert(0, Interrupt())\n"
+        "sys.argv[0] = 'uavris'  # as the console script runs\n"
+        "from uavris.cli import main\n"
+        "sys.exit(main(['demo']))\n")
+    proc = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 130 and proc.stderr.strip() == "uavris: interrupted", proc.stderr
+    script.write_text(script.read_text().replace("sys.argv[0] = 'uavris'  # as the console script runs\n", ""))
+    proc = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=120)
+    assert proc.returncode != 130 and "KeyboardInterrupt" in proc.stderr  # the library's import: Python's own

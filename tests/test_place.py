@@ -119,10 +119,38 @@ def test_uavris_plan_learned_writes_the_learned_planners_target(value_model, tmp
                      "--no-progress"]) == 0
     plan = json.loads(out.with_suffix(".json").read_text())
     system, where = LayoutGenerator().layout("unseen", 2).resolve(SystemConfig())
-    assert plan["planner"] == "learned" and plan["expected_sum_rate_se"] is None
-    assert plan["target"] == pytest.approx(learned_plan(value_model, system, where.start).target.tolist())
-    assert "planned by the learned planner in" in capsys.readouterr().out
+    learned = learned_plan(value_model, system, where.start)
+    assert plan["planner"] == "learned" and plan["target"] == pytest.approx(learned.target.tolist())
+    # V's numbers under V's keys: nothing was valued by R, so the R keys say so
+    assert plan["expected_sum_rate"] is None and plan["expected_sum_rate_se"] is None
+    users = np.asarray(system.users)
+    assert plan["learned_value"] == pytest.approx(float(predict(value_model, users, learned.target[None])[0]))
+    printed = capsys.readouterr().out
+    assert "learned value V there" in printed and "expected sum rate there" not in printed
+    assert "planned by the learned planner in" in printed
     assert cli_main(["plan", "layout-unseen-2", "--top-k", "2", "--out", str(out)]) == 2  # needs --learned
+
+
+def test_plan_learned_top_k_states_r_and_draws_v(value_model, tmp_path, monkeypatch):
+    """With --top-k the plan's numbers are R's (and say so), V at the target beside them, and the
+    map of V marks V at the target on its colour bar, never R (R could stretch V's scale)."""
+    from uavris.cli import main as cli_main
+    from uavris.experiments.tools import plan as plan_module
+
+    marked = []
+    limits = plan_module.colour_limits
+    monkeypatch.setattr(plan_module, "colour_limits", lambda rates, v: marked.append((rates, v)) or limits(rates, v))
+    save_value(value_model, tmp_path / "v")
+    out = tmp_path / "plan"
+    assert cli_main(["plan", "layout-unseen-2", "--learned", str(tmp_path / "v"), "--top-k", "2", "--out", str(out),
+                     "--no-progress"]) == 0
+    plan = json.loads(out.with_suffix(".json").read_text())
+    system, _ = LayoutGenerator().layout("unseen", 2).resolve(SystemConfig())
+    v_target = float(predict(value_model, np.asarray(system.users), np.asarray(plan["target"])[None])[0])
+    assert plan["learned_value"] == pytest.approx(v_target) and plan["expected_sum_rate_se"] > 0
+    assert plan["expected_sum_rate"] != pytest.approx(v_target)  # R, on fresh draws: not V
+    [(rates, value)] = marked
+    assert value == pytest.approx(v_target)
 
 
 # ------------------------------------------------------------------------------ the goal-conditioned controller

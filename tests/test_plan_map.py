@@ -98,3 +98,38 @@ def test_the_map_agrees_with_the_plan_and_the_simulator(planned):
     assert far[i, j] < 2 * GRID_STEP
     mean, se = _simulated(hall, (xs[i], ys[j], target[2]))
     assert abs(rates[i, j] - mean) < 3 * se + 0.3, (rates[i, j], mean, se)
+
+
+def test_the_legends_hide_no_device_and_a_plan_that_stays_shows_its_start(tmp_path, monkeypatch):
+    """The plan map's and the trajectory plot's legends sit below their maps (no device under
+    them); a plan that stays draws the start on top of the target, both in the legend."""
+    from uavris.experiments.display import plots
+    from uavris.experiments.tools import plan as plan_module
+    from uavris.experiments.tools import trajectory
+
+    figures = []
+
+    def keep(fig, stem):
+        fig.canvas.draw()
+        figures.append(fig)
+        return []
+
+    monkeypatch.setattr(plan_module, "save_figure", keep)
+    monkeypatch.setattr(trajectory, "save_figure", keep, raising=False)
+    monkeypatch.setattr(plots, "save_figure", keep)
+    system = SystemConfig()
+    start = [15.0, 20.0, 4.5]
+    plan = {"planner": "exact", "expected_sum_rate": 40.0, "layout": {"name": "stays", "start": start},
+            "target": start, "travel_s": 0.0}
+    xs, ys = np.linspace(0, 40, 5), np.linspace(0, 40, 5)
+    plan_module.plan_figure(system, plan, xs, ys, np.full((5, 5), 30.0), tmp_path / "p")
+    log = trajectory.SlotLog(np.array([7]))
+    log.rows = [(7, t, 15.0 + t, 20.0, 4.5, 0.0, 0.0, 0.0, 1, 30.0, 10.0) for t in range(5)]
+    trajectory.trajectory_plot(log, system, tmp_path / "t", "title")
+    assert len(figures) == 2
+    for fig in figures:
+        ax = fig.axes[0]
+        legend = ax.get_legend().get_window_extent()
+        assert legend.y1 <= ax.get_window_extent().y0 + 1  # below the map
+    labels = [t.get_text() for t in figures[0].axes[0].get_legend().get_texts()]
+    assert "target: stay at the start" in labels and "start" in labels

@@ -202,6 +202,33 @@ def test_changed_parameter_invalidates_exactly_its_dependents(tmp_path):
     assert "compare" not in build_pipeline(dataclasses.replace(RC, track="deployment"), tmp_path, ctx).stages
 
 
+def test_an_evaluation_reruns_when_its_hall_changes_under_the_same_name(tmp_path, monkeypatch):
+    """A stage's key covers the hall it reads, not only its name: one device of an unseen hall
+    moved (its name kept) changes that hall's stages' keys and no other (every other is reused);
+    halls of one count no longer share a key."""
+    from uavris.layouts import LayoutGenerator
+
+    rc = dataclasses.replace(RC, track="deployment", ablation=False, device_counts=(3,))
+    ctx = StudyContext(1, "local", None)
+    before = build_pipeline(rc, tmp_path, ctx)
+    evaluations = [n for n in before.stages if n.startswith("deploy-evaluate-")]
+    assert len({before.stages[n].key for n in evaluations}) == len(evaluations) == 4
+    generated = LayoutGenerator.layout
+
+    def moved(self, split, index, base=None):
+        layout = generated(self, split, index, base)
+        if (split, index, self.devices) == ("unseen", 1, 4):
+            x, y, z = layout.users[0]
+            layout = dataclasses.replace(layout, users=((x + 0.25, y, z), *layout.users[1:]))
+        return layout
+
+    monkeypatch.setattr(LayoutGenerator, "layout", moved)
+    after = build_pipeline(rc, tmp_path, ctx)
+    assert after.stages.keys() == before.stages.keys()
+    assert {n for n in before.stages if before.stages[n].key != after.stages[n].key} == {
+        "deploy-evaluate-layout-unseen-1"}
+
+
 def test_stage_keys_chain_through_dependencies(tmp_path):
     ran = []
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import csv
 import json
 import sys
 from pathlib import Path
@@ -213,3 +214,43 @@ def test_benchmark_of_a_reference_and_a_bad_preset(tmp_path: Path, capsys: pytes
     assert [r["fraction_of_oracle"] for r in rows] == [1.0, 1.0]
     err = _one_line(capsys, main(["benchmark", "oracle", "--preset", "huge", "--out", str(tmp_path / "c")]))
     assert "invalid choice 'huge'" in err and not (tmp_path / "c").exists()
+
+
+def test_your_policys_results_in_two_halls_are_two_files(controller: Path, tmp_path: Path) -> None:
+    """FILE.py:NAME evaluated in two halls into its default folder: two results side by side,
+    named after the file and the policy (a dot in the name once cut both to control.json)."""
+    for hall in ("layout-unseen-1", "layout-unseen-2"):
+        assert main(["evaluate", f"{controller}:toward_centre", "--layout", hall, "--episodes", "2",
+                     "--no-progress", "--no-references"]) == 0
+    default = tmp_path / "runs" / "policies"
+    [folder] = [p for p in default.iterdir() if p.is_dir()]
+    names = sorted(p.name for p in (folder / "eval").glob("*.json"))
+    assert len(names) == 2 and all(n.startswith("control_py_toward_centre-layout-unseen-") for n in names), names
+
+
+def test_evaluate_prints_and_records_the_paired_differences_to_the_references(controller: Path, tmp_path: Path,
+                                                                              capsys: pytest.CaptureFixture[str]):
+    """Beside "% of the oracle", your policy minus hovering with optimised phases and minus the
+    oracle, paired on the same episodes with Student's t interval (recomputed here with SciPy from
+    the references evaluated on their own)."""
+    from scipy import stats as sps
+
+    from uavris.agents.evaluation import evaluate
+    from uavris.agents.references import reference_policy
+    from uavris.config import SystemConfig
+
+    out = tmp_path / "e"
+    assert main(["evaluate", f"{controller}:toward_centre", "--scenario", "unseen1", "--episodes", "4", "--out",
+                 str(out), "--no-progress"]) == 0
+    printed = capsys.readouterr().out
+    summary = _summary(out)
+    mine = np.array([float(r["avg_sum_rate"]) for r in csv.DictReader(open(next(out.glob("*.csv"))))])
+    for name in ("hover-optimizer", "oracle"):
+        ref = evaluate(reference_policy(name, SystemConfig()), SystemConfig(), "unseen1", 4, 1_000_000).avg_sum_rate
+        d = mine - ref
+        lo, hi = sps.t.interval(0.95, 3, loc=d.mean(), scale=sps.sem(d))
+        got = summary["paired"][name]
+        assert got["mean"] == pytest.approx(d.mean(), abs=1e-9)
+        assert (got["ci_low"], got["ci_high"]) == pytest.approx((lo, hi), abs=1e-9)
+    assert "beside it on the same episodes: hover-optimizer" in printed and "minus it " in printed
+    assert printed.count("(paired, 95% CI)") == 3  # the zero action, hovering with optimised phases, the oracle

@@ -5,8 +5,17 @@ Lives here: the package's public names. Not here: anything else; the layers are
 ``physics`` -> ``env`` -> ``agents`` -> ``experiments`` -> ``cli`` (README, Layout).
 """
 
-from uavris.config import SCENARIOS, ConfigError, Scenario, SystemConfig, get_scenario
-from uavris.env import ENV_ID, UavRisD2DEnv, UavRisD2DVectorEnv
+try:
+    from uavris.config import SCENARIOS, ConfigError, Scenario, SystemConfig, get_scenario
+    from uavris.env import ENV_ID, UavRisD2DEnv, UavRisD2DVectorEnv
+except KeyboardInterrupt:
+    import os as _os
+    import sys as _sys
+
+    if _os.path.basename(_sys.argv[0]) in ("uavris", "-m"):  # Ctrl-C while `uavris` starts: one line, as later
+        print("uavris: interrupted", file=_sys.stderr)
+        raise SystemExit(130) from None
+    raise
 
 __version__ = "0.3.0"
 

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import numbers
 import sys
 import types
 import typing
@@ -133,11 +134,12 @@ def _finite(x: Any) -> bool:
 
 
 def float_tuple(value: Any, owner: str, name: str, allowed: str) -> tuple[float, ...]:
-    """``value`` as a tuple of floats, or a one-line :class:`ConfigError` naming the field."""
-    try:
-        return tuple(float(v) for v in value)
-    except (TypeError, ValueError):
-        raise ConfigError(f"{owner}.{name} must be {allowed}, got {value!r}") from None
+    """``value`` as a tuple of floats, or a one-line :class:`ConfigError` naming the field: its
+    entries are numbers (YAML's ``true`` or a quoted ``"3"`` is not a coordinate)."""
+    if isinstance(value, (str, bytes)) or not hasattr(value, "__iter__") or any(
+            isinstance(v, bool) or not isinstance(v, numbers.Real) for v in value):
+        raise ConfigError(f"{owner}.{name} must be {allowed}, got {value!r}")
+    return tuple(float(v) for v in value)
 
 
 def check_positive(owner: str, cfg: Any, names: Sequence[str]) -> None:

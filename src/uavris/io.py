@@ -154,6 +154,14 @@ def read_csv(path: str | Path) -> list[dict[str, str]]:
     return _read(path, lambda f: list(csv.DictReader(f)), (csv.Error,), "CSV", newline="")
 
 
+def file_part(text: str, fallback: str = "policy") -> str:
+    """``text`` as one part of a file's name: letters, digits, ``_``, ``-`` and ``@`` (no folder,
+    no dot that a suffix could be taken from), safe for any file system."""
+    import re
+
+    return re.sub(r"[^\w@-]+", "_", text).strip("_") or fallback
+
+
 def read_checkpoint_meta(directory: str | Path, meta_file: str, kind: str, version: int, what: str,
                          described: str) -> dict[str, Any]:
     """A checkpoint directory's JSON metadata (``meta_file``), checked for its ``kind`` and

@@ -58,6 +58,8 @@ OTHER_SPLIT = dict(wall_margin=5.0, spacing=9.0, heights=(0.6, 1.9), start_span=
 # A generated hall's name: its split and index, and its number of devices where that is not
 # the default (layout-unseen-3-k6: unseen hall 3 of the generator with 6 devices).
 _GENERATED = re.compile(r"layout-(train|unseen|other)-(\d+)(?:-k(\d+))?")
+# A hall's name names the files of its results: one plain file-name part, no folder, nothing hidden.
+_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]*")
 DEFAULT_DEVICES = 4  # the paper's device count, the generator's default
 _FILE_KEYS = {"name", "room", "devices", "users", "start"}
 
@@ -76,6 +78,9 @@ class Layout:
     split: str | None = field(default=None, compare=False)
 
     def __post_init__(self) -> None:
+        if not isinstance(self.name, str) or not _NAME.fullmatch(self.name):
+            raise ConfigError(f"layout name {self.name!r}: letters, digits, '.', '_' and '-' only, starting with a "
+                              "letter or digit (it names the files of the hall's results)")
         # Lists from YAML or the CLI become tuples of floats, so a layout is hashable and exact.
         object.__setattr__(self, "users", tuple(float_tuple(u, "Layout", f"users[{k}] (device D{k + 1})",
                                                             "a point [x, y, z] (m)")
@@ -272,7 +277,7 @@ def layout_from_dict(data: Any, where: str, base: SystemConfig | None = None) ->
     for k, device in enumerate(devices, 1):  # before any check of where it is: a point has three coordinates
         if not isinstance(device, (list, tuple)) or len(device) != 3:
             raise ConfigError(f"device D{k} of {where}: expected [x, y, z], got {device!r}")
-    name = str(data.get("name") or Path(where).stem)
+    name = data.get("name") or (re.sub(r"[^A-Za-z0-9._-]+", "_", Path(where).stem).lstrip("._-") or "hall")
     room = data.get("room")
     start = data.get("start")
     if start is None:

@@ -68,8 +68,8 @@ def from_scratch_command(args: list[str]) -> None:
     """Fewer interactions, measured: in a study's first unseen halls, fine-tuning against hybrid
     PPO trained there from scratch (under the safety layer, evaluated every --config.eval-every
     steps on the study's episodes, at most --config.steps): the interactions each needs to reach
-    the fine-tuned DT's level. Hours on one core per hall at the defaults; the file is rewritten
-    after every hall.
+    the fine-tuned DT's level. Hours on one core per hall at the defaults. Writes --out (JSON: each
+    hall's levels and interactions, rewritten after every hall; uavris claims --from-scratch reads it).
     """
     from uavris.experiments.display.tables import markdown_table
     from uavris.experiments.study.from_scratch import from_scratch

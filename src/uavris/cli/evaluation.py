@@ -6,6 +6,7 @@ library. Not here: the rollouts, datasets and figures themselves (:mod:`uavris.e
 
 from __future__ import annotations
 
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Annotated, Literal
@@ -45,7 +46,8 @@ class EvaluateArgs:
     seed: int = EVAL_SEED
     """seed of the first evaluation episode"""
     out: Unset[Path] = None
-    """output directory (default: RUN/eval, or runs/baselines/NAME/eval for a reference)"""
+    """output directory (default: RUN/eval for a run or model, runs/baselines/NAME/eval for a reference,
+    runs/policies/FILE_py_NAME/eval for your own policy, runs/rows/ROW with --row)"""
     phase_control: Unset[PhaseControl] = None
     """optimizer: replace the policy's RIS phases by the per-slot optimiser's (default: as trained)"""
     device: Device = "cpu"
@@ -67,6 +69,9 @@ class EvaluateArgs:
     trajectory: bool = False
     """also write every slot (OUT/...-slots.csv: position, attitude, active pairs, sum rate, energy), draw the first
     episode's flight in the hall (...-trajectory.png) and split the rate by the number of active pairs"""
+    trust_pickle: bool = False
+    """load a run that holds only SB3's pickled archive (uavris 0.3's, or another tool's): reading it runs whatever
+    it holds, so only for runs you trust (uavris's own runs are read from safetensors and JSON)"""
 
 
 def evaluate_command(args: list[str]) -> None:
@@ -81,7 +86,7 @@ def evaluate_command(args: list[str]) -> None:
     Every target but a reference is scored with the zero action, hovering with the optimiser's
     phases and the oracle beside it on the same episodes (in the JSON under "references";
     --no-references: not); your own policy is MODULE:NAME or FILE.py:NAME (default OUT
-    runs/policies/TARGET/eval). For the study's whole protocol use `uavris benchmark`.
+    runs/policies/FILE_py_NAME/eval). For the study's whole protocol use `uavris benchmark`.
     A row of a study's report (--row, TARGET the study's OUT) is evaluated as the report
     evaluates it, here or in a hall of your own (default OUT runs/rows/ROW).
     """
@@ -93,9 +98,12 @@ def evaluate_command(args: list[str]) -> None:
     doc = evaluate_command.__doc__ or ""
     # Two passes: the first finds the target, whose own system is the default the flags change.
     first = parse(EvaluateArgs, args, "uavris evaluate", doc)
+    check_one_start(first.scenario, first.layout)
     if first.row is not None:
         return _evaluate_row(first, args, doc)
-    target = resolve_target(first.target)
+    if first.track is not None:
+        raise UsageError("--track chooses the track of --row; give --row KEY (and TARGET the study's output directory)")
+    target = resolve_target(first.target, first.trust_pickle)
     own = target.own_system()
     if first.scenario is not None and first.layout is None:  # a named scenario is a start in the paper's hall
         own = paper_hall(own)
@@ -108,6 +116,24 @@ def evaluate_command(args: list[str]) -> None:
                                     progress=a.progress, system=a.system, trajectory=a.trajectory,
                                     references=a.references)
     _print_evaluation(a.target, summary, path)
+
+
+def _row_controller(study: str | Path, key: str, track: str, dest: Path) -> Path:
+    """Row ``key`` of ``track`` of the study in ``study`` as a controller directory at ``dest``."""
+    from uavris.experiments.study.finished import Study
+    from uavris.experiments.tools.targets import write_controller
+
+    opened = Study.open(study)
+    _, unseen = opened.sites(track)
+    return write_controller(opened.row(key, track, unseen[0]), dest)
+
+
+def check_one_start(scenario: str | None, layout: str | None) -> None:
+    """A named scenario is a start in the paper's hall (docs/halls.md), a layout a hall with its
+    start: both at once would mix the paper's start with another hall's devices."""
+    if scenario is not None and layout is not None:
+        raise UsageError(f"--scenario {scenario} is a start in the paper's hall and --layout {layout} a hall with its "
+                         "own start; pass one of them")
 
 
 def paper_hall(system: SystemConfig) -> SystemConfig:
@@ -150,9 +176,7 @@ def _evaluate_row(first: EvaluateArgs, args: list[str], doc: str) -> None:
 
 
 def _print_evaluation(what: str, summary: dict, path: Path) -> None:
-    import sys
-
-    from uavris.experiments.display.tables import rate_interval
+    from uavris.experiments.display.tables import interval, rate_interval, signed
 
     if summary.get("warning"):
         print(f"uavris: warning: {summary['warning']}", file=sys.stderr)
@@ -163,8 +187,10 @@ def _print_evaluation(what: str, summary: dict, path: Path) -> None:
         print(f"  slots with {m} active pair{'s' * (m != '1')}: {part['share']:.0%} of the slots, mean sum rate "
               f"{part['rate']:.2f} bps/Hz")
     for name, ref in summary.get("references", {}).items():
+        d = summary["paired"][name]  # the target minus the reference, paired on the same episodes
         print(f"  beside it on the same episodes: {name} {ref['mean']:.2f} bps/Hz "
-              f"(95% CI {rate_interval(ref['ci_low'], ref['ci_high'])})")
+              f"(95% CI {rate_interval(ref['ci_low'], ref['ci_high'])}); {what} minus it "
+              f"{signed(d['mean'])} {interval(d['ci_low'], d['ci_high'], signed)} (paired, 95% CI)")
     if summary.get("fraction_of_oracle") is not None:
         print(f"  {what} reaches {100 * summary['fraction_of_oracle']:.1f}% of the oracle")
 
@@ -192,6 +218,14 @@ class BenchmarkArgs:
     """show a progress bar"""
     system: SystemConfig = SystemConfig()
     """the system: the target's own, with these fields changed"""
+    row: Unset[str] = None
+    """a row of a study's report, the target being the study's output directory: exported as a controller into
+    OUT/controller (uavris export) and scored as the study scores it"""
+    track: TrackName = "deployment"
+    """the track of --row"""
+    trust_pickle: bool = False
+    """load a run that holds only SB3's pickled archive (uavris 0.3's, or another tool's): reading it runs whatever
+    it holds, so only for runs you trust (uavris's own runs are read from safetensors and JSON)"""
 
 
 def benchmark_command(args: list[str]) -> None:
@@ -209,11 +243,24 @@ def benchmark_command(args: list[str]) -> None:
 
     doc = benchmark_command.__doc__ or ""
     first = parse(BenchmarkArgs, args, "uavris benchmark", doc)
+    if first.row is not None:  # the study's row as a controller of its own, kept beside the results
+        from dataclasses import replace
+
+        out = first.out or Path("runs/benchmarks") / first.row
+        controller = _row_controller(first.target, first.row, first.track, out / "controller")
+        args = [str(controller) if x == first.target else x for x in args]
+        first = replace(first, target=str(controller), out=out)
+        args += ["--out", str(out)]
+    if first.layout is not None and first.cells != "all":
+        raise UsageError(f"--cells {first.cells} chooses among the protocol's cells and --layout is a cell of its own; "
+                         "pass one of them")
     default = BenchmarkArgs(first.target, system=resolve_target(first.target).own_system())
     a = parse(BenchmarkArgs, args, "uavris benchmark", doc, default=default)
     output_dir(a.out)
-    _, md = benchmark(a.target, a.preset, a.cells, a.out, resolve_device(a.device), progress=a.progress,
-                      system=a.system, phase_control=a.phase_control, layout=a.layout)
+    rows, md = benchmark(a.target, a.preset, a.cells, a.out, resolve_device(a.device), progress=a.progress,
+                         system=a.system, phase_control=a.phase_control, layout=a.layout, trust_pickle=a.trust_pickle)
+    for warning in dict.fromkeys(r["warning"] for r in rows if r.get("warning")):  # each once
+        print(f"uavris: warning: {warning}", file=sys.stderr)
     print(md.read_text(), end="")
     print(f"-> {md}")
 
@@ -250,6 +297,14 @@ class SweepArgs:
     """show a progress bar"""
     system: SystemConfig = SystemConfig()
     """the system the grid varies"""
+    row: Unset[str] = None
+    """a row of a study's report, the target being the study's output directory: exported as a controller into
+    OUT/controller (uavris export) and scored as the study scores it"""
+    track: TrackName = "deployment"
+    """the track of --row"""
+    trust_pickle: bool = False
+    """load a run that holds only SB3's pickled archive (uavris 0.3's, or another tool's): reading it runs whatever
+    it holds, so only for runs you trust (uavris's own runs are read from safetensors and JSON)"""
 
 
 def sweep_command(args: list[str]) -> None:
@@ -270,9 +325,22 @@ def sweep_command(args: list[str]) -> None:
 
     system, hall = layout_defaults(args, SystemConfig(), "uavris sweep")
     a = parse(SweepArgs, args, "uavris sweep", sweep_command.__doc__ or "", default=SweepArgs((), system=system))
+    row_of = None
+    if a.row is not None:
+        if len(a.targets) != 1:
+            raise UsageError(f"--row {a.row}: name one study (its output directory) as the policy, got "
+                             f"{len(a.targets)}")
+        row_of = a.targets[0]
     if not a.param:
         raise UsageError("sweep: give one or two --param NAME VALUES (see uavris sweep --help)")
+    check_one_start(a.scenario, a.layout)
+    twice = sorted({t for t in a.targets if a.targets.count(t) > 1})
+    if twice:
+        raise UsageError(f"sweep: {', '.join(twice)} named more than once; name each policy once")
     axes = [parse_axis(name, spec) for name, spec in a.param]
+    if a.layout is not None and any(ax.name == "devices" for ax in axes):
+        raise UsageError(f"--param system.devices sweeps generated halls of each count, --layout {a.layout} is one "
+                         "hall; pass one of them")
     if a.out is None:
         whole = repr((a.targets, a.param, a.scenario, a.layout, a.episodes, a.halls, a.system.to_dict())).encode()
         name = "-".join(ax.name for ax in axes) + "-" + hashlib.sha256(whole).hexdigest()[:8]
@@ -280,8 +348,13 @@ def sweep_command(args: list[str]) -> None:
     else:
         out = a.out
     output_dir(out)
+    if row_of is not None:  # the study's row as a controller of its own, kept beside the results
+        from dataclasses import replace
+
+        a = replace(a, targets=(str(_row_controller(row_of, a.row, a.track, out / "controller")),))
     paths = sweep(a.targets, axes, out, base=a.system, scenario=a.scenario or hall, episodes=a.episodes, halls=a.halls,
-                  workers=a.workers, backend=a.backend, progress=a.progress)
+                  workers=a.workers, backend=a.backend, progress=a.progress, trust_pickle=a.trust_pickle,
+                  warn=lambda w: print(f"uavris: warning: {w}", file=sys.stderr))
     print("wrote " + ", ".join(str(p) for p in paths))
 
 

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Literal
 
 import tyro
 
@@ -29,10 +29,12 @@ class PlanArgs:
     grid_step: float = 2.0
     """spacing of the rate map's grid, m (1.0 takes about four times as long)"""
     learned: Unset[Path] = None
-    """a learned value of a pose (a study's stages/value-* folder, made by `uavris reproduce --track
-    deployment`): plan with the argmax of V instead of the exact planner, and map V (milliseconds)"""
+    """a learned value of a pose: a study's OUT/stages/deploy-value-KEY/value folder (made by `uavris reproduce
+    --track deployment`): plan with the argmax of V instead of the exact planner, and map V (milliseconds)"""
     top_k: int = 0
     """with --learned: value its best K places (1-5) and the start by the exact R (semi-amortised; seconds)"""
+    controller: Unset[Path] = None
+    """a controller directory (uavris export): plan with the learned planner its row is told its place by"""
     progress: bool = True
     """show a progress bar"""
     system: SystemConfig = SystemConfig()
@@ -48,17 +50,31 @@ def plan_command(args: list[str]) -> None:
     and the target).
     """
     from uavris.cli.options import layout_defaults
-    from uavris.experiments.tools.plan import check_grid, plan_hall
+    from uavris.experiments.tools.plan import check_devices, check_grid, plan_hall, planning_seconds
     from uavris.layouts import PAPER_LAYOUT, Layout, default_start, resolve_layout
 
     a = parse(PlanArgs, args, "uavris plan", plan_command.__doc__ or "")
+    if a.controller is not None:
+        if a.learned is not None:
+            raise UsageError("--controller and --learned both name a learned value; pass one of them")
+        from dataclasses import replace
+
+        from uavris.experiments.tools.targets import read_controller
+
+        told = read_controller(a.controller).goal_from
+        if told is None or told.kind != "value":
+            raise UsageError(f"--controller {a.controller}: its row is told no learned place (no learned value)")
+        a = replace(a, learned=told.path, top_k=told.top_k)
     if a.layout is None:
         layout = PAPER_LAYOUT if a.system.users == PAPER_LAYOUT.users else Layout(
             "custom", a.system.users, default_start(a.system))
     else:
         layout_defaults(["--layout", a.layout, *args], a.system)  # --system.users beside a layout: one line
         layout = resolve_layout(a.layout, a.system)
-    check_grid(layout.system(a.system), a.grid_step)  # before anything is written
+    hall = layout.system(a.system)
+    check_grid(hall, a.grid_step)  # before anything is written
+    if a.learned is None or a.top_k:
+        check_devices(hall)
     if not 0 <= a.top_k <= 5 or (a.top_k and a.learned is None):
         raise UsageError(f"--top-k must be in 0-5 and needs --learned, got {a.top_k}"
                           + ("" if a.learned is not None else " without --learned"))
@@ -68,16 +84,21 @@ def plan_command(args: list[str]) -> None:
         value, _ = load_value(a.learned)
     out = a.out or Path("runs/plans") / (layout.name + ("-learned" if value is not None else ""))
     output_dir(out.parent, "--out's folder")
+    if value is None and hall.num_users > 8:
+        seconds = planning_seconds(hall.num_users)
+        print(f"planning a hall of {hall.num_users} devices: about {seconds:.0f} s on one core", flush=True)
     plan, paths = plan_hall(layout, a.system, out, a.grid_step, progress=a.progress, value=value, top_k=a.top_k)
     t = plan["target"]
-    se = plan["expected_sum_rate_se"]
-    where = "expected sum rate there" if se is not None else "learned value V there"
+    if plan["expected_sum_rate"] is None:  # the learned planner's V: no R was computed
+        worth = (f"learned value V there {plan['learned_value']:.2f} bps/Hz (at the start "
+                 f"{plan['learned_value_start']:.2f}); V's episode average {plan['learned_episode_value']:.2f}")
+    else:
+        worth = (f"expected sum rate there {plan['expected_sum_rate']:.2f} +- {plan['expected_sum_rate_se']:.2f} "
+                 f"(standard error) bps/Hz (at the start {plan['start_sum_rate']:.2f}); expected episode average "
+                 f"{plan['expected_episode_average']:.2f}")
     print(f"{layout.name}: fly from {[round(v, 2) for v in plan['layout']['start']]} to "
           f"[{t[0]:.2f}, {t[1]:.2f}, {t[2]:.2f}] (attitude {[round(v, 1) for v in plan['attitude_deg']]} deg) in "
-          f"{plan['travel_s']:.1f} s; {where} {plan['expected_sum_rate']:.2f} "
-          + (f"+- {se:.2f} (standard error) " if se is not None else "")
-          + f"bps/Hz (at the start {plan['start_sum_rate']:.2f}); expected episode average "
-          f"{plan['expected_episode_average']:.2f}; planned by the {plan['planner']} planner in "
+          f"{plan['travel_s']:.1f} s; {worth}; planned by the {plan['planner']} planner in "
           f"{1000 * plan['planning_s']:.0f} ms -> {', '.join(str(p) for p in paths)}")
 
 
@@ -96,6 +117,9 @@ class CollectArgs:
     """replace an existing dataset"""
     progress: bool = True
     """show a progress bar"""
+    trust_pickle: bool = False
+    """load a run that holds only SB3's pickled archive (uavris 0.3's, or another tool's): reading it runs whatever
+    it holds, so only for runs you trust (uavris's own runs are read from safetensors and JSON)"""
 
 
 def collect_command(args: list[str]) -> None:
@@ -109,7 +133,8 @@ def collect_command(args: list[str]) -> None:
 
     a = parse(CollectArgs, args, "uavris collect", collect_command.__doc__ or "")
     output_dir(a.out)
-    path = collect(a.experts, a.trajectories, a.out, seed=a.seed, force=a.force, progress=a.progress)
+    path = collect(a.experts, a.trajectories, a.out, seed=a.seed, force=a.force, progress=a.progress,
+                   trust_pickle=a.trust_pickle)
     summary = dataset_summary(path)
     rates = ", ".join(f"{s} {v['avg_sum_rate']:.2f}" for s, v in summary["scenarios"].items())
     print(f"dataset {path} ({summary['dataset_id']}): {summary['episodes']} episodes, {summary['slots']} slots; "
@@ -167,3 +192,39 @@ def plot_command(args: list[str]) -> None:
     output_dir(a.out.parent, "--out's folder")
     paths = plot_runs(list(a.runs), a.out, list(a.labels) if a.labels else None)
     print("wrote " + ", ".join(str(p) for p in paths))
+
+
+# ------------------------------------------------------------------------------------------- export
+@dataclass(frozen=True)
+class ExportArgs:
+    study: Annotated[Path, tyro.conf.Positional, tyro.conf.arg(metavar="OUT")]
+    """a study's output directory (uavris reproduce --out)"""
+    row: str = "dt-goal-safe"
+    """the row of the study's report to export (its key in the stage files): e.g. dt-goal-safe (the goal-conditioned
+    DT told the learned planner's place, under the safety layer), dt-ensemble-safe, dt-zero-shot-safe@s1"""
+    track: Literal["paper", "strong", "deployment"] = "deployment"
+    """the row's track"""
+    out: Unset[Path] = None
+    """the controller directory to write (default: runs/controllers/ROW); evaluate, benchmark, sweep and plan
+    --controller take it like a model"""
+
+
+def export_command(args: list[str]) -> None:
+    """Export a row of a study as one controller directory that `uavris evaluate`, `benchmark`, `sweep` and
+    `plan --controller` take like any model: its models' weights and JSON (no pickle) and how the study evaluates
+    them (the goal-conditioned DT with its learned planner, the safety layer, an ensemble), the same numbers as
+    `uavris evaluate OUT --row ROW` in the same hall. A row that flies another hall's plan (transfer-...) is that
+    hall's and cannot be exported. Writes --out/controller.json and its models' files.
+    """
+    from uavris.experiments.study.finished import Study
+    from uavris.experiments.tools.targets import write_controller
+    from uavris.io import file_part
+
+    a = parse(ExportArgs, args, "uavris export", export_command.__doc__ or "")
+    study = Study.open(a.study)
+    _, unseen = study.sites(a.track)
+    row = study.row(a.row, a.track, unseen[0])  # a controller's models are the study's, whatever the hall
+    out = a.out or Path("runs/controllers") / file_part(row.key)
+    output_dir(out)
+    write_controller(row, out)
+    print(f"exported {row.key} ({row.label_for()}) of {a.study} -> {out}")

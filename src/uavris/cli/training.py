@@ -59,6 +59,9 @@ class TrainArgs:
     """YAML file of TrainConfig fields (e.g. RUN/config.yaml); the preset fills what it leaves out, flags override it
     (default: none, the preset's)"""
     layout: Annotated[Unset[str], tyro.conf.arg(help=LAYOUT_HELP)] = None
+    trust_pickle: bool = False
+    """with --resume: resume from checkpoints this uavris did not write (SB3's archive and the pickles beside it
+    are read by unpickling, which runs whatever they hold; uavris resumes its own, sealed, without this)"""
 
 
 def _nested_update(base: dict[str, Any], changes: dict[str, Any], where: str) -> dict[str, Any]:
@@ -123,7 +126,7 @@ def train_command(args: list[str]) -> None:
     run_dir = a.options.out or default_run_dir(a.run)
     device = check_run_options(a.options, run_dir)
     model = train(a.run, run_dir, resume=a.options.resume, force=a.options.force,
-                  progress=a.options.progress, device=device)
+                  progress=a.options.progress, device=device, trust_pickle=a.trust_pickle)
     final = read_done(run_dir)["final_eval"]
     print(f"trained {model}: average sum rate {final['mean']:.2f} bps/Hz "
           f"(95% CI {rate_interval(final['ci_low'], final['ci_high'])}, {final['episodes']} episodes)")

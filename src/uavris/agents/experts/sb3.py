@@ -1,8 +1,11 @@
-"""Stable-Baselines3 models of the experts: construction, loading, the deterministic policy.
+"""Stable-Baselines3 models of the experts: construction, the policy's files, the deterministic policy.
 
 Lives here: the SB3 class of each algorithm, :func:`build_model` with uavris's
-hyperparameters, :func:`load_model` with a clear error for a corrupt archive, and
-:class:`SB3Policy`, a trained model as an observation-only policy. Not here: the
+hyperparameters; the policy's weights as safetensors and its architecture as JSON
+(:func:`save_policy`, :func:`load_policy`: what every command reads, files that cannot run
+code when read); :func:`load_model`, SB3's own archive (a pickle: only to resume a run uavris
+sealed as its own, or where the user trusts it, :mod:`uavris.runs.seal`); and
+:class:`SB3Policy`, a trained policy as an observation-only policy. Not here: the
 hyperparameters (:mod:`.hyperparams`), training runs (:mod:`uavris.experiments.training.train_expert`).
 """
 
@@ -16,7 +19,13 @@ import numpy as np
 from numpy.typing import NDArray
 
 from uavris.agents.experts.hyperparams import Hyperparams, check_algorithm
+from uavris.agents.experts.vec_env import expert_spaces
+from uavris.config import SystemConfig
 from uavris.errors import CheckpointError
+
+POLICY_KIND, POLICY_FORMAT_VERSION = "uavris-expert-policy", 1
+# What the architecture's JSON may hold: the keyword arguments uavris's models are built with (build_model).
+POLICY_KWARGS = ("net_arch", "use_sde", "n_critics", "share_features_extractor")
 
 
 def algorithm_class(algo: str) -> type:
@@ -51,8 +60,54 @@ def build_model(algo: str, env: Any, hp: Hyperparams, seed: int, tensorboard_log
     return cls("MlpPolicy", env, action_noise=noise, **off)
 
 
+def save_policy(model: Any, algo: str, stem: Path) -> None:
+    """The policy of an SB3 ``model`` as ``STEM.safetensors`` (its weights) and ``STEM.json``
+    (the algorithm and the keyword arguments its network is built with), atomically."""
+    from safetensors.torch import save
+
+    from uavris.io import atomic_write_bytes, write_json
+
+    kwargs = {k: v for k, v in model.policy_kwargs.items() if k in POLICY_KWARGS}
+    if algo == "ppo":  # on-policy algorithms hand use_sde to the policy beside its kwargs
+        kwargs["use_sde"] = bool(model.use_sde)
+    tensors = {k: v.detach().cpu().contiguous().clone() for k, v in model.policy.state_dict().items()}
+    atomic_write_bytes(stem.parent / f"{stem.name}.safetensors", save(tensors))
+    write_json(stem.parent / f"{stem.name}.json", {"kind": POLICY_KIND, "format_version": POLICY_FORMAT_VERSION,
+                                                   "algo": algo, "policy_kwargs": kwargs})
+
+
+def has_policy(stem: Path) -> bool:
+    return (stem.parent / f"{stem.name}.json").is_file()
+
+
+def load_policy(stem: Path, config: SystemConfig, phase_control: str, device: str = "cpu") -> Any:
+    """The policy network :func:`save_policy` wrote at ``stem``, for ``config`` (its spaces), in
+    eval mode; nothing in the files is run. One :class:`CheckpointError` line naming what is wrong."""
+    from safetensors import SafetensorError
+    from safetensors.torch import load
+
+    from uavris.io import read_checkpoint_meta
+
+    meta = read_checkpoint_meta(stem.parent, f"{stem.name}.json", POLICY_KIND, POLICY_FORMAT_VERSION,
+                                "an expert's policy", "an expert's policy")
+    algo, kwargs = meta.get("algo"), meta.get("policy_kwargs")
+    if algo not in ("ddpg", "ppo", "sac", "td3") or not isinstance(kwargs, dict) or set(kwargs) - set(POLICY_KWARGS):
+        raise CheckpointError(f"{stem}.json does not describe an expert's policy (algo {algo!r}, keyword arguments "
+                              f"{sorted(kwargs) if isinstance(kwargs, dict) else kwargs!r})")
+    weights = stem.parent / f"{stem.name}.safetensors"
+    obs_space, act_space = expert_spaces(config, phase_control)
+    try:
+        policy = algorithm_class(algo).policy_aliases["MlpPolicy"](obs_space, act_space, lambda _: 0.0, **kwargs)
+        policy.load_state_dict(load(weights.read_bytes()))
+    except (OSError, SafetensorError, RuntimeError, TypeError, ValueError, KeyError) as e:
+        raise CheckpointError(f"{weights} is missing, corrupt or of another size ({type(e).__name__})") from None
+    policy.set_training_mode(False)
+    return policy.to(device)
+
+
 class SB3Policy:
-    """A trained SB3 model as a deterministic batch policy of the observation; a model trained
+    """A trained SB3 model or policy network (anything with SB3's ``predict`` and
+    ``observation_space``) as a deterministic batch policy of the observation; a model trained
     on the motion (``phase_control="optimizer"``) acts with the optimiser's phases."""
 
     def __init__(self, model: Any, phase_control: str = "agent") -> None:
@@ -83,10 +138,14 @@ def _check_model_file(path: Path) -> None:
         raise CheckpointError(f"checkpoint {path} is corrupt (not a Stable-Baselines3 model)")
 
 
-def load_model(path: str | Path, algo: str, env: Any = None, device: str = "cpu") -> Any:
-    """An SB3 model of ``algo`` from ``path`` (a model.zip or checkpoint)."""
+def load_model(path: str | Path, algo: str, env: Any = None, device: str = "cpu", trust_pickle: bool = False) -> Any:
+    """An SB3 model of ``algo`` from ``path`` (a model.zip or checkpoint): SB3 unpickles it, so
+    only a file sealed as uavris's own or, with ``trust_pickle``, one the user trusts."""
+    from uavris.runs.seal import check_sealed
+
     path = Path(path)
     _check_model_file(path)
+    check_sealed(path, trust_pickle)
     try:
         return algorithm_class(algo).load(path, env=env, device=device)
     except Exception as e:  # noqa: BLE001 - SB3 raises many types for a bad archive

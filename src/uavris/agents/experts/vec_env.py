@@ -25,6 +25,13 @@ from uavris.env.simulator import BatchedSimulator, observation_bounds
 from uavris.env.wrappers import action_dim_for, check_phase_control, optimised_action
 
 
+def expert_spaces(config: SystemConfig, phase_control: str) -> tuple[gym.spaces.Box, gym.spaces.Box]:
+    """The observation and action spaces an expert of ``config`` acts in."""
+    low, high = observation_bounds(config)
+    return (gym.spaces.Box(low, high, dtype=np.float32),
+            gym.spaces.Box(-1.0, 1.0, (action_dim_for(config, phase_control),), dtype=np.float32))
+
+
 class UavRisVecEnv(VecEnv):
     """``num_envs`` UAV-RIS systems as an SB3 VecEnv.
 
@@ -45,10 +52,7 @@ class UavRisVecEnv(VecEnv):
         self.config = config if config is not None else SystemConfig()
         self.sim = BatchedSimulator(self.config, scenario, num_envs)
         self.phase_control = phase_control
-        low, high = observation_bounds(self.config)
-        obs_space = gym.spaces.Box(low, high, dtype=np.float32)
-        act_space = gym.spaces.Box(-1.0, 1.0, (action_dim_for(self.config, phase_control),), dtype=np.float32)
-        super().__init__(num_envs, obs_space, act_space)
+        super().__init__(num_envs, *expert_spaces(self.config, phase_control))
         self.reward_scale = float(reward_scale)
         self._actions: np.ndarray | None = None
         self._seeded = False

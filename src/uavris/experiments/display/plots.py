@@ -25,14 +25,15 @@ plt.rcParams.update({"font.size": 9, "axes.grid": True, "grid.alpha": 0.3, "figu
 
 
 def save_figure(fig: plt.Figure, stem: Path) -> list[Path]:
-    """Write ``stem.png`` and ``stem.pdf`` atomically; returns both paths."""
+    """Write ``stem.png`` and ``stem.pdf`` atomically (the suffixes appended: a dot in the stem's
+    name is kept); returns both paths."""
     import io
 
     out = []
     for ext, kw in (("png", {"dpi": 200}), ("pdf", {})):
         buf = io.BytesIO()
         fig.savefig(buf, format=ext, **kw)
-        path = stem.with_suffix(f".{ext}")
+        path = stem.parent / f"{stem.name}.{ext}"
         atomic_write_bytes(path, buf.getvalue())
         out.append(path)
     plt.close(fig)

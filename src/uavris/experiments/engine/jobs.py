@@ -86,9 +86,12 @@ def configure_threads(torch_now: bool = True) -> None:
     from threadpoolctl import threadpool_limits
 
     if torch_now or "torch" in sys.modules:
-        import torch
-
-        torch.set_num_threads(1)
+        try:
+            import torch
+        except ModuleNotFoundError:  # `pip install uavris` without its training extra: nothing to set
+            pass
+        else:
+            torch.set_num_threads(1)
     threadpool_limits(limits=1)
 
 

@@ -88,6 +88,10 @@ from uavris.io import read_json
 from uavris.layouts import Site
 from uavris.presets import COLLECT_SEED, DEMONSTRATION_CHUNK, EVAL_SEED, TRACK_FINETUNE, TRACK_PRETRAIN
 
+# The experts' run directories: 2 holds the policy as safetensors + JSON (what the study's later stages
+# read; uavris 0.3's runs held SB3's pickled archive only). Part of the experts stages' keys.
+EXPERT_FORMAT = 2
+
 
 def build_pipeline(rc: ReproduceConfig, out: Path, ctx: StudyContext) -> Pipeline:
     """The study's stages in dependency order: the comparison (paper track), then every
@@ -165,7 +169,8 @@ class TrackStages(PlaceStages):
             if self.track.phase_control == "optimizer":  # the strong recipe: imitation of the planning oracle
                 cfgs = {d.name: strong_expert_config(d.name, self.rc.seed, self.rc.preset, self.rc.eval_episodes,
                                                      d.system, d.start) for d in where}
-                stages.append(Stage(self.t(name), {s: c.to_dict() for s, c in cfgs.items()},
+                stages.append(Stage(self.t(name), {"runs": {s: c.to_dict() for s, c in cfgs.items()},
+                                                   "format": EXPERT_FORMAT},
                                     partial(self._run_experts, self.t(name), cfgs),
                                     costs=tuple(train_cost(c) for c in cfgs.values())))
             else:
@@ -185,7 +190,7 @@ class TrackStages(PlaceStages):
         guesses = [rc.expert_algo] if rc.expert_algo != AUTO else list(ALGORITHMS)
         by_algo = [tuple(train_cost(c) for c in self._expert_configs(a, where).values()) for a in guesses]
         config = {"algo": rc.expert_algo, "scenarios": [w.name for w in where], "seed": rc.seed, "preset": rc.preset,
-                  "eval_episodes": rc.eval_episodes, "system": rc.system.to_dict()}
+                  "eval_episodes": rc.eval_episodes, "system": rc.system.to_dict(), "format": EXPERT_FORMAT}
         return Stage(name, config, partial(self._run_paper_experts, name, tuple(where)),
                      ("compare",) if rc.expert_algo == AUTO else (), max(by_algo, key=sum),
                      sum(map(sum, by_algo)) / len(by_algo))
@@ -311,8 +316,11 @@ class TrackStages(PlaceStages):
         keys = [*self.inputs, *self.finetunes(where)]
         rows = self._rows(where, sources, {k: Path() for k in keys})
         cost = evaluate_cost(len(rows) - len(REFERENCE_ROWS), self.rc.eval_episodes, self.horizon, self.control)
+        # the hall it reads (its devices, room and start), not only its name: a changed generator or
+        # layout is evaluated again instead of read back from an older run
         config = {"episodes": self.rc.eval_episodes, "seed": EVAL_SEED, "track": self.track.name,
-                  "format": RESULTS_FORMAT,
+                  "format": RESULTS_FORMAT, "hall": {"system": where.system.to_dict(),
+                                                     "start": list(where.scenario.start)},
                   "rows": [r.key for r in rows], "transfer_from": [s for s, _ in sources],
                   **({"front_margin_deg": self.track.front_margin_deg} if self.track.front_margin_deg else {})}
         return Stage(self.t(f"evaluate-{where.name}"), config, partial(self._run_evaluate, where, sources, keys, cost),

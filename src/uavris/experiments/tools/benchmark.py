@@ -23,10 +23,10 @@ from typing import Any, Literal
 
 import numpy as np
 
-from uavris.agents.references import ORACLE, ZERO_ACTION
+from uavris.agents.references import HOVER_OPTIMIZER, ORACLE, ZERO_ACTION
 from uavris.config import UNSEEN_SCENARIOS, ConfigError, SystemConfig, get_scenario
 from uavris.experiments.display.progress import progress_bar
-from uavris.experiments.display.tables import interval, markdown_table, num, pct, signed
+from uavris.experiments.display.tables import interval, markdown_table, num, pct, rate_interval, signed
 from uavris.experiments.tools.evaluate import evaluate_target
 from uavris.experiments.tools.targets import Target, resolve_target
 from uavris.io import atomic_write_text, other_inputs, read_csv, write_csv, write_json
@@ -36,8 +36,10 @@ from uavris.stats import over_units, t_interval
 
 Cells = Literal["all", "scenarios", "layouts"]
 MIN_UNITS_FOR_CI = 3  # an interval over cells (halls, scenarios) is printed from this many on
-COLUMNS = ("cell", "kind", "mean", "ci_low", "ci_high", "zero_action", "oracle", "fraction_of_oracle",
-           "minus_zero_action", "minus_zero_action_low", "minus_zero_action_high")
+COLUMNS = ("cell", "kind", "mean", "ci_low", "ci_high", "zero_action", "hover_optimizer", "oracle",
+           "fraction_of_oracle", "minus_zero_action", "minus_zero_action_low", "minus_zero_action_high",
+           "minus_hover_optimizer", "minus_hover_optimizer_low", "minus_hover_optimizer_high", "minus_oracle",
+           "minus_oracle_low", "minus_oracle_high")
 
 
 @dataclass(frozen=True)
@@ -69,8 +71,10 @@ def _episodes(path: Path) -> np.ndarray:
 
 def benchmark(target: str, preset: str = "quick", cells: Cells = "all", out: Path | None = None,
               device: str = "cpu", progress: bool = False, system: SystemConfig | None = None,
-              phase_control: str | None = None, layout: str | None = None) -> tuple[list[dict[str, Any]], Path]:
-    """Score ``target`` (whatever ``uavris evaluate`` takes) and the references in every cell.
+              phase_control: str | None = None, layout: str | None = None, trust_pickle: bool = False
+              ) -> tuple[list[dict[str, Any]], Path]:
+    """Score ``target`` (whatever ``uavris evaluate`` takes; ``trust_pickle``: an expert's run with
+    SB3's pickled archive only may be loaded) and the references in every cell.
 
     Writes OUT/CELL/ (each policy's per-episode CSV and summary JSON, as ``uavris evaluate``
     writes them) and OUT/benchmark.{csv,json,md}. Returns the rows and the markdown path.
@@ -78,7 +82,7 @@ def benchmark(target: str, preset: str = "quick", cells: Cells = "all", out: Pat
     """
     check_preset(preset)
     episodes = STUDY[preset]["eval_episodes"]
-    resolved = resolve_target(target)
+    resolved = resolve_target(target, trust_pickle)
     system = system or resolved.own_system()
     # --layout: the user's own hall (its devices and start) instead of the protocol's cells
     todo = [Cell(Path(layout).stem, "layout", layout)] if layout is not None else protocol_cells(preset, cells)
@@ -117,18 +121,25 @@ def _cell(target: Target, cell: Cell, episodes: int, out: Path, system: SystemCo
     # a scenario of the paper is a start in the paper's hall, whatever hall the target was trained in
     place = dict(scenario=cell.name, layout="paper") if cell.kind == "scenario" else dict(scenario=None,
                                                                                            layout=cell.hall)
-    paths = {}
-    for key, who in (("target", target), (ZERO_ACTION, ZERO_ACTION), (ORACLE, ORACLE)):
+    paths, warning = {}, None
+    for key, who in (("target", target), (ZERO_ACTION, ZERO_ACTION), (HOVER_OPTIMIZER, HOVER_OPTIMIZER),
+                     (ORACLE, ORACLE)):
         pc = phase_control if key == "target" else None
-        _, paths[key] = evaluate_target(who, episodes=episodes, seed=EVAL_SEED, out=out / key, phase_control=pc,
-                                        device=device, system=system, references=False, **place)
-    x, zero, oracle = (_episodes(paths[k]) for k in ("target", ZERO_ACTION, ORACLE))
+        summary, paths[key] = evaluate_target(who, episodes=episodes, seed=EVAL_SEED, out=out / key, phase_control=pc,
+                                              device=device, system=system, references=False, **place)
+        warning = warning or summary.get("warning")
+    x, zero, hover, oracle = (_episodes(paths[k]) for k in ("target", ZERO_ACTION, HOVER_OPTIMIZER, ORACLE))
     low, high = t_interval(x)
     d_low, d_high = t_interval(x - zero)
+    paired = {}  # the target minus each reference, per episode (the same episodes): mean and t interval
+    for name, ref in (("hover_optimizer", hover), ("oracle", oracle)):
+        lo, hi = t_interval(x - ref)
+        paired.update({f"minus_{name}": float((x - ref).mean()), f"minus_{name}_low": lo, f"minus_{name}_high": hi})
     return {"cell": cell.name, "kind": cell.kind, "mean": float(x.mean()), "ci_low": low, "ci_high": high,
             "zero_action": float(zero.mean()), "oracle": float(oracle.mean()),
             "fraction_of_oracle": float(x.mean() / oracle.mean()), "minus_zero_action": float((x - zero).mean()),
-            "minus_zero_action_low": d_low, "minus_zero_action_high": d_high}
+            "minus_zero_action_low": d_low, "minus_zero_action_high": d_high, "hover_optimizer": float(hover.mean()),
+            **paired, **({"warning": warning} if warning else {})}
 
 
 def _over(rows: list[dict[str, Any]]) -> dict[str, dict[str, float]]:
@@ -147,23 +158,30 @@ def benchmark_table(summary: dict[str, Any]) -> str:
     def percent(x: float) -> str:
         return f"{100 * x:.1f}"
 
-    rows = [(r["cell"], f"{num(r['mean'])} {interval(r['ci_low'], r['ci_high'])}", num(r["zero_action"]),
-             num(r["oracle"]), pct(r["fraction_of_oracle"]),
-             f"{signed(r['minus_zero_action'])} "
-             f"{interval(r['minus_zero_action_low'], r['minus_zero_action_high'], signed)}")
+    def minus(r: dict[str, Any], ref: str) -> str:
+        return f"{signed(r[f'minus_{ref}'])} {interval(r[f'minus_{ref}_low'], r[f'minus_{ref}_high'], signed)}"
+
+    rows = [(r["cell"], f"{num(r['mean'])} {rate_interval(r['ci_low'], r['ci_high'])}", num(r["zero_action"]),
+             num(r["hover_optimizer"]), num(r["oracle"]), pct(r["fraction_of_oracle"]), minus(r, "zero_action"),
+             minus(r, "hover_optimizer"), minus(r, "oracle"))
             for r in summary["cells"]]
     for kind, s in summary["over"].items():
         f, d = s["fraction_of_oracle"], s["minus_zero_action"]
+        if f["n"] < 2:
+            continue  # one cell is its own row
         few = f"[n/a: {f['n']} {kind}{'s' * (f['n'] != 1)}]"  # Student's t on 1 degree of freedom reads nothing
         ci = interval(f["ci_low"], f["ci_high"], percent) if f["n"] >= MIN_UNITS_FOR_CI else few
         dci = interval(d["ci_low"], d["ci_high"], signed) if d["n"] >= MIN_UNITS_FOR_CI else few
-        rows.append((f"**mean over {f['n']} {kind}s** (95% CI over {kind}s)", "", "", "",
-                     f"{percent(f['mean'])}% {ci}", f"{signed(d['mean'])} {dci}"))
+        rows.append((f"**mean over {f['n']} {kind}s** (95% CI over {kind}s)", "", "", "", "",
+                     f"{percent(f['mean'])}% {ci}", f"{signed(d['mean'])} {dci}", "", ""))
     lines = [f"# {summary['target']} on the study's protocol ({summary['preset']} preset)", "",
              f"{summary['episodes']} episodes per cell from seed {summary['seed']}, the same as the "
-             f"report's; average sum rate in bps/Hz, 95% CIs over episodes. The means over cells have a "
+             f"report's; average sum rate in bps/Hz, 95% CIs over episodes (a rate's bounded below at 0); the "
+             "differences are paired on the same episodes. The means over cells have a "
              f"Student-t 95% CI over cells from {MIN_UNITS_FOR_CI} cells on (n/a with fewer: on one degree of "
              "freedom the interval spans more than the values it summarises).", "",
-             *markdown_table(("cell", "target [95% CI]", "zero action", "oracle", "fraction of oracle",
-                              "target - zero action [95% CI]"), rows, "lrrrrr")]
+             *markdown_table(("cell", "target [95% CI]", "zero action", "hover, optimiser's phases", "oracle",
+                              "fraction of oracle", "target - zero action [95% CI]",
+                              "target - hover, optimiser's phases [95% CI]", "target - oracle [95% CI]"), rows,
+                             "lrrrrrrrr")]
     return "\n".join(lines) + "\n"

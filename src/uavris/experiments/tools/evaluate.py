@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-import re
 from pathlib import Path
 from typing import Any
 
@@ -27,10 +26,11 @@ from uavris.env.rollout import policy_phase_control
 from uavris.env.wrappers import check_phase_control
 from uavris.errors import UavrisError
 from uavris.experiments.display.progress import progress_bar
-from uavris.experiments.tools.targets import Row, Target, as_row
+from uavris.experiments.tools.targets import Row, Target, as_row, resolve_target
 from uavris.experiments.tools.trajectory import SlotLog, rate_by_active_pairs, trajectory_plot, write_slots
-from uavris.io import write_csv, write_json
+from uavris.io import file_part, write_csv, write_json
 from uavris.layouts import Layout, resolve_layout
+from uavris.stats import t_interval
 
 
 def evaluated_key(summary: dict[str, Any]) -> str:
@@ -44,8 +44,8 @@ def evaluated_key(summary: dict[str, Any]) -> str:
 def write_results(res: EpisodeResults, summary: dict[str, Any], stem: Path) -> None:
     rows = zip(res.seeds.tolist(), res.avg_sum_rate.tolist(), res.episode_return.tolist(), res.length.tolist(),
                res.energy_used.tolist())
-    write_csv(stem.with_suffix(".csv"), ("seed", "avg_sum_rate", "return", "length", "energy_j"), rows)
-    write_json(stem.with_suffix(".json"), summary)
+    write_csv(stem.parent / f"{stem.name}.csv", ("seed", "avg_sum_rate", "return", "length", "energy_j"), rows)
+    write_json(stem.parent / f"{stem.name}.json", summary)
 
 
 def evaluate_target(target: str | Target | Row, scenario: str | Scenario | None, episodes: int, seed: int,
@@ -71,7 +71,10 @@ def evaluate_target(target: str | Target | Row, scenario: str | Scenario | None,
     check_episodes(episodes, seed, "--")  # the command's flags
     if phase_control is not None:
         check_phase_control(phase_control)
-    study_row = isinstance(target, Row)
+    if isinstance(target, (str, Path)):
+        target = resolve_target(target)
+    # a study's row, or one exported as a controller directory: named by its key
+    study_row = isinstance(target, Row) or target.kind == "controller"
     row = as_row(target)
     system = system or row.own_system()
     if layout is not None:
@@ -120,17 +123,26 @@ def evaluate_target(target: str | Target | Row, scenario: str | Scenario | None,
         summary["references"] = {name: r.summary() for name, r in refs.items()}
         oracle = summary["references"][ORACLE]["mean"]
         summary["fraction_of_oracle"] = summary["mean"] / oracle if oracle > 0 else None
+        # the target minus each reference, paired on the same episodes: the difference a comparison reads
+        summary["paired"] = {name: paired_summary(res.avg_sum_rate - r.avg_sum_rate) for name, r in refs.items()}
     suffix = "-optimizer-phases" if phase_control == "optimizer" else ""
-    default = Path("runs/rows") / row.key if study_row or row.target is None else row.target.default_out()
-    stem = Path(out or default) / (f"{file_token(row, study_row)}-{where.name}-seed{seed}-n{episodes}{suffix}-"
-                                   f"{evaluated_key(summary)}")
+    default = (target.default_out() if isinstance(target, Target) and target.kind == "controller" else
+               Path("runs/rows") / row.key if study_row or row.target is None else row.target.default_out())
+    stem = Path(out or default) / (f"{file_token(row, study_row)}-{file_part(where.name)}-seed{seed}-n{episodes}"
+                                   f"{suffix}-{evaluated_key(summary)}")
     if log is not None:
         summary["active_pairs"] = {str(m): v for m, v in rate_by_active_pairs(log.rows).items()}
         write_slots(log, stem.parent / f"{stem.name}-slots.csv")
         trajectory_plot(log, evaluated, stem.parent / f"{stem.name}-trajectory",
                         f"{row.key} in {where.name}, episode seed {seed}")
     write_results(res, summary, stem)
-    return summary, stem.with_suffix(".json")
+    return summary, stem.parent / f"{stem.name}.json"
+
+
+def paired_summary(d: Any) -> dict[str, float]:
+    """A paired difference per episode: its mean and Student-t 95% interval."""
+    low, high = t_interval(d)
+    return {"mean": float(np.mean(d)), "ci_low": low, "ci_high": high}
 
 
 def outside_training(row: Row, system: SystemConfig, name: str) -> str | None:
@@ -164,8 +176,10 @@ def hall_name(system: SystemConfig, layout: str | Layout | None, site: str) -> s
 
 def file_token(row: Row, study_row: bool) -> str:
     """What a result file's name starts with: the row, the reference or the policy evaluated
-    (two targets into one folder never share a file), safe for any file system."""
+    (a user's ``path/FILE.py:NAME`` as ``FILE_py_NAME``; two targets into one folder never
+    share a file)."""
     t = row.target
-    name = (row.key if study_row or t is None else str(t.reference) if t.kind == "reference" else
-            t.name if t.kind == "user" else Path(t.name).name)
-    return re.sub(r"[^\w.@-]+", "_", name).strip("_") or "policy"
+    if not study_row and t is not None and t.kind == "user":
+        return t.file_name()
+    return file_part(row.key if study_row or t is None else str(t.reference) if t.kind == "reference" else
+                     Path(t.name).name)

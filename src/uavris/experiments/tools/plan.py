@@ -19,15 +19,13 @@ from __future__ import annotations
 
 import time
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from uavris.agents.oracle import PlanSettings, expected_optimised_rate, plan_target
 from uavris.agents.oracle.objective import feasible
-from uavris.agents.place.planner import PlaceSettings, learned_plan
-from uavris.agents.place.value import PoseValue, predict
 from uavris.config import SystemConfig
 from uavris.errors import ConfigError
 from uavris.experiments.display.plots import plt, save_figure
@@ -35,30 +33,60 @@ from uavris.experiments.display.progress import progress_bar
 from uavris.io import write_json
 from uavris.layouts import Layout
 
+if TYPE_CHECKING:  # the learned value needs torch (the training extra); the exact plan does not
+    from uavris.agents.place.value import PoseValue
+
 MAP_CHUNK = 64  # poses valued per call (the progress bar's step)
 
 
 def plan_layout(layout: Layout, system: SystemConfig, settings: PlanSettings | None = None,
                 value: PoseValue | None = None, top_k: int = 0) -> dict[str, Any]:
-    """The plan for ``layout`` on ``system``: target pose, expected sum rate there and at the
-    start, travel time, the plan's expected episode average, and the seconds planning took.
-    The planning oracle's by default; with a learned ``value``, the learned planner's (its
-    numbers ``V``'s, no standard error), with ``top_k`` > 0 its top places valued by ``R``."""
+    """The plan for ``layout`` on ``system``: target pose, expected sum rate ``R`` there and at
+    the start, travel time, the plan's expected episode average, and the seconds planning took.
+    The planning oracle's by default; with a learned ``value``, the learned planner's: its
+    numbers are ``V``'s, under their own keys (``learned_value``, ``learned_value_start``,
+    ``learned_episode_value``; the ``R`` keys None: nothing was valued by ``R``), and with
+    ``top_k`` > 0 its top places valued by ``R`` (the ``R`` keys, with ``V`` at the target beside)."""
     hall, scenario = layout.resolve(system)
     began = time.perf_counter()
     if value is None:
         plan, planner = plan_target(hall, scenario.start, settings or PlanSettings()), "exact"
     else:
+        from uavris.agents.place.planner import PlaceSettings, learned_plan
+
         plan = learned_plan(value, hall, scenario.start, PlaceSettings(top_k=top_k))
         planner = f"learned, top {top_k} valued by R" if top_k else "learned"
     seconds = time.perf_counter() - began
-    se = plan.rate_se if value is None or top_k else None  # V's numbers have no sampling error to state
-    return {"layout": layout.to_dict(), "planner": planner, "target": [float(v) for v in plan.target],
-            "attitude_deg": [float(v) for v in np.degrees(plan.attitude)],
-            "expected_sum_rate": plan.rate, "expected_sum_rate_se": se, "start_sum_rate": plan.start_rate,
-            "travel_slots": plan.travel_slots,
-            "travel_s": plan.travel_slots * hall.slot_s, "expected_episode_average": plan.value,
-            "poses_valued": plan.poses_valued, "planning_s": seconds}
+    out = {"layout": layout.to_dict(), "planner": planner, "target": [float(v) for v in plan.target],
+           "attitude_deg": [float(v) for v in np.degrees(plan.attitude)], "travel_slots": plan.travel_slots,
+           "travel_s": plan.travel_slots * hall.slot_s, "poses_valued": plan.poses_valued, "planning_s": seconds}
+    if value is not None and not top_k:  # V's numbers: no R was computed, and V has no sampling error to state
+        return {**out, "expected_sum_rate": None, "expected_sum_rate_se": None, "start_sum_rate": None,
+                "expected_episode_average": None, "learned_value": plan.rate, "learned_value_start": plan.start_rate,
+                "learned_episode_value": plan.value}
+    learned = {} if value is None else {
+        "learned_value": float(_v(value, np.asarray(hall.users, dtype=np.float64), plan.target[None])[0])}
+    return {**out, "expected_sum_rate": plan.rate, "expected_sum_rate_se": plan.rate_se,
+            "start_sum_rate": plan.start_rate, "expected_episode_average": plan.value, **learned}
+
+
+# The exact plan's time grows with the devices about as K^2.4 (one core, measured: 3.6 s at 4 devices,
+# 18.5 s at 8, 51 s at 12): 16 devices take about 2 minutes, 30 would take over 10.
+MAX_PLAN_DEVICES = 16
+
+
+def planning_seconds(devices: int) -> float:
+    """The exact plan's expected seconds on one core for a hall of ``devices`` (the fit above)."""
+    return 3.6 * (devices / 4) ** 2.4
+
+
+def check_devices(system: SystemConfig) -> None:
+    """One :class:`ConfigError` line for a hall beyond :data:`MAX_PLAN_DEVICES` devices."""
+    if system.num_users > MAX_PLAN_DEVICES:
+        raise ConfigError(f"uavris plan plans halls of at most {MAX_PLAN_DEVICES} devices (about "
+                          f"{planning_seconds(MAX_PLAN_DEVICES) / 60:.0f} min on one core; the time grows as K^2.4: "
+                          f"{system.num_users} devices would take about "
+                          f"{planning_seconds(system.num_users) / 60:.0f} min)")
 
 
 MAX_MAP_POSES = 10_000  # about 3 min of one core (~19 ms a pose): a 0.4 m grid over the 40 m hall
@@ -101,7 +129,7 @@ def rate_map(system: SystemConfig, altitude: float, step: float, progress: bool 
     ok = np.flatnonzero(feasible(system, poses))
     values = np.full(len(poses), np.nan)
     if value is not None:
-        values[ok] = predict(value, np.asarray(system.users, dtype=np.float64), poses[ok])
+        values[ok] = _v(value, np.asarray(system.users, dtype=np.float64), poses[ok])
         return xs, ys, values.reshape(len(xs), len(ys))
     with progress_bar(len(ok), "rate map", "pose", progress, leave=False) as bar:
         for start in range(0, len(ok), MAP_CHUNK):
@@ -111,17 +139,26 @@ def rate_map(system: SystemConfig, altitude: float, step: float, progress: bool 
     return xs, ys, values.reshape(len(xs), len(ys))
 
 
+def _v(value: PoseValue, users: NDArray, poses: NDArray) -> NDArray[np.float64]:
+    from uavris.agents.place.value import predict
+
+    return predict(value, users, poses)
+
+
 def plan_figure(system: SystemConfig, plan: dict[str, Any], xs: NDArray, ys: NDArray, rates: NDArray,
                 stem: Path) -> list[Path]:
-    """The rate map with the devices, their safety balls at the map's altitude, start and target."""
+    """The map (``rates``: ``R``, or a learned planner's ``V``) with the devices, their safety
+    balls at the map's altitude, start and target; the colour bar marks the target's value of
+    the map's own quantity (``V`` at it for a learned map, ``R`` with its attitude for ``R``'s)."""
     learned = plan.get("planner", "exact") != "exact"
+    marked = plan["learned_value"] if learned else plan["expected_sum_rate"]  # the map's quantity at the target
     fig, ax = plt.subplots(figsize=(4.8, 4.2))
     cmap = plt.get_cmap("viridis").with_extremes(bad="0.85")  # grey: inside a safety ball, no place to be
-    vmin, vmax = colour_limits(rates, plan["expected_sum_rate"])
+    vmin, vmax = colour_limits(rates, marked)
     mesh = ax.pcolormesh(xs, ys, rates.T, shading="nearest", cmap=cmap, vmin=vmin, vmax=vmax)
     ax.grid(False)
     bar = fig.colorbar(mesh, ax=ax, label="learned value V (bps/Hz)" if learned else "expected sum rate (bps/Hz)")
-    bar.ax.axhline(plan["expected_sum_rate"], color="#d62728", lw=1.2)  # the target's, with its attitude
+    bar.ax.axhline(marked, color="#d62728", lw=1.2)  # the target's
     users = np.asarray(system.users)
     altitude = plan["target"][2]
     ring = np.linspace(0, 2 * np.pi, 90)
@@ -132,8 +169,11 @@ def plan_figure(system: SystemConfig, plan: dict[str, Any], xs: NDArray, ys: NDA
         ax.annotate(f"D{k + 1}", u[:2], textcoords="offset points", xytext=(4, 4), color="k", fontsize=7)
     ax.scatter(users[:, 0], users[:, 1], marker="^", color="w", edgecolor="k", s=36, label="devices", zorder=3)
     start, target = plan["layout"]["start"], plan["target"]
-    ax.scatter(*start[:2], marker="o", color="#ff7f0e", edgecolor="k", s=36, label="start", zorder=3)
-    ax.scatter(*target[:2], marker="*", color="#d62728", edgecolor="k", s=110, label="target", zorder=3)
+    stays = bool(np.allclose(start, target))
+    ax.scatter(*target[:2], marker="*", color="#d62728", edgecolor="k", s=110, zorder=3,
+               label="target: stay at the start" if stays else "target")
+    ax.scatter(*start[:2], marker="o", color="#ff7f0e", edgecolor="k", s=16 if stays else 36, label="start",
+               zorder=4)  # above the target: a plan that stays shows both
     ax.plot([start[0], target[0]], [start[1], target[1]], color="#d62728", lw=0.8, ls="--")
     ax.set_xlim(0, system.room[0])
     ax.set_ylim(0, system.room[1])
@@ -141,8 +181,10 @@ def plan_figure(system: SystemConfig, plan: dict[str, Any], xs: NDArray, ys: NDA
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")
     what = "learned value V" if learned else "expected sum rate"
+    stated = (f"V {plan['learned_value']:.2f}" if plan["expected_sum_rate"] is None else
+              f"R {plan['expected_sum_rate']:.2f}" + (f" (V {plan['learned_value']:.2f})" if learned else ""))
     ax.set_title(f"{plan['layout']['name']}: {what} at z = {altitude:.2f} m (level RIS)\n"
-                 f"target {np.round(target, 2).tolist()}: {plan['expected_sum_rate']:.2f} bps/Hz, "
+                 f"target {np.round(target, 2).tolist()}: {stated} bps/Hz, "
                  f"{plan['travel_s']:.1f} s from the start", fontsize=8)
     # below the map, where it hides no device
     ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.14), ncol=3, frameon=False)
@@ -163,8 +205,10 @@ def plan_hall(layout: Layout, system: SystemConfig, out: Path, grid_step: float,
     learned ``value``, its plan and its map (:func:`plan_layout`, :func:`rate_map`)."""
     hall, _ = layout.resolve(system)
     check_grid(hall, grid_step)
+    if value is None or top_k:  # the optimiser values poses (V alone takes milliseconds at any count)
+        check_devices(hall)
     plan = plan_layout(layout, system, value=value, top_k=top_k)
     xs, ys, rates = rate_map(hall, plan["target"][2], grid_step, progress, value)
     paths = plan_figure(hall, plan, xs, ys, rates, out)
-    write_json(out.with_suffix(".json"), plan)
-    return plan, [out.with_suffix(".json"), *paths]
+    write_json(out.parent / f"{out.name}.json", plan)
+    return plan, [out.parent / f"{out.name}.json", *paths]

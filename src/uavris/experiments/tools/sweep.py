@@ -36,7 +36,7 @@ import json
 import math
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any, Callable, Sequence
 
 import numpy as np
 
@@ -138,21 +138,23 @@ def _key(payload: dict[str, Any]) -> str:
     return hashlib.sha256(json.dumps(to_plain(payload), sort_keys=True).encode()).hexdigest()[:12]
 
 
-def sweep_cell(target: str, system: dict[str, Any], scenario: dict[str, Any], episodes: int, out: str) -> None:
+def sweep_cell(target: str, system: dict[str, Any], scenario: dict[str, Any], episodes: int, out: str,
+               trust_pickle: bool = False) -> None:
     """A job: ``target`` in one hall of one cell on episodes ``EVAL_SEED ..``; its mean and its
     per-episode rates to the JSON file ``out``."""
     from uavris.agents.evaluation import evaluate
     from uavris.agents.policy import fit_policy
     from uavris.config import Scenario
-    from uavris.experiments.tools.targets import resolve_target
+    from uavris.experiments.tools.targets import as_row, resolve_target
 
     cfg = SystemConfig.from_dict(system)
-    resolved = resolve_target(target)
-    if resolved.kind in ("dt", "expert") and resolved.own_system().observe_devices:
+    row = as_row(resolve_target(target, trust_pickle))  # a controller's row: its safety layer, its goals
+    if row.own_system().observe_devices:
         # A model that reads the devices' positions is given them: they add entries to the
         # observation and change nothing in the physics (the references' numbers stay).
         cfg = cfg.replace(observe_devices=True)
-    loaded = resolved.load(cfg)
+    cfg = row.system(cfg)
+    loaded = row.load(cfg)
     policy = fit_policy(loaded.policy, cfg, target)
     res = evaluate(policy, cfg, Scenario(scenario["name"], tuple(scenario["start"])), episodes, EVAL_SEED)
     write_json(Path(out), {"target": target, "mean": float(res.avg_sum_rate.mean()),
@@ -161,7 +163,8 @@ def sweep_cell(target: str, system: dict[str, Any], scenario: dict[str, Any], ep
 
 def sweep(targets: Sequence[str], axes: Sequence[Axis], out: Path, *, base: SystemConfig | None = None,
           scenario: str | Any | None = None, episodes: int = 16, halls: int = 4, workers: int = 1,
-          backend: str = "local", progress: bool = False) -> list[Path]:
+          backend: str = "local", progress: bool = False, trust_pickle: bool = False,
+          warn: Callable[[str], None] | None = None) -> list[Path]:
     """Every ``target`` in every cell of the grid of ``axes`` (one or two), written to ``out``
     (module docstring); returns the paths of the CSV and the figures."""
     from uavris.agents.evaluation import check_episodes
@@ -184,6 +187,16 @@ def sweep(targets: Sequence[str], axes: Sequence[Axis], out: Path, *, base: Syst
     if len(grid) > MAX_CELLS:
         raise ConfigError(f"the grid has {len(grid)} cells; at most {MAX_CELLS}")
     places = {point: cell_systems(base, axes, point, halls, scenario) for point in grid}  # every cell checked first
+    if warn is not None:  # a trained model flown outside what it was trained in, once per policy
+        from uavris.experiments.tools.evaluate import outside_training
+        from uavris.experiments.tools.targets import as_row
+
+        for t in targets:
+            row = as_row(resolve_target(t, trust_pickle))
+            found = next((w for where in places.values() for system, _ in where
+                          if (w := outside_training(row, system, policy_label(t)))), None)
+            if found:
+                warn(found)
     spec = {"targets": list(targets), "axes": [to_plain(a) for a in axes], "episodes": episodes, "seed": EVAL_SEED,
             "halls": halls, "scenario": scenario, "system": base.to_dict()}
     old = other_inputs(Path(out) / "sweep.json", spec)
@@ -192,11 +205,11 @@ def sweep(targets: Sequence[str], axes: Sequence[Axis], out: Path, *, base: Syst
                           f"over {', '.join(old['targets'])}); give this one another --out (its cells would be kept, "
                           "its table and figure replaced)")
     with locked(out, "uavris sweep"):  # one invocation writes a sweep at a time
-        return _run(targets, axes, Path(out), places, spec, episodes, workers, backend, progress)
+        return _run(targets, axes, Path(out), places, spec, episodes, workers, backend, progress, trust_pickle)
 
 
 def _run(targets: Sequence[str], axes: Sequence[Axis], out: Path, places: dict[tuple, list], spec: dict[str, Any],
-         episodes: int, workers: int, backend: str, progress: bool) -> list[Path]:
+         episodes: int, workers: int, backend: str, progress: bool, trust_pickle: bool) -> list[Path]:
     jobs, files = [], {}
     for point, where in places.items():
         for target in targets:
@@ -208,7 +221,7 @@ def _run(targets: Sequence[str], axes: Sequence[Axis], out: Path, places: dict[t
                 if not path.exists():
                     jobs.append(Job(f"{target} {point} {i}", sweep_cell,
                                     (target, system.to_dict(), {"name": start.name, "start": list(start.start)},
-                                     episodes, str(path)), Path(out) / "logs" / f"{path.stem}.log"))
+                                     episodes, str(path), trust_pickle), Path(out) / "logs" / f"{path.stem}.log"))
     with progress_bar(len(jobs), "sweep", "cell", progress) as bar:
         results = run_jobs(jobs, workers, lambda r: bar.update(1), backend=backend)
     failed = [r for r in results if not r.ok]
@@ -266,7 +279,9 @@ def sweep_figure(rows: list[dict], axes: Sequence[Axis], stem: Path) -> list[Pat
             label = policy_label(target) + (f", {axes[1].symbol} = {y:g}" if y != "" else "")
             ax.plot(x, [r["mean"] for r in part], styles[j % len(styles)], color=color, marker="o", ms=3,
                     lw=1.3, label=label)
-            ax.fill_between(x, [r["ci_low"] for r in part], [r["ci_high"] for r in part], color=color, alpha=0.15,
+            # a rate's interval, as every command shows it, bounded below at 0 (sweep.csv keeps the raw one)
+            ax.fill_between(x, [max(0.0, r["ci_low"]) for r in part], [r["ci_high"] for r in part], color=color,
+                            alpha=0.15,
                             lw=0)
     if axes[0].name in ("ris_size", "nx", "ny") and min(r["x"] for r in rows) > 0:
         ax.set_xscale("log", base=2)

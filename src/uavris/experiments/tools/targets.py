@@ -18,6 +18,9 @@ The kinds, in the order a name is tried:
 - a directory holding a DT model (``model.json``) or a DT run (pre-training, fine-tuning);
 - a directory holding a learned value of a pose (``value.json``): the learned planner's
   place, flown by the oracle's controller (:class:`uavris.agents.place.planner.LearnedPlanner`);
+- a controller directory (``controller.json``, written by :func:`write_controller`, ``uavris
+  export``): a row of a study with its models (a goal-conditioned DT with its learned planner,
+  an ensemble, under the safety layer or held level), evaluated as the study evaluates it;
 - any other directory: an expert's training run (``uavris train``).
 """
 
@@ -32,9 +35,11 @@ from typing import Any, Literal
 from uavris.agents.references import REFERENCE_SEED, REFERENCES, reference_policy
 from uavris.config import Scenario, SystemConfig
 from uavris.errors import ConfigError, UavrisError
+from uavris.io import file_part
 from uavris.layouts import Site
 
-TargetKind = Literal["reference", "user", "dt", "expert", "value"]
+TargetKind = Literal["reference", "user", "dt", "expert", "value", "controller"]
+CONTROLLER_FILE, CONTROLLER_KIND, CONTROLLER_FORMAT = "controller.json", "uavris-controller", 1
 # What a row of a report is: a learned controller or place (the DT family, behaviour cloning, the learned
 # planner), the expert trained where it is deployed, a policy transferred from a training deployment, a reference.
 RowKind = Literal["learned", "expert", "transfer", "reference"]
@@ -62,6 +67,7 @@ class Target:
     reference: str | None = None  # the reference's name (kind "reference")
     path: Path | None = None  # the directory (kinds "dt", "expert" and "value")
     top_k: int = 0  # kind "value": the top places valued by R (0: the learned value alone)
+    trust_pickle: bool = False  # kind "expert": a run with SB3's pickled archive only may be loaded (--trust-pickle)
 
     def planner_model(self) -> Any:
         """A learned value's network (kind "value")."""
@@ -98,6 +104,8 @@ class Target:
             from uavris.experiments.training.train_expert import load_run_config
 
             return load_run_config(self.path).system
+        if self.kind == "controller":
+            return read_controller(self.path).own_system()
         return SystemConfig()
 
     def load(self, system: SystemConfig | None = None, device: str = "cpu") -> Loaded:
@@ -118,6 +126,9 @@ class Target:
 
             dt = load_dt_policy(self.path, device=device)
             return Loaded(dt.policy, dt.system, dt.scenario, self.path)
+        if self.kind == "controller":  # the row it holds, in its own system (its safety layer, if any)
+            row = read_controller(self.path)
+            return row.load(row.system(system or row.own_system()), device)
         if self.kind == "value":
             from uavris.agents.place.planner import LearnedPlanner, PlaceSettings
 
@@ -126,7 +137,7 @@ class Target:
                           self.path)
         from uavris.experiments.training.train_expert import load_run_policy
 
-        cfg, policy = load_run_policy(self.path, device)
+        cfg, policy = load_run_policy(self.path, device, self.trust_pickle)
         return Loaded(policy, cfg.system, cfg.resolved_scenario, self.path, cfg.expert_kind)
 
     @classmethod
@@ -138,10 +149,16 @@ class Target:
         """A DT model or an expert's run of a study, named by its directory (which may not exist yet)."""
         return cls(str(path), kind, path=Path(path))
 
+    def file_name(self) -> str:
+        """A user's policy as one part of a file's name: ``path/FILE.py:NAME`` as ``FILE_py_NAME``,
+        ``pkg.module:NAME`` as ``pkg_module_NAME``."""
+        where, attr = self.name.rsplit(":", 1)
+        return file_part(f"{Path(where).name}_{attr}")
+
     def default_out(self) -> Path:
         """Where ``uavris evaluate`` writes when no ``--out`` is given."""
         if self.kind == "user":
-            return Path("runs/policies") / re.sub(r"[^\w.-]+", "_", self.name) / "eval"
+            return Path("runs/policies") / self.file_name() / "eval"
         if self.kind == "reference":
             return Path("runs/baselines") / str(self.reference) / "eval"
         return Path(str(self.path)) / "eval"
@@ -155,9 +172,10 @@ def _is_user_policy(name: str) -> bool:
     return bool(attr) and (where.endswith(".py") or bool(_MODULE.fullmatch(where)))
 
 
-def resolve_target(name: str | Path) -> Target:
+def resolve_target(name: str | Path, trust_pickle: bool = False) -> Target:
     """What ``name`` names (the module docstring's rules); one line naming the problem when it
-    names nothing: an unknown baseline, a missing path, a file where a directory is expected."""
+    names nothing: an unknown baseline, a missing path, a file where a directory is expected.
+    ``trust_pickle``: an expert's run with SB3's pickled archive only may be loaded."""
     name = str(name)
     path = Path(name)
     if name.startswith(BASELINE_PREFIX):
@@ -171,7 +189,11 @@ def resolve_target(name: str | Path) -> Target:
 
         if is_value_dir(path):
             return Target(name, "value", path=path)
-        return Target(name, "dt" if dt_model_dir(path) is not None else "expert", path=path)
+        if (path / CONTROLLER_FILE).is_file():
+            return Target(name, "controller", path=path)
+        if dt_model_dir(path) is not None:
+            return Target(name, "dt", path=path)
+        return Target(name, "expert", path=path, trust_pickle=trust_pickle)
     if name in REFERENCES:
         return Target(name, "reference", reference=name)
     if _is_user_policy(name):
@@ -295,4 +317,74 @@ def as_row(target: str | Path | Target | Row) -> Row:
     if isinstance(target, Row):
         return target
     t = target if isinstance(target, Target) else resolve_target(target)
+    if t.kind == "controller":
+        return read_controller(t.path)
     return Row(t.name, t.name, target=t)
+
+
+# ------------------------------------------------------------------------------ controller directories
+def write_controller(row: Row, dest: Path) -> Path:
+    """``row`` as a directory of its own (``uavris export``): the files of its models (weights
+    and JSON only) and ``controller.json`` (how the row evaluates them: its goal source, safety
+    margin, level attitude, ensemble); :func:`read_controller` gives the row back. A row that
+    flies another hall's plan is that hall's, not a controller: one line."""
+    import shutil
+
+    from uavris.io import write_json
+
+    if row.plan_of is not None:
+        raise ConfigError(f"{row.key} flies the plan of {row.plan_of.name}, a hall of the study: it is no controller "
+                          "of its own to export")
+
+    def copied(t: Target, folder: str) -> dict[str, Any]:
+        if t.kind == "reference":
+            return {"kind": "reference", "reference": t.reference}
+        if t.kind not in ("dt", "value", "expert"):
+            raise ConfigError(f"{row.key}: a {t.kind} target cannot be exported")
+        src = t.path
+        if t.kind == "dt":
+            from uavris.agents.dt.checkpoint import dt_model_dir
+
+            src = dt_model_dir(t.path)
+        names = {"dt": ("model.safetensors", "model.json"), "value": ("value.safetensors", "value.json"),
+                 "expert": ("config.yaml", "policy.safetensors", "policy.json")}[t.kind]
+        (dest / folder).mkdir(parents=True, exist_ok=True)
+        for name in names:
+            shutil.copyfile(Path(src) / name, dest / folder / name)
+        return {"kind": t.kind, "path": folder, "top_k": t.top_k}
+
+    dest = Path(dest)
+    record = {"kind": CONTROLLER_KIND, "format_version": CONTROLLER_FORMAT, "name": row.name, "label": row.label,
+              "seed": row.seed, "front_margin_deg": row.front_margin_deg, "level": row.level,
+              "target": copied(row.target, "model") if row.target is not None else None,
+              "members": [copied(m, f"member-{i}") for i, m in enumerate(row.members)],
+              "goal_from": copied(row.goal_from, "goal") if row.goal_from is not None else None}
+    write_json(dest / CONTROLLER_FILE, record)
+    return dest
+
+
+def read_controller(path: Path) -> Row:
+    """The row a controller directory holds (:func:`write_controller`); one line when it is not one."""
+    from uavris.io import read_checkpoint_meta
+
+    meta = read_checkpoint_meta(path, CONTROLLER_FILE, CONTROLLER_KIND, CONTROLLER_FORMAT, "a controller directory",
+                                "a controller")
+
+    def target(part: Any) -> Target | None:
+        if part is None:
+            return None
+        if not isinstance(part, dict) or part.get("kind") not in ("reference", "dt", "value", "expert"):
+            raise ConfigError(f"{path / CONTROLLER_FILE}: a part of the controller is {part!r}")
+        if part["kind"] == "reference":
+            return Target.of_reference(str(part["reference"]))
+        folder = Path(path) / str(part["path"])
+        if folder.resolve().parent != Path(path).resolve():  # the controller's own folders, nothing outside
+            raise ConfigError(f"{path / CONTROLLER_FILE}: {part['path']!r} is not a folder of the controller")
+        return dataclasses.replace(Target.of_model(folder, part["kind"]), top_k=int(part.get("top_k", 0)))
+
+    try:
+        return Row(str(meta["name"]), str(meta["label"]), target=target(meta["target"]),
+                   members=tuple(target(m) for m in meta["members"]), goal_from=target(meta["goal_from"]),
+                   seed=meta["seed"], front_margin_deg=meta["front_margin_deg"], level=bool(meta["level"]))
+    except (KeyError, TypeError, ValueError) as e:
+        raise ConfigError(f"{path / CONTROLLER_FILE} is not a controller ({type(e).__name__}: {e})") from None

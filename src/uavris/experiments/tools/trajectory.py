@@ -82,5 +82,6 @@ def trajectory_plot(log: SlotLog, system: SystemConfig, stem: Path, title: str) 
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")
     ax.set_title(title, fontsize=8)
-    ax.legend(fontsize=7, loc="upper right")
+    # below the map, where it hides no device
+    ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.14), ncol=2, frameon=False)
     return save_figure(fig, stem)

@@ -25,16 +25,16 @@ import numpy as np
 from uavris.agents.dt.dataset import DATASET_NAMESPACE, check_dataset_target, load_dataset, write_dataset
 from uavris.agents.dt.trajectories import Trajectory, record_episodes
 from uavris.agents.evaluation import MAX_EPISODES
-from uavris.agents.experts.sb3 import load_model
 from uavris.errors import UavrisError
 from uavris.experiments.display.progress import progress_bar
-from uavris.experiments.training.train_expert import final_model_path, load_run_config, run_policy
+from uavris.experiments.training.train_expert import load_run_config, load_run_policy
 from uavris.presets import COLLECT_SEED
 
 
 def collect(experts: Sequence[str | Path], trajectories: int, out: str | Path, *, seed: int = COLLECT_SEED,
-            force: bool = False, progress: bool = True) -> Path:
-    """Roll every expert out ``trajectories`` times in its own scenario and write a dataset.
+            force: bool = False, progress: bool = True, trust_pickle: bool = False) -> Path:
+    """Roll every expert out ``trajectories`` times in its own scenario and write a dataset
+    (an expert with SB3's archive only is loaded with ``trust_pickle`` only).
 
     The dataset records the environment spec (``uavris/UavRisD2D-v1``, the experts' system)
     for Minari's ``recover_environment``, in the first expert's scenario: a spec holds one
@@ -67,7 +67,7 @@ def collect(experts: Sequence[str | Path], trajectories: int, out: str | Path, *
     trajs: list[Trajectory] = []
     try:
         for k, (run_dir, cfg) in enumerate(runs):
-            policy = run_policy(load_model(final_model_path(run_dir), cfg.algo), cfg)
+            _, policy = load_run_policy(run_dir, trust_pickle=trust_pickle)
             seeds = seed + k * trajectories + np.arange(trajectories)
             for start in range(0, trajectories, 256):
                 batch = record_episodes(policy, cfg.system, cfg.resolved_scenario, seeds[start:start + 256],

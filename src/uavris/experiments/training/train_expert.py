@@ -1,8 +1,8 @@
 """Training one expert: run directory, checkpoints, resume, logs and evaluation.
 
 Lives here: :class:`TrainConfig`, :func:`TrainConfig`, :func:`train`, :func:`train_job`,
-:func:`save_checkpoint`, :func:`run_evaluation`, :func:`run_policy` and
-:func:`final_model_path`. Not here: the overwrite guard and the checkpoint pointer
+:func:`save_checkpoint`, :func:`run_evaluation`, :func:`run_policy`, :func:`load_run_policy`,
+:func:`final_policy_stem` and :func:`final_model_path`. Not here: the overwrite guard and the checkpoint pointer
 (:mod:`uavris.runs`), the SB3 models (:mod:`uavris.agents.experts.sb3`) and the flags of
 ``uavris train`` (:mod:`uavris.cli.training`).
 
@@ -11,11 +11,15 @@ A run directory holds::
     config.yaml            the resolved TrainConfig (system, scenario, hyperparameters)
     episodes.csv           every finished training episode: env steps, average sum rate
     evals.csv              periodic deterministic evaluations (mean and 95% CI)
-    checkpoints/           step_<N>.zip models, step_<N>.state.pkl (environments and random
-                           streams), replay_buffer.pkl (off-policy), latest.json
+    checkpoints/           step_<N>.policy.safetensors/.json (the policy, what commands read),
+                           step_<N>.zip models, step_<N>.state.pkl (environments and random
+                           streams), replay_buffer.pkl (off-policy): the pickles each sealed
+                           as uavris's own (.seal, uavris.runs.seal); latest.json
     timing.json            wall-clock seconds over all sessions, and the env steps they reached
     tb/                    TensorBoard logs
-    model.zip, done.json   the final model and the completion record
+    policy.safetensors     the final policy's weights, and policy.json its architecture: what
+                           every command loads (no pickle)
+    model.zip, done.json   the final SB3 model (for SB3's users; sealed) and the completion record
 
 Every file is written atomically. ``resume=True`` continues from ``checkpoints/latest.json``
 with the step counter continuing; a finished run is never retrained unless forced.
@@ -47,7 +51,7 @@ from uavris.agents.experts import (
     resume_state,
 )
 from uavris.agents.experts.imitation import ImitationConfig, imitate
-from uavris.agents.experts.sb3 import SB3Policy, build_model, load_model
+from uavris.agents.experts.sb3 import SB3Policy, build_model, has_policy, load_model, load_policy, save_policy
 from uavris.agents.experts.vec_env import UavRisVecEnv
 from uavris.config import (
     PRESET,
@@ -64,6 +68,7 @@ from uavris.errors import CheckpointError, ConfigError, UavrisError
 from uavris.experiments.display.progress import progress_bar
 from uavris.io import atomic_write_bytes, read_csv, read_rows, write_csv
 from uavris.presets import EVAL_SEED, PRESETS, TRAIN, Preset, check_preset
+from uavris.runs.seal import TRUST_FLAG, check_sealed, seal
 
 EPISODE_HEADER = ("episode", "env_steps", "avg_sum_rate", "return", "length")
 EVAL_HEADER = ("env_steps", "episodes", "mean", "ci_low", "ci_high", "iqm")
@@ -223,10 +228,31 @@ def run_policy(model: Any, cfg: TrainConfig) -> SB3Policy:
     return SB3Policy(model, cfg.phase_control)
 
 
-def load_run_policy(run_dir: str | Path, device: str = "cpu") -> tuple[TrainConfig, SB3Policy]:
-    """A finished run's configuration and its deterministic policy (the final model)."""
+def load_run_policy(run_dir: str | Path, device: str = "cpu", trust_pickle: bool = False
+                    ) -> tuple[TrainConfig, SB3Policy]:
+    """A run's configuration and its deterministic policy (the final one, or the latest
+    checkpoint's), from its policy files (safetensors + JSON: nothing in them runs). A run with
+    SB3's archive only (uavris 0.3's, another tool's) is loaded from it with ``trust_pickle``
+    only: unpickling it could run any code."""
+    run_dir = Path(run_dir)
     cfg = load_run_config(run_dir)
-    return cfg, run_policy(load_model(final_model_path(run_dir), cfg.algo, device=device), cfg)
+    stem = final_policy_stem(run_dir)
+    if stem is not None:
+        return cfg, run_policy(load_policy(stem, cfg.system, cfg.phase_control, device), cfg)
+    archive = final_model_path(run_dir)
+    if not trust_pickle:
+        raise CheckpointError(f"{run_dir} holds only SB3's pickled archive ({archive.name}; a run of uavris 0.3 or of "
+                              f"another tool): loading it could run any code; pass {TRUST_FLAG} if you trust it")
+    return cfg, run_policy(load_model(archive, cfg.algo, device=device, trust_pickle=True), cfg)
+
+
+def final_policy_stem(run_dir: Path) -> Path | None:
+    """Where a run's final policy files are (``policy.*``), or its latest checkpoint's; None without either."""
+    if has_policy(run_dir / "policy"):
+        return run_dir / "policy"
+    latest = runs.read_pointer(run_dir, "model")
+    stem = run_dir / "checkpoints" / str(latest["model"]).replace(".zip", ".policy") if latest else None
+    return stem if stem is not None and has_policy(stem) else None
 
 
 def run_evaluation(model: Any, cfg: TrainConfig, episodes: int) -> EpisodeResults:
@@ -248,12 +274,16 @@ def save_checkpoint(model: Any, cfg: TrainConfig, run_dir: Path, episodes: list,
     tmp = ck / f".step_{steps}.tmp.zip"
     model.save(tmp)
     os.replace(tmp, model_path)
+    seal(model_path)  # SB3's archive and the pickles beside it: resumed only where uavris wrote them
+    save_policy(model, cfg.algo, ck / f"step_{steps}.policy")
     state_path = ck / f"step_{steps}.state.pkl"
     atomic_write_bytes(state_path, resume_state.capture(model))
+    seal(state_path)
     if cfg.algo in OFF_POLICY:
         tmp_buf = ck / ".replay_buffer.tmp.pkl"
         model.save_replay_buffer(tmp_buf)
         os.replace(tmp_buf, ck / "replay_buffer.pkl")
+        seal(ck / "replay_buffer.pkl")
     write_csv(run_dir / "episodes.csv", EPISODE_HEADER, episodes)
     write_csv(run_dir / "evals.csv", EVAL_HEADER, evals)
     if clock is not None:
@@ -267,8 +297,11 @@ INT_COLUMNS = {"episode", "env_steps", "length", "episodes"}
 
 
 def train(cfg: TrainConfig, run_dir: str | Path, *, resume: bool = False, force: bool = False,
-          progress: bool = True, interrupt_at: int | None = None, device: str = "cpu") -> Path:
+          progress: bool = True, interrupt_at: int | None = None, device: str = "cpu",
+          trust_pickle: bool = False) -> Path:
     """Train ``cfg`` into ``run_dir`` on the torch ``device``; returns the final model path.
+    Resuming unpickles the checkpoint: only files sealed as this uavris's own
+    (:mod:`uavris.runs.seal`), or any with ``trust_pickle``.
 
     Raises :class:`UavrisError` for a finished run (unless ``force``), an existing
     unfinished run without ``resume``/``force``, a resume whose config differs, or a
@@ -293,11 +326,13 @@ def train(cfg: TrainConfig, run_dir: str | Path, *, resume: bool = False, force:
                 start, n_ep, n_ev = int(latest["env_steps"]), int(latest["episodes"]), int(latest["evals"])
             except (TypeError, ValueError):
                 raise UavrisError(f"{run_dir / runs.POINTER} is corrupt") from None
-            model = load_model(model_path, cfg.algo, env, device)
+            model = load_model(model_path, cfg.algo, env, device, trust_pickle)
+            check_sealed(state_path, trust_pickle)
             if cfg.algo in OFF_POLICY:
                 buf = run_dir / "checkpoints" / "replay_buffer.pkl"
                 if not buf.exists():
                     raise UavrisError(f"replay buffer {buf} is missing; pass --force to start over")
+                check_sealed(buf, trust_pickle)
                 try:
                     model.load_replay_buffer(buf)
                 except Exception as e:  # noqa: BLE001
@@ -324,7 +359,9 @@ def train(cfg: TrainConfig, run_dir: str | Path, *, resume: bool = False, force:
     save_checkpoint(model, cfg, run_dir, episodes, evals, clock)
     tmp = run_dir / ".model.tmp.zip"
     model.save(tmp)
-    os.replace(tmp, run_dir / "model.zip")
+    os.replace(tmp, run_dir / "model.zip")  # for SB3's users; uavris reads the policy files
+    seal(run_dir / "model.zip")
+    save_policy(model, cfg.algo, run_dir / "policy")
     imitation = read_csv(run_dir / "imitation.csv") if (run_dir / "imitation.csv").exists() else []
     clock.save(env_steps=int(model.num_timesteps))
     runs.write_done(run_dir, {"env_steps": int(model.num_timesteps), "episodes": len(episodes),
