@@ -179,8 +179,12 @@ def test_system_users_on_the_command_line_give_a_hall(tmp_path, capsys):
     assert got["system"]["users"] == [list(u) for u in hall.users]
     want = evaluate(reference_policy("hover-optimizer", hall), hall, "fig2", 2, 1_000_000).summary()["mean"]
     assert got["mean"] == pytest.approx(want, abs=1e-12)
-    assert cli_main(["evaluate", "zero-action", *users, "--layout", "layout-unseen-0", "--scenario", "fig2"]) == 2
+    capsys.readouterr()
+    assert cli_main(["evaluate", "zero-action", *users, "--layout", "layout-unseen-0"]) == 2
     assert "--layout and --system.users" in capsys.readouterr().err
+    assert cli_main(["evaluate", "zero-action", *users, "--layout", "layout-unseen-0", "--scenario", "fig2"]) == 2
+    err = capsys.readouterr().err  # a hall's own start and a named one: one line too
+    assert len(err.splitlines()) == 1 and "--scenario fig2" in err and "--layout layout-unseen-0" in err
 
 
 def test_a_dt_in_a_hall_with_another_number_of_devices_is_one_line(layouts_dataset, tmp_path, capsys):

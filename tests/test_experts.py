@@ -140,7 +140,7 @@ def test_corrupt_resume_state_is_one_clear_error_and_nothing_changes(tmp_path):
     state = tmp_path / "r" / "checkpoints" / "step_160.state.pkl"
     state.write_bytes(state.read_bytes()[:100])
     before = {p: p.read_bytes() for p in (tmp_path / "r").rglob("*") if p.is_file()}
-    with pytest.raises(UavrisError, match="resume state .*step_160.state.pkl"):
+    with pytest.raises(UavrisError, match="step_160.state.pkl is corrupt"):
         train(cfg, tmp_path / "r", resume=True, progress=False)
     assert {p: p.read_bytes() for p in (tmp_path / "r").rglob("*") if p.is_file()} == before
 
@@ -232,9 +232,9 @@ def test_not_a_run_dir_and_corrupt_checkpoint(tmp_path, capsys):
     cfg = TrainConfig(algo="ddpg", scenario="fig2", seed=0, preset="smoke", eval_episodes=2)
     run = tmp_path / "run"
     train(cfg, run, progress=False)
-    (run / "model.zip").write_bytes(b"not a zip")
+    (run / "policy.safetensors").write_bytes(b"not weights")  # what uavris reads (model.zip is SB3's)
     code, err = _run_cli(["evaluate", str(run)], capsys)
-    assert code == 2 and "corrupt" in err and len(err.splitlines()) == 1
+    assert code == 2 and "corrupt" in err and len(err.splitlines()) == 1, err
     # a truncated checkpoint on resume
     shutil.rmtree(run)
     with pytest.raises(KeyboardInterrupt):

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import math
 import os
+import socket
 import threading
 import time
 from pathlib import Path
@@ -72,3 +73,34 @@ def test_ray_runs_a_job_again_when_its_worker_is_lost_but_not_when_it_fails(tmp_
     assert results["lost"].ok and marker.exists(), results["lost"].error  # the second attempt finished it
     assert not results["fails"].ok and "the job itself is wrong" in results["fails"].error
     assert count.read_text() == "x"  # run once: an application error is not retried
+
+
+def test_a_cluster_that_does_not_answer_is_one_line_and_nothing_is_written(tmp_path: Path, capsys):
+    """Ray itself retries an unreachable address for minutes; uavris says so at once."""
+    pytest.importorskip("ray")
+    from uavris.cli import main
+
+    with socket.socket() as s:  # a port nothing listens on
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    out = tmp_path / "study"
+    code = main(["reproduce", "--preset", "smoke", "--backend", "ray", "--ray-address", f"127.0.0.1:{port}",
+                 "--out", str(out), "--no-progress"])
+    err = capsys.readouterr().err
+    assert code == 2 and len(err.splitlines()) == 1 and f"cannot reach the Ray cluster at 127.0.0.1:{port}" in err
+    assert not out.exists()
+
+
+def test_a_cluster_job_must_say_what_it_writes(tmp_path: Path):
+    """On a cluster a job's files travel with it: one that declares none is refused, not lost."""
+    pytest.importorskip("ray")
+    runner = JobRunner(1, "ray", ray_address="127.0.0.1:1")
+    runner._ray_started = True  # as if joined: the check comes before any job leaves
+    import ray
+
+    ray.init(address="local", num_cpus=1, include_dashboard=False, log_to_driver=False)
+    try:
+        with pytest.raises(ValueError, match="declare no files they write"):
+            runner.run([Job("silent", print, ("x",), tmp_path / "silent.log")])
+    finally:
+        runner.close()

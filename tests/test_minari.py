@@ -31,9 +31,8 @@ def _fake_expert_runs(monkeypatch):
     cfgs = {name: TrainConfig(algo="ddpg", scenario=scen, seed=0, preset="smoke", eval_episodes=2, system=SHORT)
             for name, (scen, _) in EXPERTS.items()}
     monkeypatch.setattr(collect_mod, "load_run_config", lambda run_dir: cfgs[Path(run_dir).name])
-    monkeypatch.setattr(collect_mod, "final_model_path", lambda run_dir: Path(run_dir).name)
-    monkeypatch.setattr(collect_mod, "load_model", lambda name, algo: name)
-    monkeypatch.setattr(collect_mod, "run_policy", lambda name, cfg: reference_policy(EXPERTS[name][1], SHORT))
+    monkeypatch.setattr(collect_mod, "load_run_policy", lambda run_dir, trust_pickle=False: (
+        cfgs[Path(run_dir).name], reference_policy(EXPERTS[Path(run_dir).name][1], SHORT)))
 
 
 @pytest.fixture(scope="module")

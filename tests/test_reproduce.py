@@ -9,6 +9,7 @@ import time
 from pathlib import Path
 
 import pytest
+from ray_cluster import can_unshare, two_node_cluster
 from report_check import check_deployment_claims, check_deployment_report, check_track_claims, mean_ci
 
 from uavris.config import SystemConfig
@@ -297,6 +298,73 @@ def test_reproduce_on_ray_gives_the_process_pools_numbers(smoke_run, tmp_path):
                 == read_json(out / "stages" / name / "stage.json")["result"]), name
     schedule = read_json(ray_out / "schedule.json")
     assert len(schedule["jobs"]) > len(ray_stages)  # more than one job a stage went through Ray
+
+
+def _without_times(obj):
+    """A stage's record without its wall clocks (keys ending in ``_s``), which no two runs share."""
+    if isinstance(obj, dict):
+        return {k: _without_times(v) for k, v in obj.items() if not k.endswith("_s")}
+    if isinstance(obj, list):
+        return [_without_times(v) for v in obj]
+    return obj
+
+
+def _stage_files(root: Path) -> set[Path]:
+    """A stage's files but its logs and wall clock; a TensorBoard file by its kind (its name
+    holds the time, machine and process that wrote it)."""
+    return {p.relative_to(root).with_name("events.out.tfevents") if p.name.startswith("events.out.tfevents.")
+            else p.relative_to(root) for p in root.rglob("*")
+            if p.is_file() and p.suffix != ".log" and p.name != "timing.json"}
+
+
+@pytest.mark.slow
+def test_a_study_on_ray_nodes_that_share_no_file_system(smoke_run, tmp_path):
+    """Issue 45: the deployment track on a two-node Ray cluster whose far node sees an empty
+    file system at OUT, that node killed while it evaluates a hall. The study completes, and
+    OUT holds what the local run's holds: every stage's record, the same files, the same
+    models, datasets' labels and evaluation tables bit for bit."""
+    pytest.importorskip("ray")
+    why = can_unshare()
+    if why:
+        pytest.skip(f"a node with a file system of its own cannot be made here: {why}")
+    local, _, _ = smoke_run
+    out = tmp_path / "study"
+    killed: list[tuple[str, bool]] = []
+    with two_node_cluster(out, tmp_path / "cluster-logs") as cluster:
+        stop = threading.Event()
+
+        def kill_while_evaluating() -> None:
+            first_seen: dict[str, float] = {}
+            while not stop.wait(0.5):
+                for log in cluster.far_view(out / "stages").glob("deploy-evaluate-*/job.log"):
+                    stage = log.parent.name
+                    if (out / "stages" / stage / "stage.json").exists():
+                        continue
+                    if time.monotonic() - first_seen.setdefault(stage, time.monotonic()) >= 2.0:
+                        # the driver's study.yaml is not on the far node: no shared file system
+                        killed.append((stage, (cluster.far_view(out) / "study.yaml").exists()))
+                        cluster.kill_far_node()
+                        return
+
+        watcher = threading.Thread(target=kill_while_evaluating, daemon=True)
+        watcher.start()
+        try:
+            reproduce(dataclasses.replace(RC, track="deployment"), out, workers=2, backend="ray",
+                      ray_address=cluster.address, progress=False)
+        finally:
+            stop.set()
+            watcher.join()
+    assert killed, "the far node evaluated no hall, so it was never killed"
+    assert killed[0][1] is False and (out / "study.yaml").exists()
+    stages = sorted(p.name for p in (out / "stages").iterdir())
+    assert len(stages) >= 10 and all(name.startswith("deploy-") for name in stages) and killed[0][0] in stages
+    for name in stages:
+        mine, theirs = out / "stages" / name, local / "stages" / name
+        assert _without_times(read_json(mine / "stage.json")) == _without_times(read_json(theirs / "stage.json")), name
+        assert _stage_files(mine) == _stage_files(theirs), name
+        for rel in _stage_files(mine):
+            if rel.suffix in (".csv", ".npz", ".safetensors"):
+                assert (mine / rel).read_bytes() == (theirs / rel).read_bytes(), (name, rel)
 
 
 def test_downstream_is_the_longest_chain_after_each_stage(tmp_path):

@@ -79,5 +79,6 @@ def is_sealed(path: Path) -> bool:
 def check_sealed(path: Path, trust: bool = False) -> None:
     """One line (:class:`CheckpointError`) unless ``path`` is sealed as uavris's own, or ``trust``."""
     if not trust and not is_sealed(path):
-        raise CheckpointError(f"{path} is a pickle that this uavris did not write (no matching seal): unpickling it "
-                              f"could run any code; pass {TRUST_FLAG} only if you trust where it came from")
+        raise CheckpointError(f"{path} is corrupt or a pickle this uavris did not write (no matching seal): "
+                              f"unpickling it could run any code; pass {TRUST_FLAG} only if you trust where it "
+                              "came from")

@@ -15,8 +15,9 @@ own, and only a job whose process dies again is reported failed ("worker died").
 Backends: ``local`` (``concurrent.futures`` process pool, the default) and ``ray``
 (``pip install 'uavris[ray]'``): without an address a local Ray instance with ``workers``
 CPUs is started; with ``ray_address`` the jobs go to that cluster, whose nodes must have
-uavris installed and see the output directory (a shared file system). Jobs are seeded by
-their own configuration, so both backends give the same results.
+uavris installed but need not share a file system with the driver: each job's files travel
+with it (:mod:`.shipping`; what it reads and writes is declared on the :class:`Job`). Jobs
+are seeded by their own configuration, so both backends give the same results.
 """
 
 from __future__ import annotations
@@ -35,17 +36,24 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Literal, get_args
 
+from uavris.errors import UavrisError
+from uavris.experiments.engine import shipping
+
 
 @dataclass(frozen=True)
 class Job:
     """A picklable unit of work: ``fn(*args)`` with its output going to ``log``; ``cost`` is
-    its expected duration on one core (s, :mod:`.costs`), which orders and weighs it."""
+    its expected duration on one core (s, :mod:`.costs`), which orders and weighs it.
+    ``reads`` and ``writes``: the files and folders it reads and writes besides its log
+    (writes it may resume from included), which go to a cluster node with it and come back."""
 
     name: str
     fn: Callable[..., Any]
     args: tuple[Any, ...]
     log: Path
     cost: float = 0.0
+    reads: tuple[Path, ...] = ()
+    writes: tuple[Path, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -326,22 +334,48 @@ class JobRunner:
             on_done(res)
         return res
 
-    def _run_ray(self, jobs: list[Job], on_done: Callable[[JobResult], None] | None) -> list[JobResult]:
+    def connect(self) -> None:
+        """Start or join Ray (the Ray backend; a no-op once connected or on the local one): a
+        cluster that cannot be reached is one :class:`UavrisError`, before any job is queued."""
+        if self.backend != "ray":
+            return
         try:
             import ray
         except ImportError:
-            raise ImportError("the Ray backend needs Ray: pip install 'uavris[ray]'") from None
+            raise UavrisError("the Ray backend needs Ray: pip install 'uavris[ray]'") from None
         with self._lock:
-            if not ray.is_initialized():
-                if self.ray_address:
+            if ray.is_initialized():
+                return
+            if not self.ray_address:
+                # "local": a new instance even where `ray start` left this machine's address behind
+                ray.init(address="local", num_cpus=self.workers, include_dashboard=False, log_to_driver=False)
+            else:
+                _reachable(self.ray_address)
+                try:
                     ray.init(address=self.ray_address, log_to_driver=False)
-                else:
-                    ray.init(num_cpus=self.workers, include_dashboard=False, log_to_driver=False)
-                self._ray_started = True
+                except (ConnectionError, RuntimeError) as e:
+                    first = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
+                    raise UavrisError(f"cannot join the Ray cluster at {self.ray_address}: {first} (a cluster "
+                                      "with token authentication needs RAY_AUTH_MODE=token and its RAY_AUTH_TOKEN "
+                                      "here too)") from None
+            self._ray_started = True
+
+    def _run_ray(self, jobs: list[Job], on_done: Callable[[JobResult], None] | None) -> list[JobResult]:
+        import ray
+
+        self.connect()
+        with self._lock:
             # A job whose worker or node is lost (a preempted cluster node) is run again elsewhere, where it
-            # resumes from its checkpoints; a job that fails is not: _run_logged returns its error as a result.
-            remote = ray.remote(num_cpus=1, max_retries=RAY_SYSTEM_RETRIES, retry_exceptions=False)(_run_logged)
-            refs = {remote.remote(job): job for job in jobs}
+            # resumes from the checkpoints it had; a job that fails is not: it returns its error as a result.
+            options = {"num_cpus": 1, "max_retries": RAY_SYSTEM_RETRIES, "retry_exceptions": False}
+            if self.ray_address:  # a cluster's nodes may not share our file system: the files go with the jobs
+                undeclared = [job.name for job in jobs if not job.writes]
+                if undeclared:
+                    raise ValueError(f"jobs {undeclared} declare no files they write; a cluster cannot run them")
+                remote = ray.remote(**options)(shipping.run_shipped)
+                refs = {remote.remote(job, shipping.pack((*job.reads, *shipping.outputs(job)))): job for job in jobs}
+            else:
+                refs = {ray.remote(**options)(_run_logged).remote(job): job for job in jobs}
         pending = list(refs)
         results: list[JobResult] = []
         while pending:
@@ -352,10 +386,32 @@ class JobRunner:
                     res = ray.get(ref)
                 except Exception as e:  # noqa: BLE001 - a worker that died
                     res = JobResult(job.name, False, None, f"ray worker died: {type(e).__name__}: {e}", job.log)
+                else:
+                    if self.ray_address:
+                        res, files = res
+                        try:
+                            shipping.unpack(files, shipping.outputs(job), exact=shipping.outputs(job))
+                        except (OSError, ValueError) as e:
+                            res = JobResult(job.name, False, None, f"its files could not be written here: {e}", job.log)
                 results.append(res)
                 if on_done:
                     on_done(res)
         return results
+
+
+def _reachable(address: str) -> None:
+    """One line when nothing answers at a cluster's ``HOST:PORT`` (Ray itself would retry for
+    minutes); other forms of address (``ray://``, ``auto``) are left to Ray."""
+    import socket
+
+    host, sep, port = address.rpartition(":")
+    if not sep or not port.isdigit() or "/" in address:
+        return
+    try:
+        socket.create_connection((host.strip("[]"), int(port)), timeout=10).close()
+    except OSError as e:
+        raise UavrisError(f"cannot reach the Ray cluster at {address}: {e.strerror or e} (is `ray start --head` "
+                          "running there, and is the port open?)") from None
 
 
 RAY_SYSTEM_RETRIES = 3  # per job, for system failures only (a lost worker process or node)

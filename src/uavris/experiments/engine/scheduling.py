@@ -178,9 +178,11 @@ class StudyContext:
                               + "; ".join(f"{f.name} ({f.error}; log {f.log})" for f in failures))
         return results
 
-    def run_one(self, stage: str, fn: Any, args: tuple[Any, ...], log: Path, cost: float) -> Any:
-        """One job of a stage; its value, or a :class:`UavrisError` naming its log when it failed."""
-        [res] = self.submit(stage, [Job(stage, fn, args, log, cost)])
+    def run_one(self, stage: str, fn: Any, args: tuple[Any, ...], log: Path, cost: float,
+                reads: tuple[Path, ...] = (), writes: tuple[Path, ...] = ()) -> Any:
+        """One job of a stage (reading and writing the files of :class:`~.jobs.Job`); its value,
+        or a :class:`UavrisError` naming its log when it failed."""
+        [res] = self.submit(stage, [Job(stage, fn, args, log, cost, reads, writes)])
         if not res.ok:
             raise UavrisError(f"{res.error}; log {res.log}")
         return res.value

@@ -205,7 +205,7 @@ class TrackStages(PlaceStages):
     def _run_experts(self, stage: str, cfgs: dict[str, TrainConfig], d: Path, deps: dict[str, Path]
                      ) -> dict[str, Any]:
         jobs = [Job(f"{cfg.algo}-{s}", train_job, (cfg.to_dict(), str(d / "runs" / s), self.ctx.device),
-                    d / "logs" / f"{s}.log", train_cost(cfg))
+                    d / "logs" / f"{s}.log", train_cost(cfg), writes=(d / "runs" / s,))
                 for s, cfg in cfgs.items() if not runs.is_finished(d / "runs" / s)]
         self.ctx.run_all(stage, jobs, "expert job")
         algos = sorted({cfg.algo for cfg in cfgs.values()})
@@ -254,9 +254,10 @@ class TrackStages(PlaceStages):
         return stages
 
     def _run_collect(self, episodes: int, cost: float, d: Path, deps: dict[str, Path]) -> dict[str, Any]:
-        experts = [str(deps[self.t("experts-train")] / "runs" / w.name) for w in self.train]
-        return self.ctx.run_one(self.t("dataset"), dataset_job, (experts, episodes, str(d / "dataset")),
-                                d / "job.log", cost)
+        experts = [deps[self.t("experts-train")] / "runs" / w.name for w in self.train]
+        return self.ctx.run_one(self.t("dataset"), dataset_job, ([str(e) for e in experts], episodes,
+                                                                 str(d / "dataset")),
+                                d / "job.log", cost, reads=tuple(experts), writes=(d / "dataset",))
 
     @staticmethod
     def _chunks(cfg: DemonstrationConfig) -> list[tuple[int, int]]:
@@ -274,12 +275,14 @@ class TrackStages(PlaceStages):
                             deps: dict[str, Path]) -> dict[str, Any]:
         chunks = self._chunks(cfg)
         parts = [d / "parts" / f"halls-{first}" for first, _ in chunks]
+        # a part, and where the plans are exact the poses they valued (labels beside the parts)
         jobs = [Job(f"halls-{first}", demonstrations_job, (cfg.to_dict(), first, n, str(part)),
-                    d / "logs" / f"halls-{first}.log", cost)
+                    d / "logs" / f"halls-{first}.log", cost, writes=(part, d / "labels" / f"{part.name}.npz"))
                 for (first, n), part, cost in zip(chunks, parts, costs) if not part.exists()]
         self.ctx.run_all(self.t(name), jobs, "demonstration job")
         return self.ctx.run_one(self.t(name), merge_demonstrations, (cfg.to_dict(), [str(p) for p in parts],
-                                                                        str(d / "dataset")), d / "merge.log", 1.0)
+                                                                        str(d / "dataset")), d / "merge.log", 1.0,
+                                reads=tuple(parts), writes=(d / "dataset",))
 
     def _pretrain_config(self, data: Path | str, model: TrainedModel | None) -> PretrainConfig:
         fields = self.pretrain_fields if model is None else model.pretrain_fields(self.pretrain_fields)
@@ -289,7 +292,7 @@ class TrackStages(PlaceStages):
     def _run_pretrain(self, model: TrainedModel, d: Path, deps: dict[str, Path]) -> dict[str, Any]:
         cfg = self._pretrain_config(deps[self.t(model.dataset)] / "dataset", model)
         return self.ctx.run_one(self.t(model.stage), pretrain_job, (cfg.to_dict(), str(d / "model"), self.ctx.device),
-                                d / "job.log", pretrain_cost(cfg))
+                                d / "job.log", pretrain_cost(cfg), reads=(Path(cfg.dataset),), writes=(d / "model",))
 
     def finetune_config(self, model: Path | str, where: Site, extra: dict[str, Any] | None = None) -> FinetuneConfig:
         # fine-tuning evaluates each round on the study's episodes unless the track's table says otherwise
@@ -302,7 +305,8 @@ class TrackStages(PlaceStages):
         cfg = self.finetune_config(deps[self.t("pretrain")] / "model", where)
         return self.ctx.run_one(self.t(f"finetune-{where.name}"), finetune_job,
                                 (cfg.to_dict(), str(d / "model"), self.ctx.device), d / "job.log",
-                                finetune_cost(cfg, self.horizon, self.control, self.model))
+                                finetune_cost(cfg, self.horizon, self.control, self.model),
+                                reads=(Path(cfg.model),), writes=(d / "model",))
 
     def finetunes(self, site: Site) -> list[str]:
         """The fine-tuning stages of ``site`` (none in a hall evaluated zero-shot only)."""
@@ -339,5 +343,7 @@ class TrackStages(PlaceStages):
     def _run_evaluate(self, where: Site, sources: list[tuple[str, float]], keys: list[str], cost: float,
                       d: Path, deps: dict[str, Path]) -> dict[str, Any]:
         rows = self._rows(where, sources, {k: deps[self.t(k)] for k in keys})
+        # its rows' models are in the stages it depends on; its results go to its own folder
         return self.ctx.run_one(self.t(f"evaluate-{where.name}"), evaluate_job,
-                                (str(d), where, self.track.name, self.rc.eval_episodes, rows), d / "job.log", cost)
+                                (str(d), where, self.track.name, self.rc.eval_episodes, rows), d / "job.log", cost,
+                                reads=tuple(deps.values()), writes=(d,))

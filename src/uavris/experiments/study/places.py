@@ -69,7 +69,7 @@ class PlaceStages:
                     ) -> dict[str, Any]:
         parts = [d / "parts" / f"k{k}-halls-{first}.npz" for k, first, _ in _chunks(cfg)]
         jobs = [Job(part.stem, value_labels_job, (cfg.to_dict(), k, first, n, str(part)),
-                    d / "logs" / f"{part.stem}.log", cost)
+                    d / "logs" / f"{part.stem}.log", cost, writes=(part,))
                 for (k, first, n), part, cost in zip(_chunks(cfg), parts, costs) if not part.exists()]
         self.ctx.run_all(self.t("value-labels"), jobs, "value labels job")
         return {"parts": [p.name for p in parts], "counts": list(cfg.counts), "halls": cfg.halls, "poses": cfg.poses}
@@ -80,7 +80,8 @@ class PlaceStages:
         parts += sorted((deps[self.t("dataset")] / "labels").glob("*.npz"))
         return self.ctx.run_one(self.t("value"), value_fit_job, (cfg.to_dict(), [str(p) for p in parts],
                                                                  str(d / "value")),
-                                d / "job.log", value_fit_cost(cfg.steps, cfg.width))
+                                d / "job.log", value_fit_cost(cfg.steps, cfg.width), reads=tuple(parts),
+                                writes=(d / "value",))
 
     def places_config(self, model: Path | str, value: Path | str, where: Site) -> FinetuneConfig:
         """Fine-tuning of a goal-conditioned DT in ``where`` by trying places: the track's
@@ -104,4 +105,5 @@ class PlaceStages:
         cfg = self.places_config(deps[self.t(model_stage)] / "model", deps[self.t("value")] / "value", where)
         name = self.t(places_stage(where.name, seed))
         return self.ctx.run_one(name, finetune_job, (cfg.to_dict(), str(d / "model"), self.ctx.device),
-                                d / "job.log", finetune_cost(cfg, self.horizon, self.control, self.model))
+                                d / "job.log", finetune_cost(cfg, self.horizon, self.control, self.model),
+                                reads=(Path(cfg.model), Path(cfg.value)), writes=(d / "model",))

@@ -9,6 +9,7 @@ Lives here: :func:`reproduce` (run or resume the study, then write the report) a
 
 from __future__ import annotations
 
+import os
 import time
 from pathlib import Path
 from typing import Any, Sequence
@@ -59,7 +60,8 @@ def reproduce(rc: ReproduceConfig, out: str | Path, *, workers: int = 2, backend
         raise UavrisError(f"unknown backend {backend!r}; choose one of {', '.join(BACKENDS)}")
     if workers < 1:
         raise UavrisError(f"--workers must be >= 1, got {workers}")
-    out = Path(out)
+    # a cluster's nodes write the study's files where the driver has them: the same absolute paths
+    out = Path(os.path.abspath(out)) if ray_address else Path(out)
     # The bar counts expected seconds of work (uavris.experiments.engine.scheduling), shown as a share.
     bar = progress_bar(0, "reproduce", "s", progress,
                        bar_format="{desc}: {percentage:3.0f}%|{bar}| [{elapsed}{postfix}]")
@@ -70,8 +72,12 @@ def reproduce(rc: ReproduceConfig, out: str | Path, *, workers: int = 2, backend
         bar.close()
         raise UavrisError(f"--force names unknown stage(s) {unknown}; stages: {list(pipeline.stages) + ['report']}")
     try:
+        ctx.runner.connect()  # a cluster that cannot be reached: one line, before anything is written
         with locked(out, "uavris reproduce"):  # one invocation writes a study at a time
             return _run(rc, out, pipeline, ctx, force, bar, progress, workers)
+    except BaseException:
+        ctx.runner.close()  # Ray too, where it was joined and the study never began
+        raise
     finally:
         bar.close()
 
@@ -79,9 +85,9 @@ def reproduce(rc: ReproduceConfig, out: str | Path, *, workers: int = 2, backend
 def _run(rc: ReproduceConfig, out: Path, pipeline: Any, ctx: StudyContext, force: Sequence[str], bar: Any,
          progress: bool, workers: int) -> Path:
     write_yaml(out / STUDY_FILE, rc.to_dict())  # what Study.open reads (uavris evaluate OUT --row KEY, claims)
-    ctx.plan(pipeline)
     t0, origin = time.perf_counter(), time.time()
     try:
+        ctx.plan(pipeline)
         records = pipeline.run(tuple(f for f in force if f != "report"), ctx.stage_done)
     finally:
         ctx.close()

@@ -13,6 +13,7 @@ Outputs in ``OUT``: ``runs/ALGO-sSEED`` (one training run each, resumable),
 from __future__ import annotations
 
 import dataclasses
+import os
 import time
 from pathlib import Path
 from typing import Any, Callable, Sequence
@@ -132,10 +133,13 @@ def compare_algorithms(preset: str = "quick", seeds: int = 5, workers: int = 2, 
     system = system or SystemConfig()
     scenario_at(scenario, start).validate_for(system)
     out = Path(out or f"runs/compare-{preset}")
+    if ray_address:  # a cluster's nodes write the runs where the driver has them: the same absolute paths
+        out = Path(os.path.abspath(out))
     n_eval = eval_episodes or (100 if preset == "paper" else 32)
     cfgs = comparison_configs(preset, seeds, algos, scenario, n_eval, system, start, steps, eval_every)
     jobs = [Job(f"{a}-s{s}", train_job, (cfg.to_dict(), str(out / "runs" / f"{a}-s{s}"), device),
-                out / "logs" / f"{a}-s{s}.log", train_cost(cfg)) for (a, s), cfg in cfgs.items()]
+                out / "logs" / f"{a}-s{s}.log", train_cost(cfg), writes=(out / "runs" / f"{a}-s{s}",))
+            for (a, s), cfg in cfgs.items()]
     t0 = time.perf_counter()
     bar = progress_bar(len(jobs), "compare-algorithms", "job", progress)
     bar.update(sum(runs.is_finished(Path(j.args[1])) for j in jobs))
