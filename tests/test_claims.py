@@ -5,13 +5,28 @@ against an independent recomputation from its evaluation files."""
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
 from scipy import stats as sps
 
-from uavris.experiments.study.claims import judge_comparison
-from uavris.stats import HOLDS, NOT_RESOLVED, REFUTED, paired_difference, steps_to_level, verdict, welch_difference
+from uavris.experiments.study.claims_comparison import judge_comparison
+from uavris.experiments.study.claims_tracks import _fewer, by_seed, interactions_needed
+from uavris.experiments.study.judgement import judgement
+from uavris.stats import (
+    HOLDS,
+    NOT_MEASURED,
+    NOT_RESOLVED,
+    REFUTED,
+    interactions_to_level,
+    judged,
+    judged_censored,
+    paired_difference,
+    steps_to_level,
+    verdict,
+    welch_difference,
+)
 
 
 def _scipy_paired(a, b):
@@ -61,7 +76,24 @@ def test_ddpg_best_holds_is_refuted_or_not_resolved():
     refuted = judge_comparison({"ddpg": low, "ppo": high, "sac": low - 1, "td3": low})
     assert refuted.verdict == REFUTED and refuted.mean == pytest.approx(low.mean() - high.mean())
     # above two, tied with one: not resolved
-    assert judge_comparison({"ddpg": high, "ppo": high[::-1] + 0.01, "sac": low}).verdict == NOT_RESOLVED
+    assert judge_comparison({"ddpg": high, "ppo": high[::-1] + 0.01, "sac": low, "td3": low}).verdict == NOT_RESOLVED
+
+
+def test_a_comparison_cell_short_of_seeds_is_not_measured(monkeypatch):
+    """A budget cell with one seed of an algorithm (or none of one) prints no verdict, though
+    the seeds it has would "hold" by any interval that could be formed."""
+    rng = np.random.default_rng(1)
+    high, low = rng.normal(20, 0.3, 5), rng.normal(10, 0.3, 5)
+    one = judge_comparison({"ddpg": high, "ppo": low[:1], "sac": low - 1, "td3": low - 1})
+    assert one.verdict == NOT_MEASURED and one.n == 1 and "PPO" in one.text
+    assert one.cell == f"**not measured**: {high.mean() - low[0]:+.2f} (1 seed)"  # PPO is the closest here
+    assert judge_comparison({"ddpg": high, "ppo": low, "sac": low}).verdict == NOT_MEASURED  # no TD3
+    import uavris.experiments.study.claims_comparison as cc
+
+    monkeypatch.setattr(cc, "comparison_scores", lambda cdir, steps=None: {"ddpg": list(high), "ppo": [low[0]]})
+    lines = cc.budget_table(Path("."), [25_000], 5.0)
+    rows = [[c.strip() for c in line.strip("|").split("|")] for line in lines if line.startswith("| 25,000")]
+    assert {cells[1]: cells[-1] for cells in rows} == {"DDPG": HOLDS, "PPO": NOT_MEASURED}
 
 
 def test_steps_to_level_on_a_hand_made_curve():
@@ -72,3 +104,78 @@ def test_steps_to_level_on_a_hand_made_curve():
     assert steps_to_level(steps, rates, 10.0) == 40_000
     assert steps_to_level(steps, rates, 4.0) == 10_000
     assert math.isnan(steps_to_level(steps, rates, 12.5))  # never: its budget is only a lower bound
+
+
+def test_interactions_to_level_charges_a_side_that_starts_there_nothing():
+    # a fine-tuning curve: its first point is the zero-shot DT at 0 interactions
+    assert interactions_to_level([0, 500, 1000], [43.1, 42.0, 43.1], 40.0) == (0.0, False)
+    assert interactions_to_level([0, 500, 1000], [30.0, 39.0, 41.0], 40.0) == (1000.0, False)
+    assert interactions_to_level([0, 500, 1000], [30.0, 39.0, 39.5], 40.0) == (1000.0, True)  # censored: its budget
+    assert interactions_to_level([], [], 40.0) == (0.0, True)
+
+
+def test_both_sides_are_charged_to_the_same_level():
+    """The strong track's case of issue 44: the zero-shot DT already at the expert's level; the
+    old count charged the expert until it reached the fine-tuned level and fine-tuning its
+    whole budget (about -23,000); the one rule charges fine-tuning nothing."""
+    expert = (np.array([23_000.0, 30_000.0, 40_000.0]), np.array([41.0, 43.0, 45.0]))  # imitation, then RL
+    finetune = (np.array([0.0, 4_000.0, 8_000.0]), np.array([43.1, 43.0, 43.1]))
+    need = interactions_needed(expert, finetune, final=45.0)
+    assert need["level"] == pytest.approx(0.95 * 45.0)  # 42.75, the same for both sides
+    assert (need["expert"], need["finetune"], need["difference"]) == (30_000.0, 0.0, 30_000.0)
+    assert not need["low_bound"] and not need["high_bound"]
+    slow = interactions_needed(expert, (finetune[0], np.array([40.0, 41.0, 42.0])), final=45.0)
+    assert slow["finetune"] == 8_000.0 and slow["high_bound"]  # never there: its budget, an upper bound on the gain
+
+
+def test_a_censored_side_decides_only_the_verdict_it_cannot_overturn():
+    d = np.array([5_000.0, 6_000.0, 5_500.0, 6_200.0])  # expert minus fine-tuning, clearly positive
+    none = np.zeros(4, dtype=bool)
+    some = np.array([True, False, False, False])
+    assert judged_censored(d, none, none)["verdict"] == HOLDS
+    assert judged_censored(d, some, none)["verdict"] == HOLDS  # the expert's lower bound: the gain is larger still
+    assert judged_censored(d, none, some)["verdict"] == NOT_RESOLVED  # fine-tuning censored: could be smaller
+    assert judged_censored(-d, some, none)["verdict"] == NOT_RESOLVED  # a lower bound cannot refute
+    assert judged_censored(-d, none, some)["verdict"] == REFUTED
+    both = judged_censored(d, some, some)
+    assert both["verdict"] == NOT_RESOLVED and both["censored"] == 1  # both censored in a unit: unknown
+
+
+def test_the_scenarios_of_one_seed_are_one_unit():
+    """Six (seed, scenario) pairs of three seeds: as six units the difference "holds"; as the
+    three seeds it is (each seed's two scenarios share its DT, dataset and experts), it does not."""
+    seeds = [0, 0, 1, 1, 2, 2]
+    diffs = [1.0, 1.1, 3.0, 3.1, 0.2, 0.3]
+    assert judged(diffs)["verdict"] == HOLDS  # pairs as units: 5 degrees of freedom
+    order, per_seed = by_seed(seeds, diffs)
+    assert order == [0, 1, 2] and per_seed == pytest.approx([1.05, 3.05, 0.25])
+    ci = sps.ttest_1samp(per_seed, 0.0).confidence_interval(0.95)
+    assert ci.low < 0 < ci.high and judged(per_seed)["verdict"] == NOT_RESOLVED
+
+
+def test_a_cell_of_fewer_than_three_units_prints_no_verdict():
+    two = judgement("zero-shot", "paper", judged([3.0, 3.2]), "two seeds", "seeds", "x")
+    assert two.verdict == NOT_MEASURED and two.cell == "**not measured**: +3.10 (2 seeds)"
+    three = judgement("zero-shot", "paper", judged([3.0, 3.2, 3.1]), "three seeds", "seeds", "x")
+    ci = sps.ttest_1samp([3.0, 3.2, 3.1], 0.0).confidence_interval(0.95)
+    assert three.cell == f"**holds**: +3.10 [{ci.low:+.2f}, {ci.high:+.2f}] (3 seeds)"
+
+
+def _pair(diff: float, low: bool = False, high: bool = False) -> dict:
+    return {"fewer": {"difference": diff, "low_bound": low, "high_bound": high}, "pretraining": 1_000.0}
+
+
+def test_fewer_over_seeds_carries_each_scenarios_bound_to_its_seed():
+    """Three seeds x two scenarios, differences made up: a seed's mean is a lower bound where one
+    of its scenarios' is (the expert censored there), and then it cannot make "refuted"."""
+    seeds = [0, 0, 1, 1, 2, 2]
+    pairs = [_pair(-5_000), _pair(-5_200), _pair(-4_800), _pair(-5_100, low=True), _pair(-5_050), _pair(-4_900)]
+    fewer, total = _fewer("paper", seeds, pairs, "3 seeds")
+    assert fewer.n == 3 and fewer.mean == pytest.approx(np.mean([-5_100, -4_950, -4_975]))
+    low, high = sps.ttest_1samp([-5_100, -4_950, -4_975], 0.0).confidence_interval(0.95)
+    assert high < 0 and fewer.verdict == NOT_RESOLVED  # refuted by its interval, but seed 1's is a lower bound
+    assert "never reached the level in 1 and fine-tuning in 0 of 6" in fewer.text
+    assert total.mean == pytest.approx(fewer.mean - 1_000.0) and total.verdict == NOT_RESOLVED
+    clean = [_pair(p["fewer"]["difference"]) for p in pairs]
+    refuted, _ = _fewer("paper", seeds, clean, "3 seeds")
+    assert refuted.verdict == REFUTED and "never reached" not in refuted.text

@@ -55,7 +55,7 @@ def test_the_trained_models_are_the_rows_over_seeds():
     assert models["flat"].pretrain_fields(track_fields)["model"] == {"width": 64, "state_encoder": "flat"}
     assert models["bc-s1"].pretrain_fields({})["model"] == {"condition_on_return": False}
     assert models["mixed-bc-s1"].row == "bc-mixed"
-    assert [m.stage for m in trained_models(TRACK_SPECS["paper"], [], (), 1, ablation=True)] == ["pretrain"]
+    assert [m.stage for m in trained_models(TRACK_SPECS["paper"], [], (), 1, ablation=True)] == ["pretrain", "bc"]
 
 
 def test_the_main_rows_are_the_controllers_under_the_safety_layer():
@@ -352,3 +352,38 @@ def test_the_studys_controller_leaves_the_study_in_one_directory(deployment_run,
     capsys.readouterr()
     assert main(["export", str(out), "--row", transfer, "--out", str(tmp_path / "t")]) == 2
     assert "plan of" in capsys.readouterr().err  # another hall's plan: no controller of its own
+
+
+def test_fewer_interactions_in_the_halls_from_scratch_charges_both_sides_alike(deployment_run):
+    """The deployment track's "fewer interactions" from a from-scratch measurement (a made-up
+    expert curve here; the fine-tuning curves are the study's): each side charged until it
+    first reaches 95% of the expert's final evaluation, fine-tuning the mean over its seeds,
+    recomputed by hand from the places stages' finetune.csv. A from-scratch.json without curves
+    (an earlier uavris's) is "not tested"."""
+    import csv
+
+    from uavris.experiments.study.claims_tracks import judge_deployment
+    from uavris.experiments.study.finished import Study
+    from uavris.stats import NOT_MEASURED
+
+    out, _ = deployment_run
+    study = Study.open(out)
+    halls = ["layout-unseen-0", "layout-unseen-1"]
+    x, y = [10_000.0, 20_000.0, 30_000.0], [20.0, 30.0, 32.0]  # reaches 95% of 32 (30.4) at its last point
+    scratch = [{"hall": h, "expert_curve": [x, y]} for h in halls]
+    diffs = []
+    for h in halls:
+        needs = []
+        for d in sorted((out / "stages").glob(f"deploy-finetune-places-{h}-*")):
+            if not re.fullmatch(rf"deploy-finetune-places-{h}(-s1)?-[0-9a-f]{{12}}", d.name):
+                continue
+            with open(d / "model" / "finetune.csv", newline="") as f:
+                rows = [(float(r["env_interactions"]), float(r["eval_mean"])) for r in csv.DictReader(f)]
+            reached = [i for i, m in rows if m >= 0.95 * 32.0]
+            needs.append(reached[0] if reached else rows[-1][0])
+        assert len(needs) == 2  # both pre-training seeds
+        diffs.append(30_000.0 - np.mean(needs))
+    [fewer] = [j for j in judge_deployment(study, scratch) if j.claim == "fewer"]
+    assert fewer.n == 2 and fewer.mean == pytest.approx(np.mean(diffs)) and fewer.verdict == NOT_MEASURED
+    old = judge_deployment(study, [{"hall": h, "expert_to_level": 1.0, "finetune_interactions": 1.0} for h in halls])
+    assert [j.verdict for j in old if j.claim.startswith("fewer")] == ["not tested", "not tested"]

@@ -89,8 +89,9 @@ def test_report_numbers_come_from_evaluation_files(smoke_run):
     for stage in stages:
         scenario = stage.name.split("-")[-2]
         result = read_json(stage / "stage.json")["result"]
-        assert set(result) == {"expert", "dt-zero-shot", "dt-finetuned", "zero-action", "hover-optimizer", "oracle"} | {
-            f"transfer-{s}" for s in nearest_training_scenarios(scenario)}
+        # behaviour cloning on the same dataset beside the DT, in every track
+        assert set(result) == {"expert", "dt-zero-shot", "dt-finetuned", "bc", "zero-action", "hover-optimizer",
+                               "oracle"} | {f"transfer-{s}" for s in nearest_training_scenarios(scenario)}
         for summary in result.values():
             per_episode = [float(x) for x in re.findall(r"^\d+,([^,]+),", (stage / f"{summary['policy']}.csv")
                                                        .read_text(), re.M)]
@@ -176,7 +177,8 @@ def test_changed_parameter_invalidates_exactly_its_dependents(tmp_path):
         other = build_pipeline(dataclasses.replace(RC, **kw), tmp_path, ctx)
         return {n for n in base.stages if n not in other.stages or base.stages[n].key != other.stages[n].key}
 
-    dt = {"dataset", "pretrain", "finetune-unseen1", "finetune-unseen2", "evaluate-unseen1", "evaluate-unseen2"}
+    dt = {"dataset", "pretrain", "bc", "finetune-unseen1", "finetune-unseen2", "evaluate-unseen1",
+          "evaluate-unseen2"}
     deploy = {n for n in base.stages if n.startswith("deploy-")}
     models = {"pretrain", "bc", "goal", "pretrain-n1", "flat", "mixed-dt", "mixed-bc"}  # each for 2 seeds at smoke
     evaluations = {f"deploy-evaluate-layout-{split}-{j}" for split in ("unseen", "other") for j in (0, 1)}

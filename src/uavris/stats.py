@@ -87,6 +87,8 @@ def versus(low: float, high: float, reference: float) -> str:
 # zero the claimed way, is "refuted" where it excludes zero the other way, and is "not
 # resolved" otherwise (a CI that cannot be formed, one unit, is not resolved).
 HOLDS, REFUTED, NOT_RESOLVED = "holds", "refuted", "not resolved"
+# A cell with fewer than MIN_UNITS units on a side is "not measured": no verdict is printed.
+NOT_MEASURED, MIN_UNITS = "not measured", 3
 
 
 def verdict(low: float, high: float) -> str:
@@ -134,3 +136,30 @@ def steps_to_level(steps: ArrayLike, values: ArrayLike, level: float) -> float:
     x, y = np.asarray(steps, dtype=np.float64), np.asarray(values, dtype=np.float64)
     reached = x[y >= level]
     return float(reached[0]) if reached.size else float("nan")
+
+
+def interactions_to_level(steps: ArrayLike, values: ArrayLike, level: float) -> tuple[float, bool]:
+    """How many interactions a learning curve took to reach ``level``: the first of ``steps``
+    whose value reaches it (0 when the curve starts there: its first point at step 0), and
+    whether the count is censored (the curve never reached the level: its last step, only a
+    lower bound). An empty curve is censored at 0."""
+    reached = steps_to_level(steps, values, level)
+    if not np.isnan(reached):
+        return reached, False
+    x = np.asarray(steps, dtype=np.float64)
+    return (float(x[-1]) if x.size else 0.0), True
+
+
+def judged_censored(differences: ArrayLike, low_bounds: ArrayLike, high_bounds: ArrayLike) -> dict[str, float]:
+    """:func:`judged` of per-unit differences some of which are censored: a difference that is
+    only a lower bound (the true one is at least it: ``low_bounds``) is safe for "holds" and
+    not for "refuted"; an upper bound (``high_bounds``) the other way round. A verdict its
+    censoring could overturn is "not resolved", as is any verdict resting on a unit whose
+    difference is bounded both ways (both sides censored: unknown). Adds ``censored``, the
+    number of censored units."""
+    low, high = np.asarray(low_bounds, dtype=bool), np.asarray(high_bounds, dtype=bool)
+    out: dict[str, float] = judged(differences)
+    v = out["verdict"]
+    if (low & high).any() or (v == HOLDS and high.any()) or (v == REFUTED and low.any()):
+        v = NOT_RESOLVED
+    return {**out, "verdict": v, "censored": int((low | high).sum())}

@@ -33,13 +33,14 @@ class ClaimsArgs:
 
 
 def claims_command(args: list[str]) -> None:
-    """Judge the paper's three claims in every track of one or more studies, by one rule.
+    """Judge the paper's claims in every track of one or more studies, by one rule.
 
     A claim holds where the 95% CI of its paired difference over the unit of generalisation
-    (a seed and scenario in the paper and strong tracks, an unseen hall in the deployment
-    track) excludes zero the claimed way, is refuted where it excludes zero the other way, and
-    is not resolved otherwise. Writes OUT/claims.md (the claim x track table, then what each
-    cell compares) and OUT/claims.json.
+    (a training seed in the paper and strong tracks: one study each, its unseen scenarios
+    averaged; an unseen hall in the deployment track) excludes zero the claimed way, is refuted
+    where it excludes zero the other way, and is not resolved otherwise; a cell of fewer than 3
+    units is not measured. Writes OUT/claims.md (the claim x track table, what each cell
+    compares, what the verdicts rest on) and OUT/claims.json.
     """
     from uavris.experiments.study.claims import write_claims
 
@@ -67,9 +68,10 @@ class FromScratchArgs:
 def from_scratch_command(args: list[str]) -> None:
     """Fewer interactions, measured: in a study's first unseen halls, fine-tuning against hybrid
     PPO trained there from scratch (under the safety layer, evaluated every --config.eval-every
-    steps on the study's episodes, at most --config.steps): the interactions each needs to reach
-    the fine-tuned DT's level. Hours on one core per hall at the defaults. Writes --out (JSON: each
-    hall's levels and interactions, rewritten after every hall; uavris claims --from-scratch reads it).
+    steps on the study's episodes, for --config.steps): the interactions each needs to first
+    reach 95% of that expert's final evaluation. Hours on one core per hall at the defaults.
+    Writes --out (JSON: each hall's levels, curves and interactions, rewritten after every hall;
+    uavris claims --from-scratch reads it).
     """
     from uavris.experiments.display.tables import markdown_table
     from uavris.experiments.study.from_scratch import from_scratch
@@ -79,12 +81,12 @@ def from_scratch_command(args: list[str]) -> None:
     rows: list[tuple[str, ...]] = []
 
     def report(h: dict) -> None:
-        rows.append((h["hall"], f"{h['zero_shot']:.2f}", f"{h['level']:.2f}", f"{h['finetune_interactions']:,.0f}",
-                     f"{h['expert_best']:.2f}", f"{h['expert_to_level']:,.0f}" if h["reached"] else
+        rows.append((h["hall"], f"{h['zero_shot']:.2f}", f"{h['finetuned']:.2f}", f"{h['expert_final']:.2f}",
+                     f"{h['finetune_to_level']:,.0f}", f"{h['expert_to_level']:,.0f}" if h["reached"] else
                      f"not within {h['expert_steps']:,}", f"{h['expert_wall_s']:.0f}"))
-        print("\n".join(markdown_table(("hall", "zero-shot level", "fine-tuned level", "fine-tuning's interactions",
-                                        "expert's best", "expert reaches the level after", "expert's training (s)"),
-                                       rows, "lrrrrrr")), flush=True)
+        print("\n".join(markdown_table(("hall", "zero-shot level", "fine-tuned level", "expert's final level",
+                                        "fine-tuning reaches 95% of it after", "the expert after",
+                                        "expert's training (s)"), rows, "lrrrrrr")), flush=True)
 
     from_scratch(a.study, a.config, a.out, report)
     print(f"wrote {a.out}")

@@ -373,7 +373,8 @@ class JobRunner:
                 if undeclared:
                     raise ValueError(f"jobs {undeclared} declare no files they write; a cluster cannot run them")
                 remote = ray.remote(**options)(shipping.run_shipped)
-                refs = {remote.remote(job, shipping.pack((*job.reads, *shipping.outputs(job)))): job for job in jobs}
+                refs = {remote.remote(job, shipping.pack((*job.reads, *shipping.outputs(job))), _run_logged): job
+                        for job in jobs}
             else:
                 refs = {ray.remote(**options)(_run_logged).remote(job): job for job in jobs}
         pending = list(refs)

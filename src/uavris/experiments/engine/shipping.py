@@ -24,12 +24,9 @@ import io
 import os
 import tarfile
 from pathlib import Path, PurePosixPath
-from typing import TYPE_CHECKING, Iterable, Iterator
+from typing import Any, Callable, Iterable, Iterator
 
 from uavris.io import atomic_write_bytes
-
-if TYPE_CHECKING:
-    from uavris.experiments.engine.jobs import Job, JobResult
 
 MANIFEST = ".uavris-manifest"  # the archive's list of every file under the paths it packs
 
@@ -134,21 +131,21 @@ def _same(path: Path, data: bytes) -> bool:
     return hashlib.sha256(path.read_bytes()).digest() == hashlib.sha256(data).digest()
 
 
-def outputs(job: Job) -> tuple[Path, ...]:
-    """What comes back from a job: its declared writes and its log."""
+def outputs(job: Any) -> tuple[Path, ...]:
+    """What comes back from a job (a :class:`~uavris.experiments.engine.jobs.Job`): its declared
+    writes and its log."""
     return (*job.writes, job.log)
 
 
-def run_shipped(job: Job, inputs: bytes) -> tuple[JobResult, bytes]:
+def run_shipped(job: Any, inputs: bytes, run: Callable[[Any], Any]) -> tuple[Any, bytes]:
     """On a cluster node: the job's files from the driver (``inputs``, :func:`pack` of its reads
-    and writes), the job, and its writes packed for the driver, whether it succeeded or not
-    (a failed job's log and checkpoints are the driver's too)."""
-    from uavris.experiments.engine.jobs import _run_logged
-
+    and writes), the job (``run(job)``, the job runner's logged call), and its writes packed for
+    the driver, whether it succeeded or not (a failed job's log and checkpoints are the
+    driver's too)."""
     # the job's own files as the driver has them (a newer checkpoint left here by an attempt the
     # driver never heard of is not resumed beside the driver's older ones)
     unpack(inputs, (*job.reads, *outputs(job)), exact=outputs(job))
-    result = _run_logged(job)
+    result = run(job)
     return result, pack(outputs(job))
 
 

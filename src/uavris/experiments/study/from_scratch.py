@@ -11,12 +11,13 @@ level "with fewer interactions". Here, in the deployment track of a finished stu
 - fine-tuning: the goal-conditioned DT fine-tuned by trying places (the study's
   ``deploy-finetune-places-LAYOUT`` stages, every pre-training seed): its level (the mean over
   seeds of the study's score of ``dt-goal-finetuned-safe``; the zero-shot ``dt-goal-safe``
-  beside it) and the interactions it used (the mean over seeds of its ``env_interactions``);
+  beside it), the interactions it used (the mean over seeds of its ``env_interactions``) and
+  those it took to first reach 95% of the expert's final evaluation (the claims' rule);
 - from scratch: hybrid PPO on the motion entries with the optimiser's phases (the strong
   track's learner, no imitation, the quick hyperparameters), trained in the hall from its
   start under the attitude safety layer, evaluated every ``eval_every`` environment steps on
-  the study's evaluation episodes, for at most ``steps`` steps: the first evaluation at or
-  above the fine-tuned level.
+  the study's evaluation episodes, for ``steps`` steps: its whole learning curve, which the
+  claims read (both sides charged until they first reach 95% of its final evaluation).
 """
 
 from __future__ import annotations
@@ -31,10 +32,11 @@ import numpy as np
 
 from uavris.config import DictConfig
 from uavris.errors import ConfigError, UavrisError
+from uavris.experiments.study.claims_tracks import LEVEL, finetune_curve
 from uavris.experiments.study.finished import Study
 from uavris.experiments.study.tracks import SAFE_MARGIN_DEG, TRACK_SPECS, places_stage, zero_shot_only
 from uavris.io import read_csv, write_json
-from uavris.stats import steps_to_level
+from uavris.stats import interactions_to_level
 
 
 @dataclass(frozen=True)
@@ -65,14 +67,15 @@ def from_scratch(out: str | Path, cfg: FromScratchConfig, dest: Path,
                           "deployment --ablation)")
     _, unseen = study.sites(track)
     demos = study.result(track.stage("dataset"))
-    measured: dict[str, Any] = {"study": str(out), "cpu": machine(), "config": cfg.to_dict(),
+    measured: dict[str, Any] = {"study": str(Path(out).resolve()), "cpu": machine(), "config": cfg.to_dict(),
                                 "demonstrations": demos, "halls": []}
     for where in [w for w in unseen if not zero_shot_only(w, rc.system)][:cfg.halls]:
         res = study.result(track.stage(f"evaluate-{where.name}"))
         if res is None:
             raise UavrisError(f"{out}: the evaluation in {where.name} has not finished")
         fine = [v for v in res.values() if v["variant"] == "dt-goal-finetuned-safe"]
-        level = float(np.mean([v["mean"] for v in fine]))
+        finetuned = float(np.mean([v["mean"] for v in fine]))
+        places = [study.done(track.stage(places_stage(where.name, v["seed"] or 0))) for v in fine]
         used = [study.result(track.stage(places_stage(where.name, v["seed"] or 0)))["env_interactions"]
                 for v in fine]
         expert = TrainConfig(algo="ppo", scenario=where.name, start=where.scenario.start, seed=0, preset="quick",
@@ -84,12 +87,17 @@ def from_scratch(out: str | Path, cfg: FromScratchConfig, dest: Path,
             wall = time.perf_counter() - began
             evals = read_csv(Path(tmp) / "run" / "evals.csv")
         x, y = np.array([float(r["env_steps"]) for r in evals]), np.array([float(r["mean"]) for r in evals])
-        reached = steps_to_level(x, y, level)
-        hall = {"hall": where.name, "level": level, "oracle": float(res["oracle-safe"]["mean"]),
+        # the claims charge both sides until they first reach 95% of this expert's final evaluation
+        # (claims_tracks.interactions_needed): its whole curve is kept
+        to_level, censored = interactions_to_level(x, y, LEVEL * float(y[-1]))
+        finetune_to_level = float(np.mean([interactions_to_level(*finetune_curve(d / "model"), LEVEL * float(y[-1]))[0]
+                                           for d in places if d is not None]))
+        hall = {"hall": where.name, "finetuned": finetuned, "oracle": float(res["oracle-safe"]["mean"]),
                 "zero_shot": float(np.mean([v["mean"] for v in res.values() if v["variant"] == "dt-goal-safe"])),
-                "finetune_interactions": float(np.mean(used)), "expert_best": float(y.max()),
-                "expert_to_level": float(cfg.steps if np.isnan(reached) else reached),
-                "reached": not np.isnan(reached), "expert_steps": cfg.steps, "expert_wall_s": wall}
+                "finetune_interactions": float(np.mean(used)), "finetune_to_level": finetune_to_level,
+                "expert_best": float(y.max()),
+                "expert_final": float(y[-1]), "expert_to_level": to_level, "reached": not censored,
+                "expert_curve": [x.tolist(), y.tolist()], "expert_steps": cfg.steps, "expert_wall_s": wall}
         measured["halls"].append(hall)
         write_json(dest, measured)
         report(hall)

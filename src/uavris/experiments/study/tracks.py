@@ -79,9 +79,12 @@ class Track:
 
 
 TRACK_SPECS: dict[str, Track] = {  # each track's DT and fine-tuning: uavris.presets.TRACK_PRETRAIN, TRACK_FINETUNE
-    "paper": Track("paper", "", "agent", "paper track (end-to-end DRL experts, as published)"),
+    # every track has behaviour cloning on its own data beside its DT (the offline baseline a reader asks for)
+    "paper": Track("paper", "", "agent", "paper track (end-to-end DRL experts, as published)",
+                   behaviour_cloning=True),
     "strong": Track("strong", "strong-", "optimizer",
-                    "strong track (learned motion, optimised phases; experts initialised from the oracle)"),
+                    "strong track (learned motion, optimised phases; experts initialised from the oracle)",
+                    behaviour_cloning=True),
     "deployment": Track("deployment", "deploy-", "optimizer",
                         "deployment track (the oracle's demonstrations in many generated halls; unseen halls)",
                         layouts=True, unseen_experts=False, behaviour_cloning=True, demonstrations=True,

@@ -19,6 +19,7 @@ import numpy as np
 
 from uavris.experiments.study.tracks import TRACK_SPECS, Track
 from uavris.experiments.tools.targets import Row
+from uavris.io import read_json, write_json
 from uavris.layouts import Site
 from uavris.presets import EVAL_SEED
 from uavris.runs import read_done
@@ -31,13 +32,17 @@ def dataset_job(expert_dirs: list[str], trajectories: int, out: str) -> dict[str
     return dataset_summary(collect(expert_dirs, trajectories, out, force=True, progress=False))
 
 
+QUERIES_FILE = "queries.json"  # a demonstration part's model queries (poses its plans valued)
+
+
 def demonstrations_job(cfg_dict: dict[str, Any], first: int, count: int, out: str) -> dict[str, Any]:
     """Demonstrations of halls ``first .. first + count - 1`` as a dataset of their own at ``out``."""
     from uavris.experiments.training.demonstrations import DemonstrationConfig, collect_demonstrations, demonstrate
 
     cfg = DemonstrationConfig.from_dict(cfg_dict)
     labels: dict[str, list[Any]] | None = {} if cfg.exact_plans else None
-    trajectories = demonstrate(cfg, first, count, labels=labels)
+    queries: dict[str, int] = {}
+    trajectories = demonstrate(cfg, first, count, labels=labels, queries=queries)
     if labels:  # the plans' valued poses: labels of the learned value (a part beside the dataset's)
         from uavris.experiments.training.values import write_label_part
 
@@ -45,6 +50,7 @@ def demonstrations_job(cfg_dict: dict[str, Any], first: int, count: int, out: st
         write_label_part(part.parent.parent / "labels" / f"{part.name}.npz",
                          **{k: np.concatenate(v) for k, v in labels.items()})
     collect_demonstrations(cfg, out, force=True, progress=False, trajectories=trajectories)
+    write_json(Path(out) / QUERIES_FILE, queries)  # beside the part's dataset, which the merge sums
     return {"halls": count, "episodes": len(trajectories)}
 
 
@@ -60,8 +66,11 @@ def merge_demonstrations(cfg_dict: dict[str, Any], parts: Sequence[str], out: st
     by = {}  # the dataset's quality per behaviour (the per-hall table would list thousands of halls)
     for tr in trajectories:
         by.setdefault(tr.expert, []).append(tr.episode_return / tr.length)
+    queries = [Path(p) / QUERIES_FILE for p in parts]
     return {k: v for k, v in summary.items() if k != "scenarios"} | {
-        "halls": len(summary["scenarios"]), "behaviours": {b: float(np.mean(v)) for b, v in by.items()}}
+        "halls": len(summary["scenarios"]), "behaviours": {b: float(np.mean(v)) for b, v in by.items()},
+        **({"poses_valued": sum(read_json(q)["poses_valued"] for q in queries)} if all(q.exists() for q in queries)
+           else {})}
 
 
 def pretrain_job(cfg_dict: dict[str, Any], out: str, device: str = "cpu") -> dict[str, Any]:
@@ -85,7 +94,6 @@ def value_labels_job(cfg_dict: dict[str, Any], count: int, first: int, n: int, o
 def value_fit_job(cfg_dict: dict[str, Any], parts: Sequence[str], out: str) -> dict[str, Any]:
     """The learned value fitted to the label ``parts``, a checkpoint at ``out``; returns its done record."""
     from uavris.experiments.training.values import ValueFitConfig, fit
-    from uavris.io import read_json
 
     fit(ValueFitConfig.from_dict(cfg_dict), parts, out)
     return read_json(Path(out) / "done.json")

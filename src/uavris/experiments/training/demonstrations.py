@@ -107,12 +107,15 @@ def _noisy(oracle: PlanningOracle, sigma: float, rng: np.random.Generator) -> Pr
 
 
 def demonstrate(cfg: DemonstrationConfig, first: int = 0, count: int | None = None,
-                on_hall: Any = None, labels: dict[str, list[NDArray]] | None = None) -> list[Trajectory]:
+                on_hall: Any = None, labels: dict[str, list[NDArray]] | None = None,
+                queries: dict[str, int] | None = None) -> list[Trajectory]:
     """The demonstrations of halls ``first .. first + count - 1`` (module docstring), hall by
     hall, behaviour by behaviour; ``on_hall()`` is called after each hall (progress). With
     ``labels`` (a dict of lists) and the reference planner (``exact_plans``), every level pose its
     plan of each hall valued with ``R`` is added to it (users, position, rate, hall): the
-    learned value's labels near each hall's best poses, at no cost beyond the plan."""
+    learned value's labels near each hall's best poses, at no cost beyond the plan. ``queries``
+    gets ``poses_valued``: the model queries behind the plans (poses valued with the optimiser),
+    which the claims count beside the environment interactions."""
     layouts = cfg.layouts(first, count)
     oracle = PlanningOracle(settings=PlanSettings(exact=cfg.exact_plans))
     resolved = [layout.resolve(cfg.system) for layout in layouts]
@@ -147,6 +150,8 @@ def demonstrate(cfg: DemonstrationConfig, first: int = 0, count: int | None = No
             labels.setdefault("hall", []).append(np.array([layouts[i].name] * int(level.sum())))
         if on_hall is not None:
             on_hall()
+    if queries is not None:
+        queries["poses_valued"] = int(sum(plan.poses_valued for plan in oracle.plans.values()))
     return out
 
 

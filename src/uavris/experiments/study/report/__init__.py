@@ -239,10 +239,11 @@ def claims_section(study: Study) -> list[str]:
     """The claim x track table of this study (:mod:`uavris.experiments.study.claims`) and what each cell compares."""
     judgements = judge_studies([study])
     lines = [*claims_table(judgements), "", "A claim **holds** where the 95% CI of its paired difference over the unit "
-             "(a seed and scenario; an unseen hall) excludes zero the claimed way, is **refuted** where it excludes "
-             "zero the other way, and is **not resolved** otherwise. One study has one seed of the paper and strong "
-             "tracks: `uavris claims` pools studies run with `--seed 0`, `1`, `2`.", ""]
-    return lines + [f"- {j.track}, {j.claim}: {j.text}" + (f"; {j.n} units ({j.unit})." if j.n else ".")
+             "(a training seed; an unseen hall) excludes zero the claimed way, is **refuted** where it excludes "
+             "zero the other way, and is **not resolved** otherwise; with fewer than three units it is **not "
+             "measured**. One study is one seed of the paper and strong tracks: `uavris claims` pools studies run "
+             "with `--seed 0` to `4`.", ""]
+    return lines + [f"- {j.track}, {j.claim}: {j.text}" + (f"; {j.count} ({j.unit})." if j.n else ".")
                     for j in judgements]
 
 

@@ -15,9 +15,8 @@ import numpy as np
 from uavris.agents.references import REFERENCES
 from uavris.config import get_scenario
 from uavris.experiments.display.plots import REFERENCE_STYLE, plt, reference_lines, save_figure
-from uavris.experiments.study.claims import expert_curve, finetune_curve
+from uavris.experiments.study.claims_tracks import LEVEL, expert_curve, finetune_curve, interactions_needed
 from uavris.io import read_csv, read_json
-from uavris.stats import steps_to_level
 
 KIND_STYLE = {"expert": ("#1f77b4", "-"), "dt-finetuned": ("#2ca02c", "-"), "dt-zero-shot": ("#ff7f0e", "-"),
               "transfer": ("#7f7f7f", "--")}
@@ -60,16 +59,16 @@ def interactions_figure(scenario: str, finetune_dir: Path, expert_dir: Path, ste
     # linear axis: the zero-shot DT sits at 0 interactions, which a log axis cannot show
     ax.plot(fx, fy, "o-", color=KIND_STYLE["dt-finetuned"][0], label="DT fine-tuning (at 0: zero-shot)")
     ax.plot(ex_x, ex_y, "s-", color=KIND_STYLE["expert"][0], label=expert_label)
+    final = float(read_json(expert_dir / "done.json")["final_eval"]["mean"])
+    need = interactions_needed((ex_x, ex_y), (fx, fy), final)
+    # the level both sides are charged to reach (docs/results/claims.md, "fewer interactions")
+    ax.axhline(need["level"], color="0.5", lw=0.8, ls="--", label=f"{LEVEL:.0%} of the expert's final level")
     ax.set_xlim(left=0)
     ax.set_xlabel("environment interactions (slots)")
     ax.set_ylabel("average sum rate (bps/Hz)")
     ax.set_title(f"{scenario}: interactions needed", fontsize=9)
     ax.legend(fontsize=7, frameon=False)
-    info = {"finetune_interactions": float(fx[-1]) if fx.size else float("nan"),
-            "finetune_final": float(fy[-1]) if fy.size else float("nan"),
-            "expert_steps": float(ex_x[-1]) if ex_x.size else float("nan"),
-            "expert_final": float(ex_y[-1]) if ex_y.size else float("nan")}
-    info["expert_steps_to_match"] = steps_to_level(ex_x, ex_y, info["finetune_final"])
+    info = {"level": need["level"], "finetune_to_level": need["finetune"], "expert_to_level": need["expert"]}
     return save_figure(fig, stem), info
 
 

@@ -1,0 +1,63 @@
+"""One claim judged in one track: :class:`Judgement`, and :func:`judgement` (one from per-unit differences).
+
+Lives here: what a cell of the claims table holds (its verdict, the mean difference, its 95%
+CI, its unit and their count) and the rule that a cell with fewer than
+:data:`uavris.stats.MIN_UNITS` units is "not measured". Not here: the verdict rule itself
+(:func:`uavris.stats.verdict`), what each claim compares (:mod:`.claims_tracks`,
+:mod:`.claims_comparison`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+from uavris.stats import MIN_UNITS, NOT_MEASURED
+
+NOT_TESTED = "not tested"
+
+
+@dataclass(frozen=True)
+class Judgement:
+    """One claim in one track: the mean paired difference over ``n`` units (``unit``, a
+    sentence; ``units``, the noun the cell prints: "seeds", "halls"), its 95% CI, the verdict,
+    and what was compared (``text``, one sentence)."""
+
+    claim: str
+    track: str
+    verdict: str
+    mean: float = float("nan")
+    ci_low: float = float("nan")
+    ci_high: float = float("nan")
+    n: int = 0
+    unit: str = ""
+    units: str = ""
+    text: str = ""
+
+    @property
+    def count(self) -> str:
+        """"5 seeds", "1 hall": the units and their number."""
+        units = self.units or "units"
+        return f"{self.n} {units[:-1] if self.n == 1 and units.endswith('s') else units}"
+
+    @property
+    def cell(self) -> str:
+        if self.verdict == NOT_TESTED:
+            return "-"
+        count = f" ({self.count})" if self.units else ""
+        f = ",.0f" if abs(self.mean) >= 1000 else ",.2f"  # interactions as counts, rates to the hundredth
+        if self.verdict == NOT_MEASURED:  # the estimate, without an interval or a verdict
+            return f"**{NOT_MEASURED}**" + ("" if math.isnan(self.mean) else f": {self.mean:+{f}}") + count
+        ci = "" if math.isnan(self.ci_low) else f" [{self.ci_low:+{f}}, {self.ci_high:+{f}}]"
+        return f"**{self.verdict}**: {self.mean:+{f}}{ci}{count}"
+
+
+def judgement(claim: str, track: str, diff: dict[str, Any], unit: str, units: str, text: str) -> Judgement:
+    """The cell of ``diff`` (:func:`uavris.stats.judged`'s): "not measured" below
+    :data:`MIN_UNITS` units, whatever its interval says."""
+    v = diff["verdict"] if diff["n"] >= MIN_UNITS else NOT_MEASURED
+    return Judgement(claim, track, v, diff["mean"], diff["ci_low"], diff["ci_high"], int(diff["n"]), unit, units, text)
+
+
+__all__ = ["NOT_TESTED", "Judgement", "judgement"]
