@@ -179,3 +179,21 @@ def test_fewer_over_seeds_carries_each_scenarios_bound_to_its_seed():
     clean = [_pair(p["fewer"]["difference"]) for p in pairs]
     refuted, _ = _fewer("paper", seeds, clean, "3 seeds")
     assert refuted.verdict == REFUTED and "never reached" not in refuted.text
+
+
+def test_a_seed_is_one_unit_per_track():
+    """Two studies of one track with one seed are refused (one unit counted twice); a paper-track
+    and a strong-track study may share a seed, and the deployment track's seeds are within it."""
+    from types import SimpleNamespace
+
+    from uavris.errors import UavrisError
+    from uavris.experiments.study.claims import check_seeds
+    from uavris.experiments.study.tracks import TRACK_SPECS
+
+    def study(seed: int, *tracks: str) -> SimpleNamespace:
+        return SimpleNamespace(config=SimpleNamespace(seed=seed, tracks=tuple(TRACK_SPECS[t] for t in tracks)))
+
+    check_seeds([study(0, "paper", "strong", "deployment"), study(1, "paper"), study(1, "strong"),
+                 study(0, "deployment")])
+    with pytest.raises(UavrisError, match="strong track share a seed"):
+        check_seeds([study(0, "paper", "strong"), study(1, "strong"), study(1, "strong", "paper")])

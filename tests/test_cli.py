@@ -215,7 +215,8 @@ def test_help_reads_cleanly(capsys: pytest.CaptureFixture[str]) -> None:
         assert main([name, "--help"]) == 0
         text = " ".join(capsys.readouterr().out.replace("\u2502", " ").split())
         assert "--no-no-" not in text, name
-        if name in ("train", "evaluate", "benchmark", "collect", "pretrain-dt", "finetune-dt", "reproduce", "plan"):
+        if name in ("train", "evaluate", "benchmark", "collect", "pretrain-dt", "finetune-dt", "reproduce", "plan",
+                    "compare-algorithms", "sweep"):
             assert "--progress, --no-progress show a progress bar" in text, name
         for flag in ("--layout", "--out", "--scenario", "--config", "--phase-control", "--ray-address", "--labels"):
             assert not re.search(rf"{flag} \{{None\}}\|", text), (name, flag)

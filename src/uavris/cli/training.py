@@ -162,6 +162,8 @@ class CompareArgs:
     """address of a running Ray cluster (default: start a local instance)"""
     device: Device = "cpu"
     """torch device (auto: CUDA when torch sees one)"""
+    progress: bool = True
+    """show a progress bar"""
     system: SystemConfig = SystemConfig()
     """the system trained and evaluated in"""
 
@@ -186,7 +188,7 @@ def compare_command(args: list[str]) -> None:
     report = compare_algorithms(preset=a.preset, seeds=seeds, workers=a.workers, out=a.out, algos=a.algos,
                                 scenario=a.scenario, eval_episodes=a.eval_episodes, backend=a.backend,
                                 ray_address=a.ray_address, device=resolve_device(a.device), system=a.system,
-                                start=start, steps=steps, eval_every=a.eval_every)
+                                start=start, steps=steps, eval_every=a.eval_every, progress=a.progress)
     print(f"report: {report}")
 
 

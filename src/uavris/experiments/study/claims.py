@@ -67,11 +67,7 @@ def judge_studies(studies: Sequence[Study], budgets: Sequence[tuple[Path, int]] 
     (comparison, environment steps): the comparison's runs judged at that budget too
     (``uavris compare-algorithms --steps N --eval-every B``), only where every algorithm has
     its seeds there."""
-    pooled = [s for s in studies if any(not t.layouts for t in s.config.tracks)]  # the seeds of the scenario tracks
-    seeds = [s.config.seed for s in pooled]
-    if len(set(seeds)) != len(seeds):
-        raise UavrisError(f"the studies of the paper and strong tracks share a seed ({seeds}): run each with its "
-                          "own --seed")
+    check_seeds(studies)
     out: list[Judgement] = []
     compare = next((d for s in studies if (d := s.done("compare"))), None)
     if any(TRACK_SPECS["paper"] in s.config.tracks for s in studies):
@@ -94,6 +90,16 @@ def judge_studies(studies: Sequence[Study], budgets: Sequence[tuple[Path, int]] 
                                  text="the track's experts are not trained by DRL (they imitate the oracle)"))
         out += judge_deployment(ran[0], from_scratch) if track.layouts else judge_scenario_track(ran, track)
     return out
+
+
+def check_seeds(studies: Sequence[Study]) -> None:
+    """The units of a scenario track are its studies' seeds: two studies that ran the same track
+    with one seed are one unit counted twice (a paper-track and a strong-track study may share one)."""
+    for name in TRACKS:
+        track = TRACK_SPECS[name]
+        seeds = [s.config.seed for s in studies if track in s.config.tracks and not track.layouts]
+        if len(set(seeds)) != len(seeds):
+            raise UavrisError(f"the studies of the {name} track share a seed ({seeds}): run each with its own --seed")
 
 
 def claims_table(judgements: Sequence[Judgement]) -> list[str]:
