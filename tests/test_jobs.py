@@ -49,6 +49,35 @@ def test_a_dying_worker_fails_its_own_job_and_no_other(tmp_path: Path):
         assert again.ok and again.value == 120  # the runner is still usable
 
 
+def _held_while(path: str) -> None:
+    while os.path.exists(path):
+        time.sleep(0.05)
+
+
+def test_an_aborted_runner_stops_the_jobs_its_workers_run(tmp_path: Path):
+    """Closing on Ctrl-C or an error stops what the workers run instead of waiting for it: a job
+    a worker took between the signal and the close (the sweep's Ctrl-C test on a loaded machine)
+    would otherwise run to its end, here never."""
+    hold = tmp_path / "hold"
+    hold.touch()
+    runner, box = JobRunner(2, "local"), {}
+    jobs = [Job(f"held-{i}", _held_while, (str(hold),), tmp_path / f"held{i}.log", 1.0) for i in range(2)]
+    caller = threading.Thread(target=lambda: box.update(results=runner.run(jobs)), daemon=True)
+    caller.start()
+    deadline = time.time() + HANG_S
+    while not all(log.exists() for log in (j.log for j in jobs)) and time.time() < deadline:  # both started
+        time.sleep(0.1)
+    closer = threading.Thread(target=runner.close, kwargs={"abort": True}, daemon=True)
+    closer.start()
+    closer.join(HANG_S)
+    try:
+        assert not closer.is_alive(), "close(abort=True) waited for jobs that never end"
+        caller.join(HANG_S)
+        assert not caller.is_alive() and len(box["results"]) == 2 and not any(r.ok for r in box["results"])
+    finally:
+        hold.unlink()
+
+
 @pytest.mark.slow
 def test_a_dying_ray_worker_fails_its_own_job_and_no_other(tmp_path: Path):
     pytest.importorskip("ray")

@@ -40,7 +40,10 @@ def random_hall(k: int, rng: np.random.Generator) -> np.ndarray:
 
 # ------------------------------------------------------------------------------ V's symmetry
 @pytest.mark.parametrize("k", [3, 8])
-def test_v_gives_the_same_bits_in_any_order_of_the_devices(k):
+def test_v_gives_the_same_value_in_any_order_of_the_devices(k):
+    """To 4 float32 ulps of the value: the sorted means make the sum order-free, but a CPU's
+    matrix kernels may round a device's row by its place in the batch (AVX2 kernels: 1-2 ulps
+    at 8 devices; AVX-512: none). A model that read the order would be off by far more."""
     torch.manual_seed(0)
     model = PoseValue(ValueConfig(32)).eval()
     rng = np.random.default_rng(k)
@@ -48,7 +51,8 @@ def test_v_gives_the_same_bits_in_any_order_of_the_devices(k):
     poses = rng.uniform([0, 0, 2], [40, 40, 8], (64, 3))
     v = predict(model, users, poses)
     for _ in range(4):
-        assert np.array_equal(predict(model, users[rng.permutation(k)], poses), v)
+        np.testing.assert_allclose(predict(model, users[rng.permutation(k)], poses), v,
+                                   rtol=4 * np.finfo(np.float32).eps, atol=0)
 
 
 def test_one_set_of_weights_reads_halls_of_3_and_8_devices_and_reads_the_devices():

@@ -197,17 +197,24 @@ class JobRunner:
     def __enter__(self) -> JobRunner:
         return self
 
-    def __exit__(self, *exc: object) -> None:
-        self.close()
+    def __exit__(self, exc_type: type[BaseException] | None, *exc: object) -> None:
+        self.close(abort=exc_type is not None)
 
-    def close(self) -> None:
+    def close(self, abort: bool = False) -> None:
+        """Start nothing more and shut the pool down: after the running jobs end, or, with
+        ``abort`` (Ctrl-C or an error), stopping them. Ctrl-C reaches the workers, but a job
+        a worker took between the signal and this call would otherwise run to its end while
+        the command waits."""
         with self._lock:
             # jobs finishing while the pool shuts down (Ctrl-C stops the workers too) start nothing
             self._closing = True
             self._waiting.clear()
         if self._pool is not None:
-            self._pool.shutdown(cancel_futures=True)
-            self._pool = None
+            pool, self._pool = self._pool, None
+            if abort:
+                for process in list((getattr(pool, "_processes", None) or {}).values()):
+                    process.terminate()
+            pool.shutdown(cancel_futures=True)
         if self._ray_started:
             import ray
 
