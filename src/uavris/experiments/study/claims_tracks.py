@@ -99,10 +99,10 @@ def _scenario_units(studies: Sequence[Study], track: Track) -> list[dict[str, An
             continue
         _, unseen = st.sites(track)
         pretraining = _pretraining_interactions(st, track)
+        experts = st.done(track.stage("experts-unseen"))
         for w in unseen:
             found = st.evaluation(track, w.name)
             ft = st.done(track.stage(f"finetune-{w.name}"))
-            experts = st.done(track.stage("experts-unseen"))
             if found is None or ft is None or experts is None:
                 continue
             edir, res = found
@@ -152,8 +152,8 @@ def judge_scenario_track(studies: Sequence[Study], track: Track) -> list[Judgeme
         return [Judgement(c, name, NOT_TESTED, text="no unit finished") for c in SCENARIO_CLAIMS]
     pairs = [_pair_differences(u) for u in units]
     seeds = [u["seed"] for u in units]
-    order, _ = by_seed(seeds, [0.0] * len(seeds))
-    unit = f"training seeds {order}, each the mean of its unseen scenarios {sorted({u['site'] for u in units})}"
+    unit = (f"training seeds {sorted(set(seeds))}, each the mean of its unseen scenarios "
+            f"{sorted({u['site'] for u in units})}")
 
     def per_seed(key: str, at: int | None = None) -> dict[str, Any]:
         _, v = by_seed(seeds, [p[key] if at is None else p[key][at] for p in pairs])
