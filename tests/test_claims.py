@@ -96,6 +96,32 @@ def test_a_comparison_cell_short_of_seeds_is_not_measured(monkeypatch):
     assert {cells[1]: cells[-1] for cells in rows} == {"DDPG": HOLDS, "PPO": NOT_MEASURED}
 
 
+def test_a_comparison_is_scored_at_a_budget_by_its_first_evaluation_there(tmp_path):
+    """The budget table's scores: each run's first periodic evaluation at or after the budget
+    (PPO evaluates at the end of a rollout, after it), in seed order per algorithm; a run that
+    stopped short of the budget is not scored there; the final scores are the per-run file's."""
+    import yaml
+
+    from uavris.experiments.study.claims_comparison import comparison_scores
+    from uavris.experiments.training.train_expert import TrainConfig
+
+    curves = {("ppo", 1): ([12_800, 25_600, 38_400], [1.0, 2.0, 3.0]),
+              ("ppo", 0): ([12_800, 25_600, 38_400], [4.0, 5.0, 6.0]),
+              ("ddpg", 0): ([12_500, 25_000, 37_500], [7.0, 8.0, 9.0]),
+              ("ddpg", 1): ([12_500], [10.0])}  # stopped before 25,000
+    for (algo, seed), (x, y) in curves.items():
+        run = tmp_path / "runs" / f"{algo}-s{seed}"
+        run.mkdir(parents=True)
+        cfg = TrainConfig(algo=algo, scenario="fig2", seed=seed, preset="smoke")
+        (run / "config.yaml").write_text(yaml.safe_dump(cfg.to_dict()))
+        (run / "evals.csv").write_text("env_steps,mean\n" + "".join(f"{a},{b}\n" for a, b in zip(x, y)))
+    assert comparison_scores(tmp_path, 25_000) == {"ppo": [5.0, 2.0], "ddpg": [8.0]}
+    assert comparison_scores(tmp_path, 12_500) == {"ppo": [4.0, 1.0], "ddpg": [7.0, 10.0]}
+    assert comparison_scores(tmp_path, 40_000) == {}
+    (tmp_path / "final_per_run.csv").write_text("algo,final_eval_mean\nppo,6.5\nddpg,9.5\nppo,3.5\n")
+    assert comparison_scores(tmp_path) == {"ppo": [6.5, 3.5], "ddpg": [9.5]}
+
+
 def test_steps_to_level_on_a_hand_made_curve():
     steps = [10_000, 20_000, 30_000, 40_000]
     rates = [5.0, 9.0, 8.5, 12.0]

@@ -1,3 +1,4 @@
+import dataclasses
 import json
 import shutil
 import zipfile
@@ -17,6 +18,7 @@ from uavris.config import ConfigError, SystemConfig
 from uavris.env import UavRisD2DEnv
 from uavris.errors import UavrisError
 from uavris.experiments.training.train_expert import TrainConfig, run_policy, train
+from uavris.io import read_csv
 
 
 def test_sb3_env_checker_passes():
@@ -131,6 +133,22 @@ def test_killed_and_resumed_run_equals_uninterrupted_run(tmp_path, algo, interru
         assert (tmp_path / "whole" / name).read_text() == (tmp_path / "resumed" / name).read_text(), name
     a, b = (load_model(tmp_path / r / "model.zip", algo).policy.state_dict() for r in ("whole", "resumed"))
     assert all(torch.equal(a[k], b[k]) for k in a)
+
+
+@pytest.mark.parametrize("algo", ["ddpg", "ppo"])
+def test_a_periodic_evaluation_is_the_run_of_that_budget(tmp_path, algo):
+    """A run evaluated every 160 steps scores, at its first evaluation, what a run trained for
+    exactly those steps scores at its end: the policy after every update of the steps so far
+    (what the budget table reads; PPO's rollout of 4 x 32 steps ends at 256, DDPG learns from
+    step 100 on). Evaluated before the update of the step that reached 160, it was not."""
+    long = TrainConfig(algo=algo, scenario="fig2", seed=1, preset="smoke", eval_episodes=2, eval_every=160)
+    train(long, tmp_path / "long", progress=False)
+    first = read_csv(tmp_path / "long" / "evals.csv")[0]
+    assert int(first["env_steps"]) == {"ddpg": 160, "ppo": 256}[algo]
+    short = dataclasses.replace(long, total_steps=int(first["env_steps"]))
+    train(short, tmp_path / "short", progress=False)
+    end = read_csv(tmp_path / "short" / "evals.csv")[-1]
+    assert (end["env_steps"], end["mean"]) == (first["env_steps"], first["mean"])
 
 
 def test_corrupt_resume_state_is_one_clear_error_and_nothing_changes(tmp_path):

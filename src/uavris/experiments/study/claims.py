@@ -191,7 +191,8 @@ def write_claims(outs: Sequence[Path], dest: Path, budgets: Sequence[tuple[Path,
               *(f"- {what}: would cost {cost}." for what, cost in NOT_MEASURED_CLAIMS)]
     if budgets:
         zero = fig2_zero_action()
-        figs = budget_figure(budgets[0][0], Path(dest) / "budget", zero)
+        # not "budget": docs/results/budget.md's own figure lives beside the committed claims page
+        figs = budget_figure(budgets[0][0], Path(dest) / "claims-budget", zero)
         lines += ["", "## The comparison at each budget", "", f"![budget]({figs[0].name})", "",
                   *budget_table(budgets[0][0], [b for _, b in budgets], zero)]
     lines += ["", f"Studies: {', '.join(str(o) for o in outs)}" + (f"; comparison {budgets[0][0]}" if budgets else "")

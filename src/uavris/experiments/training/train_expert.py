@@ -165,7 +165,7 @@ class _Recorder:
         self.next_eval = (start_steps // cfg.eval_every + 1) * cfg.eval_every
         self.next_ckpt = (start_steps // cfg.checkpoint_every + 1) * cfg.checkpoint_every
         self.interrupt_at = interrupt_at
-        self.checkpoint_due = False
+        self.checkpoint_due = self.eval_due = False
         self.bar = progress_bar(cfg.total_steps, f"{cfg.algo} {cfg.scenario} s{cfg.seed}", "step", progress,
                                 start_steps)
 
@@ -196,9 +196,10 @@ class _Recorder:
             recent = [row["avg_sum_rate"] for row in self.episodes[-20:]]
             self.bar.set_postfix(avg_sum_rate=f"{np.mean(recent):.2f}", refresh=False)
         if steps >= self.next_eval and steps < self.cfg.total_steps:  # the final evaluation follows training
-            res = run_evaluation(model, self.cfg, self.cfg.eval_episodes).summary()
-            self.evals.append(_eval_row(steps, res))
-            logger.record("eval/avg_sum_rate", res["mean"])
+            # evaluated at the next rollout start, once this step's transitions are trained on: SB3
+            # calls on_step before the update, and a policy evaluated here would be one update short
+            # of a run of this many steps (PPO a whole rollout's), which a budget is read as
+            self.eval_due = True
             self.next_eval = (steps // self.cfg.eval_every + 1) * self.cfg.eval_every
         if steps >= self.next_ckpt:
             # saved at the next rollout start, once this step's transition is stored and trained on
@@ -209,6 +210,11 @@ class _Recorder:
         return True
 
     def on_rollout_start(self, model: Any) -> None:
+        if self.eval_due:  # before the checkpoint, which keeps the row
+            res = run_evaluation(model, self.cfg, self.cfg.eval_episodes).summary()
+            self.evals.append(_eval_row(model.num_timesteps, res))
+            model.logger.record("eval/avg_sum_rate", res["mean"])
+            self.eval_due = False
         if self.checkpoint_due:
             save_checkpoint(model, self.cfg, self.run_dir, self.episodes, self.evals, self.clock)
             self.checkpoint_due = False
