@@ -133,3 +133,35 @@ def test_a_cluster_job_must_say_what_it_writes(tmp_path: Path):
             runner.run([Job("silent", print, ("x",), tmp_path / "silent.log")])
     finally:
         runner.close()
+
+
+def _dies_then_holds(marker: str, hold: str) -> None:
+    """Kills its worker the first time; run again (alone), waits while ``hold`` exists."""
+    if not os.path.exists(marker):
+        Path(marker).touch()
+        os._exit(3)
+    Path(marker + ".again").touch()
+    _held_while(hold)
+
+
+def test_an_aborted_runner_stops_a_job_rerun_alone(tmp_path: Path):
+    """A job whose worker died runs again in a pool of its own, which Ctrl-C may have broken the
+    pool for after the signal: closing on abort stops that pool too (before, the command waited
+    for the job there; the sweep's Ctrl-C test timed out)."""
+    hold, marker = tmp_path / "hold", tmp_path / "died"
+    hold.touch()
+    runner, box = JobRunner(2, "local"), {}
+    jobs = [Job("dies-then-holds", _dies_then_holds, (str(marker), str(hold)), tmp_path / "d.log", 1.0)]
+    caller = threading.Thread(target=lambda: box.update(results=runner.run(jobs)), daemon=True)
+    caller.start()
+    deadline = time.time() + HANG_S
+    while not Path(str(marker) + ".again").exists() and time.time() < deadline:  # running alone now
+        time.sleep(0.1)
+    try:
+        assert Path(str(marker) + ".again").exists()
+        runner.close(abort=True)
+        caller.join(HANG_S)
+        assert not caller.is_alive(), "close(abort=True) left the job rerun alone running"
+        assert not box["results"][0].ok
+    finally:
+        hold.unlink()

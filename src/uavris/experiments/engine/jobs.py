@@ -171,6 +171,7 @@ class JobRunner:
             os.environ.setdefault(var, "1")
         self._lock = threading.Condition()
         self._pool: ProcessPoolExecutor | None = None
+        self._solos: set[ProcessPoolExecutor] = set()  # a job whose worker died, run again alone
         self._ray_started = False
         self._waiting: list[tuple[float, int, Job, Future[JobResult] | None]] = []  # heap: (-priority, order, ...)
         self._order = itertools.count()
@@ -209,8 +210,10 @@ class JobRunner:
             # jobs finishing while the pool shuts down (Ctrl-C stops the workers too) start nothing
             self._closing = True
             self._waiting.clear()
-        if self._pool is not None:
-            pool, self._pool = self._pool, None
+            # a job rerun alone when Ctrl-C broke its pool runs in a pool started after the signal
+            pools, self._solos = [self._pool, *self._solos], set()
+            self._pool = None
+        for pool in (p for p in pools if p is not None):
             if abort:
                 for process in list((getattr(pool, "_processes", None) or {}).values()):
                     process.terminate()
@@ -299,12 +302,15 @@ class JobRunner:
                     # down nor be taken down by one. Dying there too, it failed.
                     self._replace_pool(pool)
                     solo = ProcessPoolExecutor(max_workers=1, mp_context=mp.get_context("spawn"))
+                    self._solos.add(solo)
                     self._submit(job, outer, slot, started, solo, alone=True)
                     return
             res = JobResult(job.name, False, None, f"worker died: {type(e).__name__}: {e}", job.log)
         except BaseException as e:  # noqa: BLE001 - whatever else went wrong with the process
             res = JobResult(job.name, False, None, f"worker died: {type(e).__name__}: {e}", job.log)
         if alone:
+            with self._lock:
+                self._solos.discard(pool)
             pool.shutdown(wait=False)
         res = dataclasses.replace(res, worker=slot, start=started, end=time.time())
         with self._lock:
