@@ -148,7 +148,10 @@ def test_ctrl_c_in_a_sweep_leaves_one_line_and_a_resumable_state(tmp_path: Path)
     out = tmp_path / "s"
     args = [sys.executable, "-m", "uavris", "sweep", "zero-action", str(tmp_path / "held.py") + ":held", "--param",
             "system.nx", "2,3", "--episodes", "2", "--workers", "2", "--out", str(out), "--no-progress"]
-    proc = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+    # a suite started in the background by a shell (`make test &`) ignores SIGINT, and a child
+    # inherits that: Ctrl-C is restored for the command, as a terminal's foreground job has it
+    proc = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     deadline = time.time() + 300
     while not list((out / "cells").glob("*.json")) and time.time() < deadline:  # a zero-action cell done
         time.sleep(0.2)
