@@ -53,3 +53,18 @@ def dataset_dir(expert_trajectories, tmp_path_factory):
     from uavris.agents.dt.dataset import write_dataset
 
     return write_dataset(tmp_path_factory.mktemp("ds") / "experts-v0", expert_trajectories, SHORT)
+
+
+def keep_figures(monkeypatch: pytest.MonkeyPatch, *modules: object) -> list:
+    """Figures that ``modules`` would save (their ``save_figure``), drawn and kept instead of
+    written: a test reads their artists."""
+    kept: list = []
+
+    def keep(fig, stem):
+        fig.canvas.draw()
+        kept.append(fig)
+        return []
+
+    for module in modules:
+        monkeypatch.setattr(module, "save_figure", keep, raising=False)
+    return kept

@@ -85,18 +85,39 @@ def test_a_generated_layout_is_drawn_in_the_room_of_the_flag(tmp_path: Path) -> 
     assert layout.users != LayoutGenerator().layout("unseen", 0).users  # not the 40 m hall's devices
 
 
-@pytest.mark.parametrize("command", ["evaluate", "demo", "train"])
-def test_a_layout_file_with_a_room_and_system_room_is_one_line(command: str, tmp_path: Path,
+@pytest.mark.parametrize("room", [("50", "50", "8"), ("40", "40", "8"), ("30", "20", "6")],
+                         ids=["another", "the-default", "the-files-own"])
+@pytest.mark.parametrize("command", ["evaluate", "demo", "train", "benchmark", "plan", "sweep"])
+def test_a_layout_file_with_a_room_and_system_room_is_one_line(command: str, room: tuple[str, ...], tmp_path: Path,
                                                                capsys: pytest.CaptureFixture[str]) -> None:
+    """A room given twice is one line whatever the values: the default's (which a parse cannot
+    tell from no flag, and which ran a hall of neither room) and the file's own (which failed on
+    the default ceiling before)."""
     hall = tmp_path / "hall.yaml"
     hall.write_text(HALL_30)
     before = _tree(tmp_path)
     args = {"evaluate": ["evaluate", "zero-action", "--episodes", "1", "--out", str(tmp_path / "e")],
             "demo": ["demo", "--episodes", "1"],
-            "train": ["train", "--preset", "smoke", "--out", str(tmp_path / "run")]}[command]
-    err = _one_line(capsys, main([*args, "--layout", str(hall), "--system.room", "50", "50", "8"]))
+            "train": ["train", "--preset", "smoke", "--out", str(tmp_path / "run")],
+            "benchmark": ["benchmark", "zero-action", "--preset", "smoke", "--out", str(tmp_path / "b")],
+            "plan": ["plan", str(hall), "--out", str(tmp_path / "p" / "map")],
+            "sweep": ["sweep", "zero-action", "--param", "system.nx", "2", "--out", str(tmp_path / "s")],
+            }[command]
+    layout = [] if command == "plan" else ["--layout", str(hall)]
+    err = _one_line(capsys, main([*args, *layout, "--system.room", *room]))
     assert f"--layout {hall} sets the room; drop --system.room or the file's room" in err
     assert _tree(tmp_path) == before
+
+
+@pytest.mark.parametrize("command", [["evaluate", "zero-action", "--episodes", "1"], ["demo", "--episodes", "1"]])
+def test_a_layout_and_the_papers_devices_given_by_flag_is_one_line(command: list[str], tmp_path: Path,
+                                                                   monkeypatch: pytest.MonkeyPatch,
+                                                                   capsys: pytest.CaptureFixture[str]) -> None:
+    monkeypatch.chdir(tmp_path)
+    devices = [str(c) for u in PAPER_USERS for c in u]  # the default's value: given all the same
+    err = _one_line(capsys, main([*command, "--layout", "layout-unseen-1", "--system.users", *devices]))
+    assert "--layout and --system.users both give the device positions" in err
+    assert not any(tmp_path.iterdir())
 
 
 # ---------------------------------------------------------------- 2. every benchmark cell checked first
@@ -241,11 +262,11 @@ def test_demo_prints_intervals_in_brackets_never_below_zero(capsys: pytest.Captu
 
     from uavris.agents.references import REFERENCES
 
-    assert main(["demo", "--episodes", "2"]) == 0
+    assert main(["demo", "--episodes", "2", "--seed", "1"]) == 0
     out = capsys.readouterr().out
     system = SystemConfig()
     for name in ("zero-action", "random", "hover-aligned"):
-        x = evaluate(reference_policy(name, system), system, "fig2", 2, 0).avg_sum_rate
+        x = evaluate(reference_policy(name, system), system, "fig2", 2, 1).avg_sum_rate
         half = stats.t.ppf(0.975, 1) * stats.sem(x)
         want = f"95% CI [{max(0.0, x.mean() - half):.2f}, {x.mean() + half:.2f}]"
         line = next(line for line in out.splitlines() if REFERENCES[name].label in line)
@@ -257,13 +278,13 @@ def test_evaluate_prints_intervals_in_brackets_never_below_zero(tmp_path: Path,
                                                                 capsys: pytest.CaptureFixture[str]) -> None:
     from scipy import stats
 
-    assert main(["evaluate", "random", "--scenario", "fig2", "--episodes", "2", "--seed", "0", "--out",
+    assert main(["evaluate", "random", "--scenario", "fig2", "--episodes", "2", "--seed", "1", "--out",
                  str(tmp_path / "r"), "--no-progress"]) == 0
     out = capsys.readouterr().out
     system = SystemConfig()
     from uavris.agents.references import REFERENCE_SEED
 
-    x = evaluate(reference_policy("random", system, REFERENCE_SEED), system, "fig2", 2, 0).avg_sum_rate
+    x = evaluate(reference_policy("random", system, REFERENCE_SEED), system, "fig2", 2, 1).avg_sum_rate
     half = stats.t.ppf(0.975, 1) * stats.sem(x)
     assert x.mean() - half < 0  # the interval the printout bounds
     assert f"(95% CI [0.00, {x.mean() + half:.2f}], IQM" in out, out
@@ -307,3 +328,14 @@ def test_flags_that_conflict_are_one_line_and_write_nothing(args: list[str], mes
     err = capsys.readouterr().err.strip()
     assert err.count("\n") == 0 and message in err, err
     assert not any(tmp_path.rglob("*")), list(tmp_path.rglob("*"))
+
+
+def test_the_demo_names_a_layout_as_a_hall_and_counts_one_episode(capsys: pytest.CaptureFixture[str]) -> None:
+    """``--layout`` is a hall, not a scenario of the paper's: the first line names it so; a
+    named scenario is still one; one episode is "1 episode"."""
+    assert main(["demo", "--episodes", "1", "--layout", "layout-unseen-3"]) == 0
+    first = capsys.readouterr().out.splitlines()[0]
+    assert first.startswith("uavris demo: hall layout-unseen-3 [") and ", 1 episode, " in first, first
+    assert main(["demo", "--episodes", "1", "--scenario", "unseen1"]) == 0
+    first = capsys.readouterr().out.splitlines()[0]
+    assert first.startswith("uavris demo: scenario unseen1 [") and ", 1 episode, " in first, first

@@ -182,7 +182,7 @@ def test_system_users_on_the_command_line_give_a_hall(tmp_path, capsys):
     capsys.readouterr()
     assert cli_main(["evaluate", "zero-action", *users, "--layout", "layout-unseen-0"]) == 2
     assert "--layout and --system.users" in capsys.readouterr().err
-    assert cli_main(["evaluate", "zero-action", *users, "--layout", "layout-unseen-0", "--scenario", "fig2"]) == 2
+    assert cli_main(["evaluate", "zero-action", "--layout", "layout-unseen-0", "--scenario", "fig2"]) == 2
     err = capsys.readouterr().err  # a hall's own start and a named one: one line too
     assert len(err.splitlines()) == 1 and "--scenario fig2" in err and "--layout layout-unseen-0" in err
 

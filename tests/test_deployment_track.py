@@ -399,3 +399,35 @@ def test_fewer_interactions_in_the_halls_from_scratch_charges_both_sides_alike(d
     assert fewer.n == 2 and fewer.mean == pytest.approx(np.mean(diffs)) and fewer.verdict == NOT_MEASURED
     old = judge_deployment(study, [{"hall": h, "expert_to_level": 1.0, "finetune_interactions": 1.0} for h in halls])
     assert [j.verdict for j in old if j.claim.startswith("fewer")] == ["not tested", "not tested"]
+
+
+def test_an_exported_controller_says_its_seed_and_scores_an_episode_alone_as_in_a_batch(deployment_run, tmp_path,
+                                                                                       capsys):
+    """`export --row dt-goal-safe` is one of the row's pre-training seeds: it says which and names the
+    others. Episode k of the controller alone scores as episode k of a batch, and `plan --controller`
+    reports where the controller, told its place, actually ends that episode (what `evaluate` flies)."""
+    from uavris.cli import main
+    from uavris.io import read_csv
+    from uavris.presets import EVAL_SEED
+
+    out, _ = deployment_run
+    ctl = tmp_path / "ctl"
+    capsys.readouterr()
+    assert main(["export", str(out), "--row", "dt-goal-safe", "--out", str(ctl)]) == 0
+    printed = capsys.readouterr().out
+    assert "note: this is seed 0 of the row's 2 seeds (0, 1)" in printed and "dt-goal-safe@s1" in printed
+    assert read_json(ctl / "controller.json")["seed"] == 0
+    common = ["--layout", "layout-unseen-0", "--no-progress", "--no-references"]
+    assert main(["evaluate", str(ctl), *common, "--episodes", "4", "--out", str(tmp_path / "batch")]) == 0
+    assert main(["evaluate", str(ctl), *common, "--episodes", "1", "--seed", str(EVAL_SEED + 2),
+                 "--out", str(tmp_path / "alone")]) == 0
+    [batch] = [read_csv(p) for p in (tmp_path / "batch").glob("*.csv")]
+    [alone] = [read_csv(p) for p in (tmp_path / "alone").glob("*.csv")]
+    assert float(alone[0]["avg_sum_rate"]) == float(batch[2]["avg_sum_rate"])  # bit for bit
+    capsys.readouterr()
+    assert main(["plan", "layout-unseen-0", "--controller", str(ctl), "--system.observe-devices", "--out",
+                 str(tmp_path / "p"), "--no-progress"]) == 0
+    printed = capsys.readouterr().out
+    flight = read_json(tmp_path / "p.json")["controller_flight"]
+    assert flight["average_sum_rate"] == float(batch[0]["avg_sum_rate"])  # the episode evaluate flies
+    assert f"dt-goal-safe, told this place, ends episode seed {EVAL_SEED} at" in printed

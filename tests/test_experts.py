@@ -242,7 +242,7 @@ def test_not_a_run_dir_and_corrupt_checkpoint(tmp_path, capsys):
     (tmp_path / "junk").mkdir()
     (tmp_path / "junk" / "notes.txt").write_text("keep me")
     code, err = _run_cli(["evaluate", str(tmp_path / "junk")], capsys)
-    assert code == 2 and "not a uavris run directory" in err
+    assert code == 2 and "holds no policy uavris reads" in err
     code, err = _run_cli(["train", "--preset", "smoke", "--out", str(tmp_path / "junk"), "--no-progress"], capsys)
     assert code == 2 and "not a uavris run directory" in err
     assert (tmp_path / "junk" / "notes.txt").read_text() == "keep me"  # nothing overwritten

@@ -165,3 +165,225 @@ def test_an_aborted_runner_stops_a_job_rerun_alone(tmp_path: Path):
         assert not box["results"][0].ok
     finally:
         hold.unlink()
+
+
+def test_an_interrupt_in_a_job_the_command_runs_itself_stops_the_command(tmp_path: Path):
+    """With one worker the jobs run in the command's own process, where Ctrl-C or SIGTERM lands
+    in the job: it stops the command; before, it failed that job and the next one started."""
+    second = tmp_path / "second-ran"
+    jobs = [Job("interrupted", exec, ("raise KeyboardInterrupt",), tmp_path / "a.log", 2.0),
+            Job("next", exec, (f"import pathlib; pathlib.Path({str(second)!r}).touch()",), tmp_path / "b.log", 1.0)]
+    with pytest.raises(KeyboardInterrupt), JobRunner(1) as runner:
+        runner.run(jobs)
+    assert not second.exists()
+
+
+# A job that records its worker's pid in the folder PIDS and never ends; builtins.exec, so that
+# a spawned worker imports nothing of the test's.
+HANG = "import os, pathlib, time\npathlib.Path({pids!r}, str(os.getpid())).touch()\nwhile True:\n    time.sleep(0.05)\n"
+ENDED_S = 10.0  # a worker whose command is gone: it polls its parent every second
+
+
+def _hang_jobs(pids: Path) -> str:
+    """Python source of the two jobs ``HANG`` (in a driver script)."""
+    logs = pids.parent / "logs"
+    return (f"[Job(f'hang-{{i}}', exec, ({HANG.format(pids=str(pids))!r},), Path({str(logs)!r}) / f'{{i}}.log') "
+            "for i in range(2)]")
+
+
+def _workers(pids: Path, proc, err: Path, n: int = 2) -> list[int]:
+    """The pids of the ``n`` workers running jobs of ``proc`` once all have started."""
+    deadline = time.time() + HANG_S
+    while len(list(pids.glob("[0-9]*"))) < n and time.time() < deadline and proc.poll() is None:
+        time.sleep(0.1)
+    found = sorted(int(p.name) for p in pids.glob("[0-9]*"))
+    assert len(found) == n, (found, proc.poll(), err.read_text())
+    return found
+
+
+def _gone(pid: int) -> bool:
+    """True once ``pid`` has ended: no such process, or a zombie (re-parented to an init that
+    does not reap it)."""
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return True
+    try:
+        status = Path(f"/proc/{pid}/status").read_text()
+    except OSError:
+        return True
+    return any(line.split()[:2] == ["State:", "Z"] for line in status.splitlines())
+
+
+def _running_after(pids: list[int], seconds: float) -> list[int]:
+    """Those of ``pids`` still running ``seconds`` from now (returns as soon as none is)."""
+    deadline = time.time() + seconds
+    while any(not _gone(p) for p in pids) and time.time() < deadline:
+        time.sleep(0.1)
+    return [p for p in pids if not _gone(p)]
+
+
+def _kill_all(proc, pids: list[int]) -> None:
+    """Whatever a failed test left running: the command's process group and its workers."""
+    import signal
+
+    for pid in pids:
+        if not _gone(pid):
+            os.kill(pid, signal.SIGKILL)
+    try:
+        os.killpg(proc.pid, signal.SIGKILL)
+    except ProcessLookupError:
+        pass
+    proc.wait()
+
+
+def _default_signals() -> None:
+    """A suite started in the background by a shell (`make test &`) ignores SIGINT, and a child
+    inherits that: the command gets Ctrl-C and SIGTERM as a terminal's foreground job has them."""
+    import signal
+
+    for signum in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(signum, signal.SIG_DFL)
+
+
+def _start(args: list[str], err: Path):
+    """``args`` in a session of its own (so that a failed test can end its whole group), its
+    stderr into ``err``: a file, not a pipe, which workers left running would hold open."""
+    import subprocess
+
+    with open(err, "w") as f:
+        return subprocess.Popen(args, stdout=subprocess.DEVNULL, stderr=f, start_new_session=True,
+                                preexec_fn=_default_signals)
+
+
+def test_workers_end_when_their_command_is_killed(tmp_path: Path):
+    """A command killed by SIGKILL (or the OOM killer) stops nothing itself; its workers, which
+    went on with their jobs into an output whose lock the kill had freed, now end themselves."""
+    import signal
+    import sys
+
+    pids = tmp_path / "pids"
+    pids.mkdir()
+    driver = ("from pathlib import Path\nfrom uavris.experiments.engine.jobs import Job, JobRunner\n"
+              f"with JobRunner(2) as runner:\n    runner.run({_hang_jobs(pids)})\n")
+    err = tmp_path / "stderr"
+    proc, workers = _start([sys.executable, "-c", driver], err), []
+    try:
+        workers = _workers(pids, proc, err)
+        os.kill(proc.pid, signal.SIGKILL)
+        proc.wait()
+        assert not _running_after(workers, ENDED_S), f"workers {workers} outlived their command"
+    finally:
+        _kill_all(proc, workers)
+
+
+HELD_POLICY = '''
+import os
+import pathlib
+import time
+
+import numpy as np
+
+
+def held(obs):
+    """Records its worker's pid, then hovers after waiting while {hold!r} exists: a cell that
+    cannot end before SIGTERM."""
+    pathlib.Path({pids!r}, str(os.getpid())).touch()
+    while os.path.exists({hold!r}):
+        time.sleep(0.05)
+    return np.zeros((obs.shape[0], 6), dtype=np.float32)
+
+
+held.phase_control = "optimizer"
+'''
+
+
+def test_sigterm_stops_a_sweep_and_its_workers_in_one_line(tmp_path: Path):
+    """SIGTERM (``kill``, a batch system at its time limit) reaches the command alone: before,
+    it ended at once, printed nothing and left its workers running; now it is Ctrl-C's path,
+    with its own line and exit status 143 (128 + SIGTERM)."""
+    import signal
+    import sys
+
+    pids, hold, out = tmp_path / "pids", tmp_path / "hold", tmp_path / "s"
+    pids.mkdir()
+    hold.touch()
+    (tmp_path / "held.py").write_text(HELD_POLICY.format(pids=str(pids), hold=str(hold)))
+    err = tmp_path / "stderr"
+    proc, workers = _start([sys.executable, "-m", "uavris", "sweep", str(tmp_path / "held.py") + ":held",
+                            "--param", "system.nx", "2,3", "--episodes", "1", "--workers", "2", "--out", str(out),
+                            "--no-progress"], err), []
+    try:
+        workers = _workers(pids, proc, err)  # both cells are running
+        os.kill(proc.pid, signal.SIGTERM)  # as `kill` sends it: to the command alone
+        assert proc.wait(timeout=HANG_S / 4) == 143, err.read_text()
+        assert [x for x in err.read_text().splitlines() if x.strip()] == [
+            "uavris: terminated (SIGTERM); rerun the same command to continue (what finished is reused)"], \
+            err.read_text()
+        assert not _running_after(workers, 1.0), f"workers {workers} outlived their command"
+    finally:
+        hold.unlink()
+        _kill_all(proc, workers)
+
+
+STUDY = '''
+import os
+import sys
+from concurrent.futures import ThreadPoolExecutor, wait
+from pathlib import Path
+
+import uavris.cli as cli
+from uavris.experiments.engine.jobs import Job, JobRunner
+
+
+def gone(pid):
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return True
+    return False
+
+
+def study(args):
+    """As `uavris reproduce` runs its jobs: from a stage's thread, which the main thread waits
+    for before it closes the runner (without abort) and then releases the study's lock."""
+    runner = JobRunner(2)
+    try:
+        with ThreadPoolExecutor(1) as stages:
+            wait([stages.submit(runner.run, {jobs})])
+    finally:
+        runner.close()
+        pids = [int(p.name) for p in Path({pids!r}).glob("[0-9]*")]
+        Path({pids!r}, "closed").write_text(str(all(gone(p) for p in pids)))
+
+
+cli.command = lambda name: study
+sys.exit(cli.main(["reproduce"]))
+'''
+
+
+@pytest.mark.parametrize("signame, code, line", [("SIGTERM", 143, "terminated (SIGTERM)"),
+                                                  ("SIGINT", 130, "interrupted")])
+def test_a_signal_stops_the_workers_of_jobs_a_stage_thread_waits_for(tmp_path: Path, signame: str, code: int,
+                                                                      line: str):
+    """A study's main thread waits for its stages' threads, and they for their jobs, before the
+    runner is closed: the main thread's unwinding alone would wait for every running job (and,
+    on Ctrl-C, start the jobs waiting). The workers are stopped at once instead, and the
+    runner's close returns only after they ended (the study's lock is released after it)."""
+    import signal
+    import sys
+
+    pids = tmp_path / "pids"
+    pids.mkdir()
+    err = tmp_path / "stderr"
+    proc, workers = _start([sys.executable, "-c", STUDY.format(jobs=_hang_jobs(pids), pids=str(pids))], err), []
+    try:
+        workers = _workers(pids, proc, err)
+        os.kill(proc.pid, getattr(signal, signame))  # the command alone, as `kill` sends it
+        assert proc.wait(timeout=HANG_S / 4) == code, err.read_text()
+        assert err.read_text().strip() == (f"uavris: {line}; rerun the same command to continue "
+                                           "(what finished is reused)"), err.read_text()
+        assert (pids / "closed").read_text() == "True"  # the workers had ended when close returned
+        assert not _running_after(workers, 1.0)
+    finally:
+        _kill_all(proc, workers)

@@ -185,3 +185,57 @@ def test_env_spec_with_another_system_is_rejected(collected, tmp_path):
     with pytest.raises(DatasetError, match="another system configuration") as err:
         load_dataset(bad)
     assert len(str(err.value).splitlines()) == 1
+
+
+def _crafted(collected, tmp_path, marker, keep_spaces):
+    """The collected dataset with its spec's entry point replaced by ``os:system`` writing
+    ``marker``; without its spaces, Minari makes the spec's environment to learn them."""
+    crafted = shutil.copytree(collected / "uavris" / "experts-tiny-v0", tmp_path / "crafted-v0")
+
+    def attack(meta):
+        for key in ("env_spec", "eval_env_spec"):
+            spec = json.loads(meta[key])
+            spec["entry_point"], spec["kwargs"] = "os:system", {"command": f"touch {marker}"}
+            meta[key] = json.dumps(spec)
+        if not keep_spaces:
+            del meta["observation_space"], meta["action_space"]
+
+    _edit_metadata(crafted, attack)
+    return crafted
+
+
+@pytest.mark.parametrize("keep_spaces", [False, True])
+def test_a_crafted_dataset_runs_no_code_and_is_one_line(collected, tmp_path, keep_spaces):
+    """A metadata.json naming another entry point is refused before Minari reads it: nothing
+    the file names is imported or called (load_dataset, and episode_environment on Minari's
+    own reading of a dataset whose spaces are recorded)."""
+    marker = tmp_path / "ran"
+    crafted = _crafted(collected, tmp_path, marker, keep_spaces)
+    with pytest.raises(DatasetError, match="another entry point|observation_space is missing") as err:
+        load_dataset(crafted)
+    assert len(str(err.value).splitlines()) == 1
+    assert not marker.exists()
+    if keep_spaces:  # Minari itself reads it without making the environment; ours still refuses to
+        with pytest.raises(DatasetError, match="another entry point"):
+            episode_environment(minari.MinariDataset(crafted / "data"), 0)
+        assert not marker.exists()
+
+
+@pytest.mark.parametrize("edit, message", [
+    (lambda m: m.update(observation_space=json.dumps({"type": "Box", "low": 0.0, "high": 1.0, "shape": [10 ** 9],
+                                                      "dtype": "float32"})), "observation_space"),
+    (lambda m: m.pop("action_space"), "action_space"),
+    (lambda m: m.update(data_format="arrow"), "storage format"),
+    (lambda m: m.update(env_spec=json.dumps({**json.loads(m["env_spec"]), "additional_wrappers": [
+        {"name": "x", "entry_point": "os:system", "kwargs": {}}]})), "another entry point"),
+    (lambda m: m.update(env_spec=json.dumps({**json.loads(m["env_spec"]), "kwargs": {
+        **json.loads(m["env_spec"])["kwargs"], "layout": "/etc/passwd"}})), "'config' and 'scenario'"),
+    (lambda m: m.update(env_spec="not json"), "not a JSON object"),
+])
+def test_metadata_other_than_ours_is_refused_before_minari_reads_it(collected, tmp_path, monkeypatch, edit, message):
+    bad = shutil.copytree(collected / "uavris" / "experts-tiny-v0", tmp_path / "bad-v0")
+    _edit_metadata(bad, edit)
+    monkeypatch.setattr(minari, "MinariDataset", lambda *a, **k: pytest.fail("Minari read an unchecked dataset"))
+    with pytest.raises(DatasetError, match=message) as err:
+        load_dataset(bad)
+    assert len(str(err.value).splitlines()) == 1

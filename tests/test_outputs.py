@@ -5,6 +5,7 @@ from __future__ import annotations
 import csv
 import json
 import os
+import subprocess
 from pathlib import Path
 
 import numpy as np
@@ -59,31 +60,47 @@ def test_the_trajectory_export_adds_up_to_the_episodes(tmp_path: Path, capsys: p
     assert {r["active_pairs"] for r in rows} == {"1", "2"}  # the paper's 4 devices: one or two links a slot
 
 
-def test_a_directory_written_by_a_live_process_is_refused_and_a_dead_ones_lock_taken_over(
-        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    import socket
-    import subprocess
+def _holder(out: Path, record: bool) -> subprocess.Popen[bytes]:
+    """Another process holding ``out``'s lock: through :func:`locked` (``record``), or as a
+    holder stalled after creating the file and before writing who it is (an empty file)."""
     import sys
+
+    code = (f"from uavris.runs.lock import locked\nwith locked({str(out)!r}, 'uavris sweep ...'):\n"
+            "    print('held', flush=True)\n    import time; time.sleep(60)" if record else
+            f"import fcntl, os, time\nfd = os.open({str(out / '.uavris.lock')!r}, os.O_RDWR | os.O_CREAT)\n"
+            "fcntl.flock(fd, fcntl.LOCK_EX)\nprint('held', flush=True)\ntime.sleep(60)")
+    other = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE)
+    assert other.stdout is not None and other.stdout.readline().strip() == b"held"
+    return other
+
+
+@pytest.mark.parametrize("record", [True, False])
+def test_a_directory_written_by_a_live_process_is_refused_and_a_killed_ones_lock_taken(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], record: bool) -> None:
+    """The lock is the holder's from the moment its file exists (an empty file held is not
+    taken over, however long it stays empty), and goes with its process (a kill -9 frees it)."""
+    import signal
+    import time
 
     from uavris.errors import UavrisError
     from uavris.runs.lock import LOCK_FILE, locked
 
     out = tmp_path / "s"
     out.mkdir()
-    other = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
+    other = _holder(out, record)
+    args = ["sweep", "zero-action", "--param", "system.rician-factor", "0,8", "--episodes", "2",
+            "--system.horizon", "10", "--workers", "1", "--out", str(out), "--no-progress"]
     try:
-        (out / LOCK_FILE).write_text(json.dumps({"pid": other.pid, "host": socket.gethostname(),
-                                                 "started": "now", "command": "uavris sweep ..."}))
-        args = ["sweep", "zero-action", "--param", "system.rician-factor", "0,8", "--episodes", "2",
-                "--system.horizon", "10", "--workers", "1", "--out", str(out), "--no-progress"]
+        time.sleep(0.5)  # longer than any grace for a lock being written
         assert main(args) == 2
         err = capsys.readouterr().err
-        assert f"being written by process {other.pid}" in err and len(err.strip().splitlines()) == 1
+        assert "being written by" in err and len(err.strip().splitlines()) == 1
+        assert (f"process {other.pid}" in err) == record
         assert not (out / "sweep.csv").exists()
     finally:
-        other.kill()
+        other.send_signal(signal.SIGKILL)
         other.wait()
-    assert main(args) == 0  # the lock of a process that no longer runs: taken over
+    assert main(args) == 0  # the lock of a process that no longer runs: taken
     assert (out / "sweep.csv").exists() and not (out / LOCK_FILE).exists()  # and released at the end
     with locked(out):  # in one process: a second writer is refused too
         with pytest.raises(UavrisError, match="being written by process"):
@@ -375,3 +392,181 @@ def test_ctrl_c_while_the_command_line_starts_is_one_line(tmp_path: Path) -> Non
     script.write_text(script.read_text().replace("sys.argv[0] = 'uavris'  # as the console script runs\n", ""))
     proc = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=120)
     assert proc.returncode != 130 and "KeyboardInterrupt" in proc.stderr  # the library's import: Python's own
+
+
+# ------------------------------------------------------------------------------ one writer per output
+# Each command into an output another process holds: one line naming the holder, nothing written there.
+# The inputs need not exist: the lock is taken before anything is read.
+WRITERS = {
+    "train": ["train", "--algo", "ddpg", "--preset", "smoke", "--no-progress"],
+    "evaluate": ["evaluate", "zero-action", "--scenario", "fig2", "--episodes", "1", "--no-progress"],
+    "benchmark": ["benchmark", "zero-action", "--preset", "smoke", "--cells", "scenarios", "--no-progress"],
+    "compare-algorithms": ["compare-algorithms", "--preset", "smoke", "--no-progress"],
+    "collect": ["collect", "--experts", "no-such-run", "--no-progress"],
+    "pretrain-dt": ["pretrain-dt", "--dataset", "no-such-dataset", "--preset", "smoke", "--no-progress"],
+    "claims": ["claims", "no-such-study"],
+    "plan": ["plan", "paper", "--no-progress"],
+    "plot": ["plot", "no-such-run"],
+    "from-scratch": ["from-scratch", "no-such-study"],
+}
+STEMS = {"plan": "map", "plot": "curves", "from-scratch": "from-scratch.json"}  # written into --out's folder
+
+
+@pytest.mark.parametrize("name", list(WRITERS))
+def test_every_command_that_writes_is_refused_where_another_writes(
+        name: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    import signal
+
+    out = tmp_path / "out"
+    out.mkdir()
+    other = _holder(out, record=True)
+    try:
+        target = out / STEMS[name] if name in STEMS else out
+        assert main([*WRITERS[name], "--out", str(target)]) == 2
+        err = capsys.readouterr().err
+        assert f"being written by process {other.pid}" in err and len(err.strip().splitlines()) == 1, err
+        assert sorted(p.name for p in out.iterdir()) == [".uavris.lock"]  # the holder's, nothing else
+    finally:
+        other.send_signal(signal.SIGKILL)
+        other.wait()
+
+
+def test_a_run_redone_with_force_keeps_its_lock(tmp_path: Path) -> None:
+    """``--force`` clears the run directory but not the lock its writer holds: a second writer
+    started meanwhile is still refused (a removed lock file would have let it lock a new one)."""
+    from uavris.errors import UavrisError
+    from uavris.io import LOCK_FILE
+    from uavris.runs import prepare
+    from uavris.runs.lock import locked
+
+    run = tmp_path / "run"
+    prepare(run, {"a": 1}, resume=False, force=False)
+    (run / "checkpoints").mkdir()
+    (run / "checkpoints" / "x.zip").write_bytes(b"old")
+    with locked(run):
+        assert prepare(run, {"a": 2}, resume=False, force=True) is False
+        assert sorted(p.name for p in run.iterdir()) == [LOCK_FILE, "config.yaml"]
+        with pytest.raises(UavrisError, match="being written by process"):
+            with locked(run):
+                pass
+
+
+def test_two_policies_of_one_name_into_one_out_keep_two_results(tmp_path: Path) -> None:
+    """``a/pol.py:go`` and ``b/pol.py:go`` (or two studies' ``model`` folders) read the same in a
+    file name; the key of what was evaluated tells them apart, and each result records its model."""
+    out = tmp_path / "e"
+    for folder, accel in (("a", 0.0), ("b", 0.5)):
+        (tmp_path / folder).mkdir()
+        (tmp_path / folder / "pol.py").write_text(
+            f"import numpy as np\n\ndef go(obs):\n    a = np.zeros((obs.shape[0], 22), np.float32)\n"
+            f"    a[:, 0] = {accel}\n    return a\n")
+    means = {}
+    for folder in ("a", "b"):
+        assert main(["evaluate", str(tmp_path / folder / "pol.py") + ":go", "--scenario", "fig2", "--episodes", "2",
+                     "--no-references", "--out", str(out), "--no-progress"]) == 0
+    results = [json.loads(p.read_text()) for p in sorted(out.glob("pol_py_go-*.json"))]
+    assert len(results) == 2
+    for r in results:
+        means[r["model"]["models"][0]] = r["mean"]
+    assert set(means) == {f"{tmp_path / f / 'pol.py'}:go" for f in ("a", "b")}
+    assert len(set(means.values())) == 2
+
+
+def test_a_directory_that_holds_no_policy_says_what_it_lacks(tmp_path: Path,
+                                                             capsys: pytest.CaptureFixture[str]) -> None:
+    (tmp_path / "ctl" / "model").mkdir(parents=True)  # a controller whose controller.json is gone
+    assert main(["evaluate", str(tmp_path / "ctl"), "--scenario", "fig2", "--episodes", "1"]) == 2
+    err = capsys.readouterr().err
+    assert "controller.json" in err and "config.yaml" in err and len(err.strip().splitlines()) == 1
+
+
+@pytest.mark.parametrize("command", [
+    ["evaluate", "zero-action", "--scenario", "fig2", "--episodes", "1", "--no-progress"],
+    ["sweep", "zero-action", "--param", "system.rician-factor", "0", "--episodes", "1", "--system.horizon", "5",
+     "--workers", "1", "--no-progress"],
+    ["reproduce", "--preset", "smoke", "--workers", "1", "--force", "compare", "--no-progress"],
+])
+def test_a_folder_link_inside_the_output_is_refused(command: list[str], tmp_path: Path,
+                                                    capsys: pytest.CaptureFixture[str]) -> None:
+    """What a command writes below a link would land outside --out (a sweep's logs/, a study's
+    stage that --force would clear): refused in one line, nothing written through it."""
+    out, elsewhere = tmp_path / "out", tmp_path / "elsewhere"
+    (out / "stages").mkdir(parents=True)
+    elsewhere.mkdir()
+    (out / "logs").symlink_to(elsewhere, target_is_directory=True)
+    (out / "stages" / "compare-0123456789ab").symlink_to(elsewhere, target_is_directory=True)
+    assert main([*command, "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "is a symbolic link" in err and len(err.strip().splitlines()) == 1
+    assert not any(elsewhere.iterdir()) and sorted(p.name for p in out.iterdir()) == ["logs", "stages"]
+
+
+def test_a_benchmark_in_ones_own_hall_records_that_hall(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """benchmark.json of ``--layout FILE``: the hall's system at the top (not the target's own), the
+    file in its inputs and in each cell, the model; its table titled with the hall, and another
+    file into the same --out refused."""
+    from uavris.config import SystemConfig
+    from uavris.layouts import read_layout
+
+    (tmp_path / "mine.yaml").write_text(HALL)
+    (tmp_path / "other.yaml").write_text(HALL.replace("[5, 5, 1]", "[6, 5, 1]"))
+    out = tmp_path / "b"
+    assert main(["benchmark", "zero-action", "--layout", str(tmp_path / "mine.yaml"), "--preset", "smoke",
+                 "--out", str(out), "--no-progress"]) == 0
+    summary = json.loads((out / "benchmark.json").read_text())
+    hall = read_layout(tmp_path / "mine.yaml").resolve(SystemConfig())[0]
+    assert summary["system"]["users"] == [list(u) for u in hall.users] and summary["system"]["room"] == [30, 24, 6]
+    assert summary["layout"] == summary["inputs"]["layout"] == str(tmp_path / "mine.yaml")
+    assert summary["cells"][0]["hall"]["layout"] == str(tmp_path / "mine.yaml")
+    assert summary["cells"][0]["hall"]["start"] == [12.0, 12.0, 4.0]
+    assert summary["model"]["models"] == ["reference zero-action"]
+    title = (out / "benchmark.md").read_text().splitlines()[0]
+    assert "mine.yaml" in title and "protocol" not in title.split("(")[0], title
+    capsys.readouterr()
+    assert main(["benchmark", "zero-action", "--layout", str(tmp_path / "other.yaml"), "--preset", "smoke",
+                 "--out", str(out), "--no-progress"]) == 2
+    assert "holds the benchmark of" in capsys.readouterr().err
+
+
+def test_names_too_long_for_a_file_system_are_one_line_before_any_work(tmp_path: Path,
+                                                                        capsys: pytest.CaptureFixture[str]) -> None:
+    (tmp_path / "long.yaml").write_text(HALL + "name: " + "x" * 250 + "\n")
+    one = ["--episodes", "1", "--no-progress"]
+    for args, says in ((["evaluate", "zero-action", "--layout", str(tmp_path / "long.yaml"), *one, "--out",
+                         str(tmp_path / "e")], "has 250 characters; at most 100"),
+                       (["plan", str(tmp_path / "long.yaml"), "--no-progress", "--out", str(tmp_path / "p" / "m")],
+                        "at most 100"),
+                       (["evaluate", "zero-action", "--scenario", "fig2", *one, "--out", str(tmp_path / ("y" * 300))],
+                        "a folder name of 300 bytes")):
+        assert main(args) == 2
+        err = capsys.readouterr().err
+        assert says in err and len(err.strip().splitlines()) == 1, err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["long.yaml"]
+
+
+def test_a_full_disk_is_one_line_and_leaves_no_temporary_file(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                                              capsys: pytest.CaptureFixture[str]) -> None:
+    """ENOSPC while a result is written: one line naming the file and what to do, and a file
+    another library writes (SB3's archive, its replay buffer) leaves no temporary copy."""
+    import errno
+
+    import uavris.experiments.tools.evaluate as evaluate_mod
+    from uavris.io import atomic_save
+
+    def full(path: Path) -> None:
+        path.write_bytes(b"half of it")
+        raise OSError(errno.ENOSPC, "No space left on device", str(path))
+
+    with pytest.raises(OSError):
+        atomic_save(tmp_path / "replay_buffer.pkl", full)
+    assert list(tmp_path.iterdir()) == []
+
+    def no_space(*args: object, **kwargs: object) -> None:
+        raise OSError(errno.ENOSPC, "No space left on device", str(tmp_path / "e" / "x.csv"))
+
+    monkeypatch.setattr(evaluate_mod, "write_results", no_space)
+    assert main(["evaluate", "zero-action", "--scenario", "fig2", "--episodes", "1", "--out", str(tmp_path / "e"),
+                 "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"uavris: error: {tmp_path / 'e' / 'x.csv'}: No space left on device; free some space")
+    assert len(err.strip().splitlines()) == 1

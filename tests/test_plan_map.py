@@ -9,6 +9,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from tests.conftest import keep_figures
 from uavris.agents.references import reference_policy
 from uavris.config import SystemConfig
 from uavris.experiments.tools import plan as plan_module
@@ -107,16 +108,7 @@ def test_the_legends_hide_no_device_and_a_plan_that_stays_shows_its_start(tmp_pa
     from uavris.experiments.tools import plan as plan_module
     from uavris.experiments.tools import trajectory
 
-    figures = []
-
-    def keep(fig, stem):
-        fig.canvas.draw()
-        figures.append(fig)
-        return []
-
-    monkeypatch.setattr(plan_module, "save_figure", keep)
-    monkeypatch.setattr(trajectory, "save_figure", keep, raising=False)
-    monkeypatch.setattr(plots, "save_figure", keep)
+    figures = keep_figures(monkeypatch, plan_module, trajectory, plots)
     system = SystemConfig()
     start = [15.0, 20.0, 4.5]
     plan = {"planner": "exact", "expected_sum_rate": 40.0, "layout": {"name": "stays", "start": start},
@@ -133,3 +125,49 @@ def test_the_legends_hide_no_device_and_a_plan_that_stays_shows_its_start(tmp_pa
         assert legend.y1 <= ax.get_window_extent().y0 + 1  # below the map
     labels = [t.get_text() for t in figures[0].axes[0].get_legend().get_texts()]
     assert "target: stay at the start" in labels and "start" in labels
+
+
+def test_a_marker_on_the_rooms_edge_is_drawn_whole(tmp_path, monkeypatch):
+    """A target in a corner of the room, a device and a start on its walls (the axes' limits):
+    their markers are not clipped by the axes, so the star is a star, not a quarter of one."""
+    figures = keep_figures(monkeypatch, plan_module)
+    system = SystemConfig()
+    room_x, room_y = system.room[0], system.room[1]
+    plan = {"planner": "exact", "expected_sum_rate": 40.0, "layout": {"name": "corner", "start": [0.0, 20.0, 4.5]},
+            "target": [room_x, room_y, 4.5], "travel_s": 9.0}
+    xs, ys = np.linspace(0, room_x, 5), np.linspace(0, room_y, 5)
+    plan_module.plan_figure(system, plan, xs, ys, np.full((5, 5), 30.0), tmp_path / "p")
+    [fig] = figures
+    markers = {c.get_label(): c for c in fig.axes[0].collections if c.get_label() in ("target", "start", "devices")}
+    assert set(markers) == {"target", "start", "devices"}
+    ax = fig.axes[0]
+    assert tuple(markers["target"].get_offsets()[0]) == (ax.get_xlim()[1], ax.get_ylim()[1])  # in the corner
+    for label, marker in markers.items():
+        assert not marker.get_clip_on(), label
+
+
+def test_learning_curves_show_a_rate_band_from_zero_whole_episodes_and_a_legend_off_the_curves(tmp_path,
+                                                                                                monkeypatch):
+    """Fig. 2's band is the seeds' t interval of the mean, its lower edge clipped at 0 (a rate is
+    never negative; with two seeds the raw one reaches far below); the x axis ticks whole
+    episodes only; the legend lies below the axes and their label, over no curve."""
+    from uavris.experiments.display import plots
+
+    figures = keep_figures(monkeypatch, plots)
+    x = np.array([1, 2, 3])
+    curves = {"ppo": (x, np.array([5.0, 10.0, 20.0]), np.array([-30.0, -5.0, 10.0]), np.array([40.0, 25.0, 30.0])),
+              "sac": (x, np.array([6.0, 12.0, 18.0]), np.array([1.0, 2.0, 3.0]), np.array([9.0, 20.0, 30.0]))}
+    plots.learning_curves(curves, tmp_path / "lc", "title", {"ppo": 30.0},
+                          {"zero-action": ("zero action", 8.0), "oracle": ("oracle", 35.0)})
+    [fig] = figures
+    ax = fig.axes[0]
+    bands = [c for c in ax.collections if c.get_paths()]
+    assert len(bands) == 2
+    for band in bands:
+        assert min(v[1] for p in band.get_paths() for v in p.vertices) >= 0.0
+    ticks = [t for t in ax.xaxis.get_majorticklocs() if ax.get_xlim()[0] <= t <= ax.get_xlim()[1]]
+    assert ticks and all(float(t).is_integer() for t in ticks), ticks
+    legend = ax.get_legend().get_window_extent()
+    assert legend.y1 <= ax.xaxis.label.get_window_extent().y0 + 1 <= ax.get_window_extent().y0 + 1
+    labels = [t.get_text() for t in ax.get_legend().get_texts()]
+    assert {"PPO", "SAC", "paper's converged value"} <= set(labels)

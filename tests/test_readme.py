@@ -221,3 +221,16 @@ Prose: the oracle reaches 42.96 in Fig. 2."""
     ("DT minus BC 7.06.", False), ("Python 3.11.7: 0.93.", False)])
 def test_readme_numbers_are_found_in_their_row(readme: str, ok: bool) -> None:
     assert (not _misplaced(readme, REPORT)) == ok, _misplaced(readme, REPORT)
+
+
+@pytest.mark.parametrize("page", [README, DOCS / "getting-started.md"], ids=["README", "getting-started"])
+def test_first_examples_print_the_same_every_time(page: Path, tmp_path: Path) -> None:
+    """A reader who runs a first example twice sees the same numbers: every random draw in it
+    is seeded (the environment's and the action space's)."""
+    for index, block in enumerate(_python_blocks(page)):
+        script = tmp_path / f"block{index}.py"
+        script.write_text(block, encoding="utf-8")
+        runs = [subprocess.run([sys.executable, str(script)], cwd=tmp_path, capture_output=True, text=True,
+                               timeout=300) for _ in range(2)]
+        assert all(r.returncode == 0 for r in runs), runs[0].stderr[-2000:]
+        assert runs[0].stdout == runs[1].stdout, (index, runs[0].stdout, runs[1].stdout)

@@ -8,6 +8,7 @@ import threading
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 from ray_cluster import can_unshare, two_node_cluster
 from report_check import check_deployment_claims, check_deployment_report, check_track_claims, mean_ci
@@ -36,10 +37,11 @@ def smoke_run(tmp_path_factory):
 
     def killed(*args, **kwargs):
         calls.append(1)
-        raise KeyboardInterrupt("simulated kill during pre-training")
+        raise RuntimeError("simulated crash during pre-training")
 
     # One worker runs the jobs in this process, where the patched function is seen; the
-    # killed pre-training fails its stages and what depends on them, the rest finishes.
+    # crashed pre-training fails its stages and what depends on them, the rest finishes.
+    # (Not a KeyboardInterrupt: in the command's own process that is Ctrl-C, which stops it.)
     pretrain_module.pretrain = killed
     try:
         with pytest.raises(UavrisError, match="stage"):
@@ -267,6 +269,65 @@ def test_concurrent_run_respects_dependencies(tmp_path):
                             Stage("c", {}, make("c"), ("a",))]).run()
         assert sorted(ran) == ["a", "b", "c"]
         assert ran.index("c") > ran.index("a")
+
+
+def _no_nan(name: str) -> None:
+    raise ValueError(f"{name} in a stage record: not JSON")
+
+
+def test_a_stage_record_is_the_same_json_for_the_same_inputs(tmp_path):
+    """Two runs of the same stages (a fit of the learned value, which is timed; a comparison's
+    rows, one seed each: undefined intervals) write stage.json byte for byte the same, strict
+    JSON (NaN as null); the wall clocks are in timing.json beside it."""
+    import json
+
+    from uavris.experiments.study.pipeline import compare_record
+    from uavris.experiments.study.workers import value_fit_job
+    from uavris.experiments.training.values import ValueFitConfig, write_label_part
+    from uavris.stats import summarize
+
+    rng = np.random.default_rng(0)
+    part = write_label_part(tmp_path / "labels.npz", users=rng.uniform(0, 40, (32, 3, 3)),
+                            position=rng.uniform(0, 40, (32, 3)), rate=rng.uniform(0, 30, 32),
+                            hall=np.array(["h"] * 32))
+    fit = ValueFitConfig(preset="smoke").to_dict()
+    rows = [{"policy": "PPO", "kind": "DRL", **summarize([7.5]), "s_per_step": 1e-3 * time.perf_counter()}]
+    summary = {"rows": rows, "expert": "ppo", "expert_choice": {"expert": "ppo", "text": f"{time.time()} ms"}}
+
+    def stages():
+        return [Stage("value", fit, lambda d, deps: value_fit_job(fit, [str(part)], str(d / "value"))),
+                Stage("compare", {}, lambda d, deps: compare_record(summary))]
+
+    records, dirs = {}, {}
+    for out in (tmp_path / "one", tmp_path / "two"):
+        pipeline = Pipeline(out, stages())
+        assert all(r.status == "done" for r in pipeline.run(concurrent=False))
+        dirs[out.name] = {name: pipeline.directory(name) for name in ("value", "compare")}
+        records[out.name] = {name: (d / "stage.json").read_bytes() for name, d in dirs[out.name].items()}
+        summary["rows"][0]["s_per_step"] *= 2  # another machine's, another run's times
+        summary["expert_choice"]["text"] += " later"
+    assert records["one"] == records["two"]
+    for d in dirs["one"].values():
+        timing = read_json(d / "timing.json")
+        assert timing["wall_s"] >= 0 and timing["end"] >= timing["start"]
+    assert read_json(dirs["one"]["value"] / "value" / "timing.json")["wall_clock_s"] > 0
+    compare = json.loads(records["one"]["compare"], parse_constant=_no_nan)
+    assert compare["result"]["rows"][0]["mean_ci_low"] is None and compare["result"]["rows"][0]["mean"] == 7.5
+    assert "s_per_step" not in compare["result"]["rows"][0] and compare["result"]["expert"] == "ppo"
+    json.loads(records["one"]["value"], parse_constant=_no_nan)
+
+
+def test_the_report_reads_an_undefined_number_of_a_stage_record():
+    """What a stage record stores as null (an interval over one episode, a rank correlation
+    over too few poses) the report prints as undefined, as it did the NaN it stood for."""
+    from uavris.experiments.study.report import finetuning_effect
+    from uavris.experiments.study.report.decomposition import value_section
+
+    one = {"mean": 5.0, "ci_low": None, "ci_high": None}
+    assert "within the 95% CIs" in finetuning_effect(one, dict(one, mean=9.0))
+    results = {lay: {"v": {"value_rank_correlation": rho, "value_target_rate_level": 1.0},
+                     "oracle": {"plan_rate_level": 2.0}} for lay, rho in (("a", None), ("b", 0.5))}
+    assert "| learned V | nan | nan | 50.0% | 50.0% |" in value_section(results, {"v": "learned V"})
 
 
 @pytest.mark.slow

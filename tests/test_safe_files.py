@@ -185,3 +185,30 @@ def test_seal_key_is_made_once_and_kept_private(tmp_path, monkeypatch):
     monkeypatch.setenv("UAVRIS_SEAL_KEY", "ab" * 32)  # another machine's key: its seals are not ours
     blob.write_bytes(b"\x80\x04K\x01.")
     assert not is_sealed(blob)
+
+
+@pytest.mark.parametrize("given", ["\n", "", "  ", "ab" * 15])
+def test_a_seal_key_shorter_than_16_bytes_is_one_line(tmp_path, monkeypatch, given):
+    """An empty HMAC key (a whitespace-only UAVRIS_SEAL_KEY reads as no bytes) would let anyone
+    forge a seal: refused, as is a key file too short to be secret."""
+    from uavris.errors import CheckpointError
+    from uavris.runs.seal import is_sealed, seal
+
+    blob = tmp_path / "blob.pkl"
+    blob.write_bytes(b"\x80\x04K\x01.")
+    monkeypatch.setenv("UAVRIS_SEAL_KEY", given)
+    with pytest.raises(CheckpointError, match="at least 16") as err:
+        seal(blob)
+    assert len(str(err.value).splitlines()) == 1
+    (tmp_path / "blob.pkl.seal").write_text("1c34a7df1cb776ba1eca1b83febbd99cfc4f51eb1f50c21d1284a3063dff0898")
+    with pytest.raises(CheckpointError, match="at least 16"):  # the empty key's HMAC: a forged seal
+        is_sealed(blob)
+    monkeypatch.setenv("UAVRIS_SEAL_KEY", "ab" * 16)  # 16 bytes: enough
+    seal(blob)
+    assert is_sealed(blob)
+    monkeypatch.delenv("UAVRIS_SEAL_KEY")
+    monkeypatch.setenv("XDG_CONFIG_HOME", str(tmp_path / "config"))
+    (tmp_path / "config" / "uavris").mkdir(parents=True)
+    (tmp_path / "config" / "uavris" / "seal.key").write_bytes(b"")
+    with pytest.raises(CheckpointError, match="at least 16"):
+        seal(blob)

@@ -89,7 +89,8 @@ def test_summarize_worked_by_hand():
 
 @pytest.mark.parametrize("low, high, ref, want", [(1.0, 2.0, 0.5, "above"), (1.0, 2.0, 2.5, "below"),
                                                   (1.0, 2.0, 1.5, "tie"), (1.0, 2.0, 1.0, "tie"),
-                                                  (float("nan"), 2.0, 1.0, "n/a")])
+                                                  (float("nan"), 2.0, 1.0, "n/a"),
+                                                  (None, None, 1.0, "n/a")])  # NaN as a stage record stores it
 def test_versus_states_its_rule(low, high, ref, want):
     assert versus(low, high, ref) == want
 

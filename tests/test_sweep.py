@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 from scipy import stats as sps
 
+from tests.conftest import keep_figures
 from uavris.agents.evaluation import evaluate
 from uavris.agents.references import reference_policy
 from uavris.cli import main as cli_main
@@ -84,7 +85,8 @@ def test_the_command_writes_the_csv_and_a_bad_grid_is_one_line(tmp_path, capsys)
     before = {p: p.read_bytes() for p in out.rglob("*") if p.is_file()}
     assert cli_main(["sweep", "zero-action", "--param", "system.rician-factor", "0,4", "--episodes", "2",
                      "--system.horizon", "10", "--workers", "1", "--out", str(out), "--no-progress"]) == 2
-    assert "holds a sweep of other parameters" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert "holds another sweep (the parameters differ: rician_factor 0, 8 and nx 2, 4 there)" in err, err
     assert {p: p.read_bytes() for p in out.rglob("*") if p.is_file()} == before  # nothing replaced
     assert cli_main(["sweep", "zero-action", "--param", "system.nx", "0:4:0", "--out", str(tmp_path / "t")]) == 2
     assert "start:stop:step" in capsys.readouterr().err
@@ -99,3 +101,55 @@ def test_legends_name_a_model_by_its_folder():
     assert policy_label("runs/quick/stages/deploy-pretrain-0a1b2c3d4e5f/model") == "deploy-pretrain-0a1b2c3d4e5f"
     assert policy_label("hover-optimizer") == "hover-optimizer"
     assert policy_label("runs/ppo-fig2") == "ppo-fig2"
+
+
+def _kept_figure(monkeypatch):
+    """The sweep's figure, drawn and kept instead of written."""
+    from uavris.experiments.tools import sweep as sweep_module
+
+    return keep_figures(monkeypatch, sweep_module)
+
+
+def test_every_sweepable_parameter_is_labelled_by_its_name_and_unit(tmp_path, monkeypatch):
+    """An axis reads "noise power (dBm)", not "noise dbm": every parameter a sweep accepts has
+    a label of its own, and the title names the hall the rates are of."""
+    from uavris.experiments.tools.sweep import LABELS, Axis, sweepable
+
+    assert sweepable() <= set(LABELS)
+    for name in sweepable():
+        assert Axis(name, (1.0,)).label == LABELS[name] and "_" not in LABELS[name], name
+    kept = _kept_figure(monkeypatch)
+    sweep(["zero-action"], [parse_axis("system.noise-dbm", "-80,-70")], tmp_path, base=SHORT, episodes=2)
+    [ax] = kept[0].axes
+    assert ax.get_xlabel() == "noise power (dBm)"
+    assert ax.get_title().splitlines()[0] == "the paper's hall, start fig2"
+
+
+HALL = """name: two-pairs
+devices:
+  - [8, 9, 1]
+  - [14, 11, 0.5]
+  - [30, 28, 1.2]
+  - [26, 32, 0]
+start: [20, 20, 4.5]
+"""
+
+
+def test_a_sweep_in_a_layout_is_titled_by_it_and_a_moved_device_is_named_when_refused(tmp_path, monkeypatch,
+                                                                                      capsys):
+    """The figure of a sweep in a layout file's hall names that hall; the same sweep after the
+    file's second device moved is refused with what differs (the hall, that device), not as
+    "a sweep of other parameters"."""
+    hall, out = tmp_path / "two-pairs.yaml", tmp_path / "s"
+    hall.write_text(HALL)
+    kept = _kept_figure(monkeypatch)
+    args = ["sweep", "zero-action", "--param", "system.rician-factor", "0,8", "--layout", str(hall), "--episodes",
+            "2", "--system.horizon", "10", "--workers", "1", "--out", str(out), "--no-progress"]
+    assert cli_main(args) == 0
+    assert kept[0].axes[0].get_title().splitlines()[0] == "hall two-pairs"
+    capsys.readouterr()
+    hall.write_text(HALL.replace("[14, 11, 0.5]", "[15, 11, 0.5]"))
+    assert cli_main(args) == 2
+    err = capsys.readouterr().err
+    assert "holds another sweep (the hall differs: device 2 moved from [14, 11, 0.5] to [15, 11, 0.5])" in err, err
+    assert "parameters" not in err

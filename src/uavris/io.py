@@ -15,7 +15,7 @@ import json
 import os
 import tempfile
 from pathlib import Path
-from typing import Any, Iterable, Mapping, Sequence
+from typing import Any, Callable, Iterable, Mapping, Sequence
 
 import yaml
 
@@ -54,6 +54,20 @@ def atomic_write_bytes(path: str | Path, data: bytes) -> None:
 
 def atomic_write_text(path: str | Path, text: str) -> None:
     atomic_write_bytes(path, text.encode("utf-8"))
+
+
+def atomic_save(path: str | Path, save: Callable[[Path], Any]) -> None:
+    """A file another library writes (SB3's archive, its replay buffer) made atomic: ``save(tmp)``
+    writes a temporary file beside ``path`` (of the same suffix, which such libraries read),
+    renamed over ``path``; a write that fails (a full disk) leaves nothing behind."""
+    path = Path(path)
+    tmp = path.with_name(f".{path.stem}.tmp{path.suffix}")
+    try:
+        save(tmp)
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
 
 
 OMIT_DEFAULT = "omit_default"  # dataclass field metadata: left out of to_plain at its default
@@ -160,6 +174,15 @@ def file_part(text: str, fallback: str = "policy") -> str:
     import re
 
     return re.sub(r"[^\w@-]+", "_", text).strip("_") or fallback
+
+
+LOCK_FILE = ".uavris.lock"  # the one-writer lock of an output directory (uavris.runs.lock)
+
+
+def contents(directory: str | Path) -> list[Path]:
+    """What ``directory`` holds besides its writer's lock: a directory with nothing else is
+    empty to every check that asks whether it holds a run, a dataset or a user's files."""
+    return [p for p in Path(directory).iterdir() if p.name != LOCK_FILE]
 
 
 def read_checkpoint_meta(directory: str | Path, meta_file: str, kind: str, version: int, what: str,

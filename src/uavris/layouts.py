@@ -59,6 +59,7 @@ OTHER_SPLIT = dict(wall_margin=5.0, spacing=9.0, heights=(0.6, 1.9), start_span=
 # the default (layout-unseen-3-k6: unseen hall 3 of the generator with 6 devices).
 _GENERATED = re.compile(r"layout-(train|unseen|other)-(\d+)(?:-k(\d+))?")
 # A hall's name names the files of its results: one plain file-name part, no folder, nothing hidden.
+MAX_NAME = 100
 _NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]*")
 DEFAULT_DEVICES = 4  # the paper's device count, the generator's default
 _FILE_KEYS = {"name", "room", "devices", "users", "start"}
@@ -81,6 +82,9 @@ class Layout:
         if not isinstance(self.name, str) or not _NAME.fullmatch(self.name):
             raise ConfigError(f"layout name {self.name!r}: letters, digits, '.', '_' and '-' only, starting with a "
                               "letter or digit (it names the files of the hall's results)")
+        if len(self.name) > MAX_NAME:  # with a target's name and a key it must fit a file name (255 bytes)
+            raise ConfigError(f"layout name {self.name[:40]}... has {len(self.name)} characters; at most {MAX_NAME} "
+                              "(it names the files of the hall's results)")
         # Lists from YAML or the CLI become tuples of floats, so a layout is hashable and exact.
         object.__setattr__(self, "users", tuple(float_tuple(u, "Layout", f"users[{k}] (device D{k + 1})",
                                                             "a point [x, y, z] (m)")

@@ -74,10 +74,11 @@ def summarize(scores: ArrayLike, seed: int = 0) -> dict[str, float]:
             "std": float(x.std(ddof=1)) if x.size > 1 else 0.0}
 
 
-def versus(low: float, high: float, reference: float) -> str:
+def versus(low: float | None, high: float | None, reference: float) -> str:
     """Where a score with 95% CI [low, high] stands against a reference value: "above" or
-    "below" when the CI excludes it, "tie" (not resolved) otherwise."""
-    if np.isnan(low) or np.isnan(high):
+    "below" when the CI excludes it, "tie" (not resolved) otherwise; "n/a" for an undefined
+    CI (NaN in memory, None as a stage's record stores it: JSON has no NaN)."""
+    if low is None or high is None or np.isnan(low) or np.isnan(high):
         return "n/a"
     return "above" if low > reference else "below" if high < reference else "tie"
 

@@ -24,18 +24,31 @@ def hover(config: SystemConfig) -> Constant:
 
 
 class RandomActions:
-    """Uniform random actions in [-1, 1] (all entries, or only the phases with ``phases_only``)."""
+    """Uniform random actions in [-1, 1] (all entries, or only the phases with ``phases_only``).
+
+    In a rollout each episode draws from a stream of its own, made from ``seed`` and the
+    episode's seed (:meth:`seed_episodes`), so an episode is the same alone or in a batch;
+    called outside one, the rows share one stream of ``seed``."""
 
     def __init__(self, config: SystemConfig, seed: int, phases_only: bool = False) -> None:
-        self.config, self.phases_only = config, phases_only
+        self.config, self.phases_only, self.seed = config, phases_only, seed
         self.rng = np.random.default_rng(seed)
+        self.streams: list[np.random.Generator] | None = None
+
+    def seed_episodes(self, seeds: NDArray[np.integer]) -> None:
+        self.streams = [np.random.default_rng([self.seed, int(s)]) for s in seeds]
+
+    def _uniform(self, n: int, width: int) -> NDArray[np.float64]:
+        if self.streams is None or len(self.streams) != n:
+            return self.rng.uniform(-1.0, 1.0, (n, width))
+        return np.stack([g.uniform(-1.0, 1.0, width) for g in self.streams])
 
     def __call__(self, obs: NDArray[np.float32]) -> NDArray[np.float32]:
         c, n = self.config, obs.shape[0]
         if not self.phases_only:
-            return self.rng.uniform(-1.0, 1.0, (n, c.action_dim)).astype(np.float32)
+            return self._uniform(n, c.action_dim).astype(np.float32)
         a = np.zeros((n, c.action_dim), dtype=np.float32)
-        a[:, 3:3 + c.num_elements] = self.rng.uniform(-1.0, 1.0, (n, c.num_elements))
+        a[:, 3:3 + c.num_elements] = self._uniform(n, c.num_elements)
         return a
 
 

@@ -13,7 +13,7 @@ from typing import Annotated
 
 import tyro
 
-from uavris.cli.parsing import Unset, UsageError, output_dir, parse
+from uavris.cli.parsing import Unset, UsageError, parse, writing
 from uavris.experiments.study.from_scratch import FromScratchConfig
 
 
@@ -49,8 +49,8 @@ def claims_command(args: list[str]) -> None:
         raise UsageError("--budget-comparison and --budgets go together")
     if any(b < 1 for b in a.budgets):
         raise UsageError(f"--budgets must be environment steps >= 1, got {list(a.budgets)}")
-    output_dir(a.out)
-    path = write_claims(list(a.studies), a.out, [(a.budget_comparison, b) for b in a.budgets], a.from_scratch)
+    with writing(a.out):
+        path = write_claims(list(a.studies), a.out, [(a.budget_comparison, b) for b in a.budgets], a.from_scratch)
     print(path.read_text().split("\n\n", 2)[1])
     print(f"wrote {path}")
 
@@ -77,7 +77,6 @@ def from_scratch_command(args: list[str]) -> None:
     from uavris.experiments.study.from_scratch import from_scratch
 
     a = parse(FromScratchArgs, args, "uavris from-scratch", from_scratch_command.__doc__ or "")
-    output_dir(a.out.parent)
     rows: list[tuple[str, ...]] = []
 
     def report(h: dict) -> None:
@@ -88,5 +87,6 @@ def from_scratch_command(args: list[str]) -> None:
                                         "fine-tuning reaches 95% of it after", "the expert after",
                                         "expert's training (s)"), rows, "lrrrrrr")), flush=True)
 
-    from_scratch(a.study, a.config, a.out, report)
+    with writing(a.out.parent, "--out's folder", files_only=True):
+        from_scratch(a.study, a.config, a.out, report)
     print(f"wrote {a.out}")

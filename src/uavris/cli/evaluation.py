@@ -14,7 +14,7 @@ from typing import Annotated, Literal
 import tyro
 
 from uavris.agents.torch_device import Device
-from uavris.cli.parsing import Unset, UsageError, output_dir, parse
+from uavris.cli.parsing import Unset, UsageError, output_dir, parse, writing
 from uavris.config import ScenarioName, SystemConfig
 from uavris.env.wrappers import PhaseControl
 from uavris.experiments.engine.jobs import Backend
@@ -80,9 +80,10 @@ def evaluate_command(args: list[str]) -> None:
     The target's own system is the default of every --system.* flag; --layout puts it in
     another hall (the flags change the system first: --layout paper --system.room 40 40 8).
     Writes OUT/TARGET-SCENARIO-seedSEED-nEPISODES-KEY.csv (one row per episode: average sum
-    rate, return, length, energy) and .json (mean, 95% CI, IQM, the system) and prints the
-    summary; TARGET (the reference, policy or row) and KEY (8 hex digits of the system, phase
-    control and start) keep evaluations of other targets and systems in the same OUT apart.
+    rate, return, length, energy) and .json (mean, 95% CI, IQM, the hall and the model) and
+    prints the summary; TARGET (the reference, policy or row) and KEY (8 hex digits of the
+    system, phase control, start and model) keep evaluations of other targets and systems in
+    the same OUT apart.
     Every target but a reference is scored with the zero action, hovering with the optimiser's
     phases and the oracle beside it on the same episodes (in the JSON under "references";
     --no-references: not); your own policy is MODULE:NAME or FILE.py:NAME (default OUT
@@ -91,11 +92,12 @@ def evaluate_command(args: list[str]) -> None:
     evaluates it, here or in a hall of your own (default OUT runs/rows/ROW).
     """
     from uavris.agents.torch_device import resolve_device
-    from uavris.cli.options import layout_defaults
-    from uavris.experiments.tools.evaluate import evaluate_target
+    from uavris.cli.options import check_hall_flags, layout_defaults
+    from uavris.experiments.tools.evaluate import evaluate_target, results_dir
     from uavris.experiments.tools.targets import resolve_target
 
     doc = evaluate_command.__doc__ or ""
+    check_hall_flags(args, SystemConfig(), "uavris evaluate")  # before the flags are read into the paper's system
     # Two passes: the first finds the target, whose own system is the default the flags change.
     first = parse(EvaluateArgs, args, "uavris evaluate", doc)
     check_one_start(first.scenario, first.layout)
@@ -107,14 +109,15 @@ def evaluate_command(args: list[str]) -> None:
     own = target.own_system()
     if first.scenario is not None and first.layout is None:  # a named scenario is a start in the paper's hall
         own = paper_hall(own)
-    system, hall = layout_defaults(args, own, "uavris evaluate")
+    system, _ = layout_defaults(args, own, "uavris evaluate")
     a = parse(EvaluateArgs, args, "uavris evaluate", doc, default=EvaluateArgs(first.target, system=system))
-    output_dir(a.out)
     episodes = DEFAULT_EPISODES if a.episodes is None else a.episodes
-    summary, path = evaluate_target(target, scenario=a.scenario or hall, episodes=episodes, seed=a.seed, out=a.out,
-                                    phase_control=a.phase_control, device=resolve_device(a.device),
-                                    progress=a.progress, system=a.system, trajectory=a.trajectory,
-                                    references=a.references)
+    with writing(a.out or results_dir(target)) as out:
+        # the layout again (resolving it in its own hall changes nothing): the result records it
+        summary, path = evaluate_target(target, scenario=a.scenario, layout=a.layout, episodes=episodes,
+                                        seed=a.seed, out=out, phase_control=a.phase_control,
+                                        device=resolve_device(a.device), progress=a.progress, system=a.system,
+                                        trajectory=a.trajectory, references=a.references)
     _print_evaluation(a.target, summary, path)
 
 
@@ -148,10 +151,10 @@ def paper_hall(system: SystemConfig) -> SystemConfig:
 def _evaluate_row(first: EvaluateArgs, args: list[str], doc: str) -> None:
     """``uavris evaluate OUT --row KEY``: a row of the study in OUT, in the site the flags name."""
     from uavris.agents.torch_device import resolve_device
-    from uavris.cli.options import layout_defaults
+    from uavris.cli.options import layout_defaults, seed_note
     from uavris.experiments.study.finished import Study
     from uavris.experiments.study.tracks import TRACK_SPECS
-    from uavris.experiments.tools.evaluate import evaluate_target
+    from uavris.experiments.tools.evaluate import evaluate_target, results_dir
     from uavris.layouts import Site
 
     study = Study.open(first.target)
@@ -161,28 +164,30 @@ def _evaluate_row(first: EvaluateArgs, args: list[str], doc: str) -> None:
     base = rc.system.replace(observe_devices=True) if TRACK_SPECS[track].layouts else rc.system
     system, hall = layout_defaults(args, base, "uavris evaluate")
     a = parse(EvaluateArgs, args, "uavris evaluate", doc, default=EvaluateArgs(first.target, system=system))
-    output_dir(a.out)
     if hall is None and a.scenario is None:
         raise UsageError("--row: name where to evaluate it: --layout HALL (its devices and start) or --scenario NAME")
     site = Site(a.scenario or hall.name, a.system, None if a.scenario else hall.start)
     site.scenario.validate_for(site.system)
     row = study.row(str(a.row), track, site)
+    print(seed_note(row, study.seeds(row, track, site)), end="", file=sys.stderr)
     episodes = rc.eval_episodes if a.episodes is None else a.episodes
-    summary, path = evaluate_target(row, scenario=site.scenario, episodes=episodes, seed=a.seed, out=a.out,
-                                    phase_control=a.phase_control, device=resolve_device(a.device),
-                                    progress=a.progress, system=site.system, trajectory=a.trajectory,
-                                    references=a.references)
+    with writing(a.out or results_dir(row)) as out:
+        summary, path = evaluate_target(row, scenario=site.scenario, layout=a.layout, episodes=episodes,
+                                        seed=a.seed, out=out,
+                                        phase_control=a.phase_control, device=resolve_device(a.device),
+                                        progress=a.progress, system=site.system, trajectory=a.trajectory,
+                                        references=a.references)
     _print_evaluation(f"{row.key} ({summary['label']}, {track} track)", summary, path)
 
 
 def _print_evaluation(what: str, summary: dict, path: Path) -> None:
-    from uavris.experiments.display.tables import interval, rate_interval, signed
+    from uavris.experiments.display.tables import counted, interval, rate_interval, signed
 
     if summary.get("warning"):
         print(f"uavris: warning: {summary['warning']}", file=sys.stderr)
     print(f"{what} in {summary['scenario']} ({summary['hall']}): average sum rate {summary['mean']:.2f} bps/Hz "
           f"(95% CI {rate_interval(summary['ci_low'], summary['ci_high'])}, IQM {summary['iqm']:.2f}, "
-          f"{summary['episodes']} episodes) -> {path}")
+          f"{counted(summary['episodes'], 'episode')}) -> {path}")
     for m, part in summary.get("active_pairs", {}).items():
         print(f"  slots with {m} active pair{'s' * (m != '1')}: {part['share']:.0%} of the slots, mean sum rate "
               f"{part['rate']:.2f} bps/Hz")
@@ -238,27 +243,28 @@ def benchmark_command(args: list[str]) -> None:
     each cell's per-episode CSVs.
     """
     from uavris.agents.torch_device import resolve_device
-    from uavris.experiments.tools.benchmark import benchmark
+    from uavris.cli.options import check_hall_flags
+    from uavris.experiments.tools.benchmark import benchmark, default_benchmark_dir
     from uavris.experiments.tools.targets import resolve_target
 
     doc = benchmark_command.__doc__ or ""
+    check_hall_flags(args, SystemConfig(), "uavris benchmark")  # before the flags are read into the paper's system
     first = parse(BenchmarkArgs, args, "uavris benchmark", doc)
-    if first.row is not None:  # the study's row as a controller of its own, kept beside the results
-        from dataclasses import replace
-
-        out = first.out or Path("runs/benchmarks") / first.row
-        controller = _row_controller(first.target, first.row, first.track, out / "controller")
-        args = [str(controller) if x == first.target else x for x in args]
-        first = replace(first, target=str(controller), out=out)
-        args += ["--out", str(out)]
     if first.layout is not None and first.cells != "all":
         raise UsageError(f"--cells {first.cells} chooses among the protocol's cells and --layout is a cell of its own; "
                          "pass one of them")
-    default = BenchmarkArgs(first.target, system=resolve_target(first.target).own_system())
-    a = parse(BenchmarkArgs, args, "uavris benchmark", doc, default=default)
-    output_dir(a.out)
-    rows, md = benchmark(a.target, a.preset, a.cells, a.out, resolve_device(a.device), progress=a.progress,
-                         system=a.system, phase_control=a.phase_control, layout=a.layout, trust_pickle=a.trust_pickle)
+    with writing(first.out or default_benchmark_dir(first.target if first.row is None else first.row)) as out:
+        if first.row is not None:  # the study's row as a controller of its own, kept beside the results
+            from dataclasses import replace
+
+            controller = _row_controller(first.target, first.row, first.track, out / "controller")
+            args = [str(controller) if x == first.target else x for x in args]
+            first = replace(first, target=str(controller))
+        default = BenchmarkArgs(first.target, system=resolve_target(first.target).own_system())
+        a = parse(BenchmarkArgs, args, "uavris benchmark", doc, default=default)
+        rows, md = benchmark(a.target, a.preset, a.cells, out, resolve_device(a.device), progress=a.progress,
+                             system=a.system, phase_control=a.phase_control, layout=a.layout,
+                             trust_pickle=a.trust_pickle)
     for warning in dict.fromkeys(r["warning"] for r in rows if r.get("warning")):  # each once
         print(f"uavris: warning: {warning}", file=sys.stderr)
     print(md.read_text(), end="")
@@ -351,7 +357,8 @@ def sweep_command(args: list[str]) -> None:
     if row_of is not None:  # the study's row as a controller of its own, kept beside the results
         from dataclasses import replace
 
-        a = replace(a, targets=(str(_row_controller(row_of, a.row, a.track, out / "controller")),))
+        with writing(out):  # sweep() holds the lock for the sweep itself
+            a = replace(a, targets=(str(_row_controller(row_of, a.row, a.track, out / "controller")),))
     paths = sweep(a.targets, axes, out, base=a.system, scenario=a.scenario or hall, episodes=a.episodes, halls=a.halls,
                   workers=a.workers, backend=a.backend, progress=a.progress, trust_pickle=a.trust_pickle,
                   warn=lambda w: print(f"uavris: warning: {w}", file=sys.stderr))

@@ -16,6 +16,7 @@ from typing import Any
 from uavris.agents.torch_device import Device, resolve_device
 from uavris.cli.parsing import Unset, UsageError, output_dir, read_first
 from uavris.config import Scenario, SystemConfig
+from uavris.errors import ConfigError
 from uavris.runs import CONFIG_FILE, config_path
 
 
@@ -87,6 +88,39 @@ class _HallFlags:
     layout: Unset[str] = None
 
 
+@dataclass(frozen=True)
+class _LayoutFlag:
+    layout: Unset[str] = None
+
+
+def given_flags(args: list[str]) -> set[str]:
+    """The flags written on the command line (``--system.room``, also as ``--system.room=...``
+    or ``--system_room``): a flag given with its default value is still given."""
+    return {a.split("=", 1)[0].replace("_", "-") for a in args if a.startswith("--")}
+
+
+def check_hall_flags(args: list[str], system: SystemConfig, prog: str = "uavris") -> str | None:
+    """The layout ``--layout`` names (None: none), refused in one line beside a flag that gives
+    what it gives: ``--system.users`` (the devices), ``--system.room`` where the layout sets its
+    room. Read before any other flag, whose values may only fit the layout's hall."""
+    from uavris.layouts import resolve_layout
+
+    named = read_first(_LayoutFlag, args, prog).layout
+    if named is None:
+        return None
+    given = given_flags(args)
+    if "--system.users" in given:
+        raise UsageError("--layout and --system.users both give the device positions; pass one of them")
+    if "--system.room" in given:
+        try:
+            sets_room = resolve_layout(named, system).room is not None
+        except ConfigError:  # a hall that fits only the room the flag gives: it sets none of its own
+            sets_room = False
+        if sets_room:
+            raise UsageError(f"--layout {named} sets the room; drop --system.room or the file's room")
+    return named
+
+
 def layout_defaults(args: list[str], system: SystemConfig,
                     prog: str = "uavris") -> tuple[SystemConfig, Scenario | None]:
     """``system`` with the ``--system.*`` flags of ``args`` applied, in the hall ``--layout``
@@ -94,17 +128,23 @@ def layout_defaults(args: list[str], system: SystemConfig,
 
     The flags apply to the base system before the layout resolves. A layout gives the devices
     and, a layout file may, the room: ``--layout`` with ``--system.users``, or a file with a
-    room with ``--system.room``, gives them twice, which is one error line."""
+    room with ``--system.room``, gives them twice, which is one error line whatever the values
+    (the paper's room given beside a file's room is no less a contradiction)."""
     from uavris.layouts import resolve_layout
 
+    named = check_hall_flags(args, system, prog)
+    if named is None:
+        return system, None
     loose = _DevicesLater(**{f.name: getattr(system, f.name) for f in fields(SystemConfig)})
     first = read_first(_HallFlags, args, prog, default=_HallFlags(loose))
-    if first.layout is None:
-        return system, None
-    base = first.system
-    if base.users != system.users:
-        raise UsageError("--layout and --system.users both give the device positions; pass one of them")
-    layout = resolve_layout(first.layout, base)
-    if layout.room is not None and base.room != system.room:
-        raise UsageError(f"--layout {first.layout} sets the room; drop --system.room or the file's room")
-    return layout.resolve(base)
+    return resolve_layout(named, first.system).resolve(first.system)
+
+
+def seed_note(row: Any, seeds: list[int]) -> str:
+    """A line saying which of its seeds a row of several is (the report's row of that name is their
+    mean), and how to name the others; nothing for a row of one seed."""
+    if len(seeds) < 2:
+        return ""
+    others = ", ".join(f"{row.variant}@s{s}" for s in seeds if s != (row.seed or 0))
+    return (f"note: this is seed {row.seed or 0} of the row's {len(seeds)} seeds ({', '.join(map(str, seeds))}); the "
+            f"report's {row.variant} is their mean; the others are {others}\n")

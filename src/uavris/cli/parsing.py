@@ -21,7 +21,7 @@ import inspect
 import io
 import sys
 from pathlib import Path
-from typing import Annotated, Any, Literal, Optional, TypeVar, get_args, get_origin
+from typing import Annotated, Any, Iterator, Literal, Optional, TypeVar, get_args, get_origin
 
 import tyro
 from tyro.constructors import ConstructorRegistry, PrimitiveConstructorSpec, PrimitiveTypeInfo
@@ -146,12 +146,19 @@ def read_first(cls: type[T], args: list[str], prog: str, default: T | None = Non
     return parse(cls, [a for a in args if a not in HELP], prog, "", default=default, known_only=True)
 
 
+NAME_MAX = 255  # bytes in one file or folder name (Linux, macOS); results add their own names inside
+
+
 def output_dir(path: Path | None, flag: str = "--out") -> None:
     """An output directory may exist (as a directory) or not yet; a file in its place is an
     error, and so is one that cannot be written (read-only, immutable, another user's): found
     before any work, by writing a file into its nearest existing folder (None: ``runs/``, where
     the commands write by default)."""
     target = Path("runs") if path is None else Path(path)
+    long = [part for part in target.parts if len(part.encode()) > NAME_MAX]
+    if long:  # found before any work, not when the first result is written
+        raise UsageError(f"{flag}: a folder name of {len(long[0].encode())} bytes ({long[0][:40]}...); a file system "
+                         f"takes at most {NAME_MAX}")
     if target.exists() and not target.is_dir():
         raise UsageError(f"{flag} {path}: exists and is not a directory")
     folder = target.absolute()
@@ -167,6 +174,21 @@ def output_dir(path: Path | None, flag: str = "--out") -> None:
     except OSError as e:
         what = f"--out (default {target})" if path is None else f"{flag} {target}"
         raise UsageError(f"{what}: {folder} cannot be written ({e.strerror or e})") from None
+
+
+@contextlib.contextmanager
+def writing(path: Path, flag: str = "--out", files_only: bool = False) -> Iterator[Path]:
+    """The command's output ``path`` checked (:func:`output_dir`) and held for the block: one
+    writer at a time (:func:`uavris.runs.lock.locked`), so a second command into the same
+    output is one line instead of a silent replacement of the first's results. Every command
+    that writes takes it around all of its writing (``reproduce`` and ``sweep`` inside the
+    library, which their workers share). ``files_only``: the command writes files into ``path``
+    itself (a plot's folder), never into its subfolders, which may then be links."""
+    from uavris.runs.lock import locked
+
+    output_dir(path, flag)
+    with locked(path, links=files_only):
+        yield Path(path)
 
 
 def load_overrides(path: Path, kind: str) -> dict[str, Any]:

@@ -7,13 +7,14 @@ the commands that score policies (:mod:`.evaluation`).
 
 from __future__ import annotations
 
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Annotated, Literal
 
 import tyro
 
-from uavris.cli.parsing import Unset, UsageError, output_dir, parse
+from uavris.cli.parsing import Unset, UsageError, parse, writing
 from uavris.config import ScenarioName, SystemConfig
 from uavris.presets import COLLECT_SEED
 
@@ -49,10 +50,12 @@ def plan_command(args: list[str]) -> None:
     over the hall at the target's altitude, with the devices, their safety balls, the start
     and the target).
     """
-    from uavris.cli.options import layout_defaults
+    from uavris.cli.options import check_hall_flags, layout_defaults
     from uavris.experiments.tools.plan import check_devices, check_grid, plan_hall, planning_seconds
     from uavris.layouts import PAPER_LAYOUT, Layout, default_start, resolve_layout
 
+    positional = ["--layout", args[0], *args[1:]] if args and not args[0].startswith("-") else args
+    check_hall_flags(positional, SystemConfig(), "uavris plan")  # before the flags are read into the paper's system
     a = parse(PlanArgs, args, "uavris plan", plan_command.__doc__ or "")
     if a.controller is not None:
         if a.learned is not None:
@@ -83,11 +86,12 @@ def plan_command(args: list[str]) -> None:
         from uavris.agents.place.checkpoint import load_value
         value, _ = load_value(a.learned)
     out = a.out or Path("runs/plans") / (layout.name + ("-learned" if value is not None else ""))
-    output_dir(out.parent, "--out's folder")
-    if value is None and hall.num_users > 8:
-        seconds = planning_seconds(hall.num_users)
-        print(f"planning a hall of {hall.num_users} devices: about {seconds:.0f} s on one core", flush=True)
-    plan, paths = plan_hall(layout, a.system, out, a.grid_step, progress=a.progress, value=value, top_k=a.top_k)
+    with writing(out.parent, "--out's folder", files_only=True):
+        if value is None and hall.num_users > 8:
+            seconds = planning_seconds(hall.num_users)
+            print(f"planning a hall of {hall.num_users} devices: about {seconds:.0f} s on one core", flush=True)
+        plan, paths = plan_hall(layout, a.system, out, a.grid_step, progress=a.progress, value=value,
+                                top_k=a.top_k, controller=a.controller)
     t = plan["target"]
     if plan["expected_sum_rate"] is None:  # the learned planner's V: no R was computed
         worth = (f"learned value V there {plan['learned_value']:.2f} bps/Hz (at the start "
@@ -100,6 +104,14 @@ def plan_command(args: list[str]) -> None:
           f"[{t[0]:.2f}, {t[1]:.2f}, {t[2]:.2f}] (attitude {[round(v, 1) for v in plan['attitude_deg']]} deg) in "
           f"{plan['travel_s']:.1f} s; {worth}; planned by the {plan['planner']} planner in "
           f"{1000 * plan['planning_s']:.0f} ms -> {', '.join(str(p) for p in paths)}")
+    flight = plan.get("controller_flight")
+    if flight is not None:
+        if flight["warning"]:
+            print(f"uavris: warning: {flight['warning']}", file=sys.stderr)
+        print(f"{flight['row']}, told this place, ends episode seed {flight['seed']} at "
+              f"[{', '.join(f'{v:.2f}' for v in flight['end'])}] with an average sum rate of "
+              f"{flight['average_sum_rate']:.2f} bps/Hz (its whole flight: uavris evaluate {a.controller} "
+              f"--layout {layout.name if a.layout is None else a.layout} --trajectory)")
 
 
 # ----------------------------------------------------------------------------------------- collect
@@ -129,16 +141,17 @@ def collect_command(args: list[str]) -> None:
     (metadata.json + main_data.hdf5): per-episode scenario, expert and seed, the system
     configuration and the environment spec (minari's recover_environment() rebuilds the env).
     """
+    from uavris.experiments.display.tables import counted
     from uavris.experiments.training.collect import collect, dataset_summary
 
     a = parse(CollectArgs, args, "uavris collect", collect_command.__doc__ or "")
-    output_dir(a.out)
-    path = collect(a.experts, a.trajectories, a.out, seed=a.seed, force=a.force, progress=a.progress,
-                   trust_pickle=a.trust_pickle)
+    with writing(a.out):
+        path = collect(a.experts, a.trajectories, a.out, seed=a.seed, force=a.force, progress=a.progress,
+                       trust_pickle=a.trust_pickle)
     summary = dataset_summary(path)
     rates = ", ".join(f"{s} {v['avg_sum_rate']:.2f}" for s, v in summary["scenarios"].items())
-    print(f"dataset {path} ({summary['dataset_id']}): {summary['episodes']} episodes, {summary['slots']} slots; "
-          f"average sum rate per scenario (bps/Hz): {rates}")
+    print(f"dataset {path} ({summary['dataset_id']}): {counted(summary['episodes'], 'episode')}, "
+          f"{summary['slots']} slots; average sum rate per scenario (bps/Hz): {rates}")
 
 
 # -------------------------------------------------------------------------------------------- demo
@@ -189,8 +202,8 @@ def plot_command(args: list[str]) -> None:
     from uavris.experiments.tools.run_curves import plot_runs
 
     a = parse(PlotArgs, args, "uavris plot", plot_command.__doc__ or "")
-    output_dir(a.out.parent, "--out's folder")
-    paths = plot_runs(list(a.runs), a.out, list(a.labels) if a.labels else None)
+    with writing(a.out.parent, "--out's folder", files_only=True):
+        paths = plot_runs(list(a.runs), a.out, list(a.labels) if a.labels else None)
     print("wrote " + ", ".join(str(p) for p in paths))
 
 
@@ -216,6 +229,7 @@ def export_command(args: list[str]) -> None:
     `uavris evaluate OUT --row ROW` in the same hall. A row that flies another hall's plan (transfer-...) is that
     hall's and cannot be exported. Writes --out/controller.json and its models' files.
     """
+    from uavris.cli.options import seed_note
     from uavris.experiments.study.finished import Study
     from uavris.experiments.tools.targets import write_controller
     from uavris.io import file_part
@@ -225,6 +239,7 @@ def export_command(args: list[str]) -> None:
     _, unseen = study.sites(a.track)
     row = study.row(a.row, a.track, unseen[0])  # a controller's models are the study's, whatever the hall
     out = a.out or Path("runs/controllers") / file_part(row.key)
-    output_dir(out)
-    write_controller(row, out)
+    with writing(out):
+        write_controller(row, out)
     print(f"exported {row.key} ({row.label_for()}) of {a.study} -> {out}")
+    print(seed_note(row, study.seeds(row, a.track, unseen[0])), end="")

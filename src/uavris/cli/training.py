@@ -18,7 +18,7 @@ import tyro
 from uavris.agents.experts import Algorithm
 from uavris.agents.torch_device import Device
 from uavris.cli.options import LAYOUT_HELP, RunOptions, check_run_options, layout_defaults
-from uavris.cli.parsing import Unset, UsageError, load_overrides, output_dir, parse, read_first
+from uavris.cli.parsing import Unset, UsageError, load_overrides, output_dir, parse, read_first, writing
 from uavris.config import ScenarioName, SystemConfig
 from uavris.experiments.engine.jobs import Backend
 from uavris.experiments.study.config import ReproduceConfig
@@ -117,7 +117,7 @@ def train_command(args: list[str]) -> None:
     (rerun it with --config), episodes.csv, evals.csv, TensorBoard logs (tb/), checkpoints/
     and model.zip. Every TrainConfig field is a flag; --preset and --algo choose the defaults.
     """
-    from uavris.experiments.display.tables import rate_interval
+    from uavris.experiments.display.tables import counted, rate_interval
     from uavris.experiments.training.train_expert import default_run_dir, train
     from uavris.runs import read_done
 
@@ -125,11 +125,12 @@ def train_command(args: list[str]) -> None:
               default=TrainArgs(train_defaults(args)))
     run_dir = a.options.out or default_run_dir(a.run)
     device = check_run_options(a.options, run_dir)
-    model = train(a.run, run_dir, resume=a.options.resume, force=a.options.force,
-                  progress=a.options.progress, device=device, trust_pickle=a.trust_pickle)
-    final = read_done(run_dir)["final_eval"]
+    with writing(run_dir):
+        model = train(a.run, run_dir, resume=a.options.resume, force=a.options.force,
+                      progress=a.options.progress, device=device, trust_pickle=a.trust_pickle)
+        final = read_done(run_dir)["final_eval"]
     print(f"trained {model}: average sum rate {final['mean']:.2f} bps/Hz "
-          f"(95% CI {rate_interval(final['ci_low'], final['ci_high'])}, {final['episodes']} episodes)")
+          f"(95% CI {rate_interval(final['ci_low'], final['ci_high'])}, {counted(final['episodes'], 'episode')})")
 
 
 # ------------------------------------------------------------------------------ compare-algorithms
@@ -176,19 +177,19 @@ def compare_command(args: list[str]) -> None:
     report.md. Finished jobs are skipped on a rerun; interrupted ones resume.
     """
     from uavris.agents.torch_device import resolve_device
-    from uavris.experiments.training.compare import compare_algorithms
+    from uavris.experiments.training.compare import compare_algorithms, default_compare_dir
 
     system, hall = layout_defaults(args, SystemConfig())
     a = parse(CompareArgs, args, "uavris compare-algorithms", compare_command.__doc__ or "",
               default=CompareArgs(system=system, scenario="fig2" if hall is None else hall.name))
-    output_dir(a.out)
     start = hall.start if hall is not None and a.scenario == hall.name else None
     seeds = STUDY[a.preset]["compare_seeds"] if a.seeds is None else a.seeds
     steps = STUDY[a.preset]["compare_steps"] if a.steps is None else a.steps
-    report = compare_algorithms(preset=a.preset, seeds=seeds, workers=a.workers, out=a.out, algos=a.algos,
-                                scenario=a.scenario, eval_episodes=a.eval_episodes, backend=a.backend,
-                                ray_address=a.ray_address, device=resolve_device(a.device), system=a.system,
-                                start=start, steps=steps, eval_every=a.eval_every, progress=a.progress)
+    with writing(a.out or default_compare_dir(a.preset)) as out:
+        report = compare_algorithms(preset=a.preset, seeds=seeds, workers=a.workers, out=out, algos=a.algos,
+                                    scenario=a.scenario, eval_episodes=a.eval_episodes, backend=a.backend,
+                                    ray_address=a.ray_address, device=resolve_device(a.device), system=a.system,
+                                    start=start, steps=steps, eval_every=a.eval_every, progress=a.progress)
     print(f"report: {report}")
 
 
@@ -196,7 +197,8 @@ def _run_dt(fn: Callable[..., Path], cfg: Any, opts: RunOptions, default_dir: Ca
     """Run a DT stage (pre-training or fine-tuning) as the options say; its run directory."""
     run_dir = opts.out or default_dir(cfg)
     device = check_run_options(opts, run_dir)
-    return fn(cfg, run_dir, resume=opts.resume, force=opts.force, progress=opts.progress, device=device)
+    with writing(run_dir):
+        return fn(cfg, run_dir, resume=opts.resume, force=opts.force, progress=opts.progress, device=device)
 
 
 # ------------------------------------------------------------------------------------- pretrain-dt

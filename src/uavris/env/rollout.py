@@ -16,7 +16,9 @@ The contract (duck-typed, so that this layer needs nothing from the agents):
   ``privileged`` attribute is called ``policy(obs, sim)`` instead and may read the
   simulator's state (the references that see more than the observation: the oracle,
   co-phasing);
-- a policy with ``begin(n)`` is told that ``n`` episodes start, and one with
+- a policy with ``begin(n)`` is told that ``n`` episodes start, one with ``seed_episodes(seeds)``
+  the seed of each row's episode (a policy's own randomness drawn per episode, so that an
+  episode is the same alone or among others), and one with
   ``record(actions, rewards)`` receives its own actions and the slot's rewards after every
   step (the Decision Transformer's return-to-go);
 - ``phase_control="optimizer"`` (or a policy's own ``phase_control`` attribute) executes
@@ -81,6 +83,8 @@ def rollout(policy: Any, config: SystemConfig, scenario: str | Scenario, seeds: 
     privileged = bool(getattr(policy, "privileged", False))
     if hasattr(policy, "begin"):
         policy.begin(n)
+    if hasattr(policy, "seed_episodes"):
+        policy.seed_episodes(seeds)
     returns, energy = np.zeros(n), np.zeros(n)
     lengths = np.zeros(n, dtype=np.int64)
     terminated = np.zeros(n, dtype=bool)

@@ -22,7 +22,7 @@ from pathlib import Path
 from typing import Any, Callable
 
 from uavris.errors import UavrisError
-from uavris.io import read_json, read_yaml, to_plain, write_json, write_yaml
+from uavris.io import contents, read_json, read_yaml, to_plain, write_json, write_yaml
 
 CONFIG_FILE = "config.yaml"
 DONE_FILE = "done.json"
@@ -62,16 +62,17 @@ def prepare(run_dir: Path, record: dict[str, Any], *, resume: bool, force: bool,
     record = to_plain(record)
     has_config = config_path(run_dir) is not None
     if force and run_dir.exists() and not resume:
-        if not has_config and any(run_dir.iterdir()):
+        if not has_config and contents(run_dir):
             raise UavrisError(f"{run_dir} exists and is not a {what} directory; refusing to overwrite it")
-        shutil.rmtree(run_dir)
+        for entry in contents(run_dir):  # the writer's lock stays: this process holds it
+            shutil.rmtree(entry) if entry.is_dir() and not entry.is_symlink() else entry.unlink()
         has_config = False
     elif is_finished(run_dir):
         raise UavrisError(f"{run_dir} is a finished run; evaluate it, pass --force to redo it from scratch, or "
                           "--out DIR to run this configuration elsewhere")
     elif has_config and not resume:
         raise UavrisError(f"{run_dir} already holds a run; pass --resume to continue it or --force to start over")
-    elif run_dir.exists() and not has_config and any(run_dir.iterdir()):
+    elif run_dir.exists() and not has_config and contents(run_dir):
         raise UavrisError(f"{run_dir} exists and is not a {what} directory")
     if has_config:
         stored = read_config(run_dir)

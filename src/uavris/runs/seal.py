@@ -30,14 +30,21 @@ SUFFIX = ".seal"
 TRUST_FLAG = "--trust-pickle"
 
 
+MIN_KEY_BYTES = 16  # an HMAC key shorter than this can be guessed; an empty one forges any seal
+
+
 def _key() -> bytes:
     given = os.environ.get("UAVRIS_SEAL_KEY")
-    if given:
+    if given is not None:
         try:
-            return bytes.fromhex(given)
+            key = bytes.fromhex(given)
         except ValueError:
             raise CheckpointError("UAVRIS_SEAL_KEY must be hex digits (e.g. python -c 'import secrets; "
                                   "print(secrets.token_hex(32))')") from None
+        if len(key) < MIN_KEY_BYTES:
+            raise CheckpointError(f"UAVRIS_SEAL_KEY holds {len(key)} bytes; a seal key needs at least "
+                                  f"{MIN_KEY_BYTES} (e.g. python -c 'import secrets; print(secrets.token_hex(32))')")
+        return key
     home = Path(os.environ.get("XDG_CONFIG_HOME") or Path.home() / ".config")
     path = home / "uavris" / "seal.key"
     if not path.exists():
@@ -51,7 +58,11 @@ def _key() -> bytes:
             pass
         finally:
             os.unlink(path.with_name(f".seal.key.{os.getpid()}"))
-    return path.read_bytes()
+    key = path.read_bytes()
+    if len(key) < MIN_KEY_BYTES:
+        raise CheckpointError(f"{path} holds {len(key)} bytes; a seal key needs at least {MIN_KEY_BYTES}: "
+                              "delete it and uavris makes a new one (seals made under it no longer match)")
+    return key
 
 
 def _digest(path: Path) -> str:

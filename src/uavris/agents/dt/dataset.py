@@ -49,6 +49,7 @@ from uavris.env import ENV_ID
 from uavris.env.simulator import layout_as_lists, observation_bounds, stored_system
 from uavris.env.wrappers import PHASE_CONTROLS, action_dim_for
 from uavris.errors import ConfigError, DatasetError
+from uavris.io import contents
 
 DATASET_FORMAT_VERSION = 2  # 2: the environment spec and the phase control always recorded
 DATASET_NAMESPACE = "uavris"
@@ -119,9 +120,9 @@ def check_dataset_target(path: Path, force: bool) -> None:
     if path.exists():
         if not path.is_dir():
             raise DatasetError(f"{path} exists and is not a directory; refusing to overwrite it")
-        if not (path / "data" / "metadata.json").exists() and any(path.iterdir()):
+        if not (path / "data" / "metadata.json").exists() and contents(path):
             raise DatasetError(f"{path} exists and is not a dataset; refusing to overwrite it")
-        if not force:
+        if not force and contents(path):
             raise DatasetError(f"{path} already exists; pass --force to replace it")
 
 
@@ -181,17 +182,16 @@ def write_dataset(path: str | Path, trajectories: Sequence[Trajectory], system: 
                           truncations=_flag_last(tr.length, tr.truncated))
             for i, tr in enumerate(trajectories))
         storage.update_episode_metadata([_episode_metadata(tr) for tr in trajectories])
-        if path.exists():
-            old = path.parent / f".{path.name}.old"
-            shutil.rmtree(old, ignore_errors=True)
-            path.rename(old)
-            tmp.rename(path)
-            shutil.rmtree(old, ignore_errors=True)
-        else:
-            tmp.rename(path)
-    except BaseException:
+        # the data folder swapped, not the directory: the directory keeps its writer's lock (uavris.io.contents)
+        path.mkdir(parents=True, exist_ok=True)
+        old = path.parent / f".{path.name}.old"
+        shutil.rmtree(old, ignore_errors=True)
+        if (path / "data").exists():
+            (path / "data").rename(old)
+        (tmp / "data").rename(path / "data")
+        shutil.rmtree(old, ignore_errors=True)
+    finally:
         shutil.rmtree(tmp, ignore_errors=True)
-        raise
     return given
 
 
@@ -230,40 +230,26 @@ def _data_dir(path: Path) -> Path:
 def load_dataset(path: str | Path) -> ExpertDataset:
     """Read and validate a dataset written by :func:`write_dataset`.
 
-    Raises :class:`DatasetError` with one line naming the problem: not a dataset, not
+    The raw ``metadata.json`` is checked first (:func:`_checked_metadata`), so Minari never sees
+    a file that would make it build an environment: with its spaces missing, Minari calls
+    ``gym.make`` on the recorded spec, which imports and calls whatever entry point the file
+    names. Raises :class:`DatasetError` with one line naming the problem: not a dataset, not
     readable by Minari, missing uavris metadata or per-episode fields, wrong array
     shapes, non-finite values, an observation layout different from the one the
-    current environment produces for the stored system configuration, or a recorded
-    environment spec that would recover another environment or system.
+    current environment produces for the stored system configuration, spaces other than the
+    environment's, or a recorded environment spec that would recover another environment or
+    system.
     """
     import minari
 
     path = Path(path)
     data_dir = _data_dir(path).absolute()
+    meta, system, phase_control = _checked_metadata(data_dir, str(path))
     try:
         ds = minari.MinariDataset(data_dir)
-        meta = ds.storage.metadata
     except (ValueError, KeyError, OSError, AssertionError, TypeError, json.JSONDecodeError) as e:
         raise DatasetError(f"{path} is not a readable Minari dataset ({_one_line(e)})") from None
-    info = meta.get("uavris")
-    if not isinstance(info, dict):
-        raise DatasetError(f"{path} was not written by uavris collect (no 'uavris' metadata)")
-    for key in ("format_version", "system", "observation_layout", "observation_dim", "action_dim", "phase_control"):
-        if key not in info:
-            raise DatasetError(f"{path}: the uavris metadata is missing the field {key!r}")
-    if info["format_version"] != DATASET_FORMAT_VERSION:
-        raise DatasetError(f"{path} has dataset format {info['format_version']!r}; "
-                           f"this uavris reads format {DATASET_FORMAT_VERSION}")
-    system = stored_system(info["system"], info["observation_layout"], str(path), DatasetError)
-    _check_env_spec(ds.env_spec, system, str(path))
-    phase_control = info["phase_control"]
-    if phase_control not in PHASE_CONTROLS:
-        raise DatasetError(f"{path}: unknown phase control {phase_control!r} in the uavris metadata")
     obs_dim, act_dim = system.observation_dim, action_dim_for(system, phase_control)
-    if info["observation_dim"] != obs_dim or info["action_dim"] != act_dim \
-            or ds.observation_space.shape != (obs_dim,) or ds.action_space.shape != (act_dim,):
-        raise DatasetError(f"{path}: observation/action sizes {ds.observation_space.shape}/{ds.action_space.shape} "
-                           f"do not match the environment's ({obs_dim},)/({act_dim},)")
     if ds.total_episodes < 1:
         raise DatasetError(f"{path} holds no episodes")
     trajectories = []
@@ -320,20 +306,96 @@ def _episode_layout(meta: dict[str, Any], system: SystemConfig, where: str
     return start, users
 
 
-def _check_env_spec(spec, system: SystemConfig, where: str) -> None:
-    """Minari's ``recover_environment`` must rebuild the system the data was collected in."""
-    if spec is None:
-        raise DatasetError(f"{where}: no environment spec recorded (Minari could not recover the environment)")
-    if spec.id != ENV_ID:
-        raise DatasetError(f"{where}: the recorded environment is {spec.id!r}, not {ENV_ID!r}")
-    config = spec.kwargs.get("config")
+def _checked_metadata(data_dir: Path, where: str) -> tuple[dict[str, Any], SystemConfig, str]:
+    """``data_dir/metadata.json`` read as plain JSON and checked before Minari reads it: the uavris
+    metadata, the storage format, the spaces (exactly the environment's for the stored system, so
+    Minari takes them as written and never builds an environment to learn them) and every
+    recorded environment spec (:func:`_check_env_spec`). Returns the metadata, the system and
+    the phase control."""
     try:
-        same = isinstance(config, dict) and SystemConfig.from_dict(config) == system
-    except (ConfigError, TypeError, ValueError):
-        same = False
-    if not same:
-        raise DatasetError(f"{where}: the recorded environment spec has another system configuration than "
-                           "the uavris metadata")
+        meta = json.loads((data_dir / "metadata.json").read_text())
+    except (OSError, UnicodeDecodeError, ValueError) as e:
+        raise DatasetError(f"{where} is not a readable Minari dataset ({_one_line(e)})") from None
+    if not isinstance(meta, dict):
+        raise DatasetError(f"{where}: metadata.json is not a JSON object")
+    info = meta.get("uavris")
+    if not isinstance(info, dict):
+        raise DatasetError(f"{where} was not written by uavris collect (no 'uavris' metadata)")
+    for key in ("format_version", "system", "observation_layout", "observation_dim", "action_dim", "phase_control"):
+        if key not in info:
+            raise DatasetError(f"{where}: the uavris metadata is missing the field {key!r}")
+    if info["format_version"] != DATASET_FORMAT_VERSION:
+        raise DatasetError(f"{where} has dataset format {info['format_version']!r}; "
+                           f"this uavris reads format {DATASET_FORMAT_VERSION}")
+    system = stored_system(info["system"], info["observation_layout"], where, DatasetError)
+    phase_control = info["phase_control"]
+    if phase_control not in PHASE_CONTROLS:
+        raise DatasetError(f"{where}: unknown phase control {phase_control!r} in the uavris metadata")
+    obs_dim, act_dim = system.observation_dim, action_dim_for(system, phase_control)
+    if info["observation_dim"] != obs_dim or info["action_dim"] != act_dim:
+        raise DatasetError(f"{where}: observation/action sizes {info['observation_dim']}/{info['action_dim']} "
+                           f"do not match the environment's {obs_dim}/{act_dim}")
+    if meta.get("data_format") != "hdf5":
+        raise DatasetError(f"{where}: storage format {meta.get('data_format')!r}; uavris writes and reads 'hdf5'")
+    _check_spaces(meta, system, act_dim, where)
+    if meta.get("env_spec") is None:
+        raise DatasetError(f"{where}: no environment spec recorded (Minari could not recover the environment)")
+    for key in ("env_spec", "eval_env_spec"):
+        if key in meta:
+            _check_env_spec(meta[key], system, f"{where}: {key}")
+    return meta, system, phase_control
+
+
+def _check_spaces(meta: dict[str, Any], system: SystemConfig, act_dim: int, where: str) -> None:
+    """The recorded spaces, exactly as Minari serialises the environment's for ``system``."""
+    import gymnasium as gym
+    from minari.serialization import serialize_space
+
+    low, high = observation_bounds(system)
+    spaces = {"observation_space": gym.spaces.Box(low, high, dtype=np.float32),
+              "action_space": gym.spaces.Box(-1.0, 1.0, (act_dim,), dtype=np.float32)}
+    for key, space in spaces.items():
+        try:
+            same = isinstance(meta.get(key), str) and json.loads(meta[key]) == serialize_space(space, to_string=False)
+        except ValueError:
+            same = False
+        if not same:
+            raise DatasetError(f"{where}: the recorded {key} is missing or not the environment's for its system")
+
+
+def _check_env_spec(spec: Any, system: SystemConfig | None, where: str) -> dict[str, Any]:
+    """A recorded environment spec (Minari's JSON string) must rebuild
+    uavris's registered environment, through its registered entry point and no wrapper, with
+    ``system`` (when given): anything else would have Minari's ``recover_environment`` import
+    and call what the file names. Returns the spec's kwargs."""
+    import gymnasium as gym
+
+    try:
+        fields = json.loads(spec) if isinstance(spec, str) else None
+    except ValueError:
+        fields = None
+    if not isinstance(fields, dict):
+        raise DatasetError(f"{where}: the recorded environment spec is not a JSON object")
+    registered = gym.spec(ENV_ID)
+    if fields.get("id") != ENV_ID:
+        raise DatasetError(f"{where}: the recorded environment is {fields.get('id')!r}, not {ENV_ID!r}")
+    if fields.get("entry_point") != registered.entry_point \
+            or fields.get("vector_entry_point") not in (None, registered.vector_entry_point) \
+            or fields.get("additional_wrappers") not in (None, []):
+        raise DatasetError(f"{where}: the recorded environment spec names another entry point or wrappers than "
+                           f"uavris's {registered.entry_point!r}; refusing it (making it would run that code)")
+    kwargs = fields.get("kwargs")
+    if not isinstance(kwargs, dict) or not set(kwargs) <= {"config", "scenario"}:
+        raise DatasetError(f"{where}: the recorded environment spec's arguments must be 'config' and 'scenario'")
+    if system is not None:
+        try:
+            same = isinstance(kwargs.get("config"), dict) and SystemConfig.from_dict(kwargs["config"]) == system
+        except (ConfigError, TypeError, ValueError):
+            same = False
+        if not same:
+            raise DatasetError(f"{where}: the recorded environment spec has another system configuration than "
+                               "the uavris metadata")
+    return kwargs
 
 
 def _check_trajectory(tr: Trajectory, obs_dim: int, act_dim: int, where: str) -> None:
@@ -355,15 +417,18 @@ def _one_line(e: BaseException) -> str:
 
 
 def episode_environment(dataset: Any, episode: int, eval_env: bool = False) -> Any:
-    """The environment of one episode of a Minari dataset (``minari.MinariDataset``): Minari's
-    ``recover_environment`` (the dataset's system and first scenario) with the episode's own
+    """The environment of one episode of a Minari dataset (``minari.MinariDataset``): the recorded
+    spec's (the dataset's system and first scenario; checked, and made through uavris's registered
+    entry point, never the one the file names) with the episode's own
     hall and start from its metadata, so that a dataset over many halls rebuilds each of them.
     Reset it with the episode's seed to replay the episode."""
     import gymnasium as gym
 
-    base = dataset.recover_environment(eval_env=eval_env)
-    kwargs = dict(base.spec.kwargs)
-    base.close()
+    recorded = dataset.storage.metadata
+    spec = (eval_env and recorded.get("eval_env_spec")) or recorded.get("env_spec")
+    if spec is None:
+        raise DatasetError("the dataset records no environment spec")
+    kwargs = dict(_check_env_spec(spec, None, "the dataset"))  # made below through the registered entry point
     meta = dict(next(iter(dataset.storage.get_episode_metadata([episode]))))
     system = SystemConfig.from_dict(kwargs["config"])
     start, users = _episode_layout(meta, system, f"episode {episode}")

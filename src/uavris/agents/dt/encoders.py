@@ -42,10 +42,10 @@ from typing import Literal, get_args
 
 import numpy as np
 import torch
-import torch.nn.functional as F
 from numpy.typing import NDArray
 from torch import nn
 
+from uavris.agents.row_invariant import Linear, linear
 from uavris.env.simulator import observation_slices
 from uavris.errors import ConfigError
 
@@ -86,11 +86,11 @@ def _uav_index(lay: dict[str, slice]) -> torch.Tensor:
     return torch.cat([torch.arange(lay[s].start, lay[s].stop) for s in UAV_SLICES])
 
 
-class FlatEncoder(nn.Linear):
+class FlatEncoder(Linear):
     """One linear map of the whole normalised observation (the DT paper's state embedding)."""
 
     def forward(self, raw: torch.Tensor, normalised: torch.Tensor) -> torch.Tensor:  # type: ignore[override]
-        return F.linear(normalised, self.weight, self.bias)
+        return linear(normalised, self.weight, self.bias)
 
 
 def _sorted_sum(x: torch.Tensor) -> torch.Tensor:
@@ -141,10 +141,10 @@ class DeviceSetEncoder(nn.Module):
         self._counts: dict[int, tuple[int, dict[str, slice], torch.Tensor]] = {}  # other widths: other counts
         own = 3 + 2 * elements + (1 if ris_frame else 0)
         per_device = own + 2 + own
-        self.pair_net = nn.Sequential(nn.Linear(2 * per_device, width), nn.ReLU(), nn.Linear(width, width), nn.ReLU())
-        self.device_net = nn.Sequential(nn.Linear(per_device + 2 * width, width), nn.ReLU(), nn.Linear(width, width),
+        self.pair_net = nn.Sequential(Linear(2 * per_device, width), nn.ReLU(), Linear(width, width), nn.ReLU())
+        self.device_net = nn.Sequential(Linear(per_device + 2 * width, width), nn.ReLU(), Linear(width, width),
                                         nn.ReLU())
-        self.combine = nn.Linear(2 * width + len(self.uav_index), width)
+        self.combine = Linear(2 * width + len(self.uav_index), width)
 
     def geometry(self, width: int) -> tuple[int, dict[str, slice], torch.Tensor]:
         """(devices, observation slices, the UAV's entries) of an observation of ``width``
@@ -180,8 +180,8 @@ class DeviceSetEncoder(nn.Module):
         network on the concatenated pairs, at a K-th of the first layer's work)."""
         first, second = self.pair_net[0], self.pair_net[2]
         half = f.shape[-1]
-        mine = F.linear(f, first.weight[:, :half], first.bias)  # (..., K, W): W_1a f_k + b
-        theirs = F.linear(f, first.weight[:, half:])  # (..., K, W): W_1b f_j
+        mine = linear(f, first.weight[:, :half], first.bias)  # (..., K, W): W_1a f_k + b
+        theirs = linear(f, first.weight[:, half:])  # (..., K, W): W_1b f_j
         hidden = (mine.unsqueeze(-2) + theirs.unsqueeze(-3)).relu_()  # (..., K, K, W), [k, j]; in place: a temporary
         return second(hidden).relu_()
 

@@ -60,13 +60,13 @@ from typing import Any
 
 import numpy as np
 import torch
-import torch.nn.functional as F
 from torch import nn
 
 from uavris.agents.dt.cache import KVCache
 from uavris.agents.dt.config import DTConfig
 from uavris.agents.dt.encoders import devices_of_width, make_state_encoder, stats_for_devices
 from uavris.agents.dt.goals import GOAL_DIM
+from uavris.agents.row_invariant import Linear, attention
 from uavris.env.simulator import observation_slices
 from uavris.errors import ConfigError
 
@@ -82,11 +82,11 @@ class _Block(nn.Module):
         self.norm1 = nn.LayerNorm(w)
         # Separate query and key/value projections, so the last block can project queries
         # for the read-out tokens only.
-        self.query = nn.Linear(w, w)
-        self.key_value = nn.Linear(w, 2 * w)
-        self.proj = nn.Linear(w, w)
+        self.query = Linear(w, w)
+        self.key_value = Linear(w, 2 * w)
+        self.proj = Linear(w, w)
         self.norm2 = nn.LayerNorm(w)
-        self.mlp = nn.Sequential(nn.Linear(w, cfg.mlp_ratio * w), nn.ReLU(), nn.Linear(cfg.mlp_ratio * w, w))
+        self.mlp = nn.Sequential(Linear(w, cfg.mlp_ratio * w), nn.ReLU(), Linear(cfg.mlp_ratio * w, w))
         self.drop = nn.Dropout(cfg.dropout)
 
     def forward(self, x: torch.Tensor, mask: torch.Tensor, query_index: torch.Tensor | None = None) -> torch.Tensor:
@@ -111,7 +111,7 @@ class _Block(nn.Module):
         if query_index is not None:
             x, y, mask = x[:, query_index], y[:, query_index], mask[:, :, query_index]
         q = self.query(y).view(b, -1, self.heads, w // self.heads).transpose(1, 2)
-        att = F.scaled_dot_product_attention(q, k, v, attn_mask=mask, dropout_p=self.dropout if self.training else 0.0)
+        att = attention(q, k, v, mask, self.dropout if self.training else 0.0)
         x = x + self.drop(self.proj(att.transpose(1, 2).reshape(b, -1, w)))
         return x + self.drop(self.mlp(self.norm2(x)))
 
@@ -126,19 +126,19 @@ class DecisionTransformer(nn.Module):
             raise ConfigError("a DT is built for data of known sizes: DTConfig.for_data(system, act_dim) sets them")
         self.cfg = cfg
         w = cfg.width
-        self.embed_return = nn.Linear(1, w)
+        self.embed_return = Linear(1, w)
         self.embed_state = make_state_encoder(cfg.state_encoder, cfg.state_dim, w, cfg.devices, cfg.elements,
                                               cfg.ris_frame)
-        self.embed_action = nn.Linear(cfg.act_dim, w)
+        self.embed_action = Linear(cfg.act_dim, w)
         self.embed_timestep = nn.Embedding(cfg.max_timestep, w)
         self.embed_norm = nn.LayerNorm(w)
         self.embed_drop = nn.Dropout(cfg.dropout)
         self.blocks = nn.ModuleList(_Block(cfg) for _ in range(cfg.depth))
         self.final_norm = nn.LayerNorm(w)
-        self.action_head = nn.Linear(w, cfg.act_dim)
+        self.action_head = Linear(w, cfg.act_dim)
         # A goal-conditioned controller reads where it is told to go, added to each state token
         # (created last, so that a model without a goal draws the same initial weights as before).
-        self.embed_goal = nn.Linear(GOAL_DIM, w) if cfg.goal else None
+        self.embed_goal = Linear(GOAL_DIM, w) if cfg.goal else None
         mean = np.zeros(cfg.state_dim) if state_mean is None else np.asarray(state_mean, dtype=np.float64)
         std = np.ones(cfg.state_dim) if state_std is None else np.asarray(state_std, dtype=np.float64)
         if mean.shape != (cfg.state_dim,) or std.shape != (cfg.state_dim,) or np.any(std <= 0):

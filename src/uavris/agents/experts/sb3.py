@@ -108,7 +108,9 @@ def load_policy(stem: Path, config: SystemConfig, phase_control: str, device: st
 class SB3Policy:
     """A trained SB3 model or policy network (anything with SB3's ``predict`` and
     ``observation_space``) as a deterministic batch policy of the observation; a model trained
-    on the motion (``phase_control="optimizer"``) acts with the optimiser's phases."""
+    on the motion (``phase_control="optimizer"``) acts with the optimiser's phases. Its linear
+    layers act row by row (:mod:`uavris.agents.row_invariant`): each episode's actions are
+    those it would get alone."""
 
     def __init__(self, model: Any, phase_control: str = "agent") -> None:
         self.model = model
@@ -120,7 +122,10 @@ class SB3Policy:
         return int(self.model.observation_space.shape[0])
 
     def __call__(self, obs: NDArray[np.float32]) -> NDArray[np.float32]:
-        action, _ = self.model.predict(obs, deterministic=True)
+        from uavris.agents.row_invariant import rows_apart
+
+        with rows_apart(getattr(self.model, "policy", self.model)):
+            action, _ = self.model.predict(obs, deterministic=True)
         return action
 
 

@@ -16,6 +16,7 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
+from matplotlib.ticker import MaxNLocator  # noqa: E402
 
 from uavris.io import atomic_write_bytes  # noqa: E402
 
@@ -53,24 +54,28 @@ def reference_lines(ax: plt.Axes, references: Mapping[str, tuple[str, float]]) -
 def learning_curves(curves: Mapping[str, tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]],
                     stem: Path, title: str, paper_values: Mapping[str, float] | None = None,
                     references: Mapping[str, tuple[str, float]] | None = None) -> list[Path]:
-    """Average sum rate vs training episodes: mean over seeds with a 95% Student-t band.
+    """Average sum rate vs training episodes: the mean over seeds, and a band that is the 95%
+    Student-t interval of that mean over the seeds, its lower edge clipped at 0.
 
-    ``curves[name] = (episodes, mean, low, high)``; optional dotted lines at the paper's
-    converged values and horizontal lines at reference scores (:func:`reference_lines`).
+    The band is a spread over a handful of seeds (t's quantile at 2 seeds is 12.7), so its raw
+    lower edge can fall below 0, which no sum rate can: it is drawn from 0. ``curves[name] =
+    (episodes, mean, low, high)``; optional dotted lines at the paper's converged values and
+    horizontal lines at reference scores (:func:`reference_lines`). The legend sits below the
+    axes, where it covers no curve.
     """
     fig, ax = plt.subplots(figsize=(4.8, 3.6))
     reference_lines(ax, references or {})
     for name, (x, mean, lo, hi) in curves.items():
         color = COLORS.get(name)
         ax.plot(x, mean, label=name.upper(), color=color, lw=1.4)
-        ax.fill_between(x, lo, hi, color=color, alpha=0.2, lw=0)
+        ax.fill_between(x, np.maximum(lo, 0.0), hi, color=color, alpha=0.2, lw=0)
         if paper_values and name in paper_values:
             ax.axhline(paper_values[name], color=color, ls=":", lw=0.9)
+    if paper_values:  # one legend entry for the dotted lines (each in its algorithm's colour)
+        ax.plot([], [], color="0.4", ls=":", lw=0.9, label="paper's converged value")
+    ax.xaxis.set_major_locator(MaxNLocator(integer=True))  # episodes are whole: no tick at 1.5
     ax.set_xlabel("training episode")
     ax.set_ylabel("average sum rate (bps/Hz)")
     ax.set_title(title, fontsize=9)
-    ax.legend(loc="center right", fontsize=7, frameon=False)
-    if paper_values:
-        ax.text(0.01, 0.99, "dotted: paper's converged values", transform=ax.transAxes, va="top", fontsize=7,
-                color="0.4")
+    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.16), ncol=3, fontsize=7, frameon=False)
     return save_figure(fig, stem)

@@ -2,9 +2,10 @@
 
 Lives here: :func:`markdown_table` (every table a report, a comparison, a benchmark or an
 estimate prints) and the formats of its cells: :func:`num`, :func:`signed`, :func:`pct`
-and :func:`with_ci` / :func:`interval` / :func:`rate_interval`. A value that is missing
-(None) or undefined (NaN: an interval over one sample, a fraction of a zero oracle) prints
-as ``n/a``, never as a number. Not here: the statistics (:mod:`uavris.stats`).
+and :func:`with_ci` / :func:`interval` / :func:`rate_interval`; :func:`counted` (a count
+and its noun, singular for one). A value that is missing (None) or undefined (NaN: an
+interval over one sample, a fraction of a zero oracle) prints as ``n/a``, never as a
+number. Not here: the statistics (:mod:`uavris.stats`).
 """
 
 from __future__ import annotations
@@ -18,6 +19,12 @@ Fmt = Callable[[Any], str]
 
 def _missing(x: Any) -> bool:
     return x is None or (isinstance(x, float) and math.isnan(x))
+
+
+def counted(n: int, noun: str, fmt: str = "") -> str:
+    """``n`` (formatted by ``fmt``, e.g. ``","``) and ``noun``, plural unless ``n`` is 1:
+    "1 episode", "32 episodes" (a printed "1 episodes" reads as a typo)."""
+    return f"{n:{fmt}} {noun if n == 1 else noun + 's'}"
 
 
 def num(x: float | None, digits: int = 2) -> str:

@@ -12,6 +12,12 @@ returned failures. A worker process that dies (killed by the OOM killer, say) br
 local pool and every job running in it: those jobs run once more, each in a process of its
 own, and only a job whose process dies again is reported failed ("worker died").
 
+Workers never outlive their command: Ctrl-C and SIGTERM close the runner with ``abort``
+(:meth:`JobRunner.close`, :func:`abort_runners`), which stops them, and a worker whose
+parent is gone (killed by SIGKILL or the OOM killer, which no handler sees) exits within a
+second (:func:`_watch_parent`). The output's lock goes with the command's process; a worker
+left running would go on writing into an output that a rerun may then lock and write too.
+
 Backends: ``local`` (``concurrent.futures`` process pool, the default) and ``ray``
 (``pip install 'uavris[ray]'``): without an address a local Ray instance with ``workers``
 CPUs is started; with ``ray_address`` the jobs go to that cluster, whose nodes must have
@@ -22,19 +28,22 @@ are seeded by their own configuration, so both backends give the same results.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import heapq
 import itertools
 import multiprocessing as mp
+import os
 import sys
 import threading
 import time
 import traceback
+import weakref
 from concurrent.futures import Future, ProcessPoolExecutor, as_completed
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable, Literal, get_args
+from typing import Any, Callable, Iterator, Literal, get_args
 
 from uavris.errors import UavrisError
 from uavris.experiments.engine import shipping
@@ -127,7 +136,10 @@ def machine() -> str:
             f"torch {torch.__version__}")
 
 
-def _run_logged(job: Job) -> JobResult:
+def _run_logged(job: Job, in_command: bool = False) -> JobResult:
+    """Run ``job`` with its output in its log; a failure is its result. ``in_command``: it runs
+    in the command's own process (one worker), where Ctrl-C or SIGTERM is the command's to
+    stop on, not this job's failure (the next job would start)."""
     job.log.parent.mkdir(parents=True, exist_ok=True)
     with open(job.log, "a", encoding="utf-8") as log:
         old_out, old_err = sys.stdout, sys.stderr
@@ -137,14 +149,60 @@ def _run_logged(job: Job) -> JobResult:
             value = job.fn(*job.args)
             return JobResult(job.name, True, value, None, job.log)
         except BaseException as e:  # noqa: BLE001 - report every failure, keep the pool alive
+            if in_command and isinstance(e, KeyboardInterrupt):
+                raise
             traceback.print_exc()
             return JobResult(job.name, False, None, f"{type(e).__name__}: {e}", job.log)
         finally:
             sys.stdout, sys.stderr = old_out, old_err
 
 
+PARENT_POLL_S = 1.0  # how often a worker checks that the command that started it still runs
+ORPHANED_EXIT = 143  # a worker's exit status once its command is gone (as if stopped by SIGTERM)
+
+
+def _watch_parent(parent: int) -> None:
+    """Pool initializer: once per worker, a thread that ends the worker when ``parent`` (the
+    command's process) is gone. A command killed by SIGKILL or the OOM killer cannot stop its
+    workers, and they would finish their jobs into an output whose lock went with it.
+
+    Not ``prctl(PR_SET_PDEATHSIG)``: Linux sends that when the *thread* that started the
+    worker ends, and a worker is started by whichever thread submitted to the pool (a stage's
+    thread in a study, which ends long before the study). The parent's pid comes from the
+    command, not ``os.getppid()`` here, so that a parent that died before this ran is seen."""
+    threading.Thread(target=_exit_when_orphaned, args=(parent,), name="uavris-parent-watch", daemon=True).start()
+
+
+def _exit_when_orphaned(parent: int, poll_s: float = PARENT_POLL_S) -> None:
+    """Exit this process once it is no longer ``parent``'s child (it was re-parented to init or
+    a subreaper). ``os._exit``: no cleanup of a job that nobody will read."""
+    while os.getppid() == parent:
+        time.sleep(poll_s)
+    os._exit(ORPHANED_EXIT)
+
+
+def _new_pool(workers: int) -> ProcessPoolExecutor:
+    """A process pool whose workers are spawned (torch and numpy start clean) and watch their parent."""
+    return ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("spawn"),
+                               initializer=_watch_parent, initargs=(os.getpid(),))
+
+
 Backend = Literal["local", "ray"]  # where jobs run (--backend)
 BACKENDS: tuple[str, ...] = get_args(Backend)
+_RUNNERS: weakref.WeakSet[JobRunner] = weakref.WeakSet()  # every runner of this process, for abort_runners
+_RUNNERS_LOCK = threading.Lock()  # abort_runners reads _RUNNERS in a thread of its own
+
+
+def abort_runners() -> None:
+    """Close every job runner of this process with ``abort``: how Ctrl-C and SIGTERM reach the
+    workers (:mod:`uavris.cli`). The command's main thread unwinds from the signal, but a
+    study's stage threads wait for their jobs, and a study waits for its stage threads before
+    it closes the runner: without this, the study would go on until its running stages ended
+    (SIGTERM reaches the command alone, and Ctrl-C's workers take the next jobs waiting)."""
+    with _RUNNERS_LOCK:
+        runners = list(_RUNNERS)
+    for runner in runners:
+        runner.close(abort=True)
 
 
 class JobRunner:
@@ -170,7 +228,12 @@ class JobRunner:
         for var in THREAD_VARIABLES:  # the workers this runner starts begin with one thread (configure_threads)
             os.environ.setdefault(var, "1")
         self._lock = threading.Condition()
+        # one close at a time: a second (the command's, while a signal's aborts) returns when the
+        # workers are stopped, not when the first took the pools, so that the output's lock
+        # is released after them
+        self._close_lock = threading.Lock()
         self._pool: ProcessPoolExecutor | None = None
+        self._stopping: list[ProcessPoolExecutor] = []  # pools a close took, until they are shut down
         self._solos: set[ProcessPoolExecutor] = set()  # a job whose worker died, run again alone
         self._ray_started = False
         self._waiting: list[tuple[float, int, Job, Future[JobResult] | None]] = []  # heap: (-priority, order, ...)
@@ -180,6 +243,8 @@ class JobRunner:
         self._held = False
         self._closing = False  # close() began (Ctrl-C, or the end): nothing new is started
         self.active: dict[int, tuple[Job, float]] = {}  # running jobs by id: (job, time.time() it started)
+        with _RUNNERS_LOCK:
+            _RUNNERS.add(self)
 
     def hold(self) -> None:
         """Queue jobs without starting any until :meth:`release`: the callers about to submit
@@ -203,26 +268,38 @@ class JobRunner:
 
     def close(self, abort: bool = False) -> None:
         """Start nothing more and shut the pool down: after the running jobs end, or, with
-        ``abort`` (Ctrl-C or an error), stopping them. Ctrl-C reaches the workers, but a job
-        a worker took between the signal and this call would otherwise run to its end while
-        the command waits."""
+        ``abort`` (Ctrl-C, SIGTERM or an error), stopping them. Ctrl-C reaches the workers, but
+        a job a worker took between the signal and this call would otherwise run to its end
+        while the command waits; SIGTERM reaches the command alone. Returns once the workers
+        have ended, also when another thread's close is shutting them down: an abort then
+        stops the jobs that close waits for."""
         with self._lock:
             # jobs finishing while the pool shuts down (Ctrl-C stops the workers too) start nothing
             self._closing = True
-            self._waiting.clear()
+            waiting, self._waiting = self._waiting, []
+            self._lock.notify_all()  # callers waiting for their turn in this thread (_run_here) give up
             # a job rerun alone when Ctrl-C broke its pool runs in a pool started after the signal
-            pools, self._solos = [self._pool, *self._solos], set()
-            self._pool = None
-        for pool in (p for p in pools if p is not None):
-            if abort:
+            self._stopping += [p for p in (self._pool, *self._solos) if p is not None]
+            self._pool, self._solos = None, set()
+            pools = list(self._stopping)
+        for _, _, job, fut in waiting:  # their callers (a study's stage threads, on SIGTERM) wait on them
+            if fut is not None:
+                fut.set_result(_interrupted(job))
+        if abort:
+            for pool in pools:
                 for process in list((getattr(pool, "_processes", None) or {}).values()):
                     process.terminate()
-            pool.shutdown(cancel_futures=True)
-        if self._ray_started:
-            import ray
+        with self._close_lock:
+            for pool in pools:
+                pool.shutdown(cancel_futures=True)  # once shut down, a no-op
+                with self._lock:
+                    if pool in self._stopping:
+                        self._stopping.remove(pool)
+            if self._ray_started:
+                import ray
 
-            ray.shutdown()
-            self._ray_started = False
+                ray.shutdown()
+                self._ray_started = False
 
     def run(self, jobs: list[Job], on_done: Callable[[JobResult], None] | None = None,
             priority: float = 0.0, on_queued: Callable[[], None] | None = None) -> list[JobResult]:
@@ -240,21 +317,25 @@ class JobRunner:
             return [self._run_here(job, on_done, priority, on_queued if i == 0 else None)
                     for i, job in enumerate(jobs)]
         with self._lock:
-            if self._pool is None:
-                self._pool = ProcessPoolExecutor(max_workers=self.workers, mp_context=mp.get_context("spawn"))
             futures: dict[Future[JobResult], Job] = {}
             for job in jobs:
                 fut: Future[JobResult] = Future()
-                heapq.heappush(self._waiting, (-(priority + job.cost), next(self._order), job, fut))
+                if self._closing:  # a stage that goes on after Ctrl-C or SIGTERM closed the runner
+                    fut.set_result(_interrupted(job))
+                else:
+                    heapq.heappush(self._waiting, (-(priority + job.cost), next(self._order), job, fut))
                 futures[fut] = job
-            self._dispatch()
+            if not self._closing:
+                if self._pool is None:
+                    self._pool = _new_pool(self.workers)
+                self._dispatch()
         if on_queued:
             on_queued()
         results = []
         for fut in as_completed(futures):
             res = fut.result()
             results.append(res)
-            if on_done:
+            if on_done and not self._closing:  # after close, a line per job would bury the interrupt's one
                 on_done(res)
         return results
 
@@ -273,7 +354,7 @@ class JobRunner:
                 alone: bool) -> None:
         """``job`` on ``pool`` (lock held); a pool broken meanwhile is replaced first."""
         if self._closing:
-            outer.set_result(JobResult(job.name, False, None, "interrupted", job.log))
+            outer.set_result(_interrupted(job))
             return
         try:
             inner = pool.submit(_run_logged, job)
@@ -286,7 +367,7 @@ class JobRunner:
         """A fresh shared pool in place of ``broken`` (lock held; a no-op if already replaced)."""
         if broken is self._pool:
             broken.shutdown(wait=False)
-            self._pool = ProcessPoolExecutor(max_workers=self.workers, mp_context=mp.get_context("spawn"))
+            self._pool = _new_pool(self.workers)
         assert self._pool is not None
         return self._pool
 
@@ -301,11 +382,13 @@ class JobRunner:
                     # this one again in a pool of its own, where it can neither take a neighbour
                     # down nor be taken down by one. Dying there too, it failed.
                     self._replace_pool(pool)
-                    solo = ProcessPoolExecutor(max_workers=1, mp_context=mp.get_context("spawn"))
+                    solo = _new_pool(1)
                     self._solos.add(solo)
                     self._submit(job, outer, slot, started, solo, alone=True)
                     return
-            res = JobResult(job.name, False, None, f"worker died: {type(e).__name__}: {e}", job.log)
+            # closing, the pool broke because close(abort=True) stopped its workers
+            res = _interrupted(job) if self._closing else \
+                JobResult(job.name, False, None, f"worker died: {type(e).__name__}: {e}", job.log)
         except BaseException as e:  # noqa: BLE001 - whatever else went wrong with the process
             res = JobResult(job.name, False, None, f"worker died: {type(e).__name__}: {e}", job.log)
         if alone:
@@ -325,18 +408,15 @@ class JobRunner:
         """One job in this thread once no other is running and none of higher priority waits."""
         entry = (-(priority + job.cost), next(self._order), job, None)
         with self._lock:
-            heapq.heappush(self._waiting, entry)
+            if not self._closing:
+                heapq.heappush(self._waiting, entry)
         if on_queued:
             on_queued()
-        with self._lock:
-            while self._busy or self._held or self._waiting[0] is not entry:
-                self._lock.wait()
-            heapq.heappop(self._waiting)
-            self._busy = 1
-            started = time.time()
-            self.active[id(job)] = (job, started)
+        started = self._take_turn(entry)
+        if started is None:
+            return dataclasses.replace(_interrupted(job), worker=0)  # no on_done: as in run()
         try:
-            res = _run_logged(job)
+            res = _run_logged(job, in_command=True)
         finally:
             with self._lock:
                 self.active.pop(id(job), None)
@@ -347,6 +427,21 @@ class JobRunner:
             on_done(res)
         return res
 
+    def _take_turn(self, entry: tuple[float, int, Job, None]) -> float | None:
+        """Wait until ``entry``'s job may run in this thread, mark it running and return when it
+        started; None once the runner is closed (Ctrl-C or SIGTERM): the job does not start."""
+        job = entry[2]
+        with self._lock:
+            while not self._closing and (self._busy or self._held or self._waiting[0] is not entry):
+                self._lock.wait()
+            if self._closing:
+                return None
+            heapq.heappop(self._waiting)
+            self._busy = 1
+            started = time.time()
+            self.active[id(job)] = (job, started)
+            return started
+
     def connect(self) -> None:
         """Start or join Ray (the Ray backend; a no-op once connected or on the local one): a
         cluster that cannot be reached is one :class:`UavrisError`, before any job is queued."""
@@ -356,7 +451,7 @@ class JobRunner:
             import ray
         except ImportError:
             raise UavrisError("the Ray backend needs Ray: pip install 'uavris[ray]'") from None
-        with self._lock:
+        with self._lock, _sigterm_kept():
             if ray.is_initialized():
                 return
             if not self.ray_address:
@@ -411,6 +506,29 @@ class JobRunner:
                 if on_done:
                     on_done(res)
         return results
+
+
+@contextlib.contextmanager
+def _sigterm_kept() -> Iterator[None]:
+    """The process's SIGTERM handler as it was before the block: ``ray.init`` replaces it with
+    one that exits at once (status 1 or 15, no line), which would skip the command's own
+    (:mod:`uavris.cli`: the one line, exit status 143, the workers stopped first)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield  # only the main thread sets handlers (Ray leaves them alone there too)
+        return
+    import signal
+
+    previous = signal.getsignal(signal.SIGTERM)
+    try:
+        yield
+    finally:
+        if previous is not None:  # None: set outside Python, which cannot be put back
+            signal.signal(signal.SIGTERM, previous)
+
+
+def _interrupted(job: Job) -> JobResult:
+    """The result of a job that the runner's close kept from starting or stopped."""
+    return JobResult(job.name, False, None, "interrupted", job.log)
 
 
 def _reachable(address: str) -> None:

@@ -78,7 +78,9 @@ class StudyContext:
         self._first = {name for name, st in pipeline.stages.items() if not st.deps}
         if self._first:
             self.runner.hold()
-            threading.Timer(HOLD_LIMIT_S, self.runner.release).start()  # never more than this
+            timer = threading.Timer(HOLD_LIMIT_S, self.runner.release)  # never more than this
+            timer.daemon = True  # a study stopped meanwhile exits at once, not when the timer fires
+            timer.start()
         if self.bar is not None:
             self.bar.total = sum(self._expected.values())
             self.bar.refresh()

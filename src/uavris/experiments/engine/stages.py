@@ -7,17 +7,21 @@ Not here: the study's stages (:mod:`.reproduce`), the processes their jobs run o
 A stage's key hashes its own configuration together with the keys of the stages it
 depends on, so changing a parameter invalidates exactly that stage and everything
 downstream of it, and nothing else. A stage runs in ``OUT/stages/NAME-KEY/`` and is
-finished when ``stage.json`` exists there (written last, atomically; its wall clock in
-``timing.json`` beside it); a rerun skips finished stages, and an unfinished one is run
-again in the same folder, where the training code resumes from its checkpoints. Stages
-whose inputs are ready run concurrently (:meth:`Pipeline.run`), the longest remaining
-chain first (:meth:`Pipeline.downstream`).
+finished when ``stage.json`` exists there (written last, atomically). That record is the
+same, byte for byte, for the same inputs: the stage's wall clock goes to ``timing.json``
+beside it (:data:`uavris.runs.TIMING_FILE`, added to what the stage's own code measured
+there), and an undefined number (NaN, an interval over one sample) is written as JSON
+``null``, never as ``NaN``, which is not JSON. A rerun skips finished stages, and an
+unfinished one is run again in the same folder, where the training code resumes from its
+checkpoints. Stages whose inputs are ready run concurrently (:meth:`Pipeline.run`), the
+longest remaining chain first (:meth:`Pipeline.downstream`).
 """
 
 from __future__ import annotations
 
 import hashlib
 import json
+import math
 import shutil
 import time
 from concurrent.futures import FIRST_COMPLETED, Future, ThreadPoolExecutor, wait
@@ -50,6 +54,20 @@ class Stage:
         """Expected wall clock of the stage on ``workers`` free workers: its longest job, or its
         work spread over the workers, whichever is longer."""
         return max(max(self.costs, default=0.0), sum(self.costs) / max(1, workers))
+
+
+def json_numbers(obj: Any) -> Any:
+    """``obj`` as plain values with every NaN and infinity as None: JSON has no NaN (Python's
+    ``json`` writes a bare ``NaN`` that strict readers refuse), and a reader of a stage's record
+    takes None for "undefined" as the tables do (:mod:`uavris.experiments.display.tables`)."""
+    obj = to_plain(obj)
+    if isinstance(obj, float):
+        return obj if math.isfinite(obj) else None
+    if isinstance(obj, dict):
+        return {k: json_numbers(v) for k, v in obj.items()}
+    if isinstance(obj, list):
+        return [json_numbers(v) for v in obj]
+    return obj
 
 
 def stage_key(config: dict[str, Any], dep_keys: list[str]) -> str:
@@ -151,8 +169,7 @@ class Pipeline:
             shutil.rmtree(d)
         if self.is_done(st.name):
             meta = read_json(d / "stage.json")
-            timing = read_timing(d)
-            return StageRecord(st.name, st.key, d, "skipped", float(timing.get("wall_s", meta.get("wall_s", 0.0))),
+            return StageRecord(st.name, st.key, d, "skipped", float(read_timing(d).get("wall_s", 0.0)),
                                meta.get("result"))
         d.mkdir(parents=True, exist_ok=True)
         start = time.time()
@@ -162,8 +179,11 @@ class Pipeline:
             return StageRecord(st.name, st.key, d, "failed", time.time() - start, None, f"{type(e).__name__}: {e}",
                                start, time.time())
         end = time.time()
-        # The wall clock goes to timing.json, so that stage.json is the same for the same inputs.
-        write_json(d / TIMING_FILE, {"wall_s": end - start, "start": start, "end": end})
-        write_json(d / "stage.json", {"name": st.name, "key": st.key, "config": st.config,
-                                      "deps": {dep: self.stages[dep].key for dep in st.deps}, "result": result})
-        return StageRecord(st.name, st.key, d, "done", end - start, result, None, start, end)
+        # The wall clock goes to timing.json, so that stage.json is the same for the same inputs;
+        # what the stage's code timed there itself (a comparison's wall clock) is kept.
+        write_json(d / TIMING_FILE, {**read_timing(d), "wall_s": end - start, "start": start, "end": end})
+        record = json_numbers({"name": st.name, "key": st.key, "config": st.config,
+                               "deps": {dep: self.stages[dep].key for dep in st.deps}, "result": result})
+        write_json(d / "stage.json", record)
+        # the record a later invocation reads when it skips this stage, not the NaNs of this one
+        return StageRecord(st.name, st.key, d, "done", end - start, record["result"], None, start, end)

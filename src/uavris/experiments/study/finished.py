@@ -86,6 +86,8 @@ class Study:
         models read from the study's stage directories; one line naming the rows there are, or
         the stage not finished."""
         rows = {r.key: r for r in self.track(track).rows_in(site, self.pipeline)}
+        if key.endswith("@s0") and key[:-3] in rows:  # the first seed's key carries no suffix
+            key = key[:-3]
         if key not in rows:
             raise UavrisError(f"--row {key}: no such row of the {track} track in {site.name}; its rows: "
                               f"{', '.join(rows)}")
@@ -95,3 +97,8 @@ class Study:
                 raise UavrisError(f"--row {key}: {target.path} does not exist yet (its stage has not finished; "
                                   f"rerun uavris reproduce --out {self.out})")
         return row
+
+    def seeds(self, row: Row, track: str, site: Site) -> list[int]:
+        """The seeds of ``row``'s variant in ``track`` (one entry per pre-training seed, sorted): the
+        report's row of that name is their mean, ``row`` one of them."""
+        return sorted(r.seed or 0 for r in self.track(track).rows_in(site, self.pipeline) if r.variant == row.variant)

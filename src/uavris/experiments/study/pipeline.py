@@ -127,8 +127,23 @@ def _run_compare(rc: ReproduceConfig, ctx: StudyContext, d: Path, deps: dict[str
     compare_algorithms(preset=rc.preset, seeds=rc.compare_seeds, workers=ctx.workers, out=d,
                        eval_episodes=rc.eval_episodes, progress=False, device=ctx.device, system=rc.system,
                        submit=lambda jobs: ctx.submit("compare", jobs), steps=rc.compare_steps)
-    summary = read_json(d / "summary.json")
-    return {"rows": summary["rows"], "expert": summary["expert"], "expert_choice": summary["expert_choice"]}
+    return compare_record(read_json(d / "summary.json"))
+
+
+MEASURED_TIMES = ("s_per_step",)  # a comparison row's wall-clock measurements (summary.json keeps them)
+
+
+def compare_record(summary: dict[str, Any]) -> dict[str, Any]:
+    """The comparison stage's result: its rows and the expert chosen, without what was timed.
+
+    The rows' training times per env step and the choice's sentence (which quotes them when
+    the algorithms tie) are wall-clock measurements: they differ between two runs of the same
+    inputs, so they stay in the comparison's ``summary.json`` (which the report reads), out
+    of the stage's record."""
+    choice = summary["expert_choice"]
+    return {"rows": [{k: v for k, v in r.items() if k not in MEASURED_TIMES} for r in summary["rows"]],
+            "expert": summary["expert"],
+            "expert_choice": None if choice is None else {k: v for k, v in choice.items() if k != "text"}}
 
 
 class TrackStages(PlaceStages):

@@ -26,9 +26,9 @@ import numpy as np
 from uavris.agents.references import HOVER_OPTIMIZER, ORACLE, ZERO_ACTION
 from uavris.config import UNSEEN_SCENARIOS, ConfigError, SystemConfig, get_scenario
 from uavris.experiments.display.progress import progress_bar
-from uavris.experiments.display.tables import interval, markdown_table, num, pct, rate_interval, signed
-from uavris.experiments.tools.evaluate import evaluate_target
-from uavris.experiments.tools.targets import Target, resolve_target
+from uavris.experiments.display.tables import counted, interval, markdown_table, num, pct, rate_interval, signed
+from uavris.experiments.tools.evaluate import evaluate_target, layout_origin
+from uavris.experiments.tools.targets import Target, as_row, resolve_target
 from uavris.io import atomic_write_text, other_inputs, read_csv, write_csv, write_json
 from uavris.layouts import resolve_layout
 from uavris.presets import EVAL_SEED, STUDY, check_preset
@@ -69,6 +69,12 @@ def _episodes(path: Path) -> np.ndarray:
     return np.array([float(r["avg_sum_rate"]) for r in read_csv(path.with_suffix(".csv"))])
 
 
+def default_benchmark_dir(target: str) -> Path:
+    """Where ``benchmark`` writes without ``--out``: runs/benchmarks/ and the target's last part
+    (a study's row: its key)."""
+    return Path("runs/benchmarks") / Path(target.replace(":", "_")).name
+
+
 def benchmark(target: str, preset: str = "quick", cells: Cells = "all", out: Path | None = None,
               device: str = "cpu", progress: bool = False, system: SystemConfig | None = None,
               phase_control: str | None = None, layout: str | None = None, trust_pickle: bool = False
@@ -94,8 +100,9 @@ def benchmark(target: str, preset: str = "quick", cells: Cells = "all", out: Pat
                 get_scenario(cell.name).validate_for(system)
         except ConfigError as e:
             raise ConfigError(f"benchmark cell {cell.name} does not fit the system: {e}") from None
-    out = Path(out) if out is not None else Path("runs/benchmarks") / Path(target.replace(":", "_")).name
-    inputs = {"target": target, "preset": preset, "cells": [c.name for c in todo], "system": system.to_dict(),
+    out = Path(out) if out is not None else default_benchmark_dir(target)
+    inputs = {"target": target, "model": as_row(resolved).origin(), "preset": preset,
+              "cells": [c.name for c in todo], "layout": layout_origin(layout), "system": system.to_dict(),
               "phase_control": phase_control}
     old = other_inputs(out / "benchmark.json", inputs, "inputs")
     if old is not None:
@@ -106,8 +113,11 @@ def benchmark(target: str, preset: str = "quick", cells: Cells = "all", out: Pat
         for cell in todo:
             rows.append(_cell(resolved, cell, episodes, out / cell.name, system, phase_control, device))
             bar.update(1)
-    summary = {"inputs": inputs, "target": target, "preset": preset, "episodes": episodes, "seed": EVAL_SEED,
-               "system": system.to_dict(), "cells": rows, "over": _over(rows)}
+    # the system of the hall benchmarked where there is one (--layout); each cell records its own hall
+    summary = {"inputs": inputs, "target": target, "model": inputs["model"], "preset": preset, "episodes": episodes,
+               "seed": EVAL_SEED, "layout": inputs["layout"],
+               "system": rows[0]["hall"]["system"] if layout is not None else system.to_dict(), "cells": rows,
+               "over": _over(rows)}
     write_csv(out / "benchmark.csv", COLUMNS, ([r[c] for c in COLUMNS] for r in rows))
     write_json(out / "benchmark.json", summary)
     md = out / "benchmark.md"
@@ -128,6 +138,8 @@ def _cell(target: Target, cell: Cell, episodes: int, out: Path, system: SystemCo
         summary, paths[key] = evaluate_target(who, episodes=episodes, seed=EVAL_SEED, out=out / key, phase_control=pc,
                                               device=device, system=system, references=False, **place)
         warning = warning or summary.get("warning")
+        if key == "target":
+            hall = {k: summary[k] for k in ("hall", "layout", "start", "system")}
     x, zero, hover, oracle = (_episodes(paths[k]) for k in ("target", ZERO_ACTION, HOVER_OPTIMIZER, ORACLE))
     low, high = t_interval(x)
     d_low, d_high = t_interval(x - zero)
@@ -139,7 +151,7 @@ def _cell(target: Target, cell: Cell, episodes: int, out: Path, system: SystemCo
             "zero_action": float(zero.mean()), "oracle": float(oracle.mean()),
             "fraction_of_oracle": float(x.mean() / oracle.mean()), "minus_zero_action": float((x - zero).mean()),
             "minus_zero_action_low": d_low, "minus_zero_action_high": d_high, "hover_optimizer": float(hover.mean()),
-            **paired, **({"warning": warning} if warning else {})}
+            **paired, "hall": hall, **({"warning": warning} if warning else {})}
 
 
 def _over(rows: list[dict[str, Any]]) -> dict[str, dict[str, float]]:
@@ -174,8 +186,10 @@ def benchmark_table(summary: dict[str, Any]) -> str:
         dci = interval(d["ci_low"], d["ci_high"], signed) if d["n"] >= MIN_UNITS_FOR_CI else few
         rows.append((f"**mean over {f['n']} {kind}s** (95% CI over {kind}s)", "", "", "", "",
                      f"{percent(f['mean'])}% {ci}", f"{signed(d['mean'])} {dci}", "", ""))
-    lines = [f"# {summary['target']} on the study's protocol ({summary['preset']} preset)", "",
-             f"{summary['episodes']} episodes per cell from seed {summary['seed']}, the same as the "
+    where = ("on the study's protocol" if summary.get("layout") is None else
+             f"in your hall {Path(summary['layout']).name} (the protocol's episodes)")
+    lines = [f"# {summary['target']} {where} ({summary['preset']} preset)", "",
+             f"{counted(summary['episodes'], 'episode')} per cell from seed {summary['seed']}, the same as the "
              f"report's; average sum rate in bps/Hz, 95% CIs over episodes (a rate's bounded below at 0); the "
              "differences are paired on the same episodes. The means over cells have a "
              f"Student-t 95% CI over cells from {MIN_UNITS_FOR_CI} cells on (n/a with fewer: on one degree of "

@@ -11,8 +11,8 @@ import math
 
 from uavris.agents.evaluation import check_episodes, evaluate
 from uavris.agents.references import REFERENCES, reference_policy
-from uavris.config import Scenario, SystemConfig, get_scenario
-from uavris.experiments.display.tables import rate_interval
+from uavris.config import SCENARIOS, Scenario, SystemConfig, get_scenario
+from uavris.experiments.display.tables import counted, rate_interval
 from uavris.physics import propulsion_power
 
 DEMO_POLICIES = ("zero-action", "random", "hover-aligned")
@@ -29,6 +29,18 @@ def horizon_text(cfg: SystemConfig) -> str:
     return f"{text}, or until the {cfg.energy_budget_j:,.0f} J energy budget is spent (hovering: slot {hover_slots})"
 
 
+def where_text(cfg: SystemConfig, where: Scenario) -> str:
+    """Where the demo flies, as its first line names it: a scenario of the paper's (a start in
+    the paper's hall, or in devices of ``--system.users``), or a hall of its own (``--layout``)
+    by the layout's name, as a hall: the paper has no scenario of that name."""
+    from uavris.experiments.tools.evaluate import hall_name
+
+    if SCENARIOS.get(where.name) == where:
+        hall = hall_name(cfg, None, where.name)
+        return f"scenario {where.name}" + ("" if hall == "the paper's hall" else f" in {hall}")
+    return hall_name(cfg, where.name, where.name)
+
+
 def run_demo(episodes: int = 32, seed: int = 0, scenario: str | Scenario = "fig2",
              system: SystemConfig | None = None) -> dict[str, float]:
     """Print and return each demo policy's mean average sum rate over ``episodes`` seeded episodes
@@ -37,8 +49,8 @@ def run_demo(episodes: int = 32, seed: int = 0, scenario: str | Scenario = "fig2
     cfg = system or SystemConfig()
     where = get_scenario(scenario)
     where.validate_for(cfg)
-    print(f"uavris demo: scenario {where.name} {[round(c, 2) for c in where.start]}, {episodes} episodes, "
-          f"{horizon_text(cfg)}")
+    print(f"uavris demo: {where_text(cfg, where)} {[round(c, 2) for c in where.start]}, "
+          f"{counted(episodes, 'episode')}, {horizon_text(cfg)}")
     means = {}
     for name in DEMO_POLICIES:
         res = evaluate(reference_policy(name, cfg), cfg, where, episodes, seed)

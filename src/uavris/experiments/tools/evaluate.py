@@ -1,7 +1,7 @@
 """``uavris evaluate``: a run, a DT model, a reference or a user's policy on seeded episodes,
 written as CSV and JSON (``OUT/TARGET-SCENARIO-seedSEED-nEPISODES-KEY``: TARGET the row,
-reference or policy, :func:`file_token`; KEY 8 hex digits of the system, phase control and
-start evaluated, :func:`evaluated_key`).
+reference or policy, :func:`file_token`; KEY 8 hex digits of the system, phase control,
+start and model evaluated, :func:`evaluated_key`).
 
 Lives here: :func:`evaluate_target` and :func:`write_results` (a target's per-episode
 results); every policy that is not itself a reference is scored with the zero action,
@@ -35,9 +35,11 @@ from uavris.stats import t_interval
 
 def evaluated_key(summary: dict[str, Any]) -> str:
     """8 hex digits of what was evaluated beyond the file name's readable part (the system, the
-    phase control and the start): evaluations of another system into the same folder keep
-    their own files, and the same evaluation again replaces its own."""
-    what = {k: summary[k] for k in ("system", "phase_control", "start")}
+    phase control, the start and the model, :meth:`~.targets.Row.origin`): evaluations of
+    another system or of another model of the same name (two studies' ``model`` folders, two
+    ``pol.py:go``) into the same folder keep their own files, and the same evaluation again
+    replaces its own."""
+    what = {k: summary[k] for k in ("system", "phase_control", "start", "model")}
     return hashlib.sha256(json.dumps(what, sort_keys=True).encode()).hexdigest()[:8]
 
 
@@ -113,8 +115,8 @@ def evaluate_target(target: str | Target | Row, scenario: str | Scenario | None,
         # A user's policy: the references on the same episodes, so its number reads at once.
         refs = {name: run(reference_policy(name, system, REFERENCE_SEED), None, system) for name in beside}
     summary = {"target": row.key, **({"label": row.label_for(loaded.expert_kind)} if study_row else {}),
-               "scenario": where.name, "hall": hall_name(evaluated, layout, where.name), "start": list(where.start),
-               "seed": seed,
+               "model": row.origin(), "scenario": where.name, "hall": hall_name(evaluated, layout, where.name),
+               "layout": layout_origin(layout), "start": list(where.start), "seed": seed,
                "phase_control": phase_control or "as trained", **res.summary(), "system": evaluated.to_dict()}
     outside = outside_training(row, evaluated, file_token(row, study_row))
     if outside:
@@ -126,10 +128,8 @@ def evaluate_target(target: str | Target | Row, scenario: str | Scenario | None,
         # the target minus each reference, paired on the same episodes: the difference a comparison reads
         summary["paired"] = {name: paired_summary(res.avg_sum_rate - r.avg_sum_rate) for name, r in refs.items()}
     suffix = "-optimizer-phases" if phase_control == "optimizer" else ""
-    default = (target.default_out() if isinstance(target, Target) and target.kind == "controller" else
-               Path("runs/rows") / row.key if study_row or row.target is None else row.target.default_out())
-    stem = Path(out or default) / (f"{file_token(row, study_row)}-{file_part(where.name)}-seed{seed}-n{episodes}"
-                                   f"{suffix}-{evaluated_key(summary)}")
+    stem = Path(out or results_dir(target)) / (f"{file_token(row, study_row)}-{file_part(where.name)}-seed{seed}"
+                                               f"-n{episodes}{suffix}-{evaluated_key(summary)}")
     if log is not None:
         summary["active_pairs"] = {str(m): v for m, v in rate_by_active_pairs(log.rows).items()}
         write_slots(log, stem.parent / f"{stem.name}-slots.csv")
@@ -137,6 +137,18 @@ def evaluate_target(target: str | Target | Row, scenario: str | Scenario | None,
                         f"{row.key} in {where.name}, episode seed {seed}")
     write_results(res, summary, stem)
     return summary, stem.parent / f"{stem.name}.json"
+
+
+def results_dir(target: Target | Row) -> Path:
+    """Where ``evaluate`` writes a target's results without ``--out``: beside a run, model or
+    controller (``DIR/eval``), ``runs/rows/ROW`` for a study's row, ``runs/baselines/NAME/eval``
+    for a reference, ``runs/policies/FILE_py_NAME/eval`` for a user's policy."""
+    if isinstance(target, Target) and target.kind == "controller":
+        return target.default_out()
+    row = as_row(target)
+    if isinstance(target, Row) or row.target is None:
+        return Path("runs/rows") / row.key
+    return row.target.default_out()
 
 
 def paired_summary(d: Any) -> dict[str, float]:
@@ -159,6 +171,17 @@ def outside_training(row: Row, system: SystemConfig, name: str) -> str | None:
     here = " x ".join(f"{v:g}" for v in system.room)
     return (f"{name} was trained in a {size} m hall and flies a {here} m one here"
             + (" with devices beyond its training room" if beyond else "") + ": an extrapolation")
+
+
+def layout_origin(layout: str | Layout | None) -> str | None:
+    """The layout a result was made in, as the result records it: a layout file's absolute path,
+    a generated or named layout's name; None without one (the target's own hall)."""
+    if layout is None:
+        return None
+    if isinstance(layout, Layout):
+        return layout.name
+    path = Path(layout)
+    return str(path.resolve()) if path.suffix.lower() in (".yaml", ".yml") or path.is_file() else str(layout)
 
 
 def hall_name(system: SystemConfig, layout: str | Layout | None, site: str) -> str:

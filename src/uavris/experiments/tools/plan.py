@@ -32,6 +32,7 @@ from uavris.experiments.display.plots import plt, save_figure
 from uavris.experiments.display.progress import progress_bar
 from uavris.io import write_json
 from uavris.layouts import Layout
+from uavris.presets import EVAL_SEED
 
 if TYPE_CHECKING:  # the learned value needs torch (the training extra); the exact plan does not
     from uavris.agents.place.value import PoseValue
@@ -167,13 +168,16 @@ def plan_figure(system: SystemConfig, plan: dict[str, Any], xs: NDArray, ys: NDA
         if r > 0:
             ax.plot(u[0] + r * np.cos(ring), u[1] + r * np.sin(ring), color="k", lw=0.6)
         ax.annotate(f"D{k + 1}", u[:2], textcoords="offset points", xytext=(4, 4), color="k", fontsize=7)
-    ax.scatter(users[:, 0], users[:, 1], marker="^", color="w", edgecolor="k", s=36, label="devices", zorder=3)
+    # The markers are not clipped at the axes: a device, a start or a target on a wall or in a
+    # corner of the room (the axes' limits) is drawn whole, not cut to a quarter of itself.
+    ax.scatter(users[:, 0], users[:, 1], marker="^", color="w", edgecolor="k", s=36, label="devices", zorder=3,
+               clip_on=False)
     start, target = plan["layout"]["start"], plan["target"]
     stays = bool(np.allclose(start, target))
     ax.scatter(*target[:2], marker="*", color="#d62728", edgecolor="k", s=110, zorder=3,
-               label="target: stay at the start" if stays else "target")
+               label="target: stay at the start" if stays else "target", clip_on=False)
     ax.scatter(*start[:2], marker="o", color="#ff7f0e", edgecolor="k", s=16 if stays else 36, label="start",
-               zorder=4)  # above the target: a plan that stays shows both
+               zorder=4, clip_on=False)  # above the target: a plan that stays shows both
     ax.plot([start[0], target[0]], [start[1], target[1]], color="#d62728", lw=0.8, ls="--")
     ax.set_xlim(0, system.room[0])
     ax.set_ylim(0, system.room[1])
@@ -199,15 +203,44 @@ def colour_limits(rates: NDArray, target_rate: float) -> tuple[float, float]:
     return min(low, target_rate), max(high, target_rate)
 
 
+def controller_flight(controller: Path, layout: Layout, seed: int = EVAL_SEED) -> dict[str, Any]:
+    """Where a controller directory (``uavris export``) told its place actually flies in ``layout``:
+    one evaluation episode (``seed``) in its own system in that hall, as ``uavris evaluate
+    CONTROLLER --layout`` runs it: its pose at the last slot, its average sum rate and, where the
+    hall lies outside what it was trained in, the warning ``evaluate`` prints. The place it is
+    told is a request; a weak controller may not get there."""
+    from uavris.agents.evaluation import evaluate
+    from uavris.agents.policy import fit_policy
+    from uavris.experiments.tools.evaluate import outside_training
+    from uavris.experiments.tools.targets import read_controller
+    from uavris.experiments.tools.trajectory import SlotLog
+
+    row = read_controller(controller)
+    hall, where = layout.resolve(row.own_system())
+    evaluated = row.system(hall)
+    policy = fit_policy(row.load(evaluated).policy, evaluated, row.key)
+    log = SlotLog(np.array([seed]))
+    rate = evaluate(policy, evaluated, where, 1, seed, on_slot=log.on_slot, on_step=log.on_step).avg_sum_rate[0]
+    last = log.rows[-1]
+    return {"row": row.key, "seed": seed, "end": [float(v) for v in last[2:5]],
+            "end_attitude_deg": [float(v) for v in last[5:8]], "average_sum_rate": float(rate),
+            "warning": outside_training(row, evaluated, Path(controller).name)}
+
+
 def plan_hall(layout: Layout, system: SystemConfig, out: Path, grid_step: float, progress: bool = True,
-              value: PoseValue | None = None, top_k: int = 0) -> tuple[dict[str, Any], list[Path]]:
+              value: PoseValue | None = None, top_k: int = 0, controller: Path | None = None
+              ) -> tuple[dict[str, Any], list[Path]]:
     """Plan, map and draw ``layout``: writes ``out.json``, ``out.png`` and ``out.pdf``; with a
-    learned ``value``, its plan and its map (:func:`plan_layout`, :func:`rate_map`)."""
+    learned ``value``, its plan and its map (:func:`plan_layout`, :func:`rate_map`); with a
+    ``controller`` told that place, where it flies (:func:`controller_flight`, under
+    ``controller_flight``)."""
     hall, _ = layout.resolve(system)
     check_grid(hall, grid_step)
     if value is None or top_k:  # the optimiser values poses (V alone takes milliseconds at any count)
         check_devices(hall)
     plan = plan_layout(layout, system, value=value, top_k=top_k)
+    if controller is not None:
+        plan["controller_flight"] = controller_flight(controller, layout)
     xs, ys, rates = rate_map(hall, plan["target"][2], grid_step, progress, value)
     paths = plan_figure(hall, plan, xs, ys, rates, out)
     write_json(out.parent / f"{out.name}.json", plan)

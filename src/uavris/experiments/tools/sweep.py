@@ -40,7 +40,7 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
-from uavris.config import SystemConfig, get_scenario
+from uavris.config import SCENARIOS, SystemConfig, get_scenario
 from uavris.errors import ConfigError, UavrisError
 from uavris.experiments.display.plots import plt, save_figure
 from uavris.experiments.display.progress import progress_bar
@@ -52,6 +52,21 @@ from uavris.stats import over_units, t_interval
 
 VIRTUAL = {"tx_power_dbm": "transmit power (dBm)", "ris_size": "RIS size n (n x n elements)",
            "devices": "devices K (generated halls)"}
+# An axis's label: the parameter's name as a reader of the figure says it, with its unit
+# (SystemConfig's field comments), for every parameter parse_axis accepts (a test checks).
+LABELS = {
+    **VIRTUAL,
+    "nx": "RIS elements along x (nx)", "ny": "RIS elements along y (ny)",
+    "element_spacing": "element spacing (wavelengths)", "rician_factor": "Rician factor \u03ba",
+    "pathloss_exponent": "path-loss exponent \u03b1", "tx_power_w": "transmit power (W)",
+    "noise_dbm": "noise power (dBm)", "reference_gain_db": "path gain at 1 m (dB)", "slot_s": "slot length (s)",
+    "horizon": "episode length T (slots)", "v_max": "largest UAV speed (m/s)",
+    "a_max": "largest UAV acceleration (m/s\u00b2)", "attitude_step_deg": "largest attitude step per slot (\u00b0)",
+    "z_min": "lowest UAV altitude (m)", "z_max": "highest UAV altitude (m)",
+    "safety_distance": "safety distance (m)", "front_margin_deg": "RIS front margin (\u00b0)",
+    "min_device_spacing": "least device spacing (m)", "energy_budget_j": "energy budget (J)",
+    "max_active_pairs": "most active D2D pairs per slot", "channel_ref_distance": "channel observation scale (m)",
+}
 MAX_CELLS = 400  # a typo's bound (a range with a tiny step): beyond it a sweep takes days
 COLUMNS = ("policy", "x", "y", "mean", "ci_low", "ci_high", "samples", "unit")
 
@@ -65,7 +80,8 @@ class Axis:
 
     @property
     def label(self) -> str:
-        return VIRTUAL.get(self.name, self.name.replace("_", " "))
+        """The axis's label: the parameter's name with its unit (:data:`LABELS`)."""
+        return LABELS.get(self.name, self.name.replace("_", " "))
 
     @property
     def symbol(self) -> str:
@@ -84,15 +100,20 @@ class Axis:
         return system.replace(**{self.name: int(value) if whole else float(value)})
 
 
+def sweepable() -> set[str]:
+    """Every parameter a sweep may vary: SystemConfig's numeric fields and :data:`VIRTUAL`'s."""
+    numeric = {f for f, v in vars(SystemConfig()).items() if isinstance(v, (int, float)) and not isinstance(v, bool)}
+    numeric |= {"max_active_pairs", "front_margin_deg"}  # numbers whose default is None
+    return numeric | set(VIRTUAL)
+
+
 def parse_axis(name: str, spec: str) -> Axis:
     """``--param NAME VALUES``: ``NAME`` a parameter (``system.`` prefix and dashes allowed),
     ``VALUES`` ``start:stop:step`` (stop included) or ``v1,v2,...``; one line naming the problem."""
     key = name.removeprefix("system.").replace("-", "_")
-    numeric = {f for f, v in vars(SystemConfig()).items() if isinstance(v, (int, float)) and not isinstance(v, bool)}
-    numeric |= {"max_active_pairs", "front_margin_deg"}  # numbers whose default is None
-    if key not in numeric and key not in VIRTUAL:
+    if key not in sweepable():
         raise ConfigError(f"--param {name}: not a numeric system parameter; choose one of "
-                          f"{', '.join(sorted(numeric | set(VIRTUAL)))}")
+                          f"{', '.join(sorted(sweepable()))}")
     try:
         if ":" in spec:
             start, stop, step = (float(x) for x in spec.split(":"))
@@ -201,15 +222,90 @@ def sweep(targets: Sequence[str], axes: Sequence[Axis], out: Path, *, base: Syst
             "halls": halls, "scenario": scenario, "system": base.to_dict()}
     old = other_inputs(Path(out) / "sweep.json", spec)
     if old is not None:
-        raise ConfigError(f"{out} holds a sweep of other parameters ({', '.join(a['name'] for a in old['axes'])} "
-                          f"over {', '.join(old['targets'])}); give this one another --out (its cells would be kept, "
-                          "its table and figure replaced)")
+        raise ConfigError(f"{out} holds another sweep ({'; '.join(spec_differences(old, spec))}); give this one "
+                          "another --out (its cells would be kept, its table and figure replaced)")
+    hall = swept_hall(base, scenario, axes, halls)
     with locked(out, "uavris sweep"):  # one invocation writes a sweep at a time
-        return _run(targets, axes, Path(out), places, spec, episodes, workers, backend, progress, trust_pickle)
+        return _run(targets, axes, Path(out), places, spec, episodes, workers, backend, progress, trust_pickle, hall)
+
+
+def spec_differences(stored: Any, spec: dict[str, Any]) -> list[str]:
+    """What makes the sweep stored in a folder (its ``sweep.json``) another one than ``spec``,
+    "there" against "here", in a user's words. A hall changes without a flag changing (a
+    device moved in a layout file, a generated layout of another generator): the refusal
+    names the device or the room, so the user is not left looking for a parameter."""
+    old = stored if isinstance(stored, dict) else {}
+    new = to_plain(spec)
+    out = []
+    if old.get("targets") != new["targets"]:
+        out.append(f"the policies differ: {', '.join(map(str, old.get('targets') or []))} there")
+    if old.get("axes") != new["axes"]:
+        out.append(f"the parameters differ: {_axes_text(old.get('axes'))} there")
+    old_system = old.get("system") if isinstance(old.get("system"), dict) else {}
+    hall = _hall_changes(old_system, new["system"])
+    if hall:
+        out.append("the hall differs: " + ", ".join(hall))
+    if old.get("scenario") != new["scenario"]:
+        out.append(f"the start differs: {_start(old.get('scenario'))} there, {_start(new['scenario'])} here")
+    other = [k for k in new["system"] if k not in ("users", "room") and old_system.get(k) != new["system"][k]]
+    if other:
+        out.append("the system differs: " + ", ".join(f"{k} {_text(old_system.get(k))} there, "
+                                                      f"{_text(new['system'][k])} here" for k in other))
+    out += [f"{key} {_text(old.get(key))} there, {new[key]} here" for key in ("episodes", "halls", "seed")
+            if old.get(key) != new[key]]
+    return out or ["made by another version of uavris"]
+
+
+def _hall_changes(old: dict[str, Any], new: dict[str, Any]) -> list[str]:
+    """How the stored system's hall (its devices and room) differs from ``new``'s."""
+    changes = []
+    before, after = old.get("users") or [], new["users"]
+    if len(before) != len(after):
+        changes.append(f"{len(before)} devices there, {len(after)} here")
+    else:
+        changes += [f"device {k + 1} moved from {_text(a)} to {_text(b)}"
+                    for k, (a, b) in enumerate(zip(before, after)) if a != b]
+    if old.get("room") != new["room"]:
+        changes.append(f"the room is {_text(old.get('room'))} m there, {_text(new['room'])} m here")
+    return changes
+
+
+def _text(value: Any) -> str:
+    """A stored value as a message shows it: numbers without trailing zeros, lists bracketed."""
+    if isinstance(value, list):
+        return "[" + ", ".join(_text(v) for v in value) + "]"
+    return f"{value:g}" if isinstance(value, float) else str(value)
+
+
+def _axes_text(axes: Any) -> str:
+    """Stored axes as "name v1, v2 and name v1, v2"."""
+    return " and ".join(f"{a.get('name')} {', '.join(_text(v) for v in a.get('values', []))}"
+                        for a in axes or [] if isinstance(a, dict)) or "none"
+
+
+def _start(scenario: Any) -> str:
+    """A stored scenario: a name (None: fig2's) or a layout's ``{name, start}``."""
+    if isinstance(scenario, dict):
+        return f"{scenario.get('name')} {_text(scenario.get('start'))}"
+    return str(scenario or "fig2")
+
+
+def swept_hall(base: SystemConfig, scenario: str | Any | None, axes: Sequence[Axis], halls: int) -> str:
+    """Where the sweep flew, for its figure's title: a rate is a hall's, and the same policy
+    scores differently in another (the paper's hall and a start of it, a layout by its name,
+    or a devices sweep's generated halls)."""
+    from uavris.experiments.tools.evaluate import hall_name
+
+    if any(a.name == "devices" for a in axes):
+        return f"{halls} generated halls per device count (layout seed 0)"
+    where = get_scenario(scenario or "fig2")
+    if where.name in SCENARIOS:  # a start of the paper's hall, in it or in devices of --system.users
+        return f"{hall_name(base, None, where.name)}, start {where.name}"
+    return hall_name(base, where.name, where.name)
 
 
 def _run(targets: Sequence[str], axes: Sequence[Axis], out: Path, places: dict[tuple, list], spec: dict[str, Any],
-         episodes: int, workers: int, backend: str, progress: bool, trust_pickle: bool) -> list[Path]:
+         episodes: int, workers: int, backend: str, progress: bool, trust_pickle: bool, hall: str) -> list[Path]:
     jobs, files = [], {}
     for point, where in places.items():
         for target in targets:
@@ -235,7 +331,7 @@ def _run(targets: Sequence[str], axes: Sequence[Axis], out: Path, places: dict[t
               [[r["policy"], r["x"], *([r["y"]] if len(axes) > 1 else []), *(r[c] for c in COLUMNS[3:])]
                for r in rows])
     write_json(Path(out) / "sweep.json", spec)
-    return [Path(out) / "sweep.csv", *sweep_figure(rows, axes, Path(out) / "sweep")]
+    return [Path(out) / "sweep.csv", *sweep_figure(rows, axes, Path(out) / "sweep", hall)]
 
 
 def policy_label(target: str) -> str:
@@ -265,9 +361,10 @@ def _rows(targets: Sequence[str], axes: Sequence[Axis], places: dict[tuple, list
     return rows
 
 
-def sweep_figure(rows: list[dict], axes: Sequence[Axis], stem: Path) -> list[Path]:
+def sweep_figure(rows: list[dict], axes: Sequence[Axis], stem: Path, hall: str) -> list[Path]:
     """The sum rate against the first parameter, a line with its 95% band per policy (and per
-    value of the second parameter, by line style), on the parameter's natural axis."""
+    value of the second parameter, by line style), on the parameter's natural axis; the title
+    names the ``hall`` swept (:func:`swept_hall`)."""
     fig, ax = plt.subplots(figsize=(4.8, 3.6))
     styles = ("-", "--", ":", "-.")
     ys = sorted({r["y"] for r in rows}, key=lambda v: (v == "", v))
@@ -287,7 +384,7 @@ def sweep_figure(rows: list[dict], axes: Sequence[Axis], stem: Path) -> list[Pat
         ax.set_xscale("log", base=2)
     ax.set_xlabel(axes[0].label)
     ax.set_ylabel("average sum rate (bps/Hz)")
-    ax.set_title("mean and 95% CI (over " + rows[0]["unit"] + ")"
+    ax.set_title(f"{hall}\nmean and 95% CI (over " + rows[0]["unit"] + ")"
                  + (f"; {axes[1].symbol}: {axes[1].label}" if len(axes) > 1 else ""), fontsize=8)
     ax.legend(fontsize=6, frameon=False, loc="upper left", bbox_to_anchor=(1.0, 1.0))
     return save_figure(fig, stem)

@@ -155,6 +155,17 @@ class Target:
         where, attr = self.name.rsplit(":", 1)
         return file_part(f"{Path(where).name}_{attr}")
 
+    def origin(self) -> str:
+        """Where the policy comes from, as a result records it: a reference's name, a user's
+        policy with its file's absolute path, a model's or run's absolute directory. Two targets
+        that differ never share it (the name of a result file carries a hash of it)."""
+        if self.kind == "reference":
+            return f"reference {self.reference}"
+        if self.kind == "user":
+            where, attr = self.name.rsplit(":", 1)
+            return f"{Path(where).resolve()}:{attr}" if where.endswith(".py") else self.name
+        return str(Path(str(self.path)).resolve())
+
     def default_out(self) -> Path:
         """Where ``uavris evaluate`` writes when no ``--out`` is given."""
         if self.kind == "user":
@@ -193,6 +204,9 @@ def resolve_target(name: str | Path, trust_pickle: bool = False) -> Target:
             return Target(name, "controller", path=path)
         if dt_model_dir(path) is not None:
             return Target(name, "dt", path=path)
+        if not (path / "config.yaml").is_file():
+            raise UavrisError(f"{path} holds no policy uavris reads: none of config.yaml (a training run), model.json "
+                              f"(a DT model), value.json (a learned value) or {CONTROLLER_FILE} (uavris export)")
         return Target(name, "expert", path=path, trust_pickle=trust_pickle)
     if name in REFERENCES:
         return Target(name, "reference", reference=name)
@@ -259,6 +273,15 @@ class Row:
     @property
     def key(self) -> str:
         return self.variant + (f"@s{self.seed}" if self.seed else "")
+
+    def origin(self) -> dict[str, Any]:
+        """The model a result was made with, as the result records it: the row's key and seed,
+        the origin of each of its models (:meth:`Target.origin`), its goal source and the hall
+        whose plan it flies."""
+        parts = [self.target] if self.target is not None else list(self.members)
+        return {"row": self.key, "seed": self.seed, "models": [t.origin() for t in parts],
+                "goal_from": self.goal_from.origin() if self.goal_from is not None else None,
+                "plan_of": self.plan_of.name if self.plan_of is not None else None}
 
     def label_for(self, expert_kind: str | None = None) -> str:
         """The report's label: an expert's algorithm first, then the seed and how it is evaluated."""

@@ -27,6 +27,7 @@ from uavris.agents.dt.trajectories import Trajectory, record_episodes
 from uavris.agents.evaluation import MAX_EPISODES
 from uavris.errors import UavrisError
 from uavris.experiments.display.progress import progress_bar
+from uavris.experiments.display.tables import counted
 from uavris.experiments.training.train_expert import load_run_config, load_run_policy
 from uavris.presets import COLLECT_SEED
 
@@ -76,7 +77,8 @@ def collect(experts: Sequence[str | Path], trajectories: int, out: str | Path, *
                 bar.update(len(batch))
     finally:
         bar.close()
-    description = (f"uavris expert trajectories: {len(runs)} experts x {trajectories} deterministic episodes "
+    description = (f"uavris expert trajectories: {counted(len(runs), 'expert')} x "
+                   f"{counted(trajectories, 'deterministic episode')} "
                    f"({', '.join(sorted({cfg.scenario for _, cfg in runs}))})")
     return write_dataset(out, trajs, system, description=description, force=force, phase_control=phase_control,
                          namespace=DATASET_NAMESPACE)

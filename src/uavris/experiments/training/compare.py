@@ -28,7 +28,7 @@ from uavris.config import SystemConfig, scenario_at
 from uavris.errors import UavrisError
 from uavris.experiments.display.plots import learning_curves
 from uavris.experiments.display.progress import progress_bar
-from uavris.experiments.display.tables import MISSING, interval, markdown_table, num, pct
+from uavris.experiments.display.tables import MISSING, counted, interval, markdown_table, num, pct
 from uavris.experiments.engine.costs import train_cost
 from uavris.experiments.engine.jobs import Job, JobResult, run_jobs
 from uavris.experiments.training.train_expert import TrainConfig, train_job
@@ -109,6 +109,11 @@ def learning_curve_summary(series: Sequence[np.ndarray], points: int = 100) -> t
     return grid, mean, lo, hi
 
 
+def default_compare_dir(preset: str) -> Path:
+    """Where ``compare-algorithms`` writes without ``--out``."""
+    return Path(f"runs/compare-{preset}")
+
+
 def compare_algorithms(preset: str = "quick", seeds: int = 5, workers: int = 2, out: Path | None = None,
                        algos: Sequence[str] = ALGORITHMS, scenario: str = "fig2",
                        eval_episodes: int | None = None, backend: str = "local",
@@ -132,7 +137,7 @@ def compare_algorithms(preset: str = "quick", seeds: int = 5, workers: int = 2, 
         check_algorithm(a)
     system = system or SystemConfig()
     scenario_at(scenario, start).validate_for(system)
-    out = Path(out or f"runs/compare-{preset}")
+    out = Path(out or default_compare_dir(preset))
     if ray_address:  # a cluster's nodes write the runs where the driver has them: the same absolute paths
         out = Path(os.path.abspath(out))
     n_eval = eval_episodes or (100 if preset == "paper" else 32)
@@ -221,7 +226,8 @@ def write_comparison(out: Path, cfgs: dict[tuple[str, int], TrainConfig], scenar
     if curves:
         refs = {name: (REFERENCES[name].label, by_name[name]["mean"]) for name in FIGURE_REFERENCES}
         figs = learning_curves(curves, out / "learning_curves",
-                               f"{scenario} {any_cfg.resolved_scenario.start}, mean and 95% t band over seeds",
+                               f"{scenario} {any_cfg.resolved_scenario.start}: mean over seeds,\n"
+                               "band: its 95% t interval over seeds, from 0",
                                PAPER_FIG2 if scenario == "fig2" else None, refs)
     choice = expert_choice(rows) if any(r["kind"] == "DRL" for r in rows) else None
     write_json(out / "summary.json", {"rows": rows, "expert": choice and choice["expert"], "expert_choice": choice,
@@ -255,8 +261,9 @@ def render_report(rows: list[dict[str, Any]], cfgs: dict[tuple[str, int], TrainC
     lines = [f"# Algorithm comparison (paper Fig. 2), preset `{any_cfg.preset}`", ""]
     lines.append(f"Scenario `{scenario}`, UAV starting at {list(any_cfg.resolved_scenario.start)}; seeds {seeds}; "
                  f"{any_cfg.total_steps:,} environment steps per run "
-                 f"({any_cfg.total_steps // any_cfg.system.horizon:,} episodes of {any_cfg.system.horizon} slots); "
-                 f"final evaluation: deterministic policy on {n_eval} seeded episodes "
+                 f"({counted(any_cfg.total_steps // any_cfg.system.horizon, 'episode', ',')} of "
+                 f"{any_cfg.system.horizon} slots); "
+                 f"final evaluation: deterministic policy on {counted(n_eval, 'seeded episode')} "
                  f"(seeds {any_cfg.eval_seed}..{any_cfg.eval_seed + n_eval - 1}), the same for every policy. "
                  f"Wall clock of this invocation: {wall_s / 60:.1f} min.")
     lines.append("")

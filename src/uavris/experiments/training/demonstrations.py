@@ -49,6 +49,7 @@ from uavris.agents.policy import Privileged
 from uavris.config import DictConfig, SystemConfig
 from uavris.env.simulator import BatchedSimulator
 from uavris.errors import ConfigError
+from uavris.experiments.display.tables import counted
 from uavris.layouts import Layout, LayoutGenerator
 from uavris.presets import COLLECT_SEED
 
@@ -169,7 +170,7 @@ def collect_demonstrations(cfg: DemonstrationConfig, out: str | Path, *, force: 
             trajectories = demonstrate(cfg, on_hall=lambda: bar.update(1))
         finally:
             bar.close()
-    description = (f"uavris demonstrations: {', '.join(cfg.behaviours)} in {cfg.halls} generated halls x "
-                   f"{cfg.episodes} episodes (layout seed {cfg.layout_seed})")
+    description = (f"uavris demonstrations: {', '.join(cfg.behaviours)} in {counted(cfg.halls, 'generated hall')} x "
+                   f"{counted(cfg.episodes, 'episode')} (layout seed {cfg.layout_seed})")
     return write_dataset(out, list(trajectories), cfg.system, description=description, force=force,
                          phase_control="optimizer", namespace=DATASET_NAMESPACE)

@@ -32,7 +32,6 @@ model and numbers as an uninterrupted one.
 
 from __future__ import annotations
 
-import os
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping
@@ -66,7 +65,7 @@ from uavris.config import (
 from uavris.env.wrappers import PhaseControl, check_phase_control
 from uavris.errors import CheckpointError, ConfigError, UavrisError
 from uavris.experiments.display.progress import progress_bar
-from uavris.io import atomic_write_bytes, read_csv, read_rows, write_csv
+from uavris.io import atomic_save, atomic_write_bytes, read_csv, read_rows, write_csv
 from uavris.presets import EVAL_SEED, PRESETS, TRAIN, Preset, check_preset
 from uavris.runs.seal import TRUST_FLAG, check_sealed, seal
 
@@ -277,18 +276,14 @@ def save_checkpoint(model: Any, cfg: TrainConfig, run_dir: Path, episodes: list,
     ck.mkdir(parents=True, exist_ok=True)
     steps = int(model.num_timesteps)
     model_path = ck / f"step_{steps}.zip"
-    tmp = ck / f".step_{steps}.tmp.zip"
-    model.save(tmp)
-    os.replace(tmp, model_path)
+    atomic_save(model_path, model.save)
     seal(model_path)  # SB3's archive and the pickles beside it: resumed only where uavris wrote them
     save_policy(model, cfg.algo, ck / f"step_{steps}.policy")
     state_path = ck / f"step_{steps}.state.pkl"
     atomic_write_bytes(state_path, resume_state.capture(model))
     seal(state_path)
     if cfg.algo in OFF_POLICY:
-        tmp_buf = ck / ".replay_buffer.tmp.pkl"
-        model.save_replay_buffer(tmp_buf)
-        os.replace(tmp_buf, ck / "replay_buffer.pkl")
+        atomic_save(ck / "replay_buffer.pkl", model.save_replay_buffer)
         seal(ck / "replay_buffer.pkl")
     write_csv(run_dir / "episodes.csv", EPISODE_HEADER, episodes)
     write_csv(run_dir / "evals.csv", EVAL_HEADER, evals)
@@ -363,9 +358,7 @@ def train(cfg: TrainConfig, run_dir: str | Path, *, resume: bool = False, force:
     final = run_evaluation(model, cfg, cfg.eval_episodes).summary()
     evals.append(_eval_row(model.num_timesteps, final))
     save_checkpoint(model, cfg, run_dir, episodes, evals, clock)
-    tmp = run_dir / ".model.tmp.zip"
-    model.save(tmp)
-    os.replace(tmp, run_dir / "model.zip")  # for SB3's users; uavris reads the policy files
+    atomic_save(run_dir / "model.zip", model.save)  # for SB3's users; uavris reads the policy files
     seal(run_dir / "model.zip")
     save_policy(model, cfg.algo, run_dir / "policy")
     imitation = read_csv(run_dir / "imitation.csv") if (run_dir / "imitation.csv").exists() else []

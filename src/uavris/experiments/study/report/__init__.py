@@ -18,7 +18,7 @@ import yaml
 
 from uavris.agents.references import HOVER_OPTIMIZER, ORACLE, ZERO_ACTION
 from uavris.config import UNSEEN_SCENARIOS, get_scenario
-from uavris.experiments.display.tables import fraction, interval, markdown_table, num
+from uavris.experiments.display.tables import counted, fraction, interval, markdown_table, num
 from uavris.experiments.engine.jobs import machine
 from uavris.experiments.engine.stages import StageRecord
 from uavris.experiments.study.claims import claims_table, judge_studies
@@ -69,7 +69,10 @@ class _Report:
                 shutil.copyfile(cdir / f"learning_curves.{ext}", self.figs / f"fig2_learning_curves.{ext}")
         summary = read_json(cdir / "summary.json")
         rows = summary["rows"]
-        self.add("![Fig. 2](figures/fig2_learning_curves.png)", "", *fig2_table(rows))
+        self.add("![Fig. 2](figures/fig2_learning_curves.png)", "",
+                 "The average sum rate over training episodes, the mean over seeds; the band is the 95% Student-t "
+                 "interval of that mean over the seeds, drawn from 0 (a rate is never negative).", "",
+                 *fig2_table(rows))
         if any(r["kind"] == "DRL" for r in rows):
             choice = summary.get("expert_choice") or {}
             self.add("", f"Expert algorithm of the paper track: **{str(summary.get('expert')).upper()}**"
@@ -228,9 +231,11 @@ def finetuning_effect(zero_shot: dict[str, float], finetuned: dict[str, float]) 
     zs, ft = zero_shot["mean"], finetuned["mean"]
     if f"{zs:.2f}" == f"{ft:.2f}":
         return f"fine-tuning left it unchanged ({zs:.2f} -> {ft:.2f})"
-    if finetuned["ci_low"] > zero_shot["ci_high"]:
+    # an undefined CI (one episode; None in a stage's record) is apart from nothing
+    bounds = (finetuned["ci_low"], finetuned["ci_high"], zero_shot["ci_low"], zero_shot["ci_high"])
+    if None not in bounds and finetuned["ci_low"] > zero_shot["ci_high"]:
         return f"fine-tuning raised it ({zs:.2f} -> {ft:.2f}, 95% CIs apart)"
-    if finetuned["ci_high"] < zero_shot["ci_low"]:
+    if None not in bounds and finetuned["ci_high"] < zero_shot["ci_low"]:
         return f"fine-tuning lowered it ({zs:.2f} -> {ft:.2f}, 95% CIs apart)"
     return f"fine-tuning moved it within the 95% CIs ({zs:.2f} -> {ft:.2f}); one fine-tuning run, one seed"
 
@@ -255,7 +260,7 @@ def write_report(study: Study, records: Sequence[StageRecord], wall_s: float, or
     rep.add(f"# uavris reproduction of the paper, preset `{rc.preset}`", "",
             f"Everything below is read from the stage files under `{out / 'stages'}`; rerunning `uavris reproduce` "
             "with the same parameters skips finished stages. Evaluation: deterministic policies on "
-            f"{rc.eval_episodes} seeded episodes (seeds {EVAL_SEED}..{EVAL_SEED + rc.eval_episodes - 1}), "
+            f"{counted(rc.eval_episodes, 'seeded episode')} (seeds {EVAL_SEED}..{EVAL_SEED + rc.eval_episodes - 1}), "
             "the same episodes for every "
             "policy of a scenario. Every policy is read against doing nothing (the zero action: hover at the start, "
             "level, all phases equal) and the oracle (`uavris.agents.oracle`: optimised phases every slot, motion "

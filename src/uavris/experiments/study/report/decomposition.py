@@ -94,7 +94,8 @@ def value_section(results: dict[str, dict[str, Any]], labels: dict[str, str]) ->
         return []
     rows = []
     for k in keys:
-        rho = [float(results[lay][k]["value_rank_correlation"]) for lay in layouts]
+        # undefined over fewer than three poses: NaN, stored as None in a stage's record
+        rho = [float(np.nan if (r := results[lay][k]["value_rank_correlation"]) is None else r) for lay in layouts]
         share = [float(results[lay][k]["value_target_rate_level"]) / float(results[lay][ORACLE]["plan_rate_level"])
                  for lay in layouts]
         rows.append((labels[k], f"{np.mean(rho):.3f}", f"{np.min(rho):.3f}", pct(float(np.mean(share))),
