@@ -124,7 +124,7 @@ def _check_place_claims(claims: list[str], where: str, keys: list[str], stat: di
     if where != "deployment track":  # zero-shot halls: the count target, >= 96% and above hovering
         if "dt-goal-safe" not in keys:
             return 0
-        [claim] = [c for c in claims if c.startswith(f"- {where}: **the learned planner's place flown by")]
+        [claim] = [c for c in claims if c.startswith(f"- {where}: **the semi-amortised place flown by")]
         hover = diffs[("dt-goal-safe", "hover-optimizer")]
         holds = stat["dt-goal-safe"][0] >= 0.96 and hover[1] > 0
         assert f"**: {'holds' if holds else 'does not hold'} ({_pct3(stat['dt-goal-safe'])}; minus hovering " \

@@ -95,10 +95,13 @@ def test_the_main_rows_are_the_controllers_under_the_safety_layer():
     assert main[transfer].plan_of == {t.name: t for t in train}[main[transfer].facts()["plan_of"]]
     assert main[transfer].rank == 0 and {r.kind for k, r in main.items() if k in refs} == {"reference"}
     assert main["dt-zero-shot-safe@s1"].label_for() == "zero-shot DT, seed 1, safety layer"
-    # the goal-conditioned DT is told the learned planner's place; its fine-tuned form keeps its own
+    # the goal-conditioned DT is told the semi-amortised place (never worse than staying); its fine-tuned
+    # form keeps its own
     value = Path("/models/value/value")
     assert main["dt-goal-safe@s1"].goal_from.path == value and main["dt-goal-safe@s1"].target.path == Path(
         "/models/goal-s1/model")
+    assert main["dt-goal-safe@s1"].goal_from.top_k == SEMI_TOP_K
+    assert main["dt-goal-safe@s1"].facts()["goal_from"].startswith("semi-amortised planner")
     assert main["dt-goal-finetuned-safe@s1"].goal_from is None
     assert main["dt-goal-finetuned-safe@s1"].target.path == Path("/models") / places_stage(where.name, 1) / "model"
     assert main["plan-learned"].target.path == value and main["plan-semi"].target.top_k == SEMI_TOP_K
@@ -353,9 +356,11 @@ def test_the_studys_controller_leaves_the_study_in_one_directory(deployment_run,
                  "--episodes", "8", "--workers", "1", "--out", str(tmp_path / "s"), "--no-progress"]) == 0
     [cell] = [read_json(p) for p in (tmp_path / "s" / "cells").glob("*.json")]
     assert cell["mean"] == pytest.approx(want["mean"], abs=1e-12)
-    # plan --controller: the learned planner of its row, as plan --learned with the study's value
+    # plan --controller: the planner of its row (the semi-amortised one), as plan --learned --top-k with the
+    # study's value
     [value] = (out / "stages").glob("deploy-value-*/value")
-    for name, flags in (("p-ctl", ["--controller", str(ctl)]), ("p-v", ["--learned", str(value)])):
+    for name, flags in (("p-ctl", ["--controller", str(ctl)]),
+                        ("p-v", ["--learned", str(value), "--top-k", str(SEMI_TOP_K)])):
         assert main(["plan", "layout-unseen-0", *flags, "--system.observe-devices", "--out", str(tmp_path / name),
                      "--no-progress"]) == 0
     assert read_json(tmp_path / "p-ctl.json")["target"] == read_json(tmp_path / "p-v.json")["target"]
@@ -424,6 +429,7 @@ def test_an_exported_controller_says_its_seed_and_scores_an_episode_alone_as_in_
     [batch] = [read_csv(p) for p in (tmp_path / "batch").glob("*.csv")]
     [alone] = [read_csv(p) for p in (tmp_path / "alone").glob("*.csv")]
     assert float(alone[0]["avg_sum_rate"]) == float(batch[2]["avg_sum_rate"])  # bit for bit
+    assert all(float(r["avg_sum_rate"]) <= float(r["bound"]) for r in batch)  # a smoke-trained DT: below the bound
     capsys.readouterr()
     assert main(["plan", "layout-unseen-0", "--controller", str(ctl), "--system.observe-devices", "--out",
                  str(tmp_path / "p"), "--no-progress"]) == 0

@@ -278,3 +278,31 @@ def test_fine_tuning_that_tries_places_keeps_the_place_its_paired_scores_favour(
     assert np.allclose(meta["goal"], places[int(np.argmax(mean))]), (meta["goal"], places, mean)
     flown = load_dt_policy(out)
     assert flown.policy.goals is not None and np.allclose(flown.policy.goals.goals, meta["goal"])
+
+
+class _CornerValue(PoseValue):
+    """A misleading learned value: the farther into the room's far corner, the better. Its argmax
+    is a place worse than staying in a hall whose devices sit around the start."""
+
+    def forward(self, users: torch.Tensor, position: torch.Tensor) -> torch.Tensor:
+        return position.sum(dim=-1)
+
+
+def test_where_vs_argmax_is_worse_than_staying_the_deployed_place_is_not() -> None:
+    """The headline controller is told the semi-amortised place: V's top places and the start,
+    valued by R on fresh draws, a move only where it beats staying by more than its standard
+    error. Built here: a hall whose best place is by the start and a V that points to the far
+    corner. V's argmax loses to staying; the deployed place does not."""
+    from uavris.agents.oracle.objective import assessed_rate, episode_value, trip_slots
+    from uavris.agents.place.planner import PlaceSettings
+
+    system = SystemConfig(users=((4.0, 4.0, 1.0), (9.0, 4.0, 1.0), (4.0, 9.0, 0.5), (9.0, 9.0, 0.5)))
+    start = (6.5, 6.5, 4.0)
+    model = _CornerValue(ValueConfig(width=8))
+    argmax = learned_plan(model, system, start, PlaceSettings(top_k=0))
+    deployed = learned_plan(model, system, start, PlaceSettings(top_k=3))
+    poses = np.stack([np.asarray(start), argmax.target, deployed.target])
+    rate, _ = assessed_rate(system, poses, np.zeros_like(poses))
+    worth = episode_value(system.horizon, trip_slots(system, np.asarray(start), poses), rate[0], rate)
+    assert argmax.target[0] > 30 and worth[1] < worth[0] - 1.0  # V's argmax: the far corner, well below staying
+    assert worth[2] >= worth[0]  # the deployed place: never worse than staying

@@ -50,3 +50,41 @@ def test_the_optimiser_gives_the_same_bits_compiled_for_the_host_and_for_a_gener
     assert results["host"].size == 2 * (96 * 16 + 96)
     assert np.all(np.isfinite(results["host"]))
     assert results["host"].tobytes() == results["generic"].tobytes()
+
+
+PATHS = """
+import os, json, sys
+import uavris  # first: it pins the float path before numpy and torch load
+import numpy, threadpoolctl, torch
+from numpy._core._multiarray_umath import __cpu_features__ as features
+blas = sorted({i.get("architecture") for i in threadpoolctl.threadpool_info() if i.get("internal_api") == "openblas"})
+print(json.dumps({"avx512": sorted(k for k, on in features.items() if on and ("AVX512" in k or k == "X86_V4")),
+                  "blas": blas, "torch": torch.backends.cpu.get_cpu_capability(),
+                  "set": {k: os.environ.get(k) for k in ("NPY_DISABLE_CPU_FEATURES", "OPENBLAS_CORETYPE",
+                                                        "MKL_CBWR")}}))
+"""
+
+
+def _paths(env: dict[str, str]) -> dict:
+    import json
+
+    clean = {k: v for k, v in os.environ.items() if k not in ("NPY_DISABLE_CPU_FEATURES", "OPENBLAS_CORETYPE",
+                                                               "MKL_CBWR", "MKL_ENABLE_INSTRUCTIONS",
+                                                               "ONEDNN_MAX_CPU_ISA", "ATEN_CPU_CAPABILITY")}
+    out = subprocess.run([sys.executable, "-c", PATHS], env={**clean, **env}, capture_output=True, text=True,
+                         check=True, timeout=300)
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+@pytest.mark.skipif(os.uname().machine != "x86_64", reason="the pinned path is x86-64's AVX2")
+def test_import_uavris_pins_every_library_to_the_avx2_path() -> None:
+    """numpy without its AVX-512 kernels, OpenBLAS on its Haswell (AVX2) kernels and torch at AVX2,
+    whatever the CPU (an Intel Xeon's AVX-512 rounded the oracle's plan otherwise); unchanged where
+    the user chose (UAVRIS_NATIVE_FLOATS, or a variable already set)."""
+    pinned = _paths({})
+    assert pinned["avx512"] == [] and pinned["blas"] == ["Haswell"] and pinned["torch"] in ("AVX2", "DEFAULT")
+    assert pinned["set"]["OPENBLAS_CORETYPE"] == "Haswell" and pinned["set"]["MKL_CBWR"] == "AVX2"
+    assert {"X86_V4", "AVX512F"} & set(pinned["set"]["NPY_DISABLE_CPU_FEATURES"].split())
+    native = _paths({"UAVRIS_NATIVE_FLOATS": "1"})
+    assert native["set"] == {"NPY_DISABLE_CPU_FEATURES": None, "OPENBLAS_CORETYPE": None, "MKL_CBWR": None}
+    assert _paths({"OPENBLAS_CORETYPE": "Nehalem"})["blas"] == ["Nehalem"]  # the user's choice is kept

@@ -1,25 +1,28 @@
-"""How far the oracle is from the best a much wider search finds: its optimality gap, per hall.
+"""How far the oracle is from the best a much wider search finds, at 3 to 8 devices; and its cost.
 
 Feeds docs/results/oracle-gap.md.
 
-In this one process pinned to a single CPU, on ``--halls`` unseen halls (default 8) of
-``LayoutGenerator(devices=K)`` for each ``K`` of ``--devices`` (default 4), from each hall's
-start (the deployment track's unseen halls, ``layout-unseen-J``):
+In this one process pinned to a single CPU, for each hall (default: 4 unseen halls of
+``LayoutGenerator(devices=K)`` for K in 3, 4, 6, 8, and 2 halls of the other generator,
+``layout-other-J-kK``, at 6 and 8: 20 halls), from the hall's start:
 
-- the oracle's plan, :func:`uavris.agents.oracle.plan_target` (what the oracle flies to);
-- the search, :func:`uavris.agents.oracle.search.exhaustive_plan`: every feasible position of
-  a 2 m x 2 m x 1 m grid, the 5^3 attitudes of +-20 deg at the 12 best, a pattern search from
-  the 3 best, on draws that are not the planner's;
-- both, and staying at the start, valued by :func:`~uavris.agents.oracle.search.plan_gap`
-  on the same 8 fresh batches of draws (the planner's objective: the episode average of
-  flying there and hovering).
+- today's planner without its global stage (``TEACHER``, what the demonstrations keep), timed;
+- the oracle, :func:`uavris.agents.oracle.plan_target` with its global stage (the cheap ``R`` on a
+  coarse grid of the whole region), timed: the ratio of the two is the cost the yardstick adds;
+- the search, :func:`uavris.agents.oracle.search.exhaustive_plan`: a 2 m x 2 m x 1 m grid, a
+  0.5 m grid around its 8 best places, 125 attitudes at the 12 best, a pattern search from the 6
+  best, on draws that are not the planner's; timed, and its grids halved where it costs less than
+  10x the oracle (3 devices, where ``R`` is a closed form);
+- both plans and staying valued by :func:`~uavris.agents.oracle.search.plan_gap` on the same 8
+  fresh batches of draws (the planner's objective: the episode average of flying there).
 
-Printed per hall: the three values, the search minus the oracle (its standard error over the
-batches), and the oracle as a fraction of the best found; then the mean gap over halls with
-its Student-t 95% CI (the hall the unit). The ratio this benchmark states: the oracle's value
-over the search's, and the search's time over the planner's.
+Each hall's numbers are written to ``--out/HALL.json`` when it is done, and a rerun reads the
+halls it finds there: the benchmark runs in parts. Printed: a row per hall; per device count
+the oracle's mean fraction of the best found with its Student-t 95% CI over halls, the time
+ratios. With ``--page`` and every hall done, the page is written.
 
-Run: ``python benchmarks/findings/oracle_gap.py`` (about 2-3 min per 4-device hall on one core).
+Run: ``python benchmarks/findings/oracle_gap.py --out runs/oracle-gap --page docs/results/oracle-gap.md``
+(about 1.5 hours on one core; halls of 8 devices take the longest).
 """
 
 from __future__ import annotations
@@ -38,48 +41,114 @@ sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1]))  # benchmar
 from _machine import cpu_model, pin_to_one_core, table  # noqa: E402
 
 
-def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--devices", type=int, nargs="+", default=[4], help="device counts (default: 4)")
-    parser.add_argument("--halls", type=int, default=8, help="unseen halls per device count (default: 8)")
-    args = parser.parse_args(argv)
-    pinning = pin_to_one_core()
+def halls(counts: list[int], per_count: int, other_counts: list[int], other: int) -> list[tuple[str, str, int, int]]:
+    """(name, split, index, devices) of every hall measured."""
+    def name(split: str, j: int, k: int) -> str:
+        return f"layout-{split}-{j}" + ("" if k == 4 else f"-k{k}")
+
+    return ([(name("unseen", j, k), "unseen", j, k) for k in counts for j in range(per_count)]
+            + [(name("other", j, k), "other", j, k) for k in other_counts for j in range(other)])
+
+
+DEARER = 10  # the search costs at least this many times the oracle's time
+
+
+def measure(split: str, j: int, k: int) -> dict:
+    """One hall: today's planner, the oracle and the search, timed, and their values on fresh draws.
+    The search's grids are halved (up to twice) until it costs at least :data:`DEARER` times the
+    oracle."""
+    from dataclasses import replace
+
+    import numpy as np
+
     from uavris.agents.oracle import plan_target
+    from uavris.agents.oracle.planner import TEACHER
     from uavris.agents.oracle.search import SearchSettings, exhaustive_plan, plan_gap
     from uavris.config import SystemConfig
     from uavris.layouts import LayoutGenerator
+
+    system, where = LayoutGenerator(devices=k).layout(split, j).resolve(SystemConfig())
+    timed = {}
+    began = time.perf_counter()
+    teacher = plan_target(system, where.start, TEACHER)
+    timed["teacher_s"] = time.perf_counter() - began
+    began = time.perf_counter()
+    oracle = plan_target(system, where.start)
+    timed["oracle_s"] = time.perf_counter() - began
+    settings = SearchSettings()
+    for _ in range(3):  # the search at least 10x the oracle's cost: where R is cheap (3 devices), denser
+        began = time.perf_counter()
+        found = exhaustive_plan(system, where.start, settings)
+        timed["search_s"] = time.perf_counter() - began
+        if timed["search_s"] >= DEARER * timed["oracle_s"]:
+            break
+        settings = replace(settings, grid_step=settings.grid_step / 2, z_step=settings.z_step / 2,
+                           fine_step=settings.fine_step / 2)
+    g, t = plan_gap(system, where.start, oracle, found), plan_gap(system, where.start, teacher, found)
+    return {"devices": k, "split": split, "index": j, **timed, "poses_searched": found.poses_valued,
+            "search_grid_m": [settings.grid_step, settings.z_step, settings.fine_step],
+            "oracle": g.oracle_value, "teacher": t.oracle_value, "search": g.search_value, "stay": g.stay_value,
+            "search_minus_oracle": g.difference, "search_minus_oracle_se": g.difference_se,
+            "oracle_target": np.round(oracle.target, 3).tolist(), "search_target": np.round(found.target, 3).tolist()}
+
+
+def summary_rows(done: dict[str, dict]) -> tuple[list[tuple[str, ...]], list[tuple[str, ...]]]:
+    """The per-hall table and the per-count table (fractions over halls with their t interval)."""
     from uavris.stats import over_units
 
-    s = SearchSettings()
-    print(f"# the oracle's optimality gap\n- cpu: {cpu_model()}; {pinning}\n- search: {s}\n"
-          f"- {args.halls} unseen halls per device count; values in bps/Hz (episode average of the plan)\n",
-          flush=True)
-    rows = [("hall", "oracle", "search", "stay", "search - oracle (SE)", "oracle / search", "poses searched",
-             "search s / planner s")]
-    for k in args.devices:
-        gen = LayoutGenerator(devices=k)
-        fractions, gaps = [], []
-        for j in range(args.halls):
-            layout = gen.layout("unseen", j)
-            system, where = layout.resolve(SystemConfig(observe_devices=True))
-            began = time.perf_counter()
-            plan = plan_target(system, where.start)
-            planner_s = time.perf_counter() - began
-            began = time.perf_counter()
-            found = exhaustive_plan(system, where.start, s)
-            search_s = time.perf_counter() - began
-            g = plan_gap(system, where.start, plan, found)
-            fractions.append(g.oracle_value / g.search_value)
-            gaps.append(g.difference)
-            rows.append((f"{layout.name} ({k} devices)", f"{g.oracle_value:.2f}", f"{g.search_value:.2f}",
-                         f"{g.stay_value:.2f}", f"{g.difference:+.2f} ({g.difference_se:.2f})",
-                         f"{g.oracle_value / g.search_value:.1%}", f"{found.poses_valued:,}",
-                         f"{search_s / planner_s:.0f}x"))
-            print(table(rows), flush=True)
-        gap, frac = over_units(gaps), over_units(fractions)
-        print(f"\n{k} devices, {len(gaps)} halls: search minus oracle {gap['mean']:+.2f} bps/Hz, 95% CI "
-              f"[{gap['ci_low']:+.2f}, {gap['ci_high']:+.2f}]; the oracle at {frac['mean']:.1%} of the best found "
-              f"[{frac['ci_low']:.1%}, {frac['ci_high']:.1%}]\n", flush=True)
+    per_hall = [("hall", "devices", "oracle", "search", "stay", "today's planner", "search - oracle (SE)",
+                 "oracle / search", "oracle s", "oracle s / today's s", "search s / oracle s")]
+    for name, h in done.items():
+        per_hall.append((name, str(h["devices"]), f"{h['oracle']:.2f}", f"{h['search']:.2f}", f"{h['stay']:.2f}",
+                         f"{h['teacher']:.2f}", f"{h['search_minus_oracle']:+.2f} ({h['search_minus_oracle_se']:.2f})",
+                         f"{h['oracle'] / h['search']:.1%}", f"{h['oracle_s']:.1f}",
+                         f"{h['oracle_s'] / h['teacher_s']:.1f}x", f"{h['search_s'] / h['oracle_s']:.0f}x"))
+    per_count = [("halls", "n", "oracle / search [95% CI over halls]", "today's planner / search",
+                  "oracle s / today's s (mean s)", "search s / oracle s (mean s)")]
+    groups: dict[str, list[dict]] = {}
+    for h in done.values():
+        groups.setdefault(f"{h['devices']} devices" + (", other generator" if h["split"] == "other" else ""),
+                          []).append(h)
+    for label, hs in groups.items():
+        f = over_units([h["oracle"] / h["search"] for h in hs])
+        old = sum(h["teacher"] / h["search"] for h in hs) / len(hs)
+        ts, to, tq = (sum(h[x] for h in hs) / len(hs) for x in ("teacher_s", "oracle_s", "search_s"))
+        ci = f"[{f['ci_low']:.1%}, {f['ci_high']:.1%}]" if len(hs) >= 3 else "[n/a: fewer than 3 halls]"
+        per_count.append((label, str(len(hs)), f"{f['mean']:.1%} {ci}", f"{old:.1%}", f"{to / ts:.1f}x ({to:.1f})",
+                          f"{tq / to:.0f}x ({tq:.0f})"))
+    return per_hall, per_count
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--counts", type=int, nargs="+", default=[3, 4, 6, 8], help="device counts (default 3 4 6 8)")
+    parser.add_argument("--halls", type=int, default=4, help="unseen halls per device count (default 4)")
+    parser.add_argument("--other-counts", type=int, nargs="*", default=[6, 8],
+                        help="device counts of the other generator's halls (default 6 8)")
+    parser.add_argument("--other", type=int, default=2, help="the other generator's halls per count (default 2)")
+    parser.add_argument("--out", type=pathlib.Path, default=pathlib.Path("runs/oracle-gap"),
+                        help="a folder of one JSON per hall, read back by a rerun (default runs/oracle-gap)")
+    parser.add_argument("--page", type=pathlib.Path, help="write this Markdown page once every hall is done")
+    args = parser.parse_args(argv)
+    pinning = pin_to_one_core()
+    from uavris.io import read_json, write_json
+
+    args.out.mkdir(parents=True, exist_ok=True)
+    todo = halls(args.counts, args.halls, args.other_counts, args.other)
+    done: dict[str, dict] = {}
+    for name, split, j, k in todo:
+        path = args.out / f"{name}.json"
+        if not path.exists():
+            write_json(path, {**measure(split, j, k), "cpu": cpu_model()})
+        done[name] = read_json(path)
+        print(table(summary_rows({name: done[name]})[0]).splitlines()[-1], flush=True)
+    per_hall, per_count = summary_rows(done)
+    text = (f"- cpu: {cpu_model()}; {pinning}\n\n" + table(per_hall) + "\n\n" + table(per_count) + "\n")
+    print("\n" + text, flush=True)
+    if args.page is not None:
+        intro = args.page.read_text().split("<!-- measured -->")[0] if args.page.exists() else ""
+        args.page.write_text(intro + "<!-- measured -->\n" + text)
+        print(f"wrote {args.page}")
     return 0
 
 

@@ -5,6 +5,10 @@ Lives here: the package's public names. Not here: anything else; the layers are
 ``physics`` -> ``env`` -> ``agents`` -> ``experiments`` -> ``cli`` (README, Layout).
 """
 
+from uavris.float_paths import pin_float_paths
+
+pin_float_paths()  # before numpy and torch load: the references' numbers the same on every CPU (float_paths)
+
 try:
     from uavris.config import SCENARIOS, ConfigError, Scenario, SystemConfig, get_scenario
     from uavris.env import ENV_ID, UavRisD2DEnv, UavRisD2DVectorEnv

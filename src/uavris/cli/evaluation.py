@@ -198,6 +198,9 @@ def _print_evaluation(what: str, summary: dict, path: Path) -> None:
               f"{signed(d['mean'])} {interval(d['ci_low'], d['ci_high'], signed)} (paired, 95% CI)")
     if summary.get("fraction_of_oracle") is not None:
         print(f"  {what} reaches {100 * summary['fraction_of_oracle']:.1f}% of the oracle")
+    if "bound" in summary:
+        print(f"  no controller can exceed {summary['bound']['mean']:.2f} bps/Hz on these episodes (the bound, "
+              f"docs/model.md); {what} reaches {100 * summary['fraction_of_bound']:.1f}% of it")
 
 
 # --------------------------------------------------------------------------------------- benchmark

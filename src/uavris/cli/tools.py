@@ -214,7 +214,7 @@ class ExportArgs:
     """a study's output directory (uavris reproduce --out)"""
     row: str = "dt-goal-safe"
     """the row of the study's report to export (its key in the stage files): e.g. dt-goal-safe (the goal-conditioned
-    DT told the learned planner's place, under the safety layer), dt-ensemble-safe, dt-zero-shot-safe@s1"""
+    DT told the semi-amortised place, under the safety layer), dt-ensemble-safe, dt-zero-shot-safe@s1"""
     track: Literal["paper", "strong", "deployment"] = "deployment"
     """the row's track"""
     out: Unset[Path] = None

@@ -74,6 +74,17 @@ def phases_to_action(phase: NDArray[np.float64]) -> NDArray[np.float64]:
     return np.mod(phase, 2 * np.pi) / np.pi - 1.0
 
 
+def slot_draws(config: SystemConfig, keys: NDArray[np.uint64]) -> tuple[NDArray[np.complex128], NDArray[np.float64]]:
+    """A slot's randomness from its counter keys (:func:`uavris.physics.streams.slot_key`, one per
+    row): the NLoS draws ``w`` ``(n, K, N)`` and the pairing ``P(t)`` ``(n, K, K)`` (docs/model.md
+    section 16). They depend on the seed, episode and slot alone, never on the actions."""
+    K, N = config.num_users, config.num_elements
+    bits = streams.raw_bits(keys, K * N + 1 + K)
+    nlos = streams.complex_normals(bits[:, : K * N]).reshape(-1, K, N)
+    unif = streams.uniforms(bits[:, K * N:])
+    return nlos, ph.pairing_from_uniforms(unif[:, 0], unif[:, 1:], config.pairs_upper)
+
+
 class BatchedSimulator:
     """The UAV-RIS D2D system for ``num_envs`` independent environments."""
 
@@ -96,7 +107,6 @@ class BatchedSimulator:
         self._power = {k: float(v) for k, v in vars(c.propulsion).items()}
         self._chan_scale = c.channel_ref_distance ** (0.5 * c.pathloss_exponent)
         K, N = c.num_users, c.num_elements
-        self._draws_per_slot = K * N + 1 + K
         self._layout = observation_layout(c)
         z = np.zeros
         self.key = z(num_envs, dtype=np.uint64)
@@ -117,16 +127,11 @@ class BatchedSimulator:
     def _draw_slot(self, rows: NDArray[np.intp] | slice) -> None:
         """Compute incidence for the current pose and draw H(t), P(t) for ``rows``."""
         c = self.config
-        K, N = c.num_users, c.num_elements
         axes = ph.ris_axes(self.att[rows])
         u, v, cos_t, dist = ph.incidence(self.pos[rows], self.users, axes)
-        keys = streams.slot_key(self.key[rows], self.episode[rows], self.t[rows])
-        bits = streams.raw_bits(keys, self._draws_per_slot)
-        nlos = streams.complex_normals(bits[:, : K * N]).reshape(-1, K, N)
-        unif = streams.uniforms(bits[:, K * N:])
+        nlos, pairing = slot_draws(c, streams.slot_key(self.key[rows], self.episode[rows], self.t[rows]))
         h = ph.rician_channels(u, v, cos_t, dist, nlos, rician_factor=c.rician_factor,
                                pathloss_exponent=c.pathloss_exponent, nx=c.nx, ny=c.ny, spacing=c.element_spacing)
-        pairing = ph.pairing_from_uniforms(unif[:, 0], unif[:, 1:], c.pairs_upper)
         if isinstance(rows, slice) and rows == slice(None):
             # Whole batch: rebind rather than copy, so arrays handed out in a step's info
             # keep describing that step.

@@ -64,6 +64,7 @@ from uavris.agents.oracle.objective import (
     feasible,
     feasible_grid,
     rate_batches,
+    top_apart,
     trip_slots,
 )
 from uavris.config import SystemConfig
@@ -82,12 +83,19 @@ class PlanSettings:
     seed: int = 0  # common random numbers of R
     exact: bool = True  # rank every pose with R itself (the reference); False: with the cheap estimate, 11x cheaper
     check_batches: int = 8  # fresh batches the finalists are valued on (step 5), and the plan's numbers
+    # the global stage (step 2b): the cheap R, interference included, on a coarse grid of the whole region
+    global_step: float = 3.0  # m across; 0: none (the screen alone: the demonstrations' teacher, TEACHER)
+    global_z_step: float = 1.5  # m in height
+    global_regions: int = 6  # its best places, a grid step apart, valued by R beside the screen's
+    refine_from: int = 2  # the best candidates the pattern search starts from
 
     def __post_init__(self) -> None:
-        for name in ("grid_step", "refine_step", "min_step"):
+        for name in ("grid_step", "refine_step", "min_step", "global_z_step"):
             if not (math.isfinite(getattr(self, name)) and getattr(self, name) > 0):
                 raise ValueError(f"PlanSettings.{name} must be > 0, got {getattr(self, name)!r}")
-        for name in ("candidates", "nlos_draws"):
+        if not (math.isfinite(self.global_step) and self.global_step >= 0):
+            raise ValueError(f"PlanSettings.global_step must be >= 0 (0: no global stage), got {self.global_step!r}")
+        for name in ("candidates", "nlos_draws", "refine_from"):
             if getattr(self, name) < 1:
                 raise ValueError(f"PlanSettings.{name} must be >= 1, got {getattr(self, name)!r}")
         if self.check_batches < 2:
@@ -123,6 +131,10 @@ class Plan:
 RANK_DRAWS = 1
 RANK_OPTIMISER = dict(restarts=0, noise_levels=(1e3, 1.0), iterations=20)
 
+
+# Today's planner without the global stage: the demonstrations' teacher, made in hundreds of halls,
+# where the yardstick's cost (the oracle's, made once per evaluated hall) must not go.
+TEACHER = PlanSettings(global_step=0.0, refine_from=1)
 
 FINALIST_CANDIDATES = 3  # the best candidates by the planning value, unrefined, among the finalists beside the refined
 
@@ -169,11 +181,45 @@ def plan_target(config: SystemConfig, start: tuple[float, float, float], setting
     rate = exact_rate if s.exact else valuer(False)
 
     peaks, _ = screen(c, s.grid_step)
-    cands = np.concatenate([start_q[None], peaks[:s.candidates]])
+    found = [peaks[:s.candidates]]
+    if s.global_step > 0:
+        found.append(global_places(c, s, start_q, valuer(False)))
+    cands = distinct(np.concatenate([start_q[None], *found]))  # the start first
     r = rate(cands, level)
     vals = episode_value(c.horizon, trip_slots(c, start_q, cands), r[0], r)
-    best = int(np.argmax(vals))
-    q, att, r_best = cands[best].copy(), level.copy(), float(r[best])
+    order = np.argsort(-vals, kind="stable")
+    refined = [refine(c, s, cands[i], float(r[i]), rate) for i in order[:s.refine_from] if i != 0]
+    table = tuple((tuple(float(x) for x in p), float(rv), float(vv)) for p, rv, vv in zip(cands, r, vals))
+    runners_up = [cands[i] for i in order[:FINALIST_CANDIDATES] if i != 0]
+    finalists = [(start_q, level), *refined, *((p, level) for p in runners_up)]
+    return check_finalists(c, s, start_q, finalists, valued, table)
+
+
+def distinct(places: NDArray) -> NDArray[np.float64]:
+    """``places`` with each one once, in their order."""
+    keep = [i for i in range(len(places)) if not any(np.array_equal(places[i], places[j]) for j in range(i))]
+    return places[keep]
+
+
+def global_places(c: SystemConfig, s: PlanSettings, start_q: NDArray, cheap: Any) -> NDArray[np.float64]:
+    """Step 2b: the cheap ``R`` (interference and every pairing included, unlike the screen) of
+    every feasible place of a coarse grid over the whole region, level; its ``global_regions``
+    best by the episode value of flying there, at least a grid step apart. The screen's
+    interference-free score misses the places where the devices' links interfere least, which
+    is what decides a hall of many devices."""
+    grid, ok = feasible_grid(c, s.global_step, s.global_z_step)
+    places = grid[ok]
+    if not len(places):
+        return np.zeros((0, 3))
+    level = np.zeros(3)
+    r0 = float(cheap(start_q[None], level)[0])
+    vals = episode_value(c.horizon, trip_slots(c, start_q, places), r0, cheap(places, level))
+    return places[top_apart(vals, places, s.global_regions, s.global_step - 1e-9)]
+
+
+def refine(c: SystemConfig, s: PlanSettings, q: NDArray, r_q: float, rate: Any) -> tuple[NDArray, NDArray]:
+    """Step 4: the pattern search on ``R`` from place ``q`` (level), down to ``min_step``."""
+    q, att, r_best = q.copy(), np.zeros(3), r_q
     pos_step, att_step = s.refine_step, c.attitude_step_rad
     for _ in range(s.max_refinements):
         if pos_step < s.min_step:
@@ -188,10 +234,7 @@ def plan_target(config: SystemConfig, start: tuple[float, float, float], setting
             q, att, r_best = nq[ok][i], ph.wrap_angle(na[ok][i]), float(nr[i])
         else:
             pos_step, att_step = pos_step / 2, att_step / 2
-    table = tuple((tuple(float(x) for x in p), float(rv), float(vv)) for p, rv, vv in zip(cands, r, vals))
-    runners_up = [cands[i] for i in np.argsort(-vals, kind="stable")[:FINALIST_CANDIDATES] if i != 0]
-    finalists = [(start_q, level), (q, att), *((p, level) for p in runners_up)]
-    return check_finalists(c, s, start_q, finalists, valued, table)
+    return q, att
 
 
 def pattern_neighbours(c: SystemConfig, q: NDArray, att: NDArray, pos_step: float, att_step: float

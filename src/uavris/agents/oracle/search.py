@@ -10,9 +10,12 @@ expected episode average of flying from rest at ``start`` to a pose and hovering
 the pose (:func:`.objective.expected_optimised_rate`). The search:
 
 1. every feasible position of a grid (``grid_step`` across, ``z_step`` in height), level;
-2. at the ``top`` best by value (at least ``grid_step`` apart), every attitude of a grid of
+2. around its ``fine_places`` best (at least ``grid_step`` apart), every feasible position of a
+   finer grid (``fine_step``, within ``fine_reach`` of the place), level: wider than the learned
+   planner's 2 m and 0.5 m grids, which found places above the oracle's;
+3. at the ``top`` best so far (at least ``grid_step`` apart), every attitude of a grid of
    yaw, pitch and roll (``attitudes_deg`` each);
-3. a pattern search in position and attitude from each of the ``refine`` best, down to
+4. a pattern search in position and attitude from each of the ``refine`` best, down to
    ``min_step``, over the planner's own neighbours (:func:`.planner.pattern_neighbours`: the
    attitude safety layer's limit included where the system has one).
 
@@ -36,6 +39,7 @@ from uavris.agents.oracle.objective import (
     ASSESS_SEED,
     episode_value,
     expected_optimised_rate,
+    feasible,
     feasible_grid,
     rate_batches,
     top_apart,
@@ -51,9 +55,12 @@ Valuer = Callable[[NDArray[np.float64], NDArray[np.float64]], NDArray[np.float64
 class SearchSettings:
     grid_step: float = 2.0  # m, across the hall
     z_step: float = 1.0  # m, in height
+    fine_step: float = 0.5  # m, the finer grid around the best places
+    fine_reach: float = 1.0  # m, each way from such a place
+    fine_places: int = 8  # the places the finer grid surrounds
     top: int = 12  # positions whose attitudes are searched
     attitudes_deg: tuple[float, ...] = (-20.0, -10.0, 0.0, 10.0, 20.0)  # each of yaw, pitch, roll
-    refine: int = 3  # poses the pattern search starts from
+    refine: int = 6  # poses the pattern search starts from
     refine_step: float = 1.0  # m, first pattern-search step (the attitude's: attitude_step_deg)
     min_step: float = 0.0625  # m, the pattern search stops below this step
     draws: int = 2  # NLoS draws per pairing in R
@@ -91,6 +98,11 @@ def exhaustive_plan(config: SystemConfig, start: tuple[float, float, float],
     places, ok = feasible_grid(c, s.grid_step, s.z_step)
     grid = np.concatenate([start_q[None], places[ok]])
     v = value(grid, np.zeros_like(grid))
+    ticks = np.arange(-s.fine_reach, s.fine_reach + 1e-9, s.fine_step)
+    offsets = np.stack(np.meshgrid(ticks, ticks, ticks, indexing="ij"), -1).reshape(-1, 3)
+    near = np.concatenate([grid[i] + offsets for i in top_apart(v, grid, s.fine_places, s.grid_step - 1e-9)])
+    near = near[feasible(c, near)]
+    grid, v = np.concatenate([grid, near]), np.concatenate([v, value(near, np.zeros_like(near))])
     chosen = top_apart(v, grid, s.top, s.grid_step - 1e-9)  # the best, at least a grid step apart
     angles = np.radians(np.array(list(itertools.product(s.attitudes_deg, repeat=3))))
     poses = [(grid[i], a) for i in chosen for a in angles]

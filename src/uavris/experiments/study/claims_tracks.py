@@ -202,7 +202,7 @@ def _fewer(name: str, seeds: list[int], pairs: list[dict[str, Any]], unit: str) 
 
 # ------------------------------------------------------------------------------ the deployment track
 DEPLOYMENT_DT = variant_key("dt-zero-shot", safe=True)  # the paper's DT (return-conditioned) under the safety layer
-GOAL_DT = variant_key("dt-goal", safe=True)  # the goal-conditioned DT told the learned planner's place
+GOAL_DT = variant_key("dt-goal", safe=True)  # the goal-conditioned DT told the semi-amortised place
 FINETUNED_DTS = (variant_key("dt-goal-finetuned", safe=True), variant_key("dt-finetuned", safe=True))
 BC = variant_key("bc", safe=True)
 
@@ -287,7 +287,7 @@ def judge_deployment(study: Study, from_scratch: Sequence[dict[str, Any]] = ()) 
                      "bps/Hz")]
     if complete("goal"):
         out.append(judgement("zero-shot", "deployment", judged(rows["goal"]), unit, "halls",
-                             "the same for the goal-conditioned DT told the learned planner's place (uavris's "
+                             "the same for the goal-conditioned DT told the semi-amortised place (uavris's "
                              "controller; the cell's second entry)"))
     ablation = "fine-tuning in the unseen halls runs with --ablation only"
     if complete("finetuned"):

@@ -193,8 +193,11 @@ def _learned_rows(track: Track, site: Site, sources: list[tuple[str, float]], di
     value = Target.of_model(dirs["value"] / "value", "value") if "value" in dirs else None
     if train and site.devices != train[0].devices:  # a flat encoder's weights read its training halls' count only
         models = [m for m in models if dict(m.model).get("state_encoder") != "flat"]
+    # the headline controller is told the semi-amortised place (V's top places and staying, valued by R):
+    # never worse than staying, where V's argmax alone can be (docs/places.md)
+    semi = dataclasses.replace(value, top_k=SEMI_TOP_K) if value is not None else None
     for m in models:
-        goal = {"goal_from": value} if m.row == "dt-goal" else {}
+        goal = {"goal_from": semi} if m.row == "dt-goal" else {}
         rows.append((Row(m.row, m.label, Target.of_model(dirs[m.stage] / "model"), seed=m.seed if seeded else None,
                          training_halls=m.halls, **goal), not m.ablation))
     for m in models:  # fine-tuned by trying places in this hall: it keeps the place it chose
@@ -206,7 +209,7 @@ def _learned_rows(track: Track, site: Site, sources: list[tuple[str, float]], di
         rows += [(Row("plan-learned", "learned planner's place (V's argmax), flown by the oracle's controller",
                       value), False),
                  (Row("plan-semi", f"learned planner's top {SEMI_TOP_K} places valued by R, flown by the oracle's "
-                      "controller", dataclasses.replace(value, top_k=SEMI_TOP_K)), False)]
+                      "controller", semi), False)]
     dts = [Target.of_model(dirs[m.stage] / "model") for m in models if m.row == "dt-zero-shot"]
     if len(dts) > 1:
         rows.append((Row("dt-ensemble", f"zero-shot DT, ensemble of the {len(dts)} seeds' models (mean action)",
@@ -268,7 +271,8 @@ def trained_models(track: Track, train: Sequence[str], scaling: Sequence[int], s
                                   "conditioning)"))
     if track.places:  # told a goal rather than a return: each demonstration's own plan target in training
         kinds.append(TrainedModel("goal", "dataset", (), (("goal", True), ("condition_on_return", False)), "dt-goal",
-                                  "goal-conditioned DT, told the learned planner's place"))
+                                  f"goal-conditioned DT, told the semi-amortised place (V's top {SEMI_TOP_K} and "
+                                  "staying, valued by R)"))
     if ablation and track.ablation:
         if track.layouts:
             kinds += [TrainedModel(f"pretrain-n{n}", "dataset", (("scenarios", tuple(train[:n])),), (),

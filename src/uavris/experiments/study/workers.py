@@ -109,9 +109,10 @@ def finetune_job(cfg_dict: dict[str, Any], out: str, device: str = "cpu") -> dic
 
 
 # The evaluation stages' results: 2 records each row's facts (uavris.experiments.tools.targets.Row.facts),
-# which the report and the claims read; part of the stages' keys, so that a study of the earlier format is
-# evaluated again rather than read without them.
-RESULTS_FORMAT = 2
+# which the report and the claims read; 3 the planner a goal-conditioned row is told its place by (the
+# headline DT: the semi-amortised place, no longer V's argmax). Part of the stages' keys, so that a study of
+# an earlier format is evaluated again rather than read without them.
+RESULTS_FORMAT = 3
 
 
 def evaluate_job(out: str, site: Site, track: str, episodes: int, rows: Sequence[Row]) -> dict[str, Any]:

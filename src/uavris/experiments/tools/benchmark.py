@@ -36,7 +36,7 @@ from uavris.stats import over_units, t_interval
 
 Cells = Literal["all", "scenarios", "layouts"]
 MIN_UNITS_FOR_CI = 3  # an interval over cells (halls, scenarios) is printed from this many on
-COLUMNS = ("cell", "kind", "mean", "ci_low", "ci_high", "zero_action", "hover_optimizer", "oracle",
+COLUMNS = ("cell", "kind", "mean", "ci_low", "ci_high", "zero_action", "hover_optimizer", "oracle", "bound",
            "fraction_of_oracle", "minus_zero_action", "minus_zero_action_low", "minus_zero_action_high",
            "minus_hover_optimizer", "minus_hover_optimizer_low", "minus_hover_optimizer_high", "minus_oracle",
            "minus_oracle_low", "minus_oracle_high")
@@ -140,6 +140,7 @@ def _cell(target: Target, cell: Cell, episodes: int, out: Path, system: SystemCo
         warning = warning or summary.get("warning")
         if key == "target":
             hall = {k: summary[k] for k in ("hall", "layout", "start", "system")}
+            bound = summary["bound"]["mean"]
     x, zero, hover, oracle = (_episodes(paths[k]) for k in ("target", ZERO_ACTION, HOVER_OPTIMIZER, ORACLE))
     low, high = t_interval(x)
     d_low, d_high = t_interval(x - zero)
@@ -148,7 +149,7 @@ def _cell(target: Target, cell: Cell, episodes: int, out: Path, system: SystemCo
         lo, hi = t_interval(x - ref)
         paired.update({f"minus_{name}": float((x - ref).mean()), f"minus_{name}_low": lo, f"minus_{name}_high": hi})
     return {"cell": cell.name, "kind": cell.kind, "mean": float(x.mean()), "ci_low": low, "ci_high": high,
-            "zero_action": float(zero.mean()), "oracle": float(oracle.mean()),
+            "zero_action": float(zero.mean()), "oracle": float(oracle.mean()), "bound": bound,
             "fraction_of_oracle": float(x.mean() / oracle.mean()), "minus_zero_action": float((x - zero).mean()),
             "minus_zero_action_low": d_low, "minus_zero_action_high": d_high, "hover_optimizer": float(hover.mean()),
             **paired, "hall": hall, **({"warning": warning} if warning else {})}
@@ -174,7 +175,8 @@ def benchmark_table(summary: dict[str, Any]) -> str:
         return f"{signed(r[f'minus_{ref}'])} {interval(r[f'minus_{ref}_low'], r[f'minus_{ref}_high'], signed)}"
 
     rows = [(r["cell"], f"{num(r['mean'])} {rate_interval(r['ci_low'], r['ci_high'])}", num(r["zero_action"]),
-             num(r["hover_optimizer"]), num(r["oracle"]), pct(r["fraction_of_oracle"]), minus(r, "zero_action"),
+             num(r["hover_optimizer"]), num(r["oracle"]), num(r.get("bound")), pct(r["fraction_of_oracle"]),
+             minus(r, "zero_action"),
              minus(r, "hover_optimizer"), minus(r, "oracle"))
             for r in summary["cells"]]
     for kind, s in summary["over"].items():
@@ -184,7 +186,7 @@ def benchmark_table(summary: dict[str, Any]) -> str:
         few = f"[n/a: {f['n']} {kind}{'s' * (f['n'] != 1)}]"  # Student's t on 1 degree of freedom reads nothing
         ci = interval(f["ci_low"], f["ci_high"], percent) if f["n"] >= MIN_UNITS_FOR_CI else few
         dci = interval(d["ci_low"], d["ci_high"], signed) if d["n"] >= MIN_UNITS_FOR_CI else few
-        rows.append((f"**mean over {f['n']} {kind}s** (95% CI over {kind}s)", "", "", "", "",
+        rows.append((f"**mean over {f['n']} {kind}s** (95% CI over {kind}s)", "", "", "", "", "",
                      f"{percent(f['mean'])}% {ci}", f"{signed(d['mean'])} {dci}", "", ""))
     where = ("on the study's protocol" if summary.get("layout") is None else
              f"in your hall {Path(summary['layout']).name} (the protocol's episodes)")
@@ -195,7 +197,7 @@ def benchmark_table(summary: dict[str, Any]) -> str:
              f"Student-t 95% CI over cells from {MIN_UNITS_FOR_CI} cells on (n/a with fewer: on one degree of "
              "freedom the interval spans more than the values it summarises).", "",
              *markdown_table(("cell", "target [95% CI]", "zero action", "hover, optimiser's phases", "oracle",
-                              "fraction of oracle", "target - zero action [95% CI]",
+                              "bound (no controller above)", "fraction of oracle", "target - zero action [95% CI]",
                               "target - hover, optimiser's phases [95% CI]", "target - oracle [95% CI]"), rows,
-                             "lrrrrrrrr")]
+                             "lrrrrrrrrr")]
     return "\n".join(lines) + "\n"

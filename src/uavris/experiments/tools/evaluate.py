@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 
 from uavris.agents.evaluation import EpisodeResults, check_episodes, evaluate
+from uavris.agents.oracle.bound import episode_bounds
 from uavris.agents.policy import fit_policy
 from uavris.agents.references import HOVER_OPTIMIZER, ORACLE, REFERENCE_SEED, ZERO_ACTION, reference_policy
 from uavris.config import SCENARIOS, Scenario, SystemConfig, get_scenario
@@ -43,10 +44,13 @@ def evaluated_key(summary: dict[str, Any]) -> str:
     return hashlib.sha256(json.dumps(what, sort_keys=True).encode()).hexdigest()[:8]
 
 
-def write_results(res: EpisodeResults, summary: dict[str, Any], stem: Path) -> None:
-    rows = zip(res.seeds.tolist(), res.avg_sum_rate.tolist(), res.episode_return.tolist(), res.length.tolist(),
-               res.energy_used.tolist())
-    write_csv(stem.parent / f"{stem.name}.csv", ("seed", "avg_sum_rate", "return", "length", "energy_j"), rows)
+def write_results(res: EpisodeResults, summary: dict[str, Any], stem: Path, bound: Any = None) -> None:
+    """The per-episode CSV (with each episode's bound where given,
+    :func:`~uavris.agents.oracle.bound.episode_bounds`) and the summary JSON."""
+    columns = [res.seeds.tolist(), res.avg_sum_rate.tolist(), res.episode_return.tolist(), res.length.tolist(),
+               res.energy_used.tolist()] + ([] if bound is None else [np.asarray(bound).tolist()])
+    header = ("seed", "avg_sum_rate", "return", "length", "energy_j") + (() if bound is None else ("bound",))
+    write_csv(stem.parent / f"{stem.name}.csv", header, zip(*columns))
     write_json(stem.parent / f"{stem.name}.json", summary)
 
 
@@ -121,6 +125,10 @@ def evaluate_target(target: str | Target | Row, scenario: str | Scenario | None,
     outside = outside_training(row, evaluated, file_token(row, study_row))
     if outside:
         summary["warning"] = outside
+    # what no controller can exceed on these episodes (agents.oracle.bound): the room left above any result
+    bound = episode_bounds(evaluated, res.seeds)
+    summary["bound"] = {"mean": float(bound.mean()), "episodes_above": int((res.avg_sum_rate > bound).sum())}
+    summary["fraction_of_bound"] = summary["mean"] / summary["bound"]["mean"]
     if refs:
         summary["references"] = {name: r.summary() for name, r in refs.items()}
         oracle = summary["references"][ORACLE]["mean"]
@@ -135,7 +143,7 @@ def evaluate_target(target: str | Target | Row, scenario: str | Scenario | None,
         write_slots(log, stem.parent / f"{stem.name}-slots.csv")
         trajectory_plot(log, evaluated, stem.parent / f"{stem.name}-trajectory",
                         f"{row.key} in {where.name}, episode seed {seed}")
-    write_results(res, summary, stem)
+    write_results(res, summary, stem, bound)
     return summary, stem.parent / f"{stem.name}.json"
 
 

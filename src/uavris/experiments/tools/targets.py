@@ -155,6 +155,13 @@ class Target:
         where, attr = self.name.rsplit(":", 1)
         return file_part(f"{Path(where).name}_{attr}")
 
+    def planner(self) -> str:
+        """The planner this target is, as a goal source names it (:meth:`goal_source`)."""
+        if self.kind == "value":
+            return (f"semi-amortised planner (V's top {self.top_k} places and staying, valued by R)" if self.top_k
+                    else "learned planner (V's argmax)")
+        return "planning oracle" if self.kind == "reference" and self.reference == "oracle" else self.name
+
     def origin(self) -> str:
         """Where the policy comes from, as a result records it: a reference's name, a user's
         policy with its file's absolute path, a model's or run's absolute directory. Two targets
@@ -268,7 +275,8 @@ class Row:
         return {"name": self.name, "kind": self.kind, "variant": self.variant, "seed": self.seed,
                 "front_margin_deg": self.front_margin_deg, "level": self.level, "rank": self.rank,
                 "training_halls": self.training_halls,
-                "plan_of": self.plan_of.name if self.plan_of is not None else None}
+                "plan_of": self.plan_of.name if self.plan_of is not None else None,
+                "goal_from": self.goal_from.planner() if self.goal_from is not None else None}
 
     @property
     def key(self) -> str:

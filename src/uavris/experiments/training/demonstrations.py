@@ -22,7 +22,8 @@ Quality (``DemonstrationConfig.quality``):
   the start, and the oracle's motion with Gaussian noise (``noise`` on every motion entry),
   each with its true returns: the dataset on which return conditioning can matter.
 
-Plans: the cheap ranking of the planner (``PlanSettings(exact=False)``) chooses each hall's
+Plans: the teacher (``TEACHER``: the planner without the global stage that makes the yardstick) in
+its cheap ranking (``exact=False``) chooses each hall's
 target, 11x cheaper than the reference planner for plans worth 0.23% less on average (1.2%
 in the worst of 27 halls and scenarios measured): a demonstration is training data, not a
 reference, and the plan was most of a demonstration's cost (``exact_plans`` restores it).
@@ -43,7 +44,7 @@ from numpy.typing import NDArray
 
 from uavris.agents.dt.dataset import DATASET_NAMESPACE, check_dataset_target, write_dataset
 from uavris.agents.dt.trajectories import Trajectory, record_episodes
-from uavris.agents.oracle.planner import PlanSettings
+from uavris.agents.oracle.planner import TEACHER
 from uavris.agents.oracle.policy import PlannedFlight, PlanningOracle
 from uavris.agents.policy import Privileged
 from uavris.config import DictConfig, SystemConfig
@@ -118,7 +119,7 @@ def demonstrate(cfg: DemonstrationConfig, first: int = 0, count: int | None = No
     gets ``poses_valued``: the model queries behind the plans (poses valued with the optimiser),
     which the claims count beside the environment interactions."""
     layouts = cfg.layouts(first, count)
-    oracle = PlanningOracle(settings=PlanSettings(exact=cfg.exact_plans))
+    oracle = PlanningOracle(settings=dataclasses.replace(TEACHER, exact=cfg.exact_plans))
     resolved = [layout.resolve(cfg.system) for layout in layouts]
     out: list[Trajectory] = []
     for i, (system, where) in enumerate(resolved):

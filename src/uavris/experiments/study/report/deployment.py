@@ -32,7 +32,7 @@ from uavris.stats import over_units
 ZERO_SHOT_TARGET, FINETUNED_TARGET = 0.96, 0.98
 # Targets of the rows that choose a place (docs/places.md): (row, mean, worst hall, what it is)
 PLACE_TARGETS: tuple[tuple[str, float, float | None, str], ...] = (
-    ("dt-goal-safe", 0.97, 0.92, "zero-shot: the learned planner's place, flown by the goal-conditioned DT"),
+    ("dt-goal-safe", 0.97, 0.92, "zero-shot: the semi-amortised place, flown by the goal-conditioned DT"),
     ("plan-semi", 0.99, None, "the semi-amortised planner's place (top places valued by R)"),
     ("dt-goal-finetuned-safe", 0.985, 0.95, "the goal-conditioned DT fine-tuned by trying places"))
 COUNT_TARGET = 0.96  # at every device count, the zero-shot place row (docs/places.md)
@@ -198,7 +198,7 @@ def _place_claims(summary: dict[str, dict[str, float]], diffs: dict[tuple[str, s
         own, hover = summary.get("dt-goal-safe"), diffs.get(("dt-goal-safe", HOVER_OPTIMIZER))
         if own is not None and hover is not None:
             holds = own["mean"] >= COUNT_TARGET and hover["ci_low"] > 0
-            out.append(f"**the learned planner's place flown by the goal-conditioned DT >= "
+            out.append(f"**the semi-amortised place flown by the goal-conditioned DT >= "
                        f"{COUNT_TARGET:.0%} of the oracle and above hovering with optimised phases**: "
                        f"{'holds' if holds else 'does not hold'} ({with_ci(own, pct)}; minus hovering "
                        f"{with_ci(hover, signed)} bps/Hz, {_excludes_zero(hover)}).")

@@ -1,0 +1,69 @@
+"""One float path on every x86-64 CPU, so that the references give the same numbers everywhere.
+
+Lives here: :func:`pin_float_paths`, which ``import uavris`` calls before numpy or torch load, and
+:data:`PINNED`, what it sets. Not here: the computations (they are written once, whatever the CPU).
+
+Why: numpy, OpenBLAS, MKL and torch choose their kernels by the CPU they run on. An Intel Xeon
+with AVX-512 and an AMD EPYC with AVX2 then round a transcendental function, a dot product or a
+matrix product differently (numpy's AVX-512 exp, log and sin of float64 against libm's, OpenBLAS's
+SkylakeX kernels against its Haswell ones), and an oracle's plan that chooses between two places
+worth nearly the same went one way on one machine and the other way on the other (docs/timings.md,
+"One float path"). Every x86-64 CPU that runs uavris has AVX2, so that level is the one path:
+the AVX-512 kernels are switched off before the libraries load, in this process and in every
+worker it starts (they inherit the environment). The cost is the AVX-512 kernels' speed on the
+CPUs that have them.
+
+What a user set is kept (the variables are set only where absent), ``UAVRIS_NATIVE_FLOATS=1``
+leaves every library to choose, and a process that imported numpy or torch before uavris keeps
+the paths they chose (a library cannot change them once loaded: import uavris first, or set
+:data:`PINNED` in the environment).
+"""
+
+from __future__ import annotations
+
+import os
+import platform
+import sys
+from importlib import metadata
+
+# numpy 2.4 dispatches by x86-64 levels (X86_V3 is AVX2, X86_V4 AVX-512), earlier releases by features
+_NUMPY_AVX512 = {"levels": "X86_V4 AVX512_ICL AVX512_SPR",
+                 "features": "AVX512F AVX512CD AVX512_KNL AVX512_KNM AVX512_SKX AVX512_CLX AVX512_CNL AVX512_ICL "
+                             "AVX512_SPR"}
+PINNED: dict[str, str] = {
+    "OPENBLAS_CORETYPE": "Haswell",  # numpy's and scipy's BLAS: the AVX2 kernels
+    "MKL_CBWR": "AVX2",  # torch's MKL: conditional numerical reproducibility on the AVX2 path
+    "MKL_ENABLE_INSTRUCTIONS": "AVX2",
+    "ONEDNN_MAX_CPU_ISA": "AVX2",  # torch's oneDNN
+    "ATEN_CPU_CAPABILITY": "avx2",  # torch's own vectorised kernels
+}
+
+
+def _numpy_names() -> str:
+    try:
+        major, minor = (int(x) for x in metadata.version("numpy").split(".")[:2])
+    except (metadata.PackageNotFoundError, ValueError):
+        return _NUMPY_AVX512["levels"]
+    return _NUMPY_AVX512["levels" if (major, minor) >= (2, 4) else "features"]
+
+
+def _has_avx2() -> bool:
+    try:
+        with open("/proc/cpuinfo", encoding="utf-8") as f:
+            return any(line.startswith("flags") and " avx2 " in f" {line.split(':', 1)[-1].strip()} " for line in f)
+    except OSError:
+        return False
+
+
+def pin_float_paths() -> dict[str, str]:
+    """Set the environment that pins every library to the AVX2 path (module docstring), where it
+    applies: an x86-64 CPU with AVX2, numpy and torch not yet loaded, no ``UAVRIS_NATIVE_FLOATS``.
+    Returns what it set."""
+    if os.environ.get("UAVRIS_NATIVE_FLOATS") or platform.machine().lower() not in ("x86_64", "amd64"):
+        return {}
+    if "numpy" in sys.modules or "torch" in sys.modules or not _has_avx2():
+        return {}
+    wanted = {"NPY_DISABLE_CPU_FEATURES": _numpy_names(), **PINNED}
+    done = {k: v for k, v in wanted.items() if k not in os.environ}
+    os.environ.update(done)
+    return done
