@@ -13,6 +13,8 @@ export NO_MKDOCS_2_WARNING := 1
 $(STAMP): pyproject.toml constraints.txt
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet -c constraints.txt -e '.[train,test,docs]'
+	# the phase optimiser's kernel compiled once, up front (numba caches it for every later process)
+	$(PY) -c "from uavris.physics.phase_opt import compile_optimiser; compile_optimiser()"
 	touch $(STAMP)
 
 run: $(STAMP)

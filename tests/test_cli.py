@@ -409,3 +409,22 @@ def test_ctrl_c_names_only_a_flag_the_command_has(cmd, monkeypatch, capsys):
     assert main([cmd, "--help"]) == 0
     offers = "--resume" in capsys.readouterr().out
     assert ("--resume" in line) == offers, (cmd, line)
+
+
+def test_the_first_use_of_the_optimiser_says_it_compiles(monkeypatch, tmp_path, capsys):
+    """Where the compiled kernel is in no cache, the first command that optimises phases says so in
+    one line first; where it is cached (after make's install step), a fresh process finds it."""
+    import subprocess
+    import sys
+
+    from uavris.physics import phase_opt
+
+    monkeypatch.setattr(phase_opt, "kernel_ready", lambda: False)
+    assert main(["evaluate", "hover-optimizer", "--scenario", "fig2", "--episodes", "1", "--no-progress",
+                 "--out", str(tmp_path)]) == 0
+    err = capsys.readouterr().err.splitlines()
+    assert err[0].startswith("uavris: compiling the phase optimiser, once: about") and len(err) == 1, err
+    phase_opt.compile_optimiser()  # in this process: compiled, so in numba's cache
+    fresh = subprocess.run([sys.executable, "-c", "from uavris.physics.phase_opt import kernel_ready; "
+                            "print(kernel_ready())"], capture_output=True, text=True, check=True, timeout=120)
+    assert fresh.stdout.strip() == "True"

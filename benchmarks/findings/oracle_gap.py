@@ -53,17 +53,45 @@ def halls(counts: list[int], per_count: int, other_counts: list[int], other: int
 DEARER = 10  # the search costs at least this many times the oracle's time
 
 
-def measure(split: str, j: int, k: int) -> dict:
-    """One hall: today's planner, the oracle and the search, timed, and their values on fresh draws.
-    The search's grids are halved (up to twice) until it costs at least :data:`DEARER` times the
-    oracle."""
-    from dataclasses import replace
+def search(system: object, start: tuple, oracle_s: float, path: pathlib.Path) -> tuple[object, dict]:
+    """The wide search of one hall, read from ``path`` where an earlier run made it at least
+    :data:`DEARER` times the oracle's cost; else made (its grids halved, up to twice, until it is)
+    and written there. The search does not depend on the oracle: a changed oracle reuses it."""
+    from dataclasses import asdict, replace
 
     import numpy as np
 
+    from uavris.agents.oracle.search import Found, SearchSettings, exhaustive_plan
+    from uavris.io import read_json, write_json
+
+    if path.exists():
+        kept = read_json(path)
+        if kept["search_s"] >= DEARER * oracle_s:
+            return Found(np.array(kept["target"]), np.array(kept["attitude"]), kept["value"],
+                         kept["poses_valued"]), kept
+    settings = SearchSettings()
+    for _ in range(3):  # where R is cheap (3 devices), denser grids
+        began = time.perf_counter()
+        found = exhaustive_plan(system, start, settings)
+        seconds = time.perf_counter() - began
+        if seconds >= DEARER * oracle_s:
+            break
+        settings = replace(settings, grid_step=settings.grid_step / 2, z_step=settings.z_step / 2,
+                           fine_step=settings.fine_step / 2)
+    kept = {"target": found.target.tolist(), "attitude": found.attitude.tolist(), "value": found.value,
+            "poses_valued": found.poses_valued, "search_s": seconds, "settings": asdict(settings)}
+    write_json(path, kept)
+    return found, kept
+
+
+def measure(split: str, j: int, k: int, out: pathlib.Path) -> dict:
+    """One hall: today's planner, the oracle and the search (:func:`search`), timed, and their values
+    on fresh draws."""
+    import numpy as np
+
     from uavris.agents.oracle import plan_target
-    from uavris.agents.oracle.planner import TEACHER
-    from uavris.agents.oracle.search import SearchSettings, exhaustive_plan, plan_gap
+    from uavris.agents.oracle.planner import TEACHER, PlanSettings
+    from uavris.agents.oracle.search import plan_gap
     from uavris.config import SystemConfig
     from uavris.layouts import LayoutGenerator
 
@@ -75,21 +103,15 @@ def measure(split: str, j: int, k: int) -> dict:
     began = time.perf_counter()
     oracle = plan_target(system, where.start)
     timed["oracle_s"] = time.perf_counter() - began
-    settings = SearchSettings()
-    for _ in range(3):  # the search at least 10x the oracle's cost: where R is cheap (3 devices), denser
-        began = time.perf_counter()
-        found = exhaustive_plan(system, where.start, settings)
-        timed["search_s"] = time.perf_counter() - began
-        if timed["search_s"] >= DEARER * timed["oracle_s"]:
-            break
-        settings = replace(settings, grid_step=settings.grid_step / 2, z_step=settings.z_step / 2,
-                           fine_step=settings.fine_step / 2)
+    found, kept = search(system, where.start, timed["oracle_s"], out / f"{where.name}.search.json")
+    timed["search_s"] = kept["search_s"]
     g, t = plan_gap(system, where.start, oracle, found), plan_gap(system, where.start, teacher, found)
     return {"devices": k, "split": split, "index": j, **timed, "poses_searched": found.poses_valued,
-            "search_grid_m": [settings.grid_step, settings.z_step, settings.fine_step],
+            "oracle_settings": str(PlanSettings()), "search_settings": kept["settings"],
             "oracle": g.oracle_value, "teacher": t.oracle_value, "search": g.search_value, "stay": g.stay_value,
             "search_minus_oracle": g.difference, "search_minus_oracle_se": g.difference_se,
-            "oracle_target": np.round(oracle.target, 3).tolist(), "search_target": np.round(found.target, 3).tolist()}
+            "oracle_target": np.round(oracle.target, 3).tolist(), "search_target": np.round(found.target, 3).tolist(),
+            "oracle_attitude_deg": np.round(np.degrees(oracle.attitude), 1).tolist()}
 
 
 def summary_rows(done: dict[str, dict]) -> tuple[list[tuple[str, ...]], list[tuple[str, ...]]]:
@@ -136,10 +158,12 @@ def main(argv: list[str] | None = None) -> int:
     args.out.mkdir(parents=True, exist_ok=True)
     todo = halls(args.counts, args.halls, args.other_counts, args.other)
     done: dict[str, dict] = {}
+    from uavris.agents.oracle.planner import PlanSettings
+
     for name, split, j, k in todo:
         path = args.out / f"{name}.json"
-        if not path.exists():
-            write_json(path, {**measure(split, j, k), "cpu": cpu_model()})
+        if not path.exists() or read_json(path).get("oracle_settings") != str(PlanSettings()):  # another oracle
+            write_json(path, {**measure(split, j, k, args.out), "cpu": cpu_model()})
         done[name] = read_json(path)
         print(table(summary_rows({name: done[name]})[0]).splitlines()[-1], flush=True)
     per_hall, per_count = summary_rows(done)

@@ -35,8 +35,9 @@ import os
 import signal
 import sys
 import threading
+import warnings
 from types import FrameType
-from typing import Callable, Iterator
+from typing import Any, Callable, Iterator
 
 from uavris.errors import UavrisError
 
@@ -175,8 +176,28 @@ def _stopping_on_signals() -> Iterator[_OnStop]:
 
 def main(argv: list[str] | None = None) -> int:
     """Run ``uavris`` on ``argv`` (default: the process's); returns the exit code."""
-    with _stopping_on_signals() as stop:
+    with _stopping_on_signals() as stop, _notices():
         return _main(argv, stop)
+
+
+@contextlib.contextmanager
+def _notices() -> Iterator[None]:
+    """What the library says while a command runs (the optimiser being compiled, once), as one line
+    ``uavris: ...`` on stderr rather than Python's warning with its file and line."""
+    show = warnings.showwarning
+
+    def one_line(message: Warning | str, category: type[Warning], filename: str, lineno: int, file: Any = None,
+                 line: str | None = None) -> None:
+        if category.__name__ == "CompileNotice":
+            print(f"{PROG}: {message}", file=sys.stderr, flush=True)
+        else:
+            show(message, category, filename, lineno, file, line)
+
+    warnings.showwarning = one_line
+    try:
+        yield
+    finally:
+        warnings.showwarning = show
 
 
 def _main(argv: list[str] | None, stop: _OnStop) -> int:

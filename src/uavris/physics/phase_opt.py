@@ -118,7 +118,9 @@ optimiser does not explore.
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -127,6 +129,43 @@ from uavris import physics as ph
 from uavris.config import SystemConfig
 from uavris.physics import streams
 from uavris.physics.phase_kernel import solve_slots
+
+# The first compile of the kernel on one core (measured: docs/timings.md); numba caches it beside the
+# module (or in NUMBA_CACHE_DIR) and every later process loads it in well under a second.
+COMPILE_S = 25
+
+
+class CompileNotice(UserWarning):
+    """The phase optimiser's kernel is being compiled: once, then numba's cache serves every process."""
+
+
+def kernel_ready() -> bool:
+    """Whether the optimiser's compiled kernel is at hand: compiled in this process, or in numba's cache."""
+    if solve_slots.signatures:
+        return True
+    cache = getattr(getattr(solve_slots, "_cache", None), "cache_path", None)
+    return cache is not None and any(Path(cache).glob("phase_kernel.solve_slots-*.nbi"))
+
+
+def announce_compile() -> None:
+    """One notice (:class:`CompileNotice`, shown once) before the first use compiles the kernel: a
+    first run that waits half a minute says why."""
+    if not kernel_ready():
+        warnings.warn(f"compiling the phase optimiser, once: about {COMPILE_S} s (later runs load it from numba's "
+                      "cache)", CompileNotice, stacklevel=3)
+
+
+def compile_optimiser() -> None:
+    """Compile (or load) the kernel now, on one slot of two active pairs: what ``make`` does once after
+    installing, so that no run or test waits for it."""
+    c = SystemConfig()
+    rng = np.random.default_rng(0)
+    h = (rng.standard_normal((1, c.num_users, c.num_elements))
+         + 1j * rng.standard_normal((1, c.num_users, c.num_elements)))
+    pairing = np.zeros((1, c.num_users, c.num_users))
+    pairing[0, 0, 1] = pairing[0, 2, 3] = 1.0
+    optimize_slot_phases(c, h, np.ones((1, c.num_users)), pairing)
+
 
 TWO_PI = 2.0 * np.pi
 LN2 = np.log(2.0)
@@ -349,6 +388,7 @@ def optimize_phases(channels: ArrayLike, cos_theta: ArrayLike, pairing: ArrayLik
 
     multi = np.flatnonzero(npairs >= 2)
     if multi.size:
+        announce_compile()
         # Reduced problem on the active links only (padding links get zero channels).
         pad = valid[multi][..., None]
         h_tx = np.take_along_axis(h[multi], tx[multi][..., None], axis=1) * pad  # (M, L, N)
