@@ -364,7 +364,7 @@ def sweep_command(args: list[str]) -> None:
             a = replace(a, targets=(str(_row_controller(row_of, a.row, a.track, out / "controller")),))
     paths = sweep(a.targets, axes, out, base=a.system, scenario=a.scenario or hall, episodes=a.episodes, halls=a.halls,
                   workers=a.workers, backend=a.backend, progress=a.progress, trust_pickle=a.trust_pickle,
-                  warn=lambda w: print(f"uavris: warning: {w}", file=sys.stderr))
+                  warn=lambda w: print(f"uavris: warning: {w}", file=sys.stderr), layout=a.layout)
     print("wrote " + ", ".join(str(p) for p in paths))
 
 

@@ -178,17 +178,20 @@ def sweep_cell(target: str, system: dict[str, Any], scenario: dict[str, Any], ep
     loaded = row.load(cfg)
     policy = fit_policy(loaded.policy, cfg, target)
     res = evaluate(policy, cfg, Scenario(scenario["name"], tuple(scenario["start"])), episodes, EVAL_SEED)
-    write_json(Path(out), {"target": target, "mean": float(res.avg_sum_rate.mean()),
-                           "rates": res.avg_sum_rate.tolist()})
+    write_json(Path(out), {"target": target, "model": row.origin(), "mean": float(res.avg_sum_rate.mean()),
+                           "rates": res.avg_sum_rate.tolist(), "system": cfg.to_dict(),
+                           "scenario": scenario["name"], "start": list(scenario["start"])})
 
 
 def sweep(targets: Sequence[str], axes: Sequence[Axis], out: Path, *, base: SystemConfig | None = None,
           scenario: str | Any | None = None, episodes: int = 16, halls: int = 4, workers: int = 1,
           backend: str = "local", progress: bool = False, trust_pickle: bool = False,
-          warn: Callable[[str], None] | None = None) -> list[Path]:
+          warn: Callable[[str], None] | None = None, layout: str | None = None) -> list[Path]:
     """Every ``target`` in every cell of the grid of ``axes`` (one or two), written to ``out``
-    (module docstring); returns the paths of the CSV and the figures."""
+    (module docstring); returns the paths of the CSV and the figures. ``layout``: the layout the
+    hall came from (the CLI's ``--layout``), recorded in ``sweep.json``."""
     from uavris.agents.evaluation import check_episodes
+    from uavris.experiments.tools.evaluate import layout_origin
     from uavris.experiments.tools.targets import resolve_target
 
     if not 1 <= len(axes) <= 2 or len({a.name for a in axes}) != len(axes):
@@ -219,7 +222,8 @@ def sweep(targets: Sequence[str], axes: Sequence[Axis], out: Path, *, base: Syst
             if found:
                 warn(found)
     spec = {"targets": list(targets), "axes": [to_plain(a) for a in axes], "episodes": episodes, "seed": EVAL_SEED,
-            "halls": halls, "scenario": scenario, "system": base.to_dict()}
+            "halls": halls, "scenario": scenario, "system": base.to_dict(),
+            **({"layout": layout_origin(layout)} if layout is not None else {})}
     old = other_inputs(Path(out) / "sweep.json", spec)
     if old is not None:
         raise ConfigError(f"{out} holds another sweep ({'; '.join(spec_differences(old, spec))}); give this one "
