@@ -1,3 +1,6 @@
+# isort: off
+import uavris  # noqa: F401 - first: it pins the float path before numpy loads, as in every worker (float_paths)
+# isort: on
 import os
 
 import numpy as np

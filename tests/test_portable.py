@@ -6,6 +6,7 @@ made them differ: in 1,597 of 4,352 values of 256 slots, by up to 7.6 bps/Hz in 
 
 from __future__ import annotations
 
+import json
 import os
 import subprocess
 import sys
@@ -13,6 +14,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+
+from uavris.float_paths import PINNED
 
 SCRIPT = """
 import sys
@@ -88,3 +91,29 @@ def test_import_uavris_pins_every_library_to_the_avx2_path() -> None:
     native = _paths({"UAVRIS_NATIVE_FLOATS": "1"})
     assert native["set"] == {"NPY_DISABLE_CPU_FEATURES": None, "OPENBLAS_CORETYPE": None, "MKL_CBWR": None}
     assert _paths({"OPENBLAS_CORETYPE": "Nehalem"})["blas"] == ["Nehalem"]  # the user's choice is kept
+
+
+@pytest.mark.skipif(os.uname().machine != "x86_64", reason="the pinned path is x86-64's AVX2")
+def test_a_process_that_loaded_numpy_first_and_its_workers_take_one_path(tmp_path: Path) -> None:
+    """numpy imported before uavris cannot be pinned any more; the workers it starts must then keep
+    their native path too, or a row evaluated in the process and the same row evaluated in a worker
+    differ in the last digits on a CPU with AVX-512 (they did, in CI). And this suite's own process
+    is pinned like its workers (tests/conftest.py imports uavris first)."""
+    script = (
+        "import json, subprocess, sys\n"
+        "import numpy\n"
+        "import warnings\n"
+        "with warnings.catch_warnings():\n"
+        "    warnings.simplefilter('ignore')\n"
+        "    import uavris\n"
+        "child = subprocess.run([sys.executable, '-c', 'import os, uavris; "
+        "print(os.environ.get(\"NPY_DISABLE_CPU_FEATURES\"))'], capture_output=True, text=True, check=True)\n"
+        "print(json.dumps(child.stdout.strip()))\n"
+    )
+    clean = {k: v for k, v in os.environ.items()
+             if k not in ("NPY_DISABLE_CPU_FEATURES", "UAVRIS_NATIVE_FLOATS", *PINNED)}
+    out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, env=clean, check=True,
+                         timeout=120)
+    assert json.loads(out.stdout.strip().splitlines()[-1]) == "None"  # the worker kept the native path, as its parent
+    if "avx2" in Path("/proc/cpuinfo").read_text() and not os.environ.get("UAVRIS_NATIVE_FLOATS"):
+        assert os.environ.get("NPY_DISABLE_CPU_FEATURES")  # this process: pinned, like the workers it starts

@@ -13,9 +13,12 @@ the AVX-512 kernels are switched off before the libraries load, in this process 
 worker it starts (they inherit the environment). The cost is the AVX-512 kernels' speed on the
 CPUs that have them.
 
-What a user set is kept (the variables are set only where absent), ``UAVRIS_NATIVE_FLOATS=1``
-leaves every library to choose, and a process that imported numpy or torch before uavris keeps
-the paths they chose (a library cannot change them once loaded: import uavris first, or set
+What a user set is kept (the variables are set only where absent), and ``UAVRIS_NATIVE_FLOATS=1``
+leaves every library to choose. A process that imported numpy or torch before uavris keeps the
+paths they chose (a library cannot change them once loaded), so its workers are told to keep
+theirs too (``UAVRIS_NATIVE_FLOATS=1`` in the environment they inherit): a result made in the
+process and one made in a worker then agree, and on a CPU with AVX-512 a warning says that the
+numbers may differ from another CPU's in the last digits (import uavris first, or set
 :data:`PINNED` in the environment).
 """
 
@@ -24,6 +27,7 @@ from __future__ import annotations
 import os
 import platform
 import sys
+import warnings
 from importlib import metadata
 
 # numpy 2.4 dispatches by x86-64 levels (X86_V3 is AVX2, X86_V4 AVX-512), earlier releases by features
@@ -47,10 +51,10 @@ def _numpy_names() -> str:
     return _NUMPY_AVX512["levels" if (major, minor) >= (2, 4) else "features"]
 
 
-def _has_avx2() -> bool:
+def _has_flag(flag: str) -> bool:
     try:
         with open("/proc/cpuinfo", encoding="utf-8") as f:
-            return any(line.startswith("flags") and " avx2 " in f" {line.split(':', 1)[-1].strip()} " for line in f)
+            return any(line.startswith("flags") and f" {flag} " in f" {line.split(':', 1)[-1].strip()} " for line in f)
     except OSError:
         return False
 
@@ -61,8 +65,16 @@ def pin_float_paths() -> dict[str, str]:
     Returns what it set."""
     if os.environ.get("UAVRIS_NATIVE_FLOATS") or platform.machine().lower() not in ("x86_64", "amd64"):
         return {}
-    if "numpy" in sys.modules or "torch" in sys.modules or not _has_avx2():
+    if not _has_flag("avx2"):
         return {}
+    if "numpy" in sys.modules or "torch" in sys.modules:
+        # Too late for this process; its workers follow it rather than take another path.
+        os.environ["UAVRIS_NATIVE_FLOATS"] = "1"
+        if _has_flag("avx512f"):
+            warnings.warn("uavris: numpy or torch was imported before uavris, so this process and its workers use "
+                          "this CPU's AVX-512 kernels and the numbers may differ from another CPU's in the last digits "
+                          "(import uavris first)", stacklevel=3)
+        return {"UAVRIS_NATIVE_FLOATS": "1"}
     wanted = {"NPY_DISABLE_CPU_FEATURES": _numpy_names(), **PINNED}
     done = {k: v for k, v in wanted.items() if k not in os.environ}
     os.environ.update(done)
