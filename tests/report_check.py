@@ -26,6 +26,26 @@ def _zero(lo: float, hi: float) -> str:
     return "above zero" if lo > 0 else "below zero" if hi < 0 else "includes zero"
 
 
+def _verdict(n: int, low: float, high: float, target: float = 0.0, strict: bool = True) -> str:
+    """The CI rule, written out here: not measured under 3 halls; holds where the interval is above the
+    target (at or above it for a fraction's target), refuted where below, else not resolved."""
+    if n < 3:
+        return "not measured"
+    if np.isnan(low) or np.isnan(high):
+        return "not resolved"
+    if (low > target) if strict else (low >= target):
+        return "holds"
+    return "refuted" if high < target else "not resolved"
+
+
+def _every(*verdicts: str) -> str:
+    if "refuted" in verdicts:
+        return "refuted"
+    if all(v == "holds" for v in verdicts):
+        return "holds"
+    return "not measured" if "not measured" in verdicts else "not resolved"
+
+
 def _pct3(m: tuple[float, float, float]) -> str:
     return f"{m[0]:.1%} [{m[1]:.1%}, {m[2]:.1%}]"
 
@@ -125,9 +145,9 @@ def _check_place_claims(claims: list[str], where: str, keys: list[str], stat: di
         if "dt-goal-safe" not in keys:
             return 0
         [claim] = [c for c in claims if c.startswith(f"- {where}: **the semi-amortised place flown by")]
-        hover = diffs[("dt-goal-safe", "hover-optimizer")]
-        holds = stat["dt-goal-safe"][0] >= 0.96 and hover[1] > 0
-        assert f"**: {'holds' if holds else 'does not hold'} ({_pct3(stat['dt-goal-safe'])}; minus hovering " \
+        hover, n = diffs[("dt-goal-safe", "hover-optimizer")], len(frac["dt-goal-safe"])
+        word = _every(_verdict(n, *stat["dt-goal-safe"][1:3], 0.96, strict=False), _verdict(n, *hover[1:3]))
+        assert f"**: {word} ({_pct3(stat['dt-goal-safe'])}; minus hovering " \
                f"{_num3(hover[:3])} bps/Hz, {hover[3]})." in claim, claim
         return 1
     count = 0
@@ -136,10 +156,12 @@ def _check_place_claims(claims: list[str], where: str, keys: list[str], stat: di
             continue
         count += 1
         [claim] = [c for c in claims if f">= {mean:.1%} of the oracle" in c and c.startswith(f"- {where}: **")]
-        holds = stat[key][0] >= mean and (worst is None or min(frac[key]) >= worst)
+        n = len(frac[key])
+        parts = [_verdict(n, *stat[key][1:3], mean, strict=False)]
+        parts += [] if worst is None else ["holds" if min(frac[key]) >= worst else "refuted"]
         if key == "dt-goal-safe":
-            holds = holds and diffs[(key, "hover-optimizer")][1] > 0 and diffs[(key, "nearest")][1] > 0
-        assert f"**: {'holds' if holds else 'does not hold'} ({_pct3(stat[key])} of the oracle, worst hall " \
+            parts += [_verdict(n, *diffs[(key, other)][1:3]) for other in ("hover-optimizer", "nearest")]
+        assert f"**: {_every(*parts)} ({_pct3(stat[key])} of the oracle, worst hall " \
                f"{min(frac[key]):.1%}" in claim, claim
     return count
 
@@ -157,8 +179,10 @@ def _check_score_claims(claims: list[str], where: str, keys: list[str], stat: di
         [claim] = [c for c in claims if c.startswith(f"- {where}: **{what} >= ")]
         target = int(re.search(r">= (\d+)% of the oracle", claim).group(1)) / 100
         hover, near = diffs[(key, "hover-optimizer")], diffs[(key, "nearest")]
-        holds = stat[key][0] >= target and hover[1] > 0 and near[1] > 0
-        assert f"**: {'holds' if holds else 'does not hold'} (" in claim, claim
+        n = len(hover[4])
+        word = _every(_verdict(n, *stat[key][1:3], target, strict=False), _verdict(n, *hover[1:3]),
+                      _verdict(n, *near[1:3]))
+        assert f"**: {word} (" in claim, claim
         assert (f"({_pct3(stat[key])} of the oracle; minus hovering {_num3(hover[:3])} bps/Hz, {hover[3]}; minus "
                 f"nearest {_num3(near[:3])} bps/Hz, {near[3]})." in claim), claim
     for ft, zs, what in (("dt-finetuned", "dt-zero-shot", "fine-tuned DT"),
@@ -168,9 +192,10 @@ def _check_score_claims(claims: list[str], where: str, keys: list[str], stat: di
         expected += 1
         [claim] = [c for c in claims if c.startswith(f"- {where}: **{what} >= ")]
         target = int(re.search(r">= (\d+)% of the oracle", claim).group(1)) / 100
-        holds = stat[ft][0] >= target and stat[ft][0] >= stat[zs][0]
         gain = diffs[(ft, zs)]
-        assert f"**: {'holds' if holds else 'does not hold'} (" in claim, claim
+        n = len(gain[4])
+        assert f"**: {_every(_verdict(n, *stat[ft][1:3], target, strict=False), _verdict(n, *gain[1:3]))} (" \
+            in claim, claim
         assert f"(fine-tuned {_pct3(stat[ft])}; fine-tuned minus zero-shot {_num3(gain[:3])} bps/Hz)." in claim, claim
     for pair, what in ((("dt-zero-shot", "bc"), "**return conditioning on demonstrations of one quality"),
                        (("dt-zero-shot-safe", "bc-safe"), "**return conditioning under the attitude safety layer"),

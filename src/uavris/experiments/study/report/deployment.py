@@ -26,7 +26,7 @@ from uavris.agents.references import HOVER_OPTIMIZER, ORACLE
 from uavris.experiments.display.plots import REFERENCE_STYLE, plt, save_figure
 from uavris.experiments.display.tables import MISSING, markdown_table, pct, signed, with_ci
 from uavris.experiments.tools.targets import variant_key
-from uavris.stats import over_units
+from uavris.stats import HOLDS, MIN_UNITS, NOT_MEASURED, NOT_RESOLVED, REFUTED, over_units, verdict
 
 # Targets of the deployment track (docs/study.md, section 2).
 ZERO_SHOT_TARGET, FINETUNED_TARGET = 0.96, 0.98
@@ -130,6 +130,35 @@ def _seeded(res: dict[str, dict[str, Any]]) -> dict[str, dict[int, float]]:
     return out
 
 
+def at_least(s: dict[str, float], target: float) -> str:
+    """A target on a mean over halls, by the CI rule: it holds where the 95% CI is at or above
+    the target, is refuted where it is below, is not resolved otherwise, and is not measured
+    with fewer than :data:`~uavris.stats.MIN_UNITS` halls (a mean alone is no verdict)."""
+    if s.get("n", 0) < MIN_UNITS:
+        return NOT_MEASURED
+    low, high = s["ci_low"], s["ci_high"]
+    if not (np.isfinite(low) and np.isfinite(high)):
+        return NOT_RESOLVED
+    return HOLDS if low >= target else REFUTED if high < target else NOT_RESOLVED
+
+
+def above(d: dict[str, float] | None) -> str:
+    """"Above" by a paired difference over halls: the CI rule, not measured under 3 halls."""
+    if d is None or d.get("n", 0) < MIN_UNITS:
+        return NOT_MEASURED
+    return verdict(d["ci_low"], d["ci_high"])
+
+
+def every(*verdicts: str) -> str:
+    """The verdict on several conditions at once: refuted where one is, holds where all do, not
+    measured where one is and none is refuted, not resolved otherwise."""
+    if REFUTED in verdicts:
+        return REFUTED
+    if all(v == HOLDS for v in verdicts):
+        return HOLDS
+    return NOT_MEASURED if NOT_MEASURED in verdicts else NOT_RESOLVED
+
+
 def _excludes_zero(s: dict[str, float]) -> str:
     if math.isnan(s["ci_low"]):
         return "not resolved (one layout)"
@@ -197,10 +226,10 @@ def _place_claims(summary: dict[str, dict[str, float]], diffs: dict[tuple[str, s
     if zero_shot_only:
         own, hover = summary.get("dt-goal-safe"), diffs.get(("dt-goal-safe", HOVER_OPTIMIZER))
         if own is not None and hover is not None:
-            holds = own["mean"] >= COUNT_TARGET and hover["ci_low"] > 0
+            judged = every(at_least(own, COUNT_TARGET), above(hover))
             out.append(f"**the semi-amortised place flown by the goal-conditioned DT >= "
                        f"{COUNT_TARGET:.0%} of the oracle and above hovering with optimised phases**: "
-                       f"{'holds' if holds else 'does not hold'} ({with_ci(own, pct)}; minus hovering "
+                       f"{judged} ({with_ci(own, pct)}; minus hovering "
                        f"{with_ci(hover, signed)} bps/Hz, {_excludes_zero(hover)}).")
         return out
     for key, mean, worst, what in PLACE_TARGETS:
@@ -208,17 +237,18 @@ def _place_claims(summary: dict[str, dict[str, float]], diffs: dict[tuple[str, s
         if own is None:
             continue
         low = float(min(frac[key]))
-        holds = own["mean"] >= mean and (worst is None or low >= worst)
+        # the worst hall is a fact of these halls, not an estimate: a hall below it refutes
+        parts = [at_least(own, mean), *([] if worst is None else [HOLDS if low >= worst else REFUTED])]
         extra = ""
         if key == "dt-goal-safe":
             hover, near = diffs.get((key, HOVER_OPTIMIZER)), diffs.get((key, NEAREST))
-            holds = holds and all(d is not None and d["ci_low"] > 0 for d in (hover, near))
+            parts += [above(hover), above(near)]
             extra = "".join(f"; minus {name} {with_ci(d, signed)} bps/Hz, {_excludes_zero(d)}"
                             for name, d in (("hovering", hover), ("nearest", near)) if d is not None)
         target = f">= {mean:.1%} of the oracle" + (f", no hall below {worst:.0%}" if worst is not None else "")
         if key == "dt-goal-safe":
             target += ", above hovering with optimised phases and the nearest training hall's plan"
-        out.append(f"**{what} {target}**: {'holds' if holds else 'does not hold'} "
+        out.append(f"**{what} {target}**: {every(*parts)} "
                    f"({with_ci(own, pct)} of the oracle, worst hall {pct(low)}{extra}).")
     return out
 
@@ -231,10 +261,10 @@ def _claims(summary: dict[str, dict[str, float]], diffs: dict[tuple[str, str], d
         own, hover, near = summary.get(key), diffs.get((key, HOVER_OPTIMIZER)), diffs.get((key, NEAREST))
         if own is None or near is None or hover is None:
             continue
-        holds = own["mean"] >= ZERO_SHOT_TARGET and hover["ci_low"] > 0 and near["ci_low"] > 0
+        judged = every(at_least(own, ZERO_SHOT_TARGET), above(hover), above(near))
         out.append(f"**{what} >= {ZERO_SHOT_TARGET:.0%} of the oracle, above hovering with "
                    f"optimised phases and above the nearest training hall's expert (paired CIs over layouts "
-                   f"excluding zero)**: {'holds' if holds else 'does not hold'} ({with_ci(own, pct)} of the oracle; "
+                   f"excluding zero)**: {judged} ({with_ci(own, pct)} of the oracle; "
                    f"minus hovering {with_ci(hover, signed)} bps/Hz, {_excludes_zero(hover)}; minus nearest "
                    f"{with_ci(near, signed)} bps/Hz, {_excludes_zero(near)}).")
     for ft_key, zs_key, what in (("dt-finetuned", "dt-zero-shot", "fine-tuned DT"),
@@ -243,9 +273,9 @@ def _claims(summary: dict[str, dict[str, float]], diffs: dict[tuple[str, str], d
         ft, zs, gain = summary.get(ft_key), summary.get(zs_key), diffs.get((ft_key, zs_key))
         if ft is None or zs is None:
             continue
-        holds = ft["mean"] >= FINETUNED_TARGET and ft["mean"] >= zs["mean"]
-        out.append(f"**{what} >= {FINETUNED_TARGET:.0%} of the oracle and not below "
-                   f"zero-shot**: {'holds' if holds else 'does not hold'} (fine-tuned {with_ci(ft, pct)}; "
+        judged = every(at_least(ft, FINETUNED_TARGET), above(gain))
+        out.append(f"**{what} >= {FINETUNED_TARGET:.0%} of the oracle and above "
+                   f"zero-shot**: {judged} (fine-tuned {with_ci(ft, pct)}; "
                    "fine-tuned minus "
                    f"zero-shot {with_ci(gain, signed) if gain else 'n/a'} bps/Hz).")
     for (a, b), what in ((("dt-zero-shot", "bc"), "return conditioning on demonstrations of one quality (DT minus "
