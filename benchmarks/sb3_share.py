@@ -1,4 +1,4 @@
-"""Where an SB3 expert's training time goes: the environment or the learner (issue 30).
+"""Where an SB3 expert's training time goes: the environment or the learner.
 
 For each algorithm of the comparison at the quick preset (its networks, batch, ``n_envs`` and
 one gradient step per environment step), on one core: the seconds per environment step of

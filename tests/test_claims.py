@@ -141,7 +141,7 @@ def test_interactions_to_level_charges_a_side_that_starts_there_nothing():
 
 
 def test_both_sides_are_charged_to_the_same_level():
-    """The strong track's case of issue 44: the zero-shot DT already at the expert's level; the
+    """The strong track's case: the zero-shot DT already at the expert's level; the
     old count charged the expert until it reached the fine-tuned level and fine-tuning its
     whole budget (about -23,000); the one rule charges fine-tuning nothing."""
     expert = (np.array([23_000.0, 30_000.0, 40_000.0]), np.array([41.0, 43.0, 45.0]))  # imitation, then RL
@@ -154,17 +154,23 @@ def test_both_sides_are_charged_to_the_same_level():
     assert slow["finetune"] == 8_000.0 and slow["high_bound"]  # never there: its budget, an upper bound on the gain
 
 
-def test_a_censored_side_decides_only_the_verdict_it_cannot_overturn():
-    d = np.array([5_000.0, 6_000.0, 5_500.0, 6_200.0])  # expert minus fine-tuning, clearly positive
-    none = np.zeros(4, dtype=bool)
-    some = np.array([True, False, False, False])
+def test_a_censored_unit_leaves_the_verdict_not_resolved():
+    """A unit known only as a bound supports no verdict of a t interval: its true value can widen
+    the interval past zero. Units [10, 11, 12, 10.5, 11.5] hold; with the last only a lower bound
+    whose true value is 200, the interval (scipy's t, computed here) holds zero."""
+    d = np.array([10.0, 11.0, 12.0, 10.5, 11.5])
+    none, last = np.zeros(5, dtype=bool), np.array([False, False, False, False, True])
     assert judged_censored(d, none, none)["verdict"] == HOLDS
-    assert judged_censored(d, some, none)["verdict"] == HOLDS  # the expert's lower bound: the gain is larger still
-    assert judged_censored(d, none, some)["verdict"] == NOT_RESOLVED  # fine-tuning censored: could be smaller
-    assert judged_censored(-d, some, none)["verdict"] == NOT_RESOLVED  # a lower bound cannot refute
-    assert judged_censored(-d, none, some)["verdict"] == REFUTED
-    both = judged_censored(d, some, some)
-    assert both["verdict"] == NOT_RESOLVED and both["censored"] == 1  # both censored in a unit: unknown
+    worse = d.copy()
+    worse[-1] = 200.0
+    low, high = sps.t.interval(0.95, 4, loc=worse.mean(), scale=worse.std(ddof=1) / np.sqrt(5))
+    assert low < 0 < high  # the bound's true value overturns "holds"
+    for lows, highs in ((last, none), (none, last), (last, last)):
+        got = judged_censored(d, lows, highs)
+        assert got["verdict"] == NOT_RESOLVED and got["censored"] == 1
+        got = judged_censored(-d, lows, highs)
+        assert got["verdict"] == NOT_RESOLVED  # an upper-bound unit at -200 makes "refuted" fall the same way
+    assert judged_censored([1.0, -1.0, 0.5], [True, False, False], [False] * 3)["verdict"] == NOT_RESOLVED
 
 
 def test_the_scenarios_of_one_seed_are_one_unit():
@@ -223,3 +229,22 @@ def test_a_seed_is_one_unit_per_track():
                  study(0, "deployment")])
     with pytest.raises(UavrisError, match="strong track share a seed"):
         check_seeds([study(0, "paper", "strong"), study(1, "strong"), study(1, "strong", "paper")])
+
+
+def test_within_five_percent_of_an_expert_below_doing_nothing_is_not_a_verdict():
+    """The paper track's experts scored 10.74 and 10.58 against the zero action's 12.36 and 12.49:
+    the zero action also "comes within 5%" of them. A "holds" then says nothing: not resolved,
+    with the reason; a "refuted" stands, as does any "holds" against an expert above doing nothing."""
+    from uavris.experiments.study.claims_tracks import against_a_real_expert
+    from uavris.experiments.study.judgement import judgement
+
+    near = judgement("near-expert", "paper", judged([0.5, 0.4, 0.45, 0.6, 0.3]), "u", "seeds", "fine-tuned minus 95%")
+    assert near.verdict == HOLDS
+    below = judged([-1.6, -1.9, -1.5, -1.8, -1.7])  # expert minus zero action, per seed
+    cell = against_a_real_expert(near, below)
+    assert cell.verdict == NOT_RESOLVED and "not above the zero action" in cell.text and cell.mean == near.mean
+    assert against_a_real_expert(near, judged([0.1, -0.2, 0.3, 0.0, -0.1])).verdict == NOT_RESOLVED
+    assert against_a_real_expert(near, judged([2.0, 2.5, 1.8, 2.2, 2.1])).verdict == HOLDS
+    assert against_a_real_expert(near, None).verdict == HOLDS
+    refuted = judgement("near-expert", "paper", judged([-0.5, -0.4, -0.45, -0.6, -0.3]), "u", "seeds", "t")
+    assert against_a_real_expert(refuted, below).verdict == REFUTED

@@ -3,6 +3,7 @@ stages over seeds, the data curve reusing finished points, the nearest hall's pl
 
 from __future__ import annotations
 
+import csv
 import dataclasses
 import re
 import shutil
@@ -437,3 +438,33 @@ def test_an_exported_controller_says_its_seed_and_scores_an_episode_alone_as_in_
     flight = read_json(tmp_path / "p.json")["controller_flight"]
     assert flight["average_sum_rate"] == float(batch[0]["avg_sum_rate"])  # the episode evaluate flies
     assert f"dt-goal-safe, told this place, ends episode seed {EVAL_SEED} at" in printed
+
+
+def test_the_fine_tuning_claims_judge_the_papers_dt_in_every_hall(deployment_run):
+    """With --ablation both the paper's DT fine-tuned by its Algorithm 1 and the goal-conditioned
+    DT fine-tuned by trying places are run; the fine-tuning cells judge the paper's, in every hall,
+    and say so; its "raises the DT" difference is the paired one of those two rows, computed here."""
+    from uavris.experiments.study.claims_tracks import judge_deployment
+    from uavris.experiments.study.finished import Study
+
+    out, _ = deployment_run
+    cells = {j.claim: j for j in judge_deployment(Study.open(out)) if j.claim in ("finetuned", "near-expert")}
+    assert set(cells) == {"finetuned", "near-expert"}
+    assert all("the paper's DT fine-tuned in the hall by its Algorithm 1" in j.text for j in cells.values())
+    track = TRACK_SPECS["deployment"]
+    study = Study.open(out)
+    gains = []
+    for w in study.sites(track)[1]:
+        found = study.evaluation(track, w.name)
+        if found is None:
+            continue
+        edir, res = found
+        per = {}
+        for variant in ("dt-finetuned-safe", "dt-zero-shot-safe"):
+            keys = [k for k, r in res.items() if r.get("variant") == variant]
+            if keys:  # each seed's per-episode average sum rates, read from its CSV here, averaged over seeds
+                per[variant] = np.mean([[float(r["avg_sum_rate"]) for r in csv.DictReader((edir / f"{k}.csv").open())]
+                                        for k in keys], axis=0)
+        if len(per) == 2:
+            gains.append(float(np.mean(per["dt-finetuned-safe"] - per["dt-zero-shot-safe"])))
+    assert cells["finetuned"].n == len(gains) and cells["finetuned"].mean == pytest.approx(np.mean(gains))

@@ -387,7 +387,7 @@ def _stage_files(root: Path) -> set[Path]:
 
 @pytest.mark.slow
 def test_a_study_on_ray_nodes_that_share_no_file_system(smoke_run, tmp_path):
-    """Issue 45: the deployment track on a two-node Ray cluster whose far node sees an empty
+    """The deployment track on a two-node Ray cluster whose far node sees an empty
     file system at OUT, that node killed while it evaluates a hall. The study completes, and
     OUT holds what the local run's holds: every stage's record, the same files, the same
     models, datasets' labels and evaluation tables bit for bit."""

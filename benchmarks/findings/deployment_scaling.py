@@ -1,7 +1,7 @@
 """How the deployment track's generalisation grows with data: zero-shot score in unseen
+layouts against the number of training layouts.
 
 Feeds docs/halls.md.
-layouts against the number of training layouts.
 
 Runs the study's own deployment track (``uavris reproduce --track deployment``) with
 ``--train-layouts`` the largest point and ``--scaling`` the others: one set of experts and

@@ -16,7 +16,7 @@ each ``K`` of ``--devices`` (default 4 and 8), from each hall's start:
 Value: ``R`` of each plan's target (the exact plan with its attitude, the learned ones level)
 on the fresh draws plans state their numbers with (:func:`~uavris.agents.oracle.objective.assessed_rate`,
 every target of a hall on the same draws), as a fraction of the exact plan's. Time: wall
-seconds per hall. Targets (issue 36): the semi-amortised planner >= 99% of the exact plan's
+seconds per hall. Targets: the semi-amortised planner >= 99% of the exact plan's
 value at >= 20x less time per hall.
 
 Run: ``python benchmarks/findings/place_planner.py --value runs/quick/stages/deploy-value-*/value``.

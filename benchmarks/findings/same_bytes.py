@@ -4,7 +4,7 @@ Feeds docs/reproducing.md.
 
 Usage: ``python benchmarks/findings/same_bytes.py runs/w1 runs/w2``
 
-Issue 18's check: the same command with ``--workers 1`` (pinned to one core) and
+The check: the same command with ``--workers 1`` (pinned to one core) and
 ``--workers 2`` must write the same files. Compared: every file of every stage directory
 present in both, byte for byte. Left out, because they record when and how long rather
 than what: ``timing.json``, TensorBoard event files (``tb/``, which stamp wall-clock

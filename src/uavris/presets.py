@@ -92,8 +92,8 @@ STRONG_IMITATION: dict[str, dict[str, Any]] = {
 # The study (``uavris reproduce``, uavris.experiments.study.config.ReproduceConfig):
 # evaluation episodes per policy, comparison seeds per algorithm and environment steps per run,
 # expert trajectories per training scenario (the paper: 500). quick: 3 seeds and 25,000 steps
-# (250 episodes): the study was to fit 30 minutes on 2 cores (it now takes about an hour:
-# docs/timings.md), and at 50,000 steps the comparison took 31 of its 86 core-minutes. Its
+# (250 episodes), because at 50,000 steps the comparison took 31 of the study's 86 core-minutes
+# (the study's time on 2 cores: docs/timings.md). Its
 # curves still rise at 25,000 steps (PPO crosses the zero action between 100,000 and 400,000:
 # docs/results/budget.md), so the quick comparison's verdicts hold at that budget only; paper
 # keeps 5 seeds and the paper's ~25,000 episodes.

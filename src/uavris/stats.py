@@ -153,14 +153,15 @@ def interactions_to_level(steps: ArrayLike, values: ArrayLike, level: float) -> 
 
 def judged_censored(differences: ArrayLike, low_bounds: ArrayLike, high_bounds: ArrayLike) -> dict[str, float]:
     """:func:`judged` of per-unit differences some of which are censored: a difference that is
-    only a lower bound (the true one is at least it: ``low_bounds``) is safe for "holds" and
-    not for "refuted"; an upper bound (``high_bounds``) the other way round. A verdict its
-    censoring could overturn is "not resolved", as is any verdict resting on a unit whose
-    difference is bounded both ways (both sides censored: unknown). Adds ``censored``, the
-    number of censored units."""
+    only a lower bound (the true one is at least it: ``low_bounds``) or only an upper bound
+    (``high_bounds``). A verdict stands only if it stands for every value a censored unit may
+    take, and for a t interval none does: as one unit's value grows without limit the interval's
+    half-width grows faster than its mean (it grows as ``t * sqrt(n - 1) / n`` times the value,
+    the mean as ``1 / n`` times it, and ``t * sqrt(n - 1) > 1`` for every ``n`` at 95%), so the
+    interval comes to hold zero whichever way the unit is censored. A verdict resting on any
+    censored unit is therefore "not resolved" (its interval is still reported, computed at the
+    bounds). Adds ``censored``, the number of censored units."""
     low, high = np.asarray(low_bounds, dtype=bool), np.asarray(high_bounds, dtype=bool)
     out: dict[str, float] = judged(differences)
-    v = out["verdict"]
-    if (low & high).any() or (v == HOLDS and high.any()) or (v == REFUTED and low.any()):
-        v = NOT_RESOLVED
+    v = NOT_RESOLVED if (low | high).any() and out["verdict"] in (HOLDS, REFUTED) else out["verdict"]
     return {**out, "verdict": v, "censored": int((low | high).sum())}

@@ -203,9 +203,23 @@ def _print_evaluation(what: str, summary: dict, path: Path) -> None:
               f"docs/model.md); {what} reaches {100 * summary['fraction_of_bound']:.1f}% of it")
 
 
+@dataclass(frozen=True, kw_only=True)
+class StudyRowFlags:
+    """The flags that score a row of a study (benchmark, sweep): the row, its track, and whether to trust a pickle."""
+
+    row: Unset[str] = None
+    """a row of a study's report, the target being the study's output directory: exported as a controller into
+    OUT/controller (uavris export) and scored as the study scores it"""
+    track: TrackName = "deployment"
+    """the track of --row"""
+    trust_pickle: bool = False
+    """load a run that holds only SB3's pickled archive (uavris 0.3's, or another tool's): reading it runs whatever
+    it holds, so only for runs you trust (uavris's own runs are read from safetensors and JSON)"""
+
+
 # --------------------------------------------------------------------------------------- benchmark
 @dataclass(frozen=True)
-class BenchmarkArgs:
+class BenchmarkArgs(StudyRowFlags):
     target: Annotated[str, tyro.conf.Positional, tyro.conf.arg(metavar="RUN|MODEL|REFERENCE|MODULE:NAME")]
     """what `uavris evaluate` takes: a run or DT model directory, a reference, or your own policy"""
     preset: Preset = "quick"
@@ -226,14 +240,6 @@ class BenchmarkArgs:
     """show a progress bar"""
     system: SystemConfig = SystemConfig()
     """the system: the target's own, with these fields changed"""
-    row: Unset[str] = None
-    """a row of a study's report, the target being the study's output directory: exported as a controller into
-    OUT/controller (uavris export) and scored as the study scores it"""
-    track: TrackName = "deployment"
-    """the track of --row"""
-    trust_pickle: bool = False
-    """load a run that holds only SB3's pickled archive (uavris 0.3's, or another tool's): reading it runs whatever
-    it holds, so only for runs you trust (uavris's own runs are read from safetensors and JSON)"""
 
 
 def benchmark_command(args: list[str]) -> None:
@@ -276,7 +282,7 @@ def benchmark_command(args: list[str]) -> None:
 
 # ------------------------------------------------------------------------------------------- sweep
 @dataclass(frozen=True)
-class SweepArgs:
+class SweepArgs(StudyRowFlags):
     targets: Annotated[tuple[str, ...], tyro.conf.Positional, tyro.conf.arg(metavar="POLICY")]
     """what `uavris evaluate` takes, one or more: a reference (hover-optimizer, oracle, ...), a run or DT model
     directory, or your own policy (MODULE:NAME, FILE.py:NAME)"""
@@ -306,14 +312,6 @@ class SweepArgs:
     """show a progress bar"""
     system: SystemConfig = SystemConfig()
     """the system the grid varies"""
-    row: Unset[str] = None
-    """a row of a study's report, the target being the study's output directory: exported as a controller into
-    OUT/controller (uavris export) and scored as the study scores it"""
-    track: TrackName = "deployment"
-    """the track of --row"""
-    trust_pickle: bool = False
-    """load a run that holds only SB3's pickled archive (uavris 0.3's, or another tool's): reading it runs whatever
-    it holds, so only for runs you trust (uavris's own runs are read from safetensors and JSON)"""
 
 
 def sweep_command(args: list[str]) -> None:

@@ -114,7 +114,7 @@ class UavRisD2DEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
 
     ## Arguments
 
-    ``gymnasium.make("uavris/UavRisD2D-v1", config=None, scenario="fig2")``:
+    ``gymnasium.make("uavris/UavRisD2D-v1", config=None, scenario="fig2", phase_control="agent")``:
 
     - ``config``: the system, a :class:`uavris.config.SystemConfig` or its ``to_dict()`` (an
       environment spec stored as JSON, e.g. by Minari, gives a dict); ``None``: the paper's
@@ -124,6 +124,9 @@ class UavRisD2DEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
       ``[x, y, z]``; it must lie in the flight region and keep ``safety_distance`` from every
       device (else :class:`uavris.errors.ConfigError`). A hall of your own:
       ``system, scenario = layout.resolve(SystemConfig())`` (:mod:`uavris.layouts`).
+    - ``phase_control``: who sets the RIS phases. ``"agent"`` (the paper): the action holds the
+      UAV's motion and the surface's phases; ``"optimizer"``: the action is the motion alone and each
+      slot's phases are the phase optimiser's (:mod:`uavris.physics.phase_opt`, docs/model.md).
 
     ``gymnasium.make_vec("uavris/UavRisD2D-v1", num_envs=n, vectorization_mode="vector_entry_point")``
     gives the batched :class:`uavris.env.vector.UavRisD2DVectorEnv`. ``info`` holds

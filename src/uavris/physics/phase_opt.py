@@ -74,11 +74,11 @@ objective is evaluated on the active links only (``phase_kernel.link_rate``: ``L
 transmitters and their ``L`` receivers, ``L = floor(K/2)``), since users that neither
 transmit nor receive do not enter the sum rate; for ``K = 4`` that halves the work.
 
-Why these settings (measured while writing the numpy version of this module, 0.1.0; two
-seeded sets of two-pair slots of the default system: A = 256 slots at random poses over
-the whole flight region with random tilts up to 0.4 rad, B = 128 slots at the pose where
-the greedy oracle hovered, [19.95, 8, 2], SNRs 1e10-1e12; mean optimised sum rate in
-bps/Hz; rows marked * were measured with an earlier version still; "default" is 0.1.0's):
+Why these settings (measured with a batched numpy form of this solver on two seeded sets of
+two-pair slots of the default system: A = 256 slots at random poses over the whole flight
+region with random tilts up to 0.4 rad, B = 128 slots at the pose where a greedy planner
+hovered, [19.95, 8, 2], SNRs 1e10-1e12; mean optimised sum rate in bps/Hz; rows marked *
+with a gradient-ascent solver before it; "default" is the batched form's settings):
 
 | method | A | B |
 |---|---|---|
@@ -97,12 +97,12 @@ bps/Hz; rows marked * were measured with an earlier version still; "default" is 
 | interference-free bound (sum of the two lone-pair optima) | 31.6 | 64.0 |
 
 The continuation and the polish each matter; starts and iterations beyond the default
-buy little. Since 0.2 the multi-pair stages run compiled (numba), one slot and one start
-at a time, with a textbook L-BFGS memory per start (0.1.0's batched numpy shared one
-circular buffer between a slot's starts), and with 2 random starts instead of 4: on the
-1,024 seeded slots of ``benchmarks/oracle_throughput.py`` (random poses, the default pairing
-draw) the mean sum rate is within 0.1% of 0.1.0's at about 5x its slots per second on one
-core (the benchmark prints both, measured in the same run against a frozen copy of 0.1.0).
+buy little. The multi-pair stages run compiled (numba), one slot and one start at a time,
+each start with its own L-BFGS memory (the batched form shared one buffer between a slot's
+starts), and with 2 random starts (the table: 2 and 4 alike): on the 1,024 seeded slots of
+``benchmarks/oracle_throughput.py`` (random poses, the default pairing draw) the mean sum
+rate is within 0.1% of the batched form's at about 5x its slots per second on one core
+(the benchmark measures both in one run).
 
 Batching: every leading axis of the inputs is a slot axis. Slots with one active pair take
 the closed form (numpy, whole batch); slots without active pair get zero phases and rate

@@ -10,8 +10,8 @@ The paper gives no hyperparameters. Ours, with their reasons:
 
 - Networks: two hidden layers (``net_arch``) for actor and critic; 256 units in ``paper``
   (the common continuous-control size), 64 in ``quick`` because a DDPG gradient step costs
-  ~12 ms on one CPU core at 256 units and ~3 ms at 64, and the quick study (20 runs) must
-  fit 30 minutes on two cores.
+  ~12 ms on one CPU core at 256 units and ~3 ms at 64, and the quick study trains 20 such
+  runs on a laptop's two cores (its time: docs/timings.md).
 - ``gamma`` = 0.95: a slot's reward depends on that slot's phases and pose; moving pays off
   within ~10-20 slots (5-10 s at up to 5 m/s), so a 20-slot effective horizon suffices and
   keeps Q-values small.

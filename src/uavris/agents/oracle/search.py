@@ -149,7 +149,7 @@ class Gap:
 def plan_gap(config: SystemConfig, start: tuple[float, float, float], plan: Plan, found: Found, batches: int = 8,
              seed: int = 0) -> Gap:
     """The episode values of the oracle's plan, the search's pose and staying, each on the same
-    ``batches`` batches of fresh draws (:data:`.planner.ASSESS_SEED` + 5,000: neither the plan's
+    ``batches`` batches of fresh draws (:data:`.objective.ASSESS_SEED` + 5,000: neither the plan's
     draws nor the search's), and the paired difference search minus oracle with its standard error."""
     start_q = np.asarray(start, dtype=np.float64)
     q = np.stack([start_q, plan.target, found.target])

@@ -149,7 +149,9 @@ def rests_on(studies: Sequence[Study]) -> list[str]:
         "- The strong track's experts imitate the planning oracle's motion with optimised phases; the deployment "
         "track's expert is the oracle itself. Neither is trained by DRL.",
         "- The data are scaled down from the paper's (its dataset, DT and fine-tuning rounds at the preset's size: "
-        "`uavris.presets`); fine-tuning keeps elite episodes by return as the paper's Algorithm 1, over fewer rounds.",
+        "`uavris.presets`), over fewer fine-tuning rounds. Fine-tuning keeps its elite episodes by a paired ranking "
+        "within each seed, not by return as the paper's Algorithm 1 (docs/model.md, departure 22); in the "
+        "deployment track from 40 candidates and 25 elites per round, not 80 and 50.",
         "- The deployment track's DT observes the devices (a device-set encoder) and flies under the attitude "
         "safety layer and the safety distance; the paper's DT observes neither.",
     ]

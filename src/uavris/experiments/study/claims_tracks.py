@@ -12,24 +12,26 @@ unseen scenarios, so the scenarios of a seed are averaged into one unit (pooling
 units would count one seed's luck twice). "Fewer interactions" charges each side the
 interactions until it first reaches :data:`LEVEL` of the expert's final evaluation (the
 paper's "competitive performance"; zero for a side that starts there); a side that never
-reaches it is charged its whole budget, a bound that only a verdict it cannot overturn may
-rest on (:func:`uavris.stats.judged_censored`).
+reaches it is charged its whole budget, a bound: a verdict resting on such a unit is "not
+resolved", since its true value could widen the t interval past zero
+(:func:`uavris.stats.judged_censored`).
 """
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 from typing import Any, Sequence
 
 import numpy as np
 
-from uavris.agents.references import HOVER_OPTIMIZER, ORACLE
+from uavris.agents.references import HOVER_OPTIMIZER, ORACLE, ZERO_ACTION
 from uavris.experiments.study.finished import Study
 from uavris.experiments.study.judgement import NOT_TESTED, Judgement, judgement
 from uavris.experiments.study.tracks import TRACK_SPECS, Track, zero_shot_only
 from uavris.experiments.tools.targets import variant_key
 from uavris.io import read_csv, read_json
-from uavris.stats import interactions_to_level, judged, judged_censored
+from uavris.stats import HOLDS, NOT_RESOLVED, interactions_to_level, judged, judged_censored
 
 WITHIN = 0.05  # "nearly the same performance" (paper Sec. V): within 5% of the expert's mean
 LEVEL = 0.95  # "competitive performance" (abstract): the level both sides of "fewer interactions" must reach
@@ -138,7 +140,22 @@ def _pair_differences(u: dict[str, Any]) -> dict[str, Any]:
             "near-expert": float(np.mean(f - (1 - WITHIN) * e)),
             "fluctuates": (float(np.std(z, ddof=1) - np.std(f, ddof=1)), float(np.std(t, ddof=1) - np.std(e, ddof=1))),
             "dt-over-bc": float(np.mean(z - episode_rates(edir, "bc"))) if "bc" in res else None,
+            "expert-over-zero": float(np.mean(e - episode_rates(edir, ZERO_ACTION))) if ZERO_ACTION in res else None,
             "fewer": fewer, "pretraining": u["pretraining"]}
+
+
+def against_a_real_expert(near: Judgement, expert_over_zero: dict[str, Any] | None) -> Judgement:
+    """"Within 5% of the expert" says something only of an expert that does better than doing
+    nothing. Where the expert is not above the zero action by its paired 95% CI over the same
+    units (``expert_over_zero``, :func:`uavris.stats.judged`'s), the zero action would "hold" as
+    well, so a "holds" becomes "not resolved" and the cell says why; a "refuted" stands (the DT
+    is below 95% of even that expert)."""
+    if expert_over_zero is None or expert_over_zero["verdict"] == HOLDS or near.verdict != HOLDS:
+        return near
+    d = expert_over_zero
+    return dataclasses.replace(near, verdict=NOT_RESOLVED, text=(
+        f"{near.text}; vacuous here: the expert is not above the zero action (expert minus zero action "
+        f"{d['mean']:+.2f} [{d['ci_low']:+.2f}, {d['ci_high']:+.2f}] bps/Hz), which would come within 5% of it too"))
 
 
 def judge_scenario_track(studies: Sequence[Study], track: Track) -> list[Judgement]:
@@ -163,8 +180,10 @@ def judge_scenario_track(studies: Sequence[Study], track: Track) -> list[Judgeme
                      "zero-shot DT minus the stronger transferred expert, bps/Hz, paired on the evaluation episodes"),
            judgement("finetuned", name, per_seed("finetuned"), unit, "seeds",
                      "fine-tuned DT minus the zero-shot DT it started from, bps/Hz"),
-           judgement("near-expert", name, per_seed("near-expert"), unit, "seeds",
-                     f"fine-tuned DT minus {1 - WITHIN:.0%} of the expert trained in the scenario, bps/Hz"),
+           against_a_real_expert(
+               judgement("near-expert", name, per_seed("near-expert"), unit, "seeds",
+                         f"fine-tuned DT minus {1 - WITHIN:.0%} of the expert trained in the scenario, bps/Hz"),
+               None if any(p["expert-over-zero"] is None for p in pairs) else per_seed("expert-over-zero")),
            judgement("fluctuates", name, per_seed("fluctuates", 0), unit, "seeds",
                      "the zero-shot DT's spread over evaluation episodes (standard deviation of each episode's "
                      "average sum rate) minus the fine-tuned DT's, bps/Hz"),
@@ -190,8 +209,7 @@ def _fewer(name: str, seeds: list[int], pairs: list[dict[str, Any]], unit: str) 
     high = np.array([any(p["fewer"]["high_bound"] for s, p in zip(seeds, pairs) if s == k) for k in order])
     lows, highs = sum(p["fewer"]["low_bound"] for p in pairs), sum(p["fewer"]["high_bound"] for p in pairs)
     censored = (f"; the expert never reached the level in {lows} and fine-tuning in {highs} of {len(pairs)} "
-                "scenario runs (their budgets counted: bounds, which only a verdict they cannot overturn may rest "
-                "on)") if lows or highs else ""
+                "scenario runs (their budgets counted: bounds, on which no verdict rests)") if lows or highs else ""
     rule = (f"interactions the scenario's expert needed to first reach {LEVEL:.0%} of its final evaluation minus "
             "those fine-tuning needed (0 where the zero-shot DT starts there)")
     return [judgement("fewer", name, judged_censored(diff, low, high), unit, "seeds", rule + censored),
@@ -204,6 +222,10 @@ def _fewer(name: str, seeds: list[int], pairs: list[dict[str, Any]], unit: str) 
 DEPLOYMENT_DT = variant_key("dt-zero-shot", safe=True)  # the paper's DT (return-conditioned) under the safety layer
 GOAL_DT = variant_key("dt-goal", safe=True)  # the goal-conditioned DT told the semi-amortised place
 FINETUNED_DTS = (variant_key("dt-goal-finetuned", safe=True), variant_key("dt-finetuned", safe=True))
+# The fine-tuning claims are the paper's: its DT fine-tuned by its Algorithm 1 where every hall has it,
+# else uavris's goal-conditioned DT fine-tuned by trying places, named in each cell's text.
+FINETUNING = ((FINETUNED_DTS[1], DEPLOYMENT_DT, "the paper's DT fine-tuned in the hall by its Algorithm 1"),
+              (FINETUNED_DTS[0], GOAL_DT, "uavris's goal-conditioned DT fine-tuned in the hall by trying places"))
 BC = variant_key("bc", safe=True)
 
 
@@ -238,13 +260,16 @@ def judge_deployment(study: Study, from_scratch: Sequence[dict[str, Any]] = ()) 
     """The Fig. 3 claims over the unseen halls (the unit), each hall's learned rows averaged
     over the pre-training seeds. The transferred expert is the nearest training hall's oracle
     plan; the expert trained where the DT is deployed is the oracle (whose demonstrations the
-    DT learned from), and fine-tuning the one that tries places (``--ablation``).
+    DT learned from). Fine-tuning is the paper's DT fine-tuned by its Algorithm 1 where every
+    hall has it, else the goal-conditioned DT fine-tuned by trying places (``--ablation``): one
+    of the two for all halls, named in each cell.
     ``from_scratch``: per hall, what ``uavris from-scratch`` measured (:mod:`.from_scratch`:
     an expert trained from scratch in the hall, its learning curve)."""
     track = TRACK_SPECS["deployment"]
     _, unseen = study.sites(track)
-    rows: dict[str, list[float]] = {k: [] for k in ("zero-shot", "goal", "finetuned", "near-expert", "fluct-dt",
-                                                      "fluct-expert", "dt-over-bc")}
+    rows: dict[str, list[float]] = {k: [] for k in ("zero-shot", "goal", "fluct-expert", "dt-over-bc",
+                                                      *(f"{c} {v}" for c in ("finetuned", "near-expert", "fluct-dt")
+                                                        for v, _, _ in FINETUNING))}
     names = []
     for w in unseen:
         found = None if zero_shot_only(w, study.config.system) else study.evaluation(track, w.name)
@@ -266,15 +291,14 @@ def judge_deployment(study: Study, from_scratch: Sequence[dict[str, Any]] = ()) 
         if bc is not None:
             rows["dt-over-bc"].append(float(np.mean(dt - bc)))
         rows["fluct-expert"].append(float(np.std(moved, ddof=1) - np.std(oracle, ddof=1)))
-        for fine_variant, start_variant in zip(FINETUNED_DTS, (GOAL_DT, DEPLOYMENT_DT)):
+        for fine_variant, start_variant, _ in FINETUNING:
             fine = _seeds_mean(edir, res, fine_variant)
             start = _seeds_mean(edir, res, start_variant)
             if fine is not None and start is not None:
-                rows["finetuned"].append(float(np.mean(fine - start)))
-                rows["near-expert"].append(float(np.mean(fine - (1 - WITHIN) * oracle)))
+                rows[f"finetuned {fine_variant}"].append(float(np.mean(fine - start)))
+                rows[f"near-expert {fine_variant}"].append(float(np.mean(fine - (1 - WITHIN) * oracle)))
                 before, after = (_seeds_spread(edir, res, v) or 0.0 for v in (start_variant, fine_variant))
-                rows["fluct-dt"].append(before - after)
-                break
+                rows[f"fluct-dt {fine_variant}"].append(before - after)
     unit = f"{len(names)} unseen halls, each the mean of its pre-training seeds"
     if not names:
         return [Judgement(c, "deployment", NOT_TESTED, text="no unseen hall evaluated") for c in SCENARIO_CLAIMS]
@@ -290,14 +314,16 @@ def judge_deployment(study: Study, from_scratch: Sequence[dict[str, Any]] = ()) 
                              "the same for the goal-conditioned DT told the semi-amortised place (uavris's "
                              "controller; the cell's second entry)"))
     ablation = "fine-tuning in the unseen halls runs with --ablation only"
-    if complete("finetuned"):
-        out += [judgement("finetuned", "deployment", judged(rows["finetuned"]), unit, "halls",
-                          "fine-tuned DT minus the zero-shot DT it started from, both under the safety layer, bps/Hz"),
-                judgement("near-expert", "deployment", judged(rows["near-expert"]), unit, "halls",
-                          f"DT fine-tuned in the hall minus {1 - WITHIN:.0%} of the oracle (the track's expert), "
+    judged_ft = next(((v, what) for v, _, what in FINETUNING if complete(f"finetuned {v}")), None)
+    if judged_ft is not None:
+        v, what = judged_ft
+        out += [judgement("finetuned", "deployment", judged(rows[f"finetuned {v}"]), unit, "halls",
+                          f"{what}, minus the same DT zero-shot, both under the safety layer, bps/Hz"),
+                judgement("near-expert", "deployment", judged(rows[f"near-expert {v}"]), unit, "halls",
+                          f"{what}, minus {1 - WITHIN:.0%} of the oracle (the track's expert), "
                           "both under the safety layer, bps/Hz"),
-                judgement("fluctuates", "deployment", judged(rows["fluct-dt"]), unit, "halls",
-                          "the zero-shot DT's spread over evaluation episodes minus the fine-tuned DT's (each the "
+                judgement("fluctuates", "deployment", judged(rows[f"fluct-dt {v}"]), unit, "halls",
+                          f"the zero-shot DT's spread over evaluation episodes minus that of {what} (each the "
                           "mean of its seeds' standard deviations), bps/Hz")]
     else:
         out += [Judgement(c, "deployment", NOT_TESTED, text=ablation) for c in ("finetuned", "near-expert")]
@@ -339,7 +365,8 @@ def _deployment_fewer(study: Study, track: Track, from_scratch: Sequence[dict[st
     unit = f"{len(diff)} unseen halls (uavris from-scratch), fine-tuning the mean of its seeds"
     rule = (f"interactions hybrid PPO from scratch needed to first reach {LEVEL:.0%} of its final evaluation minus "
             "those fine-tuning by trying places needed (0 where its zero-shot start is there); a side that never "
-            "does is charged its budget, a bound. Not alike: fine-tuning's curve is its own evaluations (8 "
+            "does is charged its budget, a bound, on which no verdict rests. Not alike: fine-tuning's curve is its "
+            "own evaluations (8 "
             "episodes, without the safety layer), the expert's the study's episodes under it")
     return [judgement("fewer", "deployment", judged_censored(diff, low, high), unit, "halls", rule),
             judgement("fewer-total", "deployment", judged_censored(np.subtract(diff, pre), low, high), unit, "halls",

@@ -36,7 +36,7 @@ class ReproduceConfig(DictConfig):
     """Everything that determines the study (dumped into the report). Fields left at
     ``PRESET`` take the preset's values (:data:`uavris.presets.STUDY`)."""
 
-    preset: Preset = "quick"  # smoke (seconds, for tests), quick (about 30 min on 2 cores) or paper (days)
+    preset: Preset = "quick"  # smoke (seconds, for tests), quick (the time on 2 cores: docs/timings.md) or paper (days)
     seed: int = 0  # seed of every training run (experts, DT); evaluation episodes have their own
     compare_seeds: int = PRESET  # paper track: seeds per algorithm in the comparison
     compare_steps: int = PRESET  # paper track: environment steps per run of the comparison
