@@ -165,27 +165,47 @@ def _zero_shot_claim(scores) -> str:
     return next(c for c in _section(scores)[1] if "**zero-shot DT >=" in c)
 
 
+def _word(x, target: float = 0.0, at_least: bool = False) -> str:
+    """The CI rule, worked here with scipy's t interval: not measured under 3 halls; holds where the
+    interval is above the target (at or above it for a fraction's target), refuted where below."""
+    x = np.asarray(x, dtype=float)
+    if x.size < 3:
+        return "not measured"
+    _, lo, hi = _t95(x)
+    if (lo >= target) if at_least else (lo > target):
+        return "holds"
+    return "refuted" if hi < target else "not resolved"
+
+
+def _all(*words: str) -> str:
+    if "refuted" in words:
+        return "refuted"
+    if all(w == "holds" for w in words):
+        return "holds"
+    return "not measured" if "not measured" in words else "not resolved"
+
+
 def test_the_zero_shot_claim_holds_only_by_its_stated_rule():
-    oracle = [40.0, 42.0, 41.0, 43.0]
-    # 96-97% of the oracle, above hovering and the nearest plan in every hall by 2-3 bps/Hz
-    good = _scores([39.0, 40.5, 39.5, 41.5], [36.0, 38.0, 37.5, 38.5], [37.0, 38.0, 36.5, 39.0],
-                   [39.0, 40.5, 39.5, 41.5], oracle)
-    _, claims = _section(good)
-    claim = next(c for c in claims if "**zero-shot DT >=" in c)
+    """Holds only where the fraction's CI over halls is at or above 96% and both paired CIs are above
+    zero; refuted where the fraction's CI is below 96%; not resolved where one interval straddles."""
+    oracle = np.array([40.0, 42.0, 41.0, 43.0])
+    dt = np.array([39.0, 40.95, 40.0, 41.9])  # 97.4-97.6% in every hall
+    hover, near = dt - [2.0, 3.0, 2.5, 2.2], dt - [3.0, 2.0, 2.4, 2.6]
+    claim = _zero_shot_claim(_scores(dt, hover, near, dt, oracle))
+    assert _word(dt / oracle, 0.96, at_least=True) == _word(dt - hover) == _word(dt - near) == "holds"
     assert ": holds (" in claim
-    frac = np.mean([39.0 / 40, 40.5 / 42, 39.5 / 41, 41.5 / 43])
-    assert f"{frac:.1%}" in claim
-    d = np.array([39.0, 40.5, 39.5, 41.5]) - np.array([36.0, 38.0, 37.5, 38.5])
-    lo, hi = sps.t.interval(0.95, 3, loc=d.mean(), scale=sps.sem(d))
-    assert f"{d.mean():+.2f} [{lo:+.2f}, {hi:+.2f}] bps/Hz, above zero" in claim
-    # the same DT, with hovering better in one hall: the paired CI includes zero -> does not hold
-    close = _scores([39.0, 40.5, 39.5, 41.5], [36.0, 38.0, 37.5, 43.0], [37.0, 38.0, 36.5, 39.0],
-                    [39.0, 40.5, 39.5, 41.5], oracle)
-    assert ": does not hold (" in _zero_shot_claim(close)
-    # far above both but below 96% of the oracle -> does not hold
-    low = _scores([36.0, 37.0, 36.0, 38.0], [30.0, 31.0, 30.5, 32.0], [29.0, 30.0, 31.0, 30.0],
-                  [36.0, 37.0, 36.0, 38.0], oracle)
-    assert ": does not hold (" in _zero_shot_claim(low)
+    assert f"{np.mean(dt / oracle):.1%}" in claim
+    _, lo, hi = _t95(dt - hover)
+    assert f"{np.mean(dt - hover):+.2f} [{lo:+.2f}, {hi:+.2f}] bps/Hz, above zero" in claim
+    # the same DT, with hovering better in one hall: the paired CI includes zero -> not resolved
+    close = hover.copy()
+    close[3] = 45.0
+    assert _word(dt - close) == "not resolved"
+    assert ": not resolved (" in _zero_shot_claim(_scores(dt, close, near, dt, oracle))
+    # far above both but its CI below 96% of the oracle -> refuted
+    low = 0.90 * oracle + [0.1, -0.1, 0.05, 0.0]
+    assert _word(low / oracle, 0.96, at_least=True) == "refuted"
+    assert ": refuted (" in _zero_shot_claim(_scores(low, low - 6, low - 7, low, oracle))
 
 
 def test_the_return_conditioning_verdict_is_the_paired_ci():
@@ -313,41 +333,44 @@ def test_the_deployment_section_against_numbers_worked_here():
     frac = {k: (v / oracle).mean() for k, v in rows.items()}
     for key, head in (("dt-zero-shot", "**zero-shot DT >= 96%"), ("dt-ensemble", "**zero-shot DT ensemble")):
         [claim] = [c for c in claims if head in c]
-        hover, near = _t95(rows[key] - rows["hover-optimizer"]), _t95(rows[key] - rows[NEAREST])
-        holds = frac[key] >= 0.96 and hover[1] > 0 and near[1] > 0
-        assert f"**: {'holds' if holds else 'does not hold'} (" in claim, claim
+        word = _all(_word(rows[key] / oracle, 0.96, at_least=True), _word(rows[key] - rows["hover-optimizer"]),
+                    _word(rows[key] - rows[NEAREST]))
+        assert f"**: {word} (" in claim, claim
     # by hand: the zero-shot DT at 95.0% [..] of the oracle (0.9625, 0.95, 0.9625), above hovering in every
     # hall (+4.5, +4.5, +2.25) but not clearly above the nearest plan (+5.5, +27.5, +1.25: the CI includes zero)
     assert frac["dt-zero-shot"] == pytest.approx(0.9583333333333334)
     claim = next(c for c in claims if "**zero-shot DT >= 96%" in c)
-    assert "**: does not hold (95.8% [" in claim and "bps/Hz, above zero; minus nearest +11.42 [" in claim
+    assert "**: not resolved (95.8% [" in claim and "bps/Hz, above zero; minus nearest +11.42 [" in claim
     assert claim.endswith("bps/Hz, includes zero).")
+    # the fine-tuned DT: 99.0%, 99.0%, 99.5% of the oracle (its CI at or above 98%), but above zero-shot by
+    # +1.10, +2.00, +0.65 bps/Hz, whose CI includes zero: not resolved
     [claim] = [c for c in claims if "**fine-tuned DT >= 98%" in c]
-    assert frac["dt-finetuned"] >= 0.98 and frac["dt-finetuned"] >= frac["dt-zero-shot"]
-    assert "**: holds (" in claim
+    assert _word(rows["dt-finetuned"] / oracle, 0.98, at_least=True) == "holds"
+    assert _word(rows["dt-finetuned"] - rows["dt-zero-shot"]) == "not resolved"
+    assert "**: not resolved (" in claim
     assert len(claims) == 6
 
 
-@pytest.mark.parametrize("finetuned, zero_shot, holds", [
-    (0.98, 0.90, True),  # exactly the target: ">= 98%"
-    (0.97, 0.90, False),  # below the target
-    (0.99, 0.995, False),  # above the target but below zero-shot
-    (0.99, 0.99, True)])  # not below zero-shot
-def test_the_finetuned_claim_states_its_rule(finetuned, zero_shot, holds):
-    oracle = [50.0, 100.0]  # 49 / 50 and 98 / 100 are both the double nearest 0.98
+@pytest.mark.parametrize("finetuned, zero_shot, word", [
+    (0.98, 0.90, "holds"),  # exactly the target in every hall: ">= 98%", and above zero-shot in every hall
+    (0.97, 0.90, "refuted"),  # below the target in every hall
+    (0.99, 0.995, "refuted"),  # above the target but below zero-shot in every hall
+    (0.99, 0.99, "not resolved")])  # equal to zero-shot: not above it
+def test_the_finetuned_claim_states_its_rule(finetuned, zero_shot, word):
+    oracle = [50.0, 100.0, 50.0, 100.0]  # 49 / 50 and 98 / 100 are both the double nearest 0.98
     scores = {f"h{i}": {"dt-zero-shot": zero_shot * o, "dt-finetuned": finetuned * o, HOVER_OPTIMIZER: 0.5 * o,
                         NEAREST: 0.5 * o, ORACLE: o} for i, o in enumerate(oracle)}
     _, claims = _section(scores)
-    [claim] = [c for c in claims if "**fine-tuned DT >= 98% of the oracle and not below zero-shot**" in c]
-    assert f"**: {'holds' if holds else 'does not hold'} (fine-tuned {finetuned:.1%} [" in claim
+    [claim] = [c for c in claims if "**fine-tuned DT >= 98% of the oracle and above zero-shot**" in c]
+    assert f"**: {word} (fine-tuned {finetuned:.1%} [" in claim
 
 
 def test_one_layout_resolves_nothing():
     scores = {"h0": {"dt-zero-shot": 48.0, HOVER_OPTIMIZER: 40.0, NEAREST: 30.0, "bc": 20.0, ORACLE: 50.0}}
     _, claims = _section(scores)
     zero_shot = next(c for c in claims if "**zero-shot DT >= 96%" in c)
-    # 96% of the oracle, 8 and 18 bps/Hz above the others, but one hall gives no interval: not shown
-    assert ": does not hold (96.0% [n/a, n/a] of the oracle" in zero_shot
+    # 96% of the oracle, 8 and 18 bps/Hz above the others, but one hall gives no interval: no verdict
+    assert ": not measured (96.0% [n/a, n/a] of the oracle" in zero_shot
     assert zero_shot.count("not resolved (one layout)") == 2
     bc = next(c for c in claims if "return conditioning on demonstrations" in c)
     assert bc.endswith("+28.00 [n/a, n/a] bps/Hz per layout, not resolved (one layout).")  # as the percentages
