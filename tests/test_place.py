@@ -306,3 +306,27 @@ def test_where_vs_argmax_is_worse_than_staying_the_deployed_place_is_not() -> No
     worth = episode_value(system.horizon, trip_slots(system, np.asarray(start), poses), rate[0], rate)
     assert argmax.target[0] > 30 and worth[1] < worth[0] - 1.0  # V's argmax: the far corner, well below staying
     assert worth[2] >= worth[0]  # the deployed place: never worse than staying
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("devices", [3, 8])
+def test_the_learned_planners_top_places_never_beat_the_oracle_beyond_their_error(value_model, devices):
+    """The yardstick holds at 3 and 8 devices: in a generated hall of each (test scale), none of
+    V's top 3 places (level, as the learned planner flies them) is worth more than the oracle's
+    plan beyond twice the standard error of their paired difference, both valued on the same fresh
+    draws (:func:`plan_gap`). Before the oracle's global stage, the learned places beat it by 5.4%
+    on average with 8 devices (docs/results/oracle-gap.md). It fails if the oracle misses a place
+    V finds: with 3 devices V's places come within 0.07-0.5 bps/Hz of the oracle's, and with
+    staying put in the oracle's place they beat it by about 3 bps/Hz (SE 0.05-0.08). With 8
+    devices this V, trained on 4-device halls, is about 7 bps/Hz below the oracle, so that case
+    catches only a gross failure; the gap benchmark is the measure there."""
+    from uavris.agents.oracle.planner import plan_target
+    from uavris.agents.oracle.search import Found, plan_gap
+
+    system, where = LayoutGenerator(devices=devices, seed=7).layout("unseen", 0).resolve(BASE)
+    oracle = plan_target(system, where.start)
+    places = places_to_try(value_model, system, where.start, 3)[1:]
+    assert len(places) == 3
+    for place in places:
+        gap = plan_gap(system, where.start, oracle, Found(place, np.zeros(3), float("nan"), 0))
+        assert gap.difference <= 2.0 * gap.difference_se, (place, gap)  # the learned place minus the oracle's
