@@ -248,3 +248,43 @@ def test_within_five_percent_of_an_expert_below_doing_nothing_is_not_a_verdict()
     assert against_a_real_expert(near, None).verdict == HOLDS
     refuted = judgement("near-expert", "paper", judged([-0.5, -0.4, -0.45, -0.6, -0.3]), "u", "seeds", "t")
     assert against_a_real_expert(refuted, below).verdict == REFUTED
+
+
+def test_holm_adjusts_by_hand_and_the_p_value_is_scipys():
+    """Holm's step-down method worked by hand on four p-values, and a cell's p-value read from its
+    interval equal to scipy's one-sample t-test (and Welch's, for the comparison)."""
+    from uavris.stats import holm, t_p_value
+
+    # sorted 0.005, 0.01, 0.03, 0.04 -> x4, x3, x2, x1 = 0.02, 0.03, 0.06, 0.04 -> running max 0.02, 0.03, 0.06, 0.06
+    assert holm([0.01, 0.04, 0.03, 0.005]) == pytest.approx([0.03, 0.06, 0.06, 0.02])
+    assert holm([0.5, 0.9]) == pytest.approx([1.0, 1.0])
+    d = np.array([0.8, 1.9, -0.3, 1.2, 0.6])
+    j = judged(d)
+    assert t_p_value(j["mean"], j["ci_low"], j["ci_high"], 4) == pytest.approx(sps.ttest_1samp(d, 0.0).pvalue, rel=1e-9)
+    a, b = np.array([29.0, 31.5, 30.2]), np.array([20.1, 25.3, 22.0, 18.4])
+    w = welch_difference(a, b)
+    assert t_p_value(w["mean"], w["ci_low"], w["ci_high"], w["dof"]) == pytest.approx(
+        sps.ttest_ind(a, b, equal_var=False).pvalue, rel=1e-9)
+
+
+def test_the_claims_table_keeps_only_the_verdicts_holms_correction_keeps():
+    """27 judged cells as in the committed table: one "holds" at p ~ 0.037 (the issue's "within 5%")
+    and one "refuted" at p < 0.001. Corrected, the first is not resolved and says why; the second stands;
+    a "not measured" cell is outside the family."""
+    from uavris.experiments.study.claims import holm_corrected
+    from uavris.experiments.study.judgement import Judgement, judgement
+
+    rng = np.random.default_rng(3)
+    edge = np.array([0.30, 0.55, 0.05, 0.40, 0.12])  # above zero, but only just
+    strong = np.array([-5.0, -5.2, -4.9, -5.1, -5.05])
+    cells = [judgement("near-expert", "paper", judged(edge), "u", "seeds", "t"),
+             judgement("zero-shot", "paper", judged(strong), "u", "seeds", "t"),
+             *(judgement("fluctuates", "strong", judged(rng.normal(0, 1, 5)), "u", "seeds", "t") for _ in range(25)),
+             Judgement("dt-over-bc", "deployment", "not measured", 1.0, n=2)]
+    assert cells[0].verdict == HOLDS and 0.01 < cells[0].p < 0.05 and cells[1].verdict == REFUTED
+    out = holm_corrected(cells)
+    assert out[0].verdict == NOT_RESOLVED and "not resolved after Holm's correction over the table's 27" in out[0].text
+    assert out[0].p_holm == pytest.approx(min(1.0, max(27 * min(c.p for c in cells[:27]), *[
+        (27 - k) * p for k, p in enumerate(sorted(c.p for c in cells[:27])) if p <= cells[0].p])))
+    assert out[1].verdict == REFUTED and out[1].p_holm <= 0.05
+    assert out[-1] == cells[-1]

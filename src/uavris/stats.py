@@ -128,7 +128,33 @@ def welch_difference(a: ArrayLike, b: ArrayLike, confidence: float = 0.95) -> di
         half = float(stats.t.ppf(0.5 + confidence / 2, dof) * se)
         low, high = diff - half, diff + half
     return {"n": int(min(a.size, b.size)), "mean": diff, "ci_low": low, "ci_high": high,
-            "verdict": verdict(low, high)}
+            "verdict": verdict(low, high), "dof": float(dof) if np.isfinite(se) and se > 0 else float("nan")}
+
+
+def t_p_value(mean: float, ci_low: float, ci_high: float, dof: float) -> float:
+    """The two-sided p-value of "the difference is 0" read from its Student-t 95% interval
+    ``[ci_low, ci_high]`` with ``dof`` degrees of freedom (the interval excludes zero exactly
+    where it is below 0.05). NaN where the interval is."""
+    if not (np.isfinite(ci_low) and np.isfinite(ci_high) and np.isfinite(dof) and dof > 0):
+        return float("nan")
+    half = (ci_high - ci_low) / 2
+    if half <= 0:
+        return 1.0 if mean == 0 else 0.0
+    return float(2 * stats.t.sf(abs(mean) / (half / stats.t.ppf(0.975, dof)), dof))
+
+
+def holm(p_values: ArrayLike) -> NDArray[np.float64]:
+    """Holm's step-down adjusted p-values of one family of tests, in the order given: sorted
+    ascending, the i-th (from 0) is multiplied by ``m - i`` and the running maximum is taken,
+    capped at 1. A verdict of the family stands where its adjusted p is at most 0.05 (the
+    family-wise error is then at most 5%, whatever the tests' dependence)."""
+    p = np.asarray(p_values, dtype=np.float64)
+    adjusted = np.empty_like(p)
+    running = 0.0
+    for rank, i in enumerate(np.argsort(p, kind="stable")):
+        running = max(running, min(1.0, (p.size - rank) * float(p[i])))
+        adjusted[i] = running
+    return adjusted
 
 
 def steps_to_level(steps: ArrayLike, values: ArrayLike, level: float) -> float:

@@ -16,7 +16,8 @@ evaluation episodes. A cell with fewer than three units is "not measured".
 
 from __future__ import annotations
 
-from dataclasses import asdict
+import math
+from dataclasses import asdict, replace
 from pathlib import Path
 from typing import Any, Sequence
 
@@ -35,7 +36,9 @@ from uavris.experiments.study.finished import Study
 from uavris.experiments.study.judgement import NOT_TESTED, Judgement, judgement
 from uavris.experiments.study.tracks import TRACK_SPECS, TRACKS
 from uavris.io import atomic_write_text, other_inputs, read_json, write_json
-from uavris.stats import MIN_UNITS
+from uavris.stats import HOLDS, MIN_UNITS, NOT_RESOLVED, REFUTED, holm
+
+ALPHA = 0.05  # the family-wise error rate of the claims table (Holm)
 
 CLAIMS: dict[str, str] = {
     "ddpg-best": "DDPG trains the best expert of DDPG, PPO, SAC and TD3 (Fig. 2, Sec. V)",
@@ -100,6 +103,30 @@ def check_seeds(studies: Sequence[Study]) -> None:
         seeds = [s.config.seed for s in studies if track in s.config.tracks and not track.layouts]
         if len(set(seeds)) != len(seeds):
             raise UavrisError(f"the studies of the {name} track share a seed ({seeds}): run each with its own --seed")
+
+
+def holm_corrected(judgements: Sequence[Judgement]) -> list[Judgement]:
+    """The table's verdicts corrected for its many cells: Holm's step-down method
+    (:func:`uavris.stats.holm`) over every judged cell (holds, refuted or not resolved, its
+    p-value from its interval). A "holds" or "refuted" whose adjusted p is above 0.05 becomes
+    "not resolved" and its text says so; every judged cell records ``p_holm``. The intervals
+    stay the unadjusted 95% CIs."""
+    family = [i for i, j in enumerate(judgements)
+              if j.verdict in (HOLDS, REFUTED, NOT_RESOLVED) and math.isfinite(j.p)]
+    adjusted = dict(zip(family, holm([judgements[i].p for i in family]))) if family else {}
+    out = []
+    for i, j in enumerate(judgements):
+        if i not in adjusted:
+            out.append(j)
+            continue
+        p = float(adjusted[i])
+        if j.verdict in (HOLDS, REFUTED) and p > ALPHA:
+            out.append(replace(j, verdict=NOT_RESOLVED, p_holm=p, text=(
+                f"{j.text}; {j.verdict} by its own interval (p = {j.p:.3f}), not resolved after Holm's correction "
+                f"over the table's {len(family)} judged cells (adjusted p = {p:.3f})")))
+        else:
+            out.append(replace(j, p_holm=p))
+    return out
 
 
 def claims_table(judgements: Sequence[Judgement]) -> list[str]:
@@ -175,13 +202,16 @@ def write_claims(outs: Sequence[Path], dest: Path, budgets: Sequence[tuple[Path,
                           "this one another --out (nothing there is replaced)")
     studies = [Study.open(o) for o in outs]
     halls = _from_scratch_halls(from_scratch, studies) if from_scratch is not None else ()
-    judgements = judge_studies(studies, budgets, halls)
+    judgements = holm_corrected(judge_studies(studies, budgets, halls))
+    judged = sum(math.isfinite(j.p_holm) for j in judgements)
     lines = ["# The paper's claims, judged", "",
              "\n".join(claims_table(judgements)), "",
              "Each cell: the verdict, the mean paired difference over the units and its 95% CI (Student's t; "
              "Welch's for the comparison). A claim **holds** where the CI excludes zero the claimed way, is "
-             "**refuted** where it excludes zero the other way, and is **not resolved** otherwise. What each cell "
-             "compares:", ""]
+             "**refuted** where it excludes zero the other way, and is **not resolved** otherwise; then, for the "
+             f"table's {judged} judged cells at once, a verdict stands only where Holm's step-down correction keeps "
+             "it (its p-value from its interval, the family-wise error at most 5%); one it does not keep reads **not "
+             "resolved** and says so below. The intervals are the unadjusted 95% CIs. What each cell compares:", ""]
     for j in judgements:
         if j.verdict != NOT_TESTED:
             lines.append(f"- {j.track}, {j.claim}: {j.text}; {j.count} ({j.unit}).")

@@ -21,7 +21,16 @@ import numpy as np
 from uavris.experiments.display.tables import markdown_table
 from uavris.experiments.study.judgement import NOT_TESTED, Judgement
 from uavris.io import read_csv
-from uavris.stats import HOLDS, MIN_UNITS, NOT_MEASURED, NOT_RESOLVED, REFUTED, paired_difference, welch_difference
+from uavris.stats import (
+    HOLDS,
+    MIN_UNITS,
+    NOT_MEASURED,
+    NOT_RESOLVED,
+    REFUTED,
+    paired_difference,
+    t_p_value,
+    welch_difference,
+)
 
 ALGORITHMS = ("ddpg", "ppo", "sac", "td3")  # the paper's comparison (Fig. 2)
 
@@ -51,9 +60,15 @@ def judge_comparison(scores: dict[str, Sequence[float]], track: str = "paper", b
     n = min(len(s) for s in scores.values())
     above = ", ".join(f"{a.upper()} {d['mean']:+.2f} [{d['ci_low']:+.2f}, {d['ci_high']:+.2f}]"
                       for a, d in others.items())
-    return Judgement("ddpg-best", track, v, others[closest]["mean"], others[closest]["ci_low"],
-                     others[closest]["ci_high"], n, "training seeds per algorithm", "seeds",
-                     f"DDPG minus each algorithm{budget} (seeds: {seeds}; Welch): {above}")
+    c = others[closest]
+    # the p-value of the verdict: "above each" stands only if every test does (the largest p), "another is
+    # above" if one does (the smallest p of those that are), neither: the closest algorithm's
+    ps = {a: t_p_value(d["mean"], d["ci_low"], d["ci_high"], d["dof"]) for a, d in others.items()}
+    p = max(ps.values()) if v == HOLDS else min(ps[a] for a, d in others.items() if d["verdict"] == REFUTED) \
+        if v == REFUTED else ps[closest]
+    return Judgement("ddpg-best", track, v, c["mean"], c["ci_low"], c["ci_high"], n, "training seeds per algorithm",
+                     "seeds", f"DDPG minus each algorithm{budget} (seeds: {seeds}; Welch): {above}",
+                     p)
 
 
 def comparison_scores(cdir: Path, steps: int | None = None) -> dict[str, list[float]]:

@@ -13,7 +13,7 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
-from uavris.stats import MIN_UNITS, NOT_MEASURED
+from uavris.stats import MIN_UNITS, NOT_MEASURED, t_p_value
 
 NOT_TESTED = "not tested"
 
@@ -34,6 +34,8 @@ class Judgement:
     unit: str = ""
     units: str = ""
     text: str = ""
+    p: float = float("nan")  # two-sided, from the interval (uavris.stats.t_p_value), before any correction
+    p_holm: float = float("nan")  # after Holm's correction over the claims table (uavris.experiments.study.claims)
 
     @property
     def count(self) -> str:
@@ -57,7 +59,9 @@ def judgement(claim: str, track: str, diff: dict[str, Any], unit: str, units: st
     """The cell of ``diff`` (:func:`uavris.stats.judged`'s): "not measured" below
     :data:`MIN_UNITS` units, whatever its interval says."""
     v = diff["verdict"] if diff["n"] >= MIN_UNITS else NOT_MEASURED
-    return Judgement(claim, track, v, diff["mean"], diff["ci_low"], diff["ci_high"], int(diff["n"]), unit, units, text)
+    p = t_p_value(diff["mean"], diff["ci_low"], diff["ci_high"], diff["n"] - 1)
+    return Judgement(claim, track, v, diff["mean"], diff["ci_low"], diff["ci_high"], int(diff["n"]), unit, units, text,
+                     p)
 
 
 __all__ = ["NOT_TESTED", "Judgement", "judgement"]

@@ -246,8 +246,9 @@ def claims_section(study: Study) -> list[str]:
     lines = [*claims_table(judgements), "", "A claim **holds** where the 95% CI of its paired difference over the unit "
              "(a training seed; an unseen hall) excludes zero the claimed way, is **refuted** where it excludes "
              "zero the other way, and is **not resolved** otherwise; with fewer than three units it is **not "
-             "measured**. One study is one seed of the paper and strong tracks: `uavris claims` pools studies run "
-             "with `--seed 0` to `4`.", ""]
+             "measured**. Here each cell is judged alone; `uavris claims` also corrects the verdicts for the table's "
+             "many cells (Holm). One study is one seed of the paper and strong tracks: `uavris claims` pools studies "
+             "run with `--seed 0` to `4`.", ""]
     return lines + [f"- {j.track}, {j.claim}: {j.text}" + (f"; {j.count} ({j.unit})." if j.n else ".")
                     for j in judgements]
 
