@@ -26,7 +26,7 @@ def _zero(lo: float, hi: float) -> str:
     return "above zero" if lo > 0 else "below zero" if hi < 0 else "includes zero"
 
 
-def _verdict(n: int, low: float, high: float, target: float = 0.0, strict: bool = True) -> str:
+def ci_verdict(n: int, low: float, high: float, target: float = 0.0, strict: bool = True) -> str:
     """The CI rule, written out here: not measured under 3 halls; holds where the interval is above the
     target (at or above it for a fraction's target), refuted where below, else not resolved."""
     if n < 3:
@@ -38,7 +38,7 @@ def _verdict(n: int, low: float, high: float, target: float = 0.0, strict: bool 
     return "refuted" if high < target else "not resolved"
 
 
-def _every(*verdicts: str) -> str:
+def every_verdict(*verdicts: str) -> str:
     if "refuted" in verdicts:
         return "refuted"
     if all(v == "holds" for v in verdicts):
@@ -146,7 +146,7 @@ def _check_place_claims(claims: list[str], where: str, keys: list[str], stat: di
             return 0
         [claim] = [c for c in claims if c.startswith(f"- {where}: **the semi-amortised place flown by")]
         hover, n = diffs[("dt-goal-safe", "hover-optimizer")], len(frac["dt-goal-safe"])
-        word = _every(_verdict(n, *stat["dt-goal-safe"][1:3], 0.96, strict=False), _verdict(n, *hover[1:3]))
+        word = every_verdict(ci_verdict(n, *stat["dt-goal-safe"][1:3], 0.96, strict=False), ci_verdict(n, *hover[1:3]))
         assert f"**: {word} ({_pct3(stat['dt-goal-safe'])}; minus hovering " \
                f"{_num3(hover[:3])} bps/Hz, {hover[3]})." in claim, claim
         return 1
@@ -157,11 +157,11 @@ def _check_place_claims(claims: list[str], where: str, keys: list[str], stat: di
         count += 1
         [claim] = [c for c in claims if f">= {mean:.1%} of the oracle" in c and c.startswith(f"- {where}: **")]
         n = len(frac[key])
-        parts = [_verdict(n, *stat[key][1:3], mean, strict=False)]
+        parts = [ci_verdict(n, *stat[key][1:3], mean, strict=False)]
         parts += [] if worst is None else ["holds" if min(frac[key]) >= worst else "refuted"]
         if key == "dt-goal-safe":
-            parts += [_verdict(n, *diffs[(key, other)][1:3]) for other in ("hover-optimizer", "nearest")]
-        assert f"**: {_every(*parts)} ({_pct3(stat[key])} of the oracle, worst hall " \
+            parts += [ci_verdict(n, *diffs[(key, other)][1:3]) for other in ("hover-optimizer", "nearest")]
+        assert f"**: {every_verdict(*parts)} ({_pct3(stat[key])} of the oracle, worst hall " \
                f"{min(frac[key]):.1%}" in claim, claim
     return count
 
@@ -180,8 +180,8 @@ def _check_score_claims(claims: list[str], where: str, keys: list[str], stat: di
         target = int(re.search(r">= (\d+)% of the oracle", claim).group(1)) / 100
         hover, near = diffs[(key, "hover-optimizer")], diffs[(key, "nearest")]
         n = len(hover[4])
-        word = _every(_verdict(n, *stat[key][1:3], target, strict=False), _verdict(n, *hover[1:3]),
-                      _verdict(n, *near[1:3]))
+        word = every_verdict(ci_verdict(n, *stat[key][1:3], target, strict=False), ci_verdict(n, *hover[1:3]),
+                             ci_verdict(n, *near[1:3]))
         assert f"**: {word} (" in claim, claim
         assert (f"({_pct3(stat[key])} of the oracle; minus hovering {_num3(hover[:3])} bps/Hz, {hover[3]}; minus "
                 f"nearest {_num3(near[:3])} bps/Hz, {near[3]})." in claim), claim
@@ -194,8 +194,8 @@ def _check_score_claims(claims: list[str], where: str, keys: list[str], stat: di
         target = int(re.search(r">= (\d+)% of the oracle", claim).group(1)) / 100
         gain = diffs[(ft, zs)]
         n = len(gain[4])
-        assert f"**: {_every(_verdict(n, *stat[ft][1:3], target, strict=False), _verdict(n, *gain[1:3]))} (" \
-            in claim, claim
+        word = every_verdict(ci_verdict(n, *stat[ft][1:3], target, strict=False), ci_verdict(n, *gain[1:3]))
+        assert f"**: {word} (" in claim, claim
         assert f"(fine-tuned {_pct3(stat[ft])}; fine-tuned minus zero-shot {_num3(gain[:3])} bps/Hz)." in claim, claim
     for pair, what in ((("dt-zero-shot", "bc"), "**return conditioning on demonstrations of one quality"),
                        (("dt-zero-shot-safe", "bc-safe"), "**return conditioning under the attitude safety layer"),

@@ -7,6 +7,7 @@ import math
 
 import numpy as np
 import pytest
+from report_check import ci_verdict, every_verdict
 from scipy import stats as sps
 
 from uavris.experiments.study.report.deployment import (
@@ -166,23 +167,9 @@ def _zero_shot_claim(scores) -> str:
 
 
 def _word(x, target: float = 0.0, at_least: bool = False) -> str:
-    """The CI rule, worked here with scipy's t interval: not measured under 3 halls; holds where the
-    interval is above the target (at or above it for a fraction's target), refuted where below."""
+    """The CI rule (tests/report_check.py) on scipy's t interval of the per-hall values ``x``."""
     x = np.asarray(x, dtype=float)
-    if x.size < 3:
-        return "not measured"
-    _, lo, hi = _t95(x)
-    if (lo >= target) if at_least else (lo > target):
-        return "holds"
-    return "refuted" if hi < target else "not resolved"
-
-
-def _all(*words: str) -> str:
-    if "refuted" in words:
-        return "refuted"
-    if all(w == "holds" for w in words):
-        return "holds"
-    return "not measured" if "not measured" in words else "not resolved"
+    return ci_verdict(x.size, *_t95(x)[1:], target, strict=not at_least)
 
 
 def test_the_zero_shot_claim_holds_only_by_its_stated_rule():
@@ -333,7 +320,7 @@ def test_the_deployment_section_against_numbers_worked_here():
     frac = {k: (v / oracle).mean() for k, v in rows.items()}
     for key, head in (("dt-zero-shot", "**zero-shot DT >= 96%"), ("dt-ensemble", "**zero-shot DT ensemble")):
         [claim] = [c for c in claims if head in c]
-        word = _all(_word(rows[key] / oracle, 0.96, at_least=True), _word(rows[key] - rows["hover-optimizer"]),
+        word = every_verdict(_word(rows[key] / oracle, 0.96, at_least=True), _word(rows[key] - rows["hover-optimizer"]),
                     _word(rows[key] - rows[NEAREST]))
         assert f"**: {word} (" in claim, claim
     # by hand: the zero-shot DT at 95.0% [..] of the oracle (0.9625, 0.95, 0.9625), above hovering in every
