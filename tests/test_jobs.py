@@ -79,6 +79,23 @@ def test_an_aborted_runner_stops_the_jobs_its_workers_run(tmp_path: Path):
 
 
 @pytest.mark.slow
+def test_ctrl_c_at_an_idle_worker_leaves_it_quiet_and_working(tmp_path: Path, capfd):
+    """Ctrl-C reaches the terminal's whole process group, the workers included; stopping them is
+    the command's work (abort). A worker that raised KeyboardInterrupt while it waited for a
+    job printed ``Process SpawnProcess-N:`` beside the command's one line (a CI failure of the
+    sweep's Ctrl-C test) and broke the pool."""
+    import signal
+
+    with JobRunner(2, "local") as runner:
+        [first] = runner.run([Job("pid", os.getpid, (), tmp_path / "pid.log", 1.0)])
+        assert first.ok and first.value != os.getpid()
+        os.kill(first.value, signal.SIGINT)
+        time.sleep(1.0)  # time for a worker that did not ignore it to die
+        after = runner.run([Job(f"pid-{i}", os.getpid, (), tmp_path / f"pid{i}.log", 1.0) for i in range(4)])
+    assert all(r.ok for r in after), [r.error for r in after]
+    assert "Process" not in capfd.readouterr().err
+
+
 def test_a_dying_ray_worker_fails_its_own_job_and_no_other(tmp_path: Path):
     pytest.importorskip("ray")
     with JobRunner(2, "ray") as runner:

@@ -34,6 +34,7 @@ import heapq
 import itertools
 import multiprocessing as mp
 import os
+import signal
 import sys
 import threading
 import time
@@ -166,10 +167,16 @@ def _watch_parent(parent: int) -> None:
     command's process) is gone. A command killed by SIGKILL or the OOM killer cannot stop its
     workers, and they would finish their jobs into an output whose lock went with it.
 
+    The worker ignores SIGINT: Ctrl-C reaches the terminal's whole process group, and the
+    command stops its workers itself (:func:`abort_runners`). A worker left to raise
+    KeyboardInterrupt while it waits for a job prints ``Process SpawnProcess-N:`` and a
+    traceback beside the command's one line.
+
     Not ``prctl(PR_SET_PDEATHSIG)``: Linux sends that when the *thread* that started the
     worker ends, and a worker is started by whichever thread submitted to the pool (a stage's
     thread in a study, which ends long before the study). The parent's pid comes from the
     command, not ``os.getppid()`` here, so that a parent that died before this ran is seen."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     threading.Thread(target=_exit_when_orphaned, args=(parent,), name="uavris-parent-watch", daemon=True).start()
 
 
