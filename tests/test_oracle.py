@@ -321,6 +321,38 @@ def test_planning_oracle_reaches_the_best_region_from_unseen2(config):
     assert plan.rate > greedy_stop + 2.0
 
 
+def test_an_oracle_takes_the_plan_another_made_from_the_same_state(config, monkeypatch):
+    """A study's evaluation of a hall plans it for several rows (the oracle's, the DT told its
+    place, the report's target): the second oracle takes the first one's plan and the poses it
+    valued instead of planning again, and both equal what an oracle plans with nothing shared."""
+    from uavris.agents.oracle import policy as oracle_module
+    from uavris.agents.oracle.planner import TEACHER
+
+    start = SCENARIOS["fig2"].start
+    monkeypatch.setattr(oracle_module, "_FRESH_PLANS", type(oracle_module._FRESH_PLANS)())
+    first = oracle_policy(settings=TEACHER)  # the cheaper planner: the sharing is the same
+    made = first.plan(config, start)
+    calls = []
+    monkeypatch.setattr(oracle_module, "plan_target", lambda *a, **k: calls.append(a[1]) or plan_target(*a, **k))
+    second = oracle_policy(settings=TEACHER)
+    assert second.plan(config, start) is made and calls == []
+    np.testing.assert_array_equal(second.valued_poses(config)[1], first.valued_poses(config)[1])
+    assert second.plan(config, (10.0, 10.0, 4.0)) is not made and len(calls) == 1  # another start: planned
+    third = oracle_policy(settings=TEACHER)
+    third.plan(config, (10.0, 10.0, 4.0))
+    assert third.plan(config, start) is not made  # it had valued poses: it plans itself
+    assert calls == [(10.0, 10.0, 4.0), (10.0, 10.0, 4.0), start]
+    oracle_module._FRESH_PLANS.clear()
+    alone = oracle_policy(settings=TEACHER)
+    again = alone.plan(config, start)
+    np.testing.assert_array_equal(again.target, made.target)
+    assert (again.value, again.poses_valued) == (made.value, made.poses_valued)
+    for a, b in zip(alone.valued_poses(config), first.valued_poses(config)):
+        np.testing.assert_array_equal(a, b)
+    with pytest.raises(ValueError):
+        made.target[0] = 0.0  # shared, so read-only
+
+
 def test_many_devices_sample_the_pairings_stratified_by_the_number_of_active_pairs():
     """K = 6 has 330 pairings: 24 are drawn, an equal share for each number m of active pairs,
     each m keeping its probability 1/3; every drawn pairing is a valid one (disjoint links,

@@ -43,6 +43,7 @@ episode gets the same optimiser starts whatever batch it is evaluated in.
 
 from __future__ import annotations
 
+from collections import OrderedDict
 from typing import Any, ClassVar
 
 import numpy as np
@@ -155,11 +156,25 @@ class PlannedFlight:
         return motion_entries(sim.config, *fly_to(sim, self.plan))
 
 
+# Plans made by an oracle that had valued no pose of that system before, with the poses they
+# valued: another oracle of the same settings that has not planned in that system either
+# takes the plan and the poses instead of planning again. A study's evaluation of a hall
+# plans the same hall for the oracle's row, its row under the safety layer's system, the DT
+# told the oracle's place and the report's plan target; once is enough (docs/timings.md).
+# A few recent ones: a process plans one hall after another.
+_FRESH_PLANS: OrderedDict[tuple[Any, ...], tuple[Plan, dict[bytes, float]]] = OrderedDict()
+FRESH_PLANS_KEPT = 8
+
+
 class PlanningOracle:
     """The planning oracle as a privileged batch policy ``policy(obs, sim) -> actions`` (module docstring).
 
     Plans are cached per (system, start), so one instance evaluates many batches and
-    scenarios at the cost of one plan each; :attr:`plans` holds them for reports.
+    scenarios at the cost of one plan each; :attr:`plans` holds them for reports. A plan is
+    a function of the settings, the system and the start alone (its random numbers are the
+    settings' seed), so a plan another instance of this process made from the same state
+    (no pose of that system valued yet) is taken as it is, with the poses it valued
+    (:meth:`valued_poses` is then what it would have been).
     """
 
     privileged: ClassVar[bool] = True  # reads the simulator's state (uavris.agents.policy)
@@ -176,7 +191,21 @@ class PlanningOracle:
     def plan(self, config: SystemConfig, start: tuple[float, float, float]) -> Plan:
         key = (config, tuple(start))
         if key not in self.plans:
-            self.plans[key] = plan_target(config, start, self.settings, self._memo.setdefault(config, {}))
+            memo = self._memo.setdefault(config, {})
+            shared = (self.settings, config, tuple(float(x) for x in start))
+            if not memo and shared in _FRESH_PLANS:
+                plan, valued = _FRESH_PLANS[shared]
+                _FRESH_PLANS.move_to_end(shared)
+                memo.update(valued)
+            else:
+                fresh = not memo
+                plan = plan_target(config, start, self.settings, memo)
+                if fresh:
+                    plan.target.flags.writeable = plan.attitude.flags.writeable = False  # shared from now on
+                    _FRESH_PLANS[shared] = (plan, dict(memo))
+                    while len(_FRESH_PLANS) > FRESH_PLANS_KEPT:
+                        _FRESH_PLANS.popitem(last=False)
+            self.plans[key] = plan
         return self.plans[key]
 
     def valued_poses(self, config: SystemConfig) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
