@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from report_check import check_deployment_report
 
 from uavris.agents.dt.dataset import load_dataset
 from uavris.experiments.engine.scheduling import StudyContext
@@ -197,6 +198,18 @@ def test_the_report_averages_seeds_and_states_the_claims(deployment_run):
     assert cells == [f"{np.mean(rho):.3f}", f"{np.min(rho):.3f}", f"{np.mean(share):.1%}", f"{np.min(share):.1%}"]
 
 
+def test_the_other_generators_halls_are_read_from_their_files(deployment_run):
+    """The ablation's halls of another generator: zero-shot only, their own tables and claims
+    after the study's, every number and verdict worked out again from their stage files."""
+    out, _ = deployment_run
+    other = sorted(s for s in (out / "stages").glob("deploy-evaluate-layout-other-*") if s.is_dir())
+    assert len(other) == 2 and all("dt-finetuned" not in read_json(s / "stage.json")["result"] for s in other)
+    text = (out / "report.md").read_text()
+    check_deployment_report({s.name[len("deploy-evaluate-"):].rsplit("-", 1)[0]: read_json(s / "stage.json")["result"]
+                             for s in other}, text[text.index("### Halls of another generator"):],
+                            "deployment track, another generator's halls")
+
+
 def test_the_rows_per_device_count_are_the_halls_numbers(deployment_run):
     """--device-counts 3: every row zero-shot in unseen halls of 3 devices, a table per count,
     each cell the mean of the halls' fractions of the oracle (seeds averaged first)."""
@@ -274,8 +287,13 @@ def test_a_row_added_in_one_place_is_in_the_tables_the_decomposition_and_the_cla
     """Adding a row to the study is one edit of tracks._learned_rows (here: a controller of one's
     own that spins the RIS): the report finds it, by what its stage results record, in the table
     of every row, the per-hall table, the decomposition and the claim that no learned row blocks
-    a device, in every group of halls."""
-    from uavris.experiments.study import tracks
+    a device, in every group of halls.
+
+    The added row changes every evaluation's key, so each hall is evaluated again: the added row
+    for real (workers.evaluate_row), the study's own rows taken from the run's files instead of
+    evaluated a second time (what they would give again: the same seeded episodes and models;
+    the suite checks that elsewhere, e.g. the Ray study against the local one)."""
+    from uavris.experiments.study import tracks, workers
     from uavris.experiments.tools.targets import Row, resolve_target
 
     out, _ = deployment_run
@@ -285,6 +303,20 @@ def test_a_row_added_in_one_place_is_in_the_tables_the_decomposition_and_the_cla
     added = Row("dt-spinning", "a spinning controller", resolve_target(f"{tmp_path / 'spin.py'}:spinning"))
     learned_rows = tracks._learned_rows
     monkeypatch.setattr(tracks, "_learned_rows", lambda *a, **k: [*learned_rows(*a, **k), (added, False)])
+
+    def the_added_row_evaluated(d, site, track, episodes, rows):
+        [before] = [s for s in (out / "stages").glob(f"deploy-evaluate-{site.name}-*")
+                    if read_json(s / "stage.json")["name"] == f"deploy-evaluate-{site.name}"]
+        for path in before.rglob("*"):
+            if path.is_file() and path.name not in ("stage.json", "timing.json", "job.log"):
+                (d / path.relative_to(before)).parent.mkdir(parents=True, exist_ok=True)
+                shutil.copyfile(path, d / path.relative_to(before))
+        results = read_json(before / "stage.json")["result"]
+        assert added.key not in results and {r.key for r in rows} == {*results, added.key}
+        return {r.key: workers.evaluate_row(d, site, track, episodes, r) if r.key == added.key else results[r.key]
+                for r in rows}
+
+    monkeypatch.setattr(workers, "evaluate_rows", the_added_row_evaluated)
     pretrained = {p.name: p.stat().st_mtime_ns for p in (copy / "stages").glob("deploy-pretrain-*/stage.json")}
     report = reproduce(RC, copy, workers=1, progress=False).read_text()
     # only the evaluations (their rows are in their keys) and the report are made again

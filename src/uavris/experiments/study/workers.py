@@ -170,25 +170,9 @@ def evaluate_rows(out: Path, site: Site, track: Track, episodes: int, rows: Sequ
     decomposition of :func:`_decomposition`, and the oracle's its plan's target
     (:func:`oracle_target`).
     """
-    from uavris.agents.evaluation import evaluate
     from uavris.agents.references import ORACLE
-    from uavris.experiments.tools.evaluate import write_results
-    from uavris.experiments.tools.trajectory import write_slots
-    from uavris.stats import summarize
 
-    result: dict[str, Any] = {}
-    for row in rows:
-        system = row.system(site.system)
-        loaded = row.load(system)
-        rec = _Whereabouts(system, episodes)
-        res = evaluate(loaded.policy, system, site.scenario, episodes, EVAL_SEED, on_slot=rec, on_step=rec.log.on_step)
-        write_slots(rec.log, out / "slots" / f"{row.key}.csv", EVAL_SEED)  # the first episode: the report draws it
-        summary = {"policy": row.key, "label": row.label_for(loaded.expert_kind), **row.facts(),
-                   "scenario": site.name, "track": track.name, **res.summary(),
-                   **{f"boot_{k}": v for k, v in summarize(res.avg_sum_rate).items()},
-                   **(_decomposition(system, rec) if track.layouts else {})}
-        write_results(res, summary, out / row.key)
-        result[row.key] = summary
+    result = {row.key: evaluate_row(out, site, track, episodes, row) for row in rows}
     if track.layouts:
         from uavris.agents.oracle import PlanningOracle
 
@@ -198,6 +182,27 @@ def evaluate_rows(out: Path, site: Site, track: Track, episodes: int, rows: Sequ
             if row.target is not None and row.target.kind == "value" and not row.target.top_k:
                 result[row.key].update(value_accuracy(site, row.target.planner_model(), oracle))
     return result
+
+
+def evaluate_row(out: Path, site: Site, track: Track, episodes: int, row: Row) -> dict[str, Any]:
+    """One row of :func:`evaluate_rows`: its per-episode CSV and summary in ``out`` (named by its
+    key), its first episode slot by slot in ``out/slots``; the summary."""
+    from uavris.agents.evaluation import evaluate
+    from uavris.experiments.tools.evaluate import write_results
+    from uavris.experiments.tools.trajectory import write_slots
+    from uavris.stats import summarize
+
+    system = row.system(site.system)
+    loaded = row.load(system)
+    rec = _Whereabouts(system, episodes)
+    res = evaluate(loaded.policy, system, site.scenario, episodes, EVAL_SEED, on_slot=rec, on_step=rec.log.on_step)
+    write_slots(rec.log, out / "slots" / f"{row.key}.csv", EVAL_SEED)  # the first episode: the report draws it
+    summary = {"policy": row.key, "label": row.label_for(loaded.expert_kind), **row.facts(),
+               "scenario": site.name, "track": track.name, **res.summary(),
+               **{f"boot_{k}": v for k, v in summarize(res.avg_sum_rate).items()},
+               **(_decomposition(system, rec) if track.layouts else {})}
+    write_results(res, summary, out / row.key)
+    return summary
 
 
 def oracle_target(where: Site, oracle: Any = None) -> dict[str, Any]:
