@@ -26,7 +26,7 @@ demo: $(STAMP)
 test: $(STAMP)
 	$(VENV)/bin/ruff check src tests benchmarks
 	$(VENV)/bin/mkdocs build --strict
-	$(PY) -m pytest -q -n 2 --dist loadfile
+	$(PY) -m pytest -q -n 2 --dist loadfile --no-loadscope-reorder
 
 # The lowest numpy pyproject.toml allows, under the physics, environment, oracle and statistics tests: a venv
 # whose own numpy (2.3.5) comes before the lock's, every other package the lock's (.ci/run runs it after make test).

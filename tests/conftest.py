@@ -24,6 +24,16 @@ os.environ.setdefault("UAVRIS_SEAL_KEY", "5eed" * 16)
 SHORT = SystemConfig(horizon=16)
 
 
+# The files that run whole smoke studies take most of the suite's time: under `make test`
+# (`-n 2 --dist loadfile --no-loadscope-reorder`) they start first, one on each worker, and the
+# other files fill in around them (by default xdist starts the files with the most tests first).
+STUDIES_FIRST = ("test_reproduce.py", "test_deployment_track.py")
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    items.sort(key=lambda item: item.path.name not in STUDIES_FIRST)  # stable: each file's own order kept
+
+
 @pytest.fixture
 def config() -> SystemConfig:
     return SystemConfig()
