@@ -50,6 +50,7 @@ def main(argv: list[str] | None = None) -> None:
     from uavris.experiments.study.pipeline import build_pipeline
     from uavris.experiments.study.report.deployment import NEAREST, layout_scores
     from uavris.experiments.study.reproduce import reproduce
+    from uavris.experiments.study.tracks import evaluation_stage
     from uavris.io import read_json
     from uavris.stats import over_units
 
@@ -63,7 +64,7 @@ def main(argv: list[str] | None = None) -> None:
     pipeline = build_pipeline(rc, out, StudyContext(1, "local", None))
     track = rc.tracks[0]
     _, unseen = rc.deployments(track)
-    results = {w.name: read_json(pipeline.directory(track.stage(f"evaluate-{w.name}")) / "stage.json")["result"]
+    results = {w.name: read_json(pipeline.directory(track.stage(evaluation_stage(w.name))) / "stage.json")["result"]
                for w in unseen}
     scores = layout_scores(results)
     print(f"deployment track, preset {args.preset}: {len(unseen)} unseen layouts x {rc.eval_episodes} episodes; "

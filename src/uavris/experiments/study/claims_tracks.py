@@ -28,7 +28,7 @@ import numpy as np
 from uavris.agents.references import HOVER_OPTIMIZER, ORACLE, ZERO_ACTION
 from uavris.experiments.study.finished import Study
 from uavris.experiments.study.judgement import NOT_TESTED, Judgement, judgement
-from uavris.experiments.study.tracks import TRACK_SPECS, Track, zero_shot_only
+from uavris.experiments.study.tracks import TRACK_SPECS, Track, evaluation_stage, finetune_stage, zero_shot_only
 from uavris.experiments.tools.targets import variant_key
 from uavris.io import read_csv, read_json
 from uavris.stats import HOLDS, NOT_RESOLVED, interactions_to_level, judged, judged_censored
@@ -104,7 +104,7 @@ def _scenario_units(studies: Sequence[Study], track: Track) -> list[dict[str, An
         experts = st.done(track.stage("experts-unseen"))
         for w in unseen:
             found = st.evaluation(track, w.name)
-            ft = st.done(track.stage(f"finetune-{w.name}"))
+            ft = st.done(track.stage(finetune_stage(w.name)))
             if found is None or ft is None or experts is None:
                 continue
             edir, res = found
@@ -352,7 +352,7 @@ def _deployment_fewer(study: Study, track: Track, from_scratch: Sequence[dict[st
     diff, low, high = [], [], []
     for h in from_scratch:
         x, y = (np.asarray(v, dtype=np.float64) for v in h["expert_curve"])
-        res = study.result(track.stage(f"evaluate-{h['hall']}")) or {}
+        res = study.result(track.stage(evaluation_stage(h["hall"]))) or {}
         seeds = sorted({v["seed"] or 0 for v in res.values() if v.get("variant") == FINETUNED_DTS[0]})
         needs = [interactions_needed((x, y), finetune_curve(d / "model"), float(y[-1]))
                  for d in (study.done(track.stage(places_stage(h["hall"], s))) for s in seeds) if d is not None]

@@ -20,7 +20,7 @@ from uavris.experiments.engine.scheduling import StudyContext
 from uavris.experiments.engine.stages import Pipeline
 from uavris.experiments.study.config import ReproduceConfig
 from uavris.experiments.study.pipeline import TrackStages, build_pipeline, track_stages
-from uavris.experiments.study.tracks import TRACK_SPECS, Track
+from uavris.experiments.study.tracks import TRACK_SPECS, Track, evaluation_stage
 from uavris.experiments.tools.targets import Row
 from uavris.io import read_json, read_yaml
 from uavris.layouts import Site
@@ -69,7 +69,7 @@ class Study:
 
     def evaluation(self, track: Track, site: str) -> tuple[Path, dict[str, Any]] | None:
         """The evaluation stage of ``track`` in ``site`` (its directory and result), where it finished."""
-        name = track.stage(f"evaluate-{site}")
+        name = track.stage(evaluation_stage(site))
         d = self.done(name)
         return (d, read_json(d / "stage.json")["result"]) if d else None
 

@@ -34,7 +34,7 @@ from uavris.config import DictConfig
 from uavris.errors import ConfigError, UavrisError
 from uavris.experiments.study.claims_tracks import LEVEL, finetune_curve
 from uavris.experiments.study.finished import Study
-from uavris.experiments.study.tracks import SAFE_MARGIN_DEG, TRACK_SPECS, places_stage, zero_shot_only
+from uavris.experiments.study.tracks import SAFE_MARGIN_DEG, TRACK_SPECS, evaluation_stage, places_stage, zero_shot_only
 from uavris.io import read_csv, write_json
 from uavris.stats import interactions_to_level
 
@@ -70,7 +70,7 @@ def from_scratch(out: str | Path, cfg: FromScratchConfig, dest: Path,
     measured: dict[str, Any] = {"study": str(Path(out).resolve()), "cpu": machine(), "config": cfg.to_dict(),
                                 "demonstrations": demos, "halls": []}
     for where in [w for w in unseen if not zero_shot_only(w, rc.system)][:cfg.halls]:
-        res = study.result(track.stage(f"evaluate-{where.name}"))
+        res = study.result(track.stage(evaluation_stage(where.name)))
         if res is None:
             raise UavrisError(f"{out}: the evaluation in {where.name} has not finished")
         fine = [v for v in res.values() if v["variant"] == "dt-goal-finetuned-safe"]

@@ -63,6 +63,8 @@ from uavris.experiments.study.tracks import (
     REFERENCE_ROWS,
     Track,
     TrainedModel,
+    evaluation_stage,
+    finetune_stage,
     places_stage,
     strong_expert_config,
     track_rows,
@@ -240,7 +242,7 @@ class TrackStages(PlaceStages):
             stages += self.value_stages() + (self.places_finetune_stages() if self.tries_places else [])
         for w in (w for w in self.unseen if not zero_shot_only(w, self.rc.system) and self.finetunes_returns):
             ft = self.finetune_config("<pretrain>", w)
-            stages.append(Stage(self.t(f"finetune-{w.name}"), ft.to_dict(), partial(self._run_finetune, w),
+            stages.append(Stage(self.t(finetune_stage(w.name)), ft.to_dict(), partial(self._run_finetune, w),
                                 (self.t("pretrain"),),
                                 (finetune_cost(ft, self.horizon, self.control, self.model),)))
         for w in self.unseen:
@@ -318,7 +320,7 @@ class TrackStages(PlaceStages):
 
     def _run_finetune(self, where: Site, d: Path, deps: dict[str, Path]) -> dict[str, Any]:
         cfg = self.finetune_config(deps[self.t("pretrain")] / "model", where)
-        return self.ctx.run_one(self.t(f"finetune-{where.name}"), finetune_job,
+        return self.ctx.run_one(self.t(finetune_stage(where.name)), finetune_job,
                                 (cfg.to_dict(), str(d / "model"), self.ctx.device), d / "job.log",
                                 finetune_cost(cfg, self.horizon, self.control, self.model),
                                 reads=(Path(cfg.model),), writes=(d / "model",))
@@ -328,7 +330,7 @@ class TrackStages(PlaceStages):
         if zero_shot_only(site, self.rc.system):
             return []
         places = [places_stage(site.name, m.seed) for m in self.models if m.row == "dt-goal" and self.tries_places]
-        return [*([f"finetune-{site.name}"] if self.finetunes_returns else []), *places]
+        return [*([finetune_stage(site.name)] if self.finetunes_returns else []), *places]
 
     def _evaluate_stage(self, where: Site) -> Stage:
         sources = transfer_sources(self.track, where, self.train)
@@ -342,8 +344,8 @@ class TrackStages(PlaceStages):
                                                      "start": list(where.scenario.start)},
                   "rows": [r.key for r in rows], "transfer_from": [s for s, _ in sources],
                   **({"front_margin_deg": self.track.front_margin_deg} if self.track.front_margin_deg else {})}
-        return Stage(self.t(f"evaluate-{where.name}"), config, partial(self._run_evaluate, where, sources, keys, cost),
-                     tuple(self.t(k) for k in keys), (cost,))
+        return Stage(self.t(evaluation_stage(where.name)), config,
+                     partial(self._run_evaluate, where, sources, keys, cost), tuple(self.t(k) for k in keys), (cost,))
 
     def _rows(self, where: Site, sources: list[tuple[str, float]], dirs: dict[str, Path]) -> list[Row]:
         return track_rows(self.track, where, sources, dirs, self.models, self.train, self.rc.ablation)
@@ -359,6 +361,6 @@ class TrackStages(PlaceStages):
                       d: Path, deps: dict[str, Path]) -> dict[str, Any]:
         rows = self._rows(where, sources, {k: deps[self.t(k)] for k in keys})
         # its rows' models are in the stages it depends on; its results go to its own folder
-        return self.ctx.run_one(self.t(f"evaluate-{where.name}"), evaluate_job,
+        return self.ctx.run_one(self.t(evaluation_stage(where.name)), evaluate_job,
                                 (str(d), where, self.track.name, self.rc.eval_episodes, rows), d / "job.log", cost,
                                 reads=tuple(deps.values()), writes=(d,))

@@ -186,8 +186,8 @@ def _learned_rows(track: Track, site: Site, sources: list[tuple[str, float]], di
     if track.unseen_experts:
         rows.append((Row("expert", "expert trained in the scenario",
                          Target.of_model(dirs["experts-unseen"] / "runs" / site.name, "expert"), kind="expert"), False))
-    if f"finetune-{site.name}" in dirs:
-        rows.append((Row("dt-finetuned", "fine-tuned DT", Target.of_model(dirs[f"finetune-{site.name}"] / "model")),
+    if finetune_stage(site.name) in dirs:
+        rows.append((Row("dt-finetuned", "fine-tuned DT", Target.of_model(dirs[finetune_stage(site.name)] / "model")),
                      True))
     seeded = len({m.seed for m in models}) > 1
     value = Target.of_model(dirs["value"] / "value", "value") if "value" in dirs else None
@@ -225,6 +225,17 @@ def _learned_rows(track: Track, site: Site, sources: list[tuple[str, float]], di
         rows.append((Row(f"transfer-{src}", label, Target.of_model(dirs["experts-train"] / "runs" / src, "expert"),
                          kind="transfer", rank=rank), False))
     return rows
+
+
+def evaluation_stage(site: str) -> str:
+    """The stage that evaluates every row of a track in ``site`` (a hall's or a scenario's name);
+    a track's prefix goes in front (:meth:`Track.stage`)."""
+    return f"evaluate-{site}"
+
+
+def finetune_stage(site: str) -> str:
+    """The stage that fine-tunes the DT in ``site`` by the paper's Algorithm 1 (a track's prefix in front)."""
+    return f"finetune-{site}"
 
 
 def places_stage(site: str, seed: int) -> str:

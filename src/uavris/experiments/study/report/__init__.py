@@ -37,7 +37,7 @@ from uavris.experiments.study.report.deployment import (
 )
 from uavris.experiments.study.report.figures import fig3, interactions_figure, trajectory_figure
 from uavris.experiments.study.report.schedule import schedule_figure, stage_table
-from uavris.experiments.study.tracks import Track, zero_shot_only
+from uavris.experiments.study.tracks import Track, evaluation_stage, finetune_stage, zero_shot_only
 from uavris.experiments.training.compare import fig2_table
 from uavris.io import atomic_write_text, read_json
 from uavris.presets import EVAL_SEED
@@ -86,7 +86,7 @@ class _Report:
         self.add("", f"## {track.title[0].upper() + track.title[1:]}", "")
         results = {}
         for i, scenario in enumerate(UNSEEN_SCENARIOS):
-            name = track.stage(f"evaluate-{scenario}")
+            name = track.stage(evaluation_stage(scenario))
             label = "ab"[i]
             self.add(f"### Unseen scenario {scenario} {list(get_scenario(scenario).start)} (paper Fig. 3{label})", "")
             if name not in self.ok:
@@ -116,7 +116,7 @@ class _Report:
 
     def _claims(self, track: Track, scenario: str, res: dict[str, dict[str, Any]]) -> None:
         """The figure behind the "fewer interactions" claim (judged in the claims table)."""
-        fdir = self.study.directory(track.stage(f"finetune-{scenario}"))
+        fdir = self.study.directory(track.stage(finetune_stage(scenario)))
         xdir = self.study.directory(track.stage("experts-unseen"))
         if (fdir / "model" / "finetune.csv").exists() and (xdir / "runs" / scenario / "evals.csv").exists():
             istem = f"{track.prefix}interactions_{scenario}"
@@ -131,7 +131,7 @@ class _Report:
         _, unseen = self.rc.sites(track)
         results = {}
         for w in unseen:
-            name = track.stage(f"evaluate-{w.name}")
+            name = track.stage(evaluation_stage(w.name))
             if name in self.ok:
                 results[w.name] = read_json(self.study.directory(name) / "stage.json")["result"]
         missing = [w.name for w in unseen if w.name not in results]
