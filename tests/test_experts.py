@@ -140,10 +140,12 @@ def test_a_periodic_evaluation_is_the_run_of_that_budget(tmp_path, algo):
     """A run evaluated every 160 steps scores, at its first evaluation, what a run trained for
     exactly those steps scores at its end: the policy after every update of the steps so far
     (what the budget table reads; PPO's rollout of 4 x 32 steps ends at 256, DDPG learns from
-    step 100 on). Evaluated before the update of the step that reached 160, it was not."""
+    step 100 on). Evaluated before the update of the step that reached 160, it was not. The
+    curve starts at step 0, as a fine-tuning curve does (what "fewer interactions" compares)."""
     long = TrainConfig(algo=algo, scenario="fig2", seed=1, preset="smoke", eval_episodes=2, eval_every=160)
     train(long, tmp_path / "long", progress=False)
-    first = read_csv(tmp_path / "long" / "evals.csv")[0]
+    start, first = read_csv(tmp_path / "long" / "evals.csv")[:2]
+    assert int(start["env_steps"]) == 0
     assert int(first["env_steps"]) == {"ddpg": 160, "ppo": 256}[algo]
     short = dataclasses.replace(long, total_steps=int(first["env_steps"]))
     train(short, tmp_path / "short", progress=False)

@@ -10,7 +10,7 @@ A run directory holds::
 
     config.yaml            the resolved TrainConfig (system, scenario, hyperparameters)
     episodes.csv           every finished training episode: env steps, average sum rate
-    evals.csv              periodic deterministic evaluations (mean and 95% CI)
+    evals.csv              deterministic evaluations from env step 0 on (mean and 95% CI)
     checkpoints/           step_<N>.policy.safetensors/.json (the policy, what commands read),
                            step_<N>.zip models, step_<N>.state.pkl (environments and random
                            streams), replay_buffer.pkl (off-policy): the pickles each sealed
@@ -374,11 +374,23 @@ IMITATION_HEADER = ("round", "samples", "loss", "student_gap")
 
 def _fresh_model(cfg: TrainConfig, env: Any, run_dir: Path, evals: list[dict[str, Any]], progress: bool,
                  device: str = "cpu") -> Any:
-    """A new model; with ``cfg.imitation`` fitted to the teacher first (imitation.csv) and
-    evaluated at env step 0 (when RL follows), so the learning curve starts from it."""
+    """A new model, evaluated at env step 0 when RL follows (with ``cfg.imitation``, after it is
+    fitted to the teacher: imitation.csv), so that its learning curve starts where a fine-tuning
+    curve does: "fewer interactions" charges each side from its first useful point (the claims
+    page, docs/results/claims.md). The evaluation's environment is its own; the model's random numbers are
+    untouched (a deterministic policy draws none)."""
     model = build_model(cfg.algo, env, cfg.hyperparams, cfg.seed, str(run_dir / "tb"), device)
-    if cfg.imitation is None:
-        return model
+    if cfg.imitation is not None:
+        _imitate(model, cfg, run_dir, progress)
+    if cfg.total_steps > 0:  # otherwise the final evaluation is this one
+        res = run_evaluation(model, cfg, cfg.eval_episodes).summary()
+        evals.append(_eval_row(0, res))
+    return model
+
+
+def _imitate(model: Any, cfg: TrainConfig, run_dir: Path, progress: bool) -> None:
+    """Fit ``model`` to the oracle's motion (``cfg.imitation``'s rounds), recorded in imitation.csv."""
+    assert cfg.imitation is not None
     rows: list[dict[str, Any]] = []
     bar = progress_bar(cfg.imitation.rounds, f"imitation {cfg.scenario}", "round", progress)
 
@@ -390,10 +402,6 @@ def _fresh_model(cfg: TrainConfig, env: Any, run_dir: Path, evals: list[dict[str
     with bar:
         imitate(model, cfg.system, cfg.resolved_scenario, cfg.imitation, cfg.seed, on_round)
     write_csv(run_dir / "imitation.csv", IMITATION_HEADER, rows)
-    if cfg.total_steps > 0:  # otherwise the final evaluation is this one
-        res = run_evaluation(model, cfg, cfg.eval_episodes).summary()
-        evals.append(_eval_row(0, res))
-    return model
 
 
 def train_job(cfg_dict: dict[str, Any], run_dir: str, device: str = "cpu") -> dict[str, Any]:
