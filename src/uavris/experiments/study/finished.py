@@ -21,6 +21,7 @@ from uavris.experiments.engine.stages import Pipeline
 from uavris.experiments.study.config import ReproduceConfig
 from uavris.experiments.study.pipeline import TrackStages, build_pipeline, track_stages
 from uavris.experiments.study.tracks import TRACK_SPECS, Track, evaluation_stage
+from uavris.experiments.study.workers import first_episode_slots
 from uavris.experiments.tools.targets import Row
 from uavris.io import read_json, read_yaml
 from uavris.layouts import Site
@@ -72,6 +73,12 @@ class Study:
         name = track.stage(evaluation_stage(site))
         d = self.done(name)
         return (d, read_json(d / "stage.json")["result"]) if d else None
+
+    def first_episode(self, track: Track, site: str, row: str) -> Path | None:
+        """Row ``row``'s first evaluation episode in ``site``, slot by slot (a CSV), where it exists."""
+        found = self.evaluation(track, site)
+        path = first_episode_slots(found[0], row) if found else None
+        return path if path is not None and path.is_file() else None
 
     def track(self, name: str) -> TrackStages:
         """The stages of track ``name``; one line naming the tracks the study ran."""

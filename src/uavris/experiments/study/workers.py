@@ -184,6 +184,11 @@ def evaluate_rows(out: Path, site: Site, track: Track, episodes: int, rows: Sequ
     return result
 
 
+def first_episode_slots(evaluation: Path, row: str) -> Path:
+    """Where an evaluation stage's directory keeps row ``row``'s first episode, slot by slot."""
+    return evaluation / "slots" / f"{row}.csv"
+
+
 def evaluate_row(out: Path, site: Site, track: Track, episodes: int, row: Row) -> dict[str, Any]:
     """One row of :func:`evaluate_rows`: its per-episode CSV and summary in ``out`` (named by its
     key), its first episode slot by slot in ``out/slots``; the summary."""
@@ -196,7 +201,7 @@ def evaluate_row(out: Path, site: Site, track: Track, episodes: int, row: Row) -
     loaded = row.load(system)
     rec = _Whereabouts(system, episodes)
     res = evaluate(loaded.policy, system, site.scenario, episodes, EVAL_SEED, on_slot=rec, on_step=rec.log.on_step)
-    write_slots(rec.log, out / "slots" / f"{row.key}.csv", EVAL_SEED)  # the first episode: the report draws it
+    write_slots(rec.log, first_episode_slots(out, row.key), EVAL_SEED)  # the report draws it
     summary = {"policy": row.key, "label": row.label_for(loaded.expert_kind), **row.facts(),
                "scenario": site.name, "track": track.name, **res.summary(),
                **{f"boot_{k}": v for k, v in summarize(res.avg_sum_rate).items()},

@@ -92,10 +92,11 @@ class _Report:
             if name not in self.ok:
                 self.add(f"Not available: the `{name}` stage did not finish.", "")
                 continue
-            edir = self.study.directory(name)
+            found = self.study.evaluation(track, scenario)
+            assert found is not None  # a stage that finished
+            edir, res = found
             stem = f"{track.prefix}fig3{label}_{scenario}"
             fig3(scenario, edir, self.figs / stem, track.name)
-            res = read_json(edir / "stage.json")["result"]
             results[scenario] = res
             oracle, zero = res[ORACLE]["mean"], res[ZERO_ACTION]["mean"]
             self.add(f"![Fig. 3{label}, {track.name} track](figures/{stem}.png)", "")
@@ -107,8 +108,8 @@ class _Report:
                   "-" if key == ZERO_ACTION else versus(s["ci_low"], s["ci_high"], zero), fraction(s["mean"], oracle))
                  for key, s in res.items()], "lrlrllr"), "")
             self._claims(track, scenario, res)
-            slots = edir / "slots" / "dt-finetuned.csv"  # the evaluation's first episode, slot by slot
-            if i == 0 and slots.exists():
+            slots = self.study.first_episode(track, scenario, "dt-finetuned")
+            if i == 0 and slots is not None:
                 tstem = f"{track.prefix}trajectory_{scenario}"
                 trajectory_figure(scenario, slots, self.rc.system, self.figs / tstem, EVAL_SEED)
                 self.add(f"![trajectory, {track.name} track](figures/{tstem}.png)", "")
@@ -132,8 +133,9 @@ class _Report:
         results = {}
         for w in unseen:
             name = track.stage(evaluation_stage(w.name))
-            if name in self.ok:
-                results[w.name] = read_json(self.study.directory(name) / "stage.json")["result"]
+            found = self.study.evaluation(track, w.name) if name in self.ok else None
+            if found is not None:
+                results[w.name] = found[1]
         missing = [w.name for w in unseen if w.name not in results]
         if missing:
             self.add(f"Not available for {len(missing)} of {len(unseen)} unseen layouts (their evaluation stage did "
