@@ -78,7 +78,6 @@ def test_an_aborted_runner_stops_the_jobs_its_workers_run(tmp_path: Path):
         hold.unlink()
 
 
-@pytest.mark.slow
 def test_ctrl_c_at_an_idle_worker_leaves_it_quiet_and_working(tmp_path: Path, capfd):
     """Ctrl-C reaches the terminal's whole process group, the workers included; stopping them is
     the command's work (abort). A worker that raised KeyboardInterrupt while it waited for a
@@ -96,6 +95,7 @@ def test_ctrl_c_at_an_idle_worker_leaves_it_quiet_and_working(tmp_path: Path, ca
     assert "Process" not in capfd.readouterr().err
 
 
+@pytest.mark.slow
 def test_a_dying_ray_worker_fails_its_own_job_and_no_other(tmp_path: Path):
     pytest.importorskip("ray")
     with JobRunner(2, "ray") as runner:
@@ -377,6 +377,47 @@ def study(args):
 cli.command = lambda name: study
 sys.exit(cli.main(["reproduce"]))
 '''
+
+
+LIBRARY_STUDY = '''
+from pathlib import Path
+
+from uavris.experiments.engine.scheduling import StudyContext
+from uavris.experiments.engine.stages import Pipeline, Stage
+from uavris.experiments.engine.jobs import Job
+
+ctx = StudyContext(2, "local", None)
+jobs = {jobs}
+stage = Stage("held", {{}}, lambda d, deps: ctx.submit("held", jobs), costs=(1.0, 1.0))
+try:
+    Pipeline(Path({out!r}), [stage]).run()
+except KeyboardInterrupt:
+    Path({out!r}, "interrupted").touch()
+finally:
+    ctx.close()
+'''
+
+
+def test_ctrl_c_in_a_program_that_runs_a_study_stops_its_workers(tmp_path: Path):
+    """A program that calls the library (no uavris command, so no signal handler of ours) gets
+    KeyboardInterrupt on Ctrl-C while its stages wait for their jobs: the pipeline stops the
+    workers (they ignore SIGINT themselves) instead of waiting for their jobs to end."""
+    import signal
+    import sys
+
+    pids = tmp_path / "pids"
+    pids.mkdir()
+    err = tmp_path / "stderr"
+    script = LIBRARY_STUDY.format(jobs=_hang_jobs(pids), out=str(tmp_path))
+    proc, workers = _start([sys.executable, "-c", script], err), []
+    try:
+        workers = _workers(pids, proc, err)
+        os.kill(proc.pid, signal.SIGINT)  # the program alone, as a notebook's interrupt sends it
+        proc.wait(timeout=HANG_S / 4)
+        assert (tmp_path / "interrupted").exists(), err.read_text()
+        assert not _running_after(workers, 5.0), f"workers {workers} outlived the interrupt"
+    finally:
+        _kill_all(proc, workers)
 
 
 @pytest.mark.parametrize("signame, code, line", [("SIGTERM", 143, "terminated (SIGTERM)"),

@@ -146,21 +146,30 @@ class Pipeline:
         order = self.downstream(1)
         pending = dict(sorted(pending.items(), key=lambda kv: -(order[kv[0]] + kv[1].duration(1))))
         with ThreadPoolExecutor(max_workers=max(1, len(self.stages) if concurrent else 1)) as threads:
-            while pending or running:
-                for name, st in list(pending.items()):
-                    if any(records.get(dep) is not None and records[dep].status == "failed" for dep in st.deps):
-                        del pending[name]
-                        finish(StageRecord(name, st.key, self.directory(name), "failed", 0.0, None,
-                                           "an upstream stage failed"))
-                    elif all(dep in records for dep in st.deps) and (concurrent or not running):
-                        del pending[name]
-                        running[threads.submit(self._run_stage, st, name in force)] = name
-                if not running:
-                    continue
-                done, _ = wait(running, return_when=FIRST_COMPLETED)
-                for fut in done:
-                    del running[fut]
-                    finish(fut.result())
+            try:
+                while pending or running:
+                    for name, st in list(pending.items()):
+                        if any(records.get(dep) is not None and records[dep].status == "failed" for dep in st.deps):
+                            del pending[name]
+                            finish(StageRecord(name, st.key, self.directory(name), "failed", 0.0, None,
+                                               "an upstream stage failed"))
+                        elif all(dep in records for dep in st.deps) and (concurrent or not running):
+                            del pending[name]
+                            running[threads.submit(self._run_stage, st, name in force)] = name
+                    if not running:
+                        continue
+                    done, _ = wait(running, return_when=FIRST_COMPLETED)
+                    for fut in done:
+                        del running[fut]
+                        finish(fut.result())
+            except KeyboardInterrupt:
+                # Ctrl-C in a program that calls the library (the command does this in its signal
+                # handler too): stop the jobs the stage threads wait for, which leaving this block
+                # waits for, instead of letting them run to their end (pool workers ignore SIGINT)
+                from uavris.experiments.engine.jobs import abort_runners
+
+                abort_runners()
+                raise
         return [records[name] for name in self.stages]
 
     def _run_stage(self, st: Stage, forced: bool) -> StageRecord:
