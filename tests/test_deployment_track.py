@@ -198,10 +198,23 @@ def test_the_report_averages_seeds_and_states_the_claims(deployment_run):
     assert cells == [f"{np.mean(rho):.3f}", f"{np.min(rho):.3f}", f"{np.mean(share):.1%}", f"{np.min(share):.1%}"]
 
 
-def test_the_other_generators_halls_are_read_from_their_files(deployment_run):
-    """The ablation's halls of another generator: zero-shot only, their own tables and claims
-    after the study's, every number and verdict worked out again from their stage files."""
+def test_the_deployment_sections_numbers_are_read_from_their_files(deployment_run):
+    """Every number and verdict of the deployment section worked out again from the stage files
+    (tests/report_check.py), with the ablation's rows: the study's own halls, and the ablation's
+    halls of another generator (zero-shot only, their own tables and claims after the study's)."""
     out, _ = deployment_run
+    own = sorted(s for s in (out / "stages").glob("deploy-evaluate-layout-unseen-*")
+                 if s.is_dir() and not s.name.rsplit("-", 1)[0].endswith("-k3"))
+    assert len(own) == 2 and all({"dt-flat", "dt-mixed", "bc-mixed"} <= set(read_json(s / "stage.json")["result"])
+                                 for s in own)
+    for stage in own:
+        for summary in read_json(stage / "stage.json")["result"].values():
+            per_episode = [float(x) for x in re.findall(r"^\d+,([^,]+),", (stage / f"{summary['policy']}.csv")
+                                                       .read_text(), re.M)]
+            assert len(per_episode) == RC.eval_episodes
+            assert abs(sum(per_episode) / RC.eval_episodes - summary["mean"]) < 1e-9
+    check_deployment_report({s.name[len("deploy-evaluate-"):].rsplit("-", 1)[0]: read_json(s / "stage.json")["result"]
+                             for s in own}, (out / "report.md").read_text())
     other = sorted(s for s in (out / "stages").glob("deploy-evaluate-layout-other-*") if s.is_dir())
     assert len(other) == 2 and all("dt-finetuned" not in read_json(s / "stage.json")["result"] for s in other)
     text = (out / "report.md").read_text()

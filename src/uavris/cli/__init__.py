@@ -125,8 +125,8 @@ class _OnStop:
     the job runners' workers (:func:`~uavris.experiments.engine.jobs.abort_runners`): the main
     thread unwinds at once, but a study waits for its stage threads, and they for their jobs,
     before it closes its runner, so that without it the study would go on to their end (SIGTERM
-    reaches the command alone; Ctrl-C reaches the workers, which fail the jobs they run and
-    take the next ones waiting)."""
+    reaches the command alone, and the pool's workers ignore Ctrl-C: stopping them is this
+    handler's work)."""
 
     def __init__(self) -> None:
         self.first: int | None = None  # the signal that stops the command

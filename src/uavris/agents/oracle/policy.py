@@ -159,11 +159,18 @@ class PlannedFlight:
 # Plans made by an oracle that had valued no pose of that system before, with the poses they
 # valued: another oracle of the same settings that has not planned in that system either
 # takes the plan and the poses instead of planning again. A study's evaluation of a hall
-# plans the same hall for the oracle's row, its row under the safety layer's system, the DT
-# told the oracle's place and the report's plan target; once is enough (docs/timings.md).
-# A few recent ones: a process plans one hall after another.
+# flies the oracle's row and then plans the same hall again for the report's plan target and
+# the learned value's accuracy; a worker evaluating several halls plans the same training
+# hall for each one's transfer row (docs/timings.md). A few recent ones: a process plans one
+# hall after another.
 _FRESH_PLANS: OrderedDict[tuple[Any, ...], tuple[Plan, dict[bytes, float]]] = OrderedDict()
 FRESH_PLANS_KEPT = 8
+
+
+def forget_shared_plans() -> None:
+    """Empty the plans oracles of this process share: a benchmark that times planning starts
+    from nothing."""
+    _FRESH_PLANS.clear()
 
 
 class PlanningOracle:

@@ -205,7 +205,9 @@ def abort_runners() -> None:
     workers (:mod:`uavris.cli`). The command's main thread unwinds from the signal, but a
     study's stage threads wait for their jobs, and a study waits for its stage threads before
     it closes the runner: without this, the study would go on until its running stages ended
-    (SIGTERM reaches the command alone, and Ctrl-C's workers take the next jobs waiting)."""
+    (SIGTERM reaches the command alone, and pool workers ignore Ctrl-C: :func:`_watch_parent`).
+    A program that calls the library gets the same from :meth:`Pipeline.run
+    <uavris.experiments.engine.stages.Pipeline.run>` on KeyboardInterrupt."""
     with _RUNNERS_LOCK:
         runners = list(_RUNNERS)
     for runner in runners:
@@ -275,17 +277,17 @@ class JobRunner:
 
     def close(self, abort: bool = False) -> None:
         """Start nothing more and shut the pool down: after the running jobs end, or, with
-        ``abort`` (Ctrl-C, SIGTERM or an error), stopping them. Ctrl-C reaches the workers, but
-        a job a worker took between the signal and this call would otherwise run to its end
-        while the command waits; SIGTERM reaches the command alone. Returns once the workers
+        ``abort`` (Ctrl-C, SIGTERM or an error), stopping them: the workers ignore Ctrl-C and
+        SIGTERM reaches the command alone, so a running job would otherwise run to its end
+        while the command waits. Returns once the workers
         have ended, also when another thread's close is shutting them down: an abort then
         stops the jobs that close waits for."""
         with self._lock:
-            # jobs finishing while the pool shuts down (Ctrl-C stops the workers too) start nothing
+            # jobs finishing while the pool shuts down (an abort stops the workers) start nothing
             self._closing = True
             waiting, self._waiting = self._waiting, []
             self._lock.notify_all()  # callers waiting for their turn in this thread (_run_here) give up
-            # a job rerun alone when Ctrl-C broke its pool runs in a pool started after the signal
+            # a job rerun alone (its worker died) runs in a pool of its own, stopped with the rest
             self._stopping += [p for p in (self._pool, *self._solos) if p is not None]
             self._pool, self._solos = None, set()
             pools = list(self._stopping)

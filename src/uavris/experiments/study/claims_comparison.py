@@ -139,7 +139,8 @@ def budget_figure(cdir: Path, stem: Path, zero: float) -> list[Path]:
     from uavris.experiments.display.plots import plt, reference_lines, save_figure
 
     fig, ax = plt.subplots(figsize=(5.4, 3.6))
-    runs = eval_curves(cdir)
+    # the untrained policy's evaluation at step 0 has no place on a log axis
+    runs = {algo: [(x[x > 0], y[x > 0]) for x, y in curves] for algo, curves in eval_curves(cdir).items()}
     for i, (algo, curves) in enumerate(sorted(runs.items())):
         for x, y in curves:
             ax.plot(x, y, "-", color=f"C{i}", lw=0.6, alpha=0.5)
