@@ -250,6 +250,44 @@ def test_within_five_percent_of_an_expert_below_doing_nothing_is_not_a_verdict()
     assert against_a_real_expert(refuted, below).verdict == REFUTED
 
 
+def test_within_five_percent_is_read_both_ways():
+    """"Within 5% of the expert" is an equivalence: the DT above 95% of the expert and below 105%
+    of it, each by its paired 95% CI (scipy's one-sample t interval here). A DT far above the
+    expert is not "nearly the same" (refuted, its cell the upper side's), one below 95% is
+    refuted, one inside holds with the weaker side's p, and a cell of too few units is left as
+    it was."""
+    from uavris.experiments.study.claims_tracks import within_both_ways
+    from uavris.experiments.study.judgement import judgement
+
+    expert = np.array([10.0, 11.0, 12.0, 10.5, 11.5])
+
+    def cell(dt):
+        below = judgement("near-expert", "paper", judged(dt - 0.95 * expert), "u", "seeds", "DT minus 95%")
+        above = judgement("near-expert", "paper", judged(1.05 * expert - dt), "u", "seeds", "105% minus DT")
+        return within_both_ways(below, above)
+
+    def scipy_side(x):
+        lo, hi = sps.ttest_1samp(x, 0.0).confidence_interval(0.95)
+        return "holds" if lo > 0 else "refuted" if hi < 0 else "not resolved"
+
+    for dt, want in ((expert * 1.01, HOLDS), (expert * 1.2, REFUTED), (expert * 0.8, REFUTED),
+                     (expert * np.array([0.9, 1.02, 0.97, 1.0, 0.95]), NOT_RESOLVED)):
+        sides = [scipy_side(dt - 0.95 * expert), scipy_side(1.05 * expert - dt)]
+        independent = ("refuted" if "refuted" in sides else "holds" if sides == ["holds", "holds"]
+                       else "not resolved")
+        got = cell(dt)
+        assert got.verdict == want == independent, (want, got.verdict, sides)
+    far = cell(expert * 1.2)
+    assert far.mean == pytest.approx(np.mean(1.05 * expert - expert * 1.2)) and far.ci_high < 0  # the upper side
+    assert "105% minus DT" in far.text and "DT minus 95%" in far.text
+    inside = cell(expert * 1.01)
+    below = judgement("near-expert", "paper", judged(expert * 0.01 + 0.05 * expert), "u", "seeds", "b")
+    above = judgement("near-expert", "paper", judged(0.04 * expert), "u", "seeds", "a")
+    assert inside.p == pytest.approx(max(below.p, above.p))
+    few = judgement("near-expert", "paper", judged([0.5, 0.4]), "u", "seeds", "t")
+    assert within_both_ways(few, judgement("near-expert", "paper", judged([-9.0, -8.0]), "u", "seeds", "a")) == few
+
+
 def test_holm_adjusts_by_hand_and_the_p_value_is_scipys():
     """Holm's step-down method worked by hand on four p-values, and a cell's p-value read from its
     interval equal to scipy's one-sample t-test (and Welch's, for the comparison)."""

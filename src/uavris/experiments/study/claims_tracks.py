@@ -31,7 +31,7 @@ from uavris.experiments.study.judgement import NOT_TESTED, Judgement, judgement
 from uavris.experiments.study.tracks import TRACK_SPECS, Track, evaluation_stage, finetune_stage, zero_shot_only
 from uavris.experiments.tools.targets import variant_key
 from uavris.io import read_csv, read_json
-from uavris.stats import HOLDS, NOT_RESOLVED, interactions_to_level, judged, judged_censored
+from uavris.stats import HOLDS, NOT_RESOLVED, REFUTED, interactions_to_level, judged, judged_censored
 
 WITHIN = 0.05  # "nearly the same performance" (paper Sec. V): within 5% of the expert's mean
 LEVEL = 0.95  # "competitive performance" (abstract): the level both sides of "fewer interactions" must reach
@@ -138,10 +138,33 @@ def _pair_differences(u: dict[str, Any]) -> dict[str, Any]:
     fewer = interactions_needed(expert_curve(u["expert"]), finetune_curve(u["finetune"]), final)
     return {"zero-shot": float(np.mean(z - t)), "finetuned": float(np.mean(f - z)),
             "near-expert": float(np.mean(f - (1 - WITHIN) * e)),
+            "near-expert-above": float(np.mean((1 + WITHIN) * e - f)),
             "fluctuates": (float(np.std(z, ddof=1) - np.std(f, ddof=1)), float(np.std(t, ddof=1) - np.std(e, ddof=1))),
             "dt-over-bc": float(np.mean(z - episode_rates(edir, "bc"))) if "bc" in res else None,
             "expert-over-zero": float(np.mean(e - episode_rates(edir, ZERO_ACTION))) if ZERO_ACTION in res else None,
             "fewer": fewer, "pretraining": u["pretraining"]}
+
+
+def within_both_ways(below: Judgement, above: Judgement) -> Judgement:
+    """"Within 5% of the expert" read both ways, as an equivalence (two one-sided tests, each
+    by its paired 95% CI over the units): ``below`` judges "the DT minus 95% of the expert > 0",
+    ``above`` "105% of the expert minus the DT > 0". It holds where both hold, is refuted where
+    either is refuted (the DT below 95% of the expert, or above 105% of it: not "nearly the
+    same performance"), and is not resolved otherwise. The cell shows the side that decides (a
+    refuted side, else one not resolved, else ``below``), the text both; its p-value, which
+    Holm's correction reads, is the deciding side's, the larger of the two where both hold (a
+    verdict that needs both sides is as sure as its weaker one). A cell that is not judged
+    (too few units) is ``below`` as it is."""
+    if below.verdict not in (HOLDS, REFUTED, NOT_RESOLVED):
+        return below
+    sides = (below, above)
+    refuted = [j for j in sides if j.verdict == REFUTED]
+    unresolved = [j for j in sides if j.verdict == NOT_RESOLVED]
+    decides = refuted[0] if refuted else unresolved[0] if unresolved else max(sides, key=lambda j: j.p)
+    verdict = REFUTED if refuted else NOT_RESOLVED if unresolved else HOLDS
+    text = (f"{below.text} ({below.mean:+.2f} [{below.ci_low:+.2f}, {below.ci_high:+.2f}]); and {above.text} "
+            f"({above.mean:+.2f} [{above.ci_low:+.2f}, {above.ci_high:+.2f}]): within only where both are above zero")
+    return dataclasses.replace(decides, claim=below.claim, verdict=verdict, text=text)
 
 
 def against_a_real_expert(near: Judgement, expert_over_zero: dict[str, Any] | None) -> Judgement:
@@ -180,9 +203,11 @@ def judge_scenario_track(studies: Sequence[Study], track: Track) -> list[Judgeme
                      "zero-shot DT minus the stronger transferred expert, bps/Hz, paired on the evaluation episodes"),
            judgement("finetuned", name, per_seed("finetuned"), unit, "seeds",
                      "fine-tuned DT minus the zero-shot DT it started from, bps/Hz"),
-           against_a_real_expert(
+           against_a_real_expert(within_both_ways(
                judgement("near-expert", name, per_seed("near-expert"), unit, "seeds",
                          f"fine-tuned DT minus {1 - WITHIN:.0%} of the expert trained in the scenario, bps/Hz"),
+               judgement("near-expert", name, per_seed("near-expert-above"), unit, "seeds",
+                         f"{1 + WITHIN:.0%} of the expert minus the fine-tuned DT")),
                None if any(p["expert-over-zero"] is None for p in pairs) else per_seed("expert-over-zero")),
            judgement("fluctuates", name, per_seed("fluctuates", 0), unit, "seeds",
                      "the zero-shot DT's spread over evaluation episodes (standard deviation of each episode's "
@@ -268,7 +293,8 @@ def judge_deployment(study: Study, from_scratch: Sequence[dict[str, Any]] = ()) 
     track = TRACK_SPECS["deployment"]
     _, unseen = study.sites(track)
     rows: dict[str, list[float]] = {k: [] for k in ("zero-shot", "goal", "fluct-expert", "dt-over-bc",
-                                                      *(f"{c} {v}" for c in ("finetuned", "near-expert", "fluct-dt")
+                                                      *(f"{c} {v}" for c in ("finetuned", "near-expert", "near-above",
+                                                                              "fluct-dt")
                                                         for v, _, _ in FINETUNING))}
     names = []
     for w in unseen:
@@ -297,6 +323,7 @@ def judge_deployment(study: Study, from_scratch: Sequence[dict[str, Any]] = ()) 
             if fine is not None and start is not None:
                 rows[f"finetuned {fine_variant}"].append(float(np.mean(fine - start)))
                 rows[f"near-expert {fine_variant}"].append(float(np.mean(fine - (1 - WITHIN) * oracle)))
+                rows[f"near-above {fine_variant}"].append(float(np.mean((1 + WITHIN) * oracle - fine)))
                 before, after = (_seeds_spread(edir, res, v) or 0.0 for v in (start_variant, fine_variant))
                 rows[f"fluct-dt {fine_variant}"].append(before - after)
     unit = f"{len(names)} unseen halls, each the mean of its pre-training seeds"
@@ -319,9 +346,12 @@ def judge_deployment(study: Study, from_scratch: Sequence[dict[str, Any]] = ()) 
         v, what = judged_ft
         out += [judgement("finetuned", "deployment", judged(rows[f"finetuned {v}"]), unit, "halls",
                           f"{what}, minus the same DT zero-shot, both under the safety layer, bps/Hz"),
-                judgement("near-expert", "deployment", judged(rows[f"near-expert {v}"]), unit, "halls",
-                          f"{what}, minus {1 - WITHIN:.0%} of the oracle (the track's expert), "
-                          "both under the safety layer, bps/Hz"),
+                within_both_ways(
+                    judgement("near-expert", "deployment", judged(rows[f"near-expert {v}"]), unit, "halls",
+                              f"{what}, minus {1 - WITHIN:.0%} of the oracle (the track's expert), "
+                              "both under the safety layer, bps/Hz"),
+                    judgement("near-expert", "deployment", judged(rows[f"near-above {v}"]), unit, "halls",
+                              f"{1 + WITHIN:.0%} of the oracle minus {what}")),
                 judgement("fluctuates", "deployment", judged(rows[f"fluct-dt {v}"]), unit, "halls",
                           f"the zero-shot DT's spread over evaluation episodes minus that of {what} (each the "
                           "mean of its seeds' standard deviations), bps/Hz")]
