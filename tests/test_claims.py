@@ -283,7 +283,7 @@ def test_within_five_percent_is_read_both_ways():
     inside = cell(expert * 1.01)
     below = judgement("near-expert", "paper", judged(expert * 0.01 + 0.05 * expert), "u", "seeds", "b")
     above = judgement("near-expert", "paper", judged(0.04 * expert), "u", "seeds", "a")
-    assert inside.p == pytest.approx(max(below.p, above.p))
+    assert inside.p == pytest.approx(max(below.p, above.p)) and inside.mean == pytest.approx(below.mean)
     few = judgement("near-expert", "paper", judged([0.5, 0.4]), "u", "seeds", "t")
     assert within_both_ways(few, judgement("near-expert", "paper", judged([-9.0, -8.0]), "u", "seeds", "a")) == few
 

@@ -29,6 +29,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable
 
+from uavris.experiments.engine.jobs import abort_runners
 from uavris.io import read_json, to_plain, write_json
 from uavris.runs import TIMING_FILE, read_timing
 
@@ -166,8 +167,6 @@ class Pipeline:
                 # Ctrl-C in a program that calls the library (the command does this in its signal
                 # handler too): stop the jobs the stage threads wait for, which leaving this block
                 # waits for, instead of letting them run to their end (pool workers ignore SIGINT)
-                from uavris.experiments.engine.jobs import abort_runners
-
                 abort_runners()
                 raise
         return [records[name] for name in self.stages]

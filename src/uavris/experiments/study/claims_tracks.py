@@ -160,11 +160,12 @@ def within_both_ways(below: Judgement, above: Judgement) -> Judgement:
     sides = (below, above)
     refuted = [j for j in sides if j.verdict == REFUTED]
     unresolved = [j for j in sides if j.verdict == NOT_RESOLVED]
-    decides = refuted[0] if refuted else unresolved[0] if unresolved else max(sides, key=lambda j: j.p)
+    decides = refuted[0] if refuted else unresolved[0] if unresolved else below
     verdict = REFUTED if refuted else NOT_RESOLVED if unresolved else HOLDS
+    p = max(below.p, above.p) if verdict == HOLDS else decides.p
     text = (f"{below.text} ({below.mean:+.2f} [{below.ci_low:+.2f}, {below.ci_high:+.2f}]); and {above.text} "
             f"({above.mean:+.2f} [{above.ci_low:+.2f}, {above.ci_high:+.2f}]): within only where both are above zero")
-    return dataclasses.replace(decides, claim=below.claim, verdict=verdict, text=text)
+    return dataclasses.replace(decides, verdict=verdict, p=p, text=text)
 
 
 def against_a_real_expert(near: Judgement, expert_over_zero: dict[str, Any] | None) -> Judgement:
@@ -172,7 +173,7 @@ def against_a_real_expert(near: Judgement, expert_over_zero: dict[str, Any] | No
     nothing. Where the expert is not above the zero action by its paired 95% CI over the same
     units (``expert_over_zero``, :func:`uavris.stats.judged`'s), the zero action would "hold" as
     well, so a "holds" becomes "not resolved" and the cell says why; a "refuted" stands (the DT
-    is below 95% of even that expert)."""
+    is outside 95-105% of even that expert)."""
     if expert_over_zero is None or expert_over_zero["verdict"] == HOLDS or near.verdict != HOLDS:
         return near
     d = expert_over_zero
@@ -293,8 +294,8 @@ def judge_deployment(study: Study, from_scratch: Sequence[dict[str, Any]] = ()) 
     track = TRACK_SPECS["deployment"]
     _, unseen = study.sites(track)
     rows: dict[str, list[float]] = {k: [] for k in ("zero-shot", "goal", "fluct-expert", "dt-over-bc",
-                                                      *(f"{c} {v}" for c in ("finetuned", "near-expert", "near-above",
-                                                                              "fluct-dt")
+                                                      *(f"{c} {v}" for c in ("finetuned", "near-expert",
+                                                                              "near-expert-above", "fluct-dt")
                                                         for v, _, _ in FINETUNING))}
     names = []
     for w in unseen:
@@ -323,7 +324,7 @@ def judge_deployment(study: Study, from_scratch: Sequence[dict[str, Any]] = ()) 
             if fine is not None and start is not None:
                 rows[f"finetuned {fine_variant}"].append(float(np.mean(fine - start)))
                 rows[f"near-expert {fine_variant}"].append(float(np.mean(fine - (1 - WITHIN) * oracle)))
-                rows[f"near-above {fine_variant}"].append(float(np.mean((1 + WITHIN) * oracle - fine)))
+                rows[f"near-expert-above {fine_variant}"].append(float(np.mean((1 + WITHIN) * oracle - fine)))
                 before, after = (_seeds_spread(edir, res, v) or 0.0 for v in (start_variant, fine_variant))
                 rows[f"fluct-dt {fine_variant}"].append(before - after)
     unit = f"{len(names)} unseen halls, each the mean of its pre-training seeds"
@@ -350,7 +351,7 @@ def judge_deployment(study: Study, from_scratch: Sequence[dict[str, Any]] = ()) 
                     judgement("near-expert", "deployment", judged(rows[f"near-expert {v}"]), unit, "halls",
                               f"{what}, minus {1 - WITHIN:.0%} of the oracle (the track's expert), "
                               "both under the safety layer, bps/Hz"),
-                    judgement("near-expert", "deployment", judged(rows[f"near-above {v}"]), unit, "halls",
+                    judgement("near-expert", "deployment", judged(rows[f"near-expert-above {v}"]), unit, "halls",
                               f"{1 + WITHIN:.0%} of the oracle minus {what}")),
                 judgement("fluctuates", "deployment", judged(rows[f"fluct-dt {v}"]), unit, "halls",
                           f"the zero-shot DT's spread over evaluation episodes minus that of {what} (each the "
