@@ -1,7 +1,9 @@
 # isort: off
 import uavris  # noqa: F401 - first: it pins the float path before numpy loads, as in every worker (float_paths)
 # isort: on
+import contextlib
 import os
+from typing import Iterator
 
 import numpy as np
 import pytest
@@ -81,3 +83,22 @@ def keep_figures(monkeypatch: pytest.MonkeyPatch, *modules: object) -> list:
     for module in modules:
         monkeypatch.setattr(module, "save_figure", keep, raising=False)
     return kept
+
+
+@contextlib.contextmanager
+def killed_after_round(monkeypatch: pytest.MonkeyPatch, last: int) -> Iterator[None]:
+    """Fine-tuning (:func:`uavris.experiments.training.finetune.finetune`) stopped by a
+    KeyboardInterrupt as soon as round ``last``'s checkpoint is written, as a kill then would."""
+    from uavris.experiments.training import finetune as module
+
+    real = module.write_checkpoint
+
+    def write_then_stop(run_dir, index, *args, **kwargs):
+        path = real(run_dir, index, *args, **kwargs)
+        if index >= last:
+            raise KeyboardInterrupt(f"killed after round {index}")
+        return path
+
+    with monkeypatch.context() as m:
+        m.setattr(module, "write_checkpoint", write_then_stop)
+        yield

@@ -13,16 +13,19 @@ from scipy import stats as sps
 from uavris.io import read_json
 
 
-def mean_ci(x) -> tuple[float, float, float]:
-    """Mean and Student-t 95% interval of a sample (a sample without spread: a point)."""
+def mean_ci(x) -> tuple[float, float, float, int]:
+    """Mean, Student-t 95% interval of a sample (a sample without spread: a point) and its size."""
     x = np.asarray(x, dtype=float)
     if sps.sem(x) == 0:
-        return x.mean(), x.mean(), x.mean()
+        return x.mean(), x.mean(), x.mean(), len(x)
     lo, hi = sps.t.interval(0.95, len(x) - 1, loc=x.mean(), scale=sps.sem(x))
-    return x.mean(), lo, hi
+    return x.mean(), lo, hi, len(x)
 
 
-def _zero(lo: float, hi: float) -> str:
+def _zero(lo: float, hi: float, n: int) -> str:
+    """What a difference's interval says about zero; under 3 halls nothing."""
+    if n < 3:
+        return f"not measured ({n} layout{'' if n == 1 else 's'})"
     return "above zero" if lo > 0 else "below zero" if hi < 0 else "includes zero"
 
 
@@ -46,12 +49,17 @@ def every_verdict(*verdicts: str) -> str:
     return "not measured" if "not measured" in verdicts else "not resolved"
 
 
-def _pct3(m: tuple[float, float, float]) -> str:
-    return f"{m[0]:.1%} [{m[1]:.1%}, {m[2]:.1%}]"
+def _no_ci(n: int) -> str:
+    return f"(no CI: {n} unit{'' if n == 1 else 's'})"
 
 
-def _num3(m: tuple[float, float, float]) -> str:
-    return f"{m[0]:+.2f} [{m[1]:+.2f}, {m[2]:+.2f}]"
+def _pct3(m: tuple[float, float, float, int]) -> str:
+    """A fraction with its interval; under 3 units the mean alone, saying so."""
+    return f"{m[0]:.1%} {_no_ci(m[3])}" if m[3] < 3 else f"{m[0]:.1%} [{m[1]:.1%}, {m[2]:.1%}]"
+
+
+def _num3(m: tuple[float, float, float, int]) -> str:
+    return f"{m[0]:+.2f} {_no_ci(m[3])}" if m[3] < 3 else f"{m[0]:+.2f} [{m[1]:+.2f}, {m[2]:+.2f}]"
 
 
 def _table(text: str, header: str) -> list[list[str]]:
@@ -79,6 +87,11 @@ DEPLOYMENT_PAIRS = (("dt-zero-shot", "hover-optimizer"), ("dt-zero-shot", "neare
                     ("dt-goal-finetuned-safe", "dt-goal-safe"))
 # the targets of the rows that choose a place: (row, mean, worst hall); in zero-shot-only halls, the count's
 PLACE_TARGETS = (("dt-goal-safe", 0.97, 0.92), ("plan-semi", 0.99, None), ("dt-goal-finetuned-safe", 0.985, 0.95))
+
+
+def _m(diff: tuple) -> tuple[float, float, float, int]:
+    """A paired difference's mean, interval and size (``diffs``'s entries below)."""
+    return (*diff[:3], diff[5])
 
 
 def check_deployment_report(results: dict[str, dict], text: str, where: str = "deployment track") -> None:
@@ -117,10 +130,10 @@ def check_deployment_report(results: dict[str, dict], text: str, where: str = "d
     for a, b in DEPLOYMENT_PAIRS:
         if a in keys and b in keys:
             d = [scores[lay][a] - scores[lay][b] for lay in layouts]
-            diffs[(a, b)] = mean_ci(d)
-            diffs[(a, b)] = (*diffs[(a, b)], _zero(*diffs[(a, b)][1:]), [f"{x:+.2f}" for x in d])
+            m = mean_ci(d)
+            diffs[(a, b)] = (*m[:3], _zero(*m[1:]), [f"{x:+.2f}" for x in d], m[3])
     table = _table(text, "| difference |")
-    assert sorted(r[1:] for r in table) == sorted([*v[4], _num3(v[:3]), v[3]] for v in diffs.values())
+    assert sorted(r[1:] for r in table) == sorted([*v[4], _num3(_m(v)), v[3]] for v in diffs.values())
 
     claims = [line for line in text.splitlines() if line.startswith(f"- {where}: **")]
     expected = _check_score_claims(claims, where, keys, stat, diffs)
@@ -132,23 +145,25 @@ def check_deployment_report(results: dict[str, dict], text: str, where: str = "d
             blocked.setdefault(s["variant"], {}).setdefault(layout, []).append(s["behind_share"])
             if s["kind"] == "learned" and s["training_halls"] is None:  # the data curve's models aside
                 learned.add(s["variant"])
-    share = {k: np.mean([np.mean(v) for v in by.values()]) for k, by in blocked.items() if k in learned}
+    # each row's share per hall (its seeds averaged), the CI rule on the limit minus it, over halls
+    per_hall = {k: [np.mean(v) for v in by.values()] for k, by in blocked.items() if k in learned}
+    words = [ci_verdict(len(v), *mean_ci(0.01 - np.asarray(v))[1:3]) for v in per_hall.values()]
     expected += 1
     [claim] = [c for c in claims if c.startswith(f"- {where}: **no learned row blocks a device")]
-    assert f"**: {'holds' if max(share.values()) <= 0.01 else 'does not hold'} (" in claim, claim
+    assert f"**: {every_verdict(*words)} (" in claim, claim
     assert len(claims) == expected >= 5
 
 
 def _check_place_claims(claims: list[str], where: str, keys: list[str], stat: dict, diffs: dict, frac: dict) -> int:
     """The place rows' targets against the recomputed statistics; how many claims there are."""
-    if where != "deployment track":  # zero-shot halls: the count target, >= 96% and above hovering
+    if where != "deployment track":  # zero-shot halls: the count target, >= 98% and above hovering
         if "dt-goal-safe" not in keys:
             return 0
         [claim] = [c for c in claims if c.startswith(f"- {where}: **the semi-amortised place flown by")]
         hover, n = diffs[("dt-goal-safe", "hover-optimizer")], len(frac["dt-goal-safe"])
-        word = every_verdict(ci_verdict(n, *stat["dt-goal-safe"][1:3], 0.96, strict=False), ci_verdict(n, *hover[1:3]))
+        word = every_verdict(ci_verdict(n, *stat["dt-goal-safe"][1:3], 0.98, strict=False), ci_verdict(n, *hover[1:3]))
         assert f"**: {word} ({_pct3(stat['dt-goal-safe'])}; minus hovering " \
-               f"{_num3(hover[:3])} bps/Hz, {hover[3]})." in claim, claim
+               f"{_num3(_m(hover))} bps/Hz, {hover[3]})." in claim, claim
         return 1
     count = 0
     for key, mean, worst in PLACE_TARGETS:
@@ -161,7 +176,8 @@ def _check_place_claims(claims: list[str], where: str, keys: list[str], stat: di
         parts += [] if worst is None else ["holds" if min(frac[key]) >= worst else "refuted"]
         if key == "dt-goal-safe":
             parts += [ci_verdict(n, *diffs[(key, other)][1:3]) for other in ("hover-optimizer", "nearest")]
-        assert f"**: {every_verdict(*parts)} ({_pct3(stat[key])} of the oracle, worst hall " \
+        word = every_verdict(*parts) if n >= 3 else "not measured"  # the worst of two halls decides nothing
+        assert f"**: {word} ({_pct3(stat[key])} of the oracle, worst hall " \
                f"{min(frac[key]):.1%}" in claim, claim
     return count
 
@@ -183,8 +199,8 @@ def _check_score_claims(claims: list[str], where: str, keys: list[str], stat: di
         word = every_verdict(ci_verdict(n, *stat[key][1:3], target, strict=False), ci_verdict(n, *hover[1:3]),
                              ci_verdict(n, *near[1:3]))
         assert f"**: {word} (" in claim, claim
-        assert (f"({_pct3(stat[key])} of the oracle; minus hovering {_num3(hover[:3])} bps/Hz, {hover[3]}; minus "
-                f"nearest {_num3(near[:3])} bps/Hz, {near[3]})." in claim), claim
+        assert (f"({_pct3(stat[key])} of the oracle; minus hovering {_num3(_m(hover))} bps/Hz, {hover[3]}; minus "
+                f"nearest {_num3(_m(near))} bps/Hz, {near[3]})." in claim), claim
     for ft, zs, what in (("dt-finetuned", "dt-zero-shot", "fine-tuned DT"),
                          ("dt-finetuned-safe", "dt-zero-shot-safe", "fine-tuned DT under the attitude safety layer")):
         if ft not in keys:
@@ -196,7 +212,7 @@ def _check_score_claims(claims: list[str], where: str, keys: list[str], stat: di
         n = len(gain[4])
         word = every_verdict(ci_verdict(n, *stat[ft][1:3], target, strict=False), ci_verdict(n, *gain[1:3]))
         assert f"**: {word} (" in claim, claim
-        assert f"(fine-tuned {_pct3(stat[ft])}; fine-tuned minus zero-shot {_num3(gain[:3])} bps/Hz)." in claim, claim
+        assert f"(fine-tuned {_pct3(stat[ft])}; fine-tuned minus zero-shot {_num3(_m(gain))} bps/Hz)." in claim, claim
     for pair, what in ((("dt-zero-shot", "bc"), "**return conditioning on demonstrations of one quality"),
                        (("dt-zero-shot-safe", "bc-safe"), "**return conditioning under the attitude safety layer"),
                        (("dt-mixed", "bc-mixed"), "**return conditioning on mixed-quality data"),
@@ -204,7 +220,7 @@ def _check_score_claims(claims: list[str], where: str, keys: list[str], stat: di
         if pair in diffs:
             expected += 1
             [claim] = [c for c in claims if c.startswith(f"- {where}: {what}")]
-            assert claim.endswith(f"**: {_num3(diffs[pair][:3])} bps/Hz per layout, {diffs[pair][3]}."), claim
+            assert claim.endswith(f"**: {_num3(_m(diffs[pair]))} bps/Hz per layout, {diffs[pair][3]}."), claim
     return expected
 
 

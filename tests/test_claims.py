@@ -288,6 +288,38 @@ def test_within_five_percent_is_read_both_ways():
     assert within_both_ways(few, judgement("near-expert", "paper", judged([-9.0, -8.0]), "u", "seeds", "a")) == few
 
 
+def test_counting_pre_training_gives_a_verdict_only_where_both_charging_rules_agree():
+    """The issue's deployment case: four halls whose saving is about 35,000 interactions each, a
+    pre-training of 98,410 charged whole to each hall (refuted) or spread over the 16 halls it
+    serves (then the saving stands: holds) gives no verdict; where both rules agree the verdict
+    stands with the weaker rule's p. Each side worked out here with scipy's one-sample t interval."""
+    from uavris.experiments.study.claims_tracks import charged_both_ways
+    from uavris.experiments.study.judgement import judgement
+
+    saving = np.array([30_000.0, 38_000.0, 33_000.0, 41_000.0])
+    pre, served = 98_410.0, 16
+
+    def side(x):
+        lo, hi = sps.ttest_1samp(x, 0.0).confidence_interval(0.95)
+        return "holds" if lo > 0 else "refuted" if hi < 0 else "not resolved"
+
+    def cell(x, share):
+        whole = judgement("fewer-total", "deployment", judged(x - share * pre), "u", "halls", "saved minus")
+        spread = judgement("fewer-total", "deployment", judged(x - share * pre / served), "u", "halls", "")
+        return whole, spread, charged_both_ways(whole, spread, served)
+
+    whole, spread, got = cell(saving, 1.0)
+    assert (side(saving - pre), side(saving - pre / served)) == ("refuted", "holds")
+    assert got.verdict == NOT_RESOLVED and got.mean == pytest.approx(np.mean(saving - pre))
+    assert whole.p < 0.05 and spread.p < 0.05 and got.p == 1.0  # no evidence either way: no early rank in Holm
+    assert "charged whole to each" in got.text and f"spread over the {served}" in got.text
+    whole, spread, got = cell(saving * 4, 1.0)  # a saving above the whole charge: both rules hold
+    assert side(saving * 4 - pre) == side(saving * 4 - pre / served) == "holds"
+    assert got.verdict == HOLDS and got.p == pytest.approx(max(whole.p, spread.p)) == pytest.approx(whole.p)
+    few = judgement("fewer-total", "deployment", judged([1.0, 2.0]), "u", "halls", "t")
+    assert charged_both_ways(few, few, served) == few
+
+
 def test_holm_adjusts_by_hand_and_the_p_value_is_scipys():
     """Holm's step-down method worked by hand on four p-values, and a cell's p-value read from its
     interval equal to scipy's one-sample t-test (and Welch's, for the comparison)."""

@@ -34,9 +34,13 @@ def test_an_expert_run_costs_its_env_steps_and_its_evaluations():
     assert train_cost(_train(preset="smoke")) == train_cost(_train())
     assert train_cost(_train(preset="paper")) > train_cost(_train())
     # imitation of the oracle: a plan, then per round its episodes of labelled slots
-    imitation = SimpleNamespace(rounds=3, episodes=2)
+    imitation = SimpleNamespace(rounds=3, episodes=2, evaluate_rounds=False)
     extra = costs.PLAN_S + 3 * 2 * 50 * costs.IMITATION_SLOT_S
     assert train_cost(_train(imitation=imitation)) - train_cost(_train()) == pytest.approx(extra)
+    # evaluated after every round: 3 more evaluations of 4 episodes
+    curve = SimpleNamespace(rounds=3, episodes=2, evaluate_rounds=True)
+    assert train_cost(_train(imitation=curve)) - train_cost(_train(imitation=imitation)) == pytest.approx(
+        3 * 4 * 50 * costs.SLOT_S["agent"])
     # the optimiser's phases make every evaluation slot dearer, nothing else
     diff = 5 * 4 * 50 * (costs.SLOT_S["optimizer"] - costs.SLOT_S["agent"])
     assert train_cost(_train(phase_control="optimizer")) - train_cost(_train()) == pytest.approx(diff)
@@ -52,7 +56,8 @@ def test_the_algorithms_are_priced_in_the_order_the_comparison_measured():
 
 def test_data_costs_are_their_slots_and_plans():
     slot = costs.SLOT_S["optimizer"]
-    assert dataset_cost(10, 50, "optimizer") == pytest.approx(10 * 50 * slot)
+    # a collected slot: its share of an evaluated one (one batch, no slot records)
+    assert dataset_cost(10, 50, "optimizer") == pytest.approx(10 * 50 * slot * costs.COLLECT_SHARE["optimizer"])
     # 64 halls, 2 episodes each of 100 slots: a plan per hall and 128 episodes with the optimiser
     assert demonstration_cost(64, 2, 100, exact_plans=True) == pytest.approx(64 * costs.PLAN_S + 128 * 100 * slot)
     # the planner's cheap ranking: the same episodes, each plan 7.7x cheaper
@@ -92,3 +97,7 @@ def test_finetuning_and_evaluation_worked_by_hand():
     # oracle with the optimiser)
     assert evaluate_cost(3, 8, 50, "agent") == pytest.approx(
         3 * 8 * 50 * costs.SLOT_S["agent"] + costs.PLAN_S + 2 * 8 * 50 * slot)
+    # a generated hall of 8 devices: twice the optimiser's pairs, the oracle's global stage with and
+    # without the safety layer, and the transferred plan's hall planned
+    assert evaluate_cost(3, 8, 50, "optimizer", 8, 2, True, 1) == pytest.approx(
+        3 * 8 * 50 * slot * 2 + 2 * costs.ORACLE_PLAN_S[8] + costs.PLAN_S + 2 * 8 * 50 * slot * 2)

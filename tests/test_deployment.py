@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 import torch
 
+from tests.conftest import killed_after_round
 from uavris.agents.dt.checkpoint import load_dt
 from uavris.agents.dt.dataset import load_dataset, write_dataset
 from uavris.agents.dt.policy import load_dt_policy
@@ -100,7 +101,7 @@ def test_checkpoint_round_trip_keeps_the_observation(layouts_dataset, tmp_path):
     assert json.loads((only / "model.json").read_text())["scenarios"] == ["layout-train-1"]
 
 
-def test_finetuning_in_an_unseen_layout_resumes_and_matches_evaluate(layouts_dataset, tmp_path, capsys):
+def test_finetuning_in_an_unseen_layout_resumes_and_matches_evaluate(layouts_dataset, tmp_path, capsys, monkeypatch):
     """A killed fine-tuning in an unseen layout resumes to the same files as an uninterrupted
     one, and `uavris evaluate` of the same checkpoints in the same layout and episodes gives
     the scores its rounds recorded."""
@@ -108,8 +109,8 @@ def test_finetuning_in_an_unseen_layout_resumes_and_matches_evaluate(layouts_dat
     pre = pretrain(PretrainConfig(dataset=path, preset="smoke"), tmp_path / "pre", progress=False)
     system, where = UNSEEN
     cfg = FinetuneConfig(model=pre, scenario=where.name, preset="smoke", rounds=2, system=system, start=where.start)
-    with pytest.raises(KeyboardInterrupt):
-        finetune(cfg, tmp_path / "killed", progress=False, interrupt_after_round=1)
+    with pytest.raises(KeyboardInterrupt), killed_after_round(monkeypatch, 1):
+        finetune(cfg, tmp_path / "killed", progress=False)
     finetune(cfg, tmp_path / "killed", resume=True, progress=False)
     straight = finetune(cfg, tmp_path / "straight", progress=False)
     assert (straight / "finetune.csv").read_text() == (tmp_path / "killed" / "finetune.csv").read_text()

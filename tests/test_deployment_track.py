@@ -14,6 +14,8 @@ import pytest
 from report_check import check_deployment_report
 
 from uavris.agents.dt.dataset import load_dataset
+from uavris.agents.oracle.bound import episode_bounds
+from uavris.errors import UavrisError
 from uavris.experiments.engine.scheduling import StudyContext
 from uavris.experiments.engine.stages import Pipeline
 from uavris.experiments.study.config import ReproduceConfig
@@ -30,9 +32,24 @@ from uavris.experiments.study.tracks import (
 )
 from uavris.io import read_json
 from uavris.layouts import LayoutGenerator, layout_distance
+from uavris.presets import EVAL_SEED
 
 RC = ReproduceConfig("smoke", track="deployment", eval_episodes=2, dt_seeds=2, scaling=(1,), ablation=True,
-                     device_counts=(3,))
+                     device_counts=(3,), count_other_layouts=2)
+
+
+def test_the_other_generators_halls_at_each_device_count_are_sites_of_their_own():
+    """--count-other-layouts N: N halls of the other generator at each of --device-counts (not at
+    the study's own count, whose other-generator halls are the ablation's), what each hall is
+    carried as fields; 1 hall, or no device counts, refused in one line."""
+    rc = ReproduceConfig("smoke", track="deployment", device_counts=(4, 6), count_other_layouts=3)
+    _, unseen = rc.sites(TRACK_SPECS["deployment"])
+    other = [w for w in unseen if w.split == "other"]
+    assert [(w.name, w.devices) for w in other] == [(f"layout-other-{j}-k6", 6) for j in range(3)]
+    assert sum(w.devices == 6 and w.split == "unseen" for w in unseen) == rc.unseen_layouts
+    for bad in (dict(device_counts=(6,), count_other_layouts=1), dict(count_other_layouts=3)):
+        with pytest.raises(UavrisError, match="--count-other-layouts"):
+            ReproduceConfig("smoke", track="deployment", **bad)
 
 
 @pytest.fixture(scope="module")
@@ -215,7 +232,8 @@ def test_the_deployment_sections_numbers_are_read_from_their_files(deployment_ru
             assert abs(sum(per_episode) / RC.eval_episodes - summary["mean"]) < 1e-9
     check_deployment_report({s.name[len("deploy-evaluate-"):].rsplit("-", 1)[0]: read_json(s / "stage.json")["result"]
                              for s in own}, (out / "report.md").read_text())
-    other = sorted(s for s in (out / "stages").glob("deploy-evaluate-layout-other-*") if s.is_dir())
+    other = sorted(s for s in (out / "stages").glob("deploy-evaluate-layout-other-*")
+                   if s.is_dir() and "-k3-" not in s.name)  # the other generator's halls of the study's count
     assert len(other) == 2 and all("dt-finetuned" not in read_json(s / "stage.json")["result"] for s in other)
     text = (out / "report.md").read_text()
     check_deployment_report({s.name[len("deploy-evaluate-"):].rsplit("-", 1)[0]: read_json(s / "stage.json")["result"]
@@ -223,22 +241,50 @@ def test_the_deployment_sections_numbers_are_read_from_their_files(deployment_ru
                             "deployment track, another generator's halls")
 
 
+def _rates(stage: Path, row: str) -> np.ndarray:
+    """A row's per-episode average sum rates in an evaluation stage, read from its CSV."""
+    return np.array([float(x) for x in re.findall(r"^\d+,([^,]+),", (stage / f"{row}.csv").read_text(), re.M)])
+
+
 def test_the_rows_per_device_count_are_the_halls_numbers(deployment_run):
-    """--device-counts 3: every row zero-shot in unseen halls of 3 devices, a table per count,
-    each cell the mean of the halls' fractions of the oracle (seeds averaged first)."""
+    """--device-counts 3 --count-other-layouts 2: every row zero-shot in unseen halls of 3 devices,
+    of the study's generator and of another, a column per count and generator, each cell the
+    mean of the halls' fractions of the oracle (seeds averaged first); the best plan found as a
+    fraction of the bound; and no episode of any row above its bound."""
     out, _ = deployment_run
     report = (out / "report.md").read_text()
     section = report[report.index("### Any number of devices"):]
     section = section[:section.index("### Halls of 3 devices")]
-    for count in (4, 3):
-        dirs = (out / "stages").glob("deploy-evaluate-layout-unseen-*")
-        halls = [read_json(p / "stage.json")["result"] for p in sorted(dirs) if ("-k3-" in p.name) == (count == 3)]
+    header = next(line for line in section.splitlines() if line.startswith("| policy |"))
+    columns = [c.strip() for c in header.strip("|").split("|")][1:]
+    assert columns == ["3 devices", "3 devices, another generator", "4 devices", "4 devices, another generator"]
+    for column, (split, count) in enumerate((("unseen", 3), ("other", 3), ("unseen", 4), ("other", 4)), start=1):
+        dirs = sorted(p for p in (out / "stages").glob(f"deploy-evaluate-layout-{split}-*") if p.is_dir()
+                      and ("-k3-" in p.name) == (count == 3))
+        halls = [read_json(p / "stage.json")["result"] for p in dirs]
         assert len(halls) == RC.unseen_layouts
         share = [np.mean([r[k]["mean"] for k in ("dt-goal-safe", "dt-goal-safe@s1")]) / r["oracle"]["mean"]
                  for r in halls]
         row = next(line for line in section.splitlines() if line.startswith("| goal-conditioned DT"))
-        column = 1 + (count == 4)  # the columns go by count: 3, then 4
-        assert row.split("|")[column + 1].strip().startswith(f"{np.mean(share):.1%}")
+        assert row.split("|")[column + 1].strip() == f"{np.mean(share):.1%} (no CI: 2 units)"
+        # the bound of each episode (uavris.agents.oracle.bound, tested against closed forms in test_bound.py)
+        bounds = []
+        for p, r in zip(dirs, halls):
+            system = next(w.system for w in RC.sites(TRACK_SPECS["deployment"])[1]
+                          if p.name.rsplit("-", 1)[0] == f"deploy-evaluate-{w.name}")
+            b = episode_bounds(system, EVAL_SEED + np.arange(RC.eval_episodes))
+            for summary in r.values():
+                per_episode = [float(x) for x in re.findall(r"^\d+,([^,]+),", (p / f"{summary['policy']}.csv")
+                                                           .read_text(), re.M)]
+                assert np.all(np.array(per_episode) <= b), (p.name, summary["policy"])
+            bounds.append(max(r[k]["mean"] for k in ("oracle", "plan-learned", "plan-semi")) / b.mean())
+        row = next(line for line in section.splitlines() if line.startswith("| best plan found / the bound"))
+        assert row.split("|")[column + 1].strip() == f"{np.mean(bounds):.1%} (no CI: 2 units)"
+        # halls where a seed's paired 95% CI over episodes lies below hovering: over 2 episodes, no verdict
+        assert all(_rates(p, "hover-optimizer").size == RC.eval_episodes == 2 for p in dirs)
+        row = next(line for line in section.splitlines() if line.startswith("| halls where a seed of the goal"))
+        assert row.split("|")[column + 1].strip() == "not measured (2 episodes)"
+    assert "above 100.5% of the oracle on average" in section
 
 
 @pytest.mark.parametrize("key", ["dt-ensemble-safe", "dt-zero-shot-level@s1", "dt-finetuned-safe", "bc-safe@s1",
@@ -335,8 +381,8 @@ def test_a_row_added_in_one_place_is_in_the_tables_the_decomposition_and_the_cla
     # only the evaluations (their rows are in their keys) and the report are made again
     assert {p.name: p.stat().st_mtime_ns for p in (copy / "stages").glob("deploy-pretrain-*/stage.json")} == pretrained
     section = report[report.index("## Deployment track"):]
-    groups = section.split("\n### Halls of")  # the study's halls, the other generator's, 3 devices
-    assert len(groups) == 3
+    groups = section.split("\n### Halls of")  # the study's halls, the other generator's, 3 devices of both
+    assert len(groups) == 4
     for group in groups:
         lines = group.splitlines()
         assert any(line.startswith("| a spinning controller |") for line in lines)  # table of every row
@@ -345,7 +391,7 @@ def test_a_row_added_in_one_place_is_in_the_tables_the_decomposition_and_the_cla
         decomposition = group[group.index("### Where the gap to the oracle is"):]
         assert "\n| a spinning controller |" in decomposition
     claims = [line for line in report.splitlines() if "**no learned row blocks a device" in line]
-    assert len(claims) == 3 and all("above the limit: " in c and "a spinning controller" in c for c in claims)
+    assert len(claims) == 4 and all("above the limit: " in c and "a spinning controller" in c for c in claims)
 
 
 def test_a_study_of_three_devices_treats_its_own_halls_as_its_own(tmp_path):

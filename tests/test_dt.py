@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 import torch
 
-from tests.conftest import SHORT
+from tests.conftest import SHORT, killed_after_round
 from uavris.agents.dt.checkpoint import load_dt, save_dt
 from uavris.agents.dt.config import DTConfig
 from uavris.agents.dt.dataset import load_dataset, write_dataset
@@ -322,11 +322,11 @@ def test_exploration_noise_is_seeded_and_bounded():
 
 
 # ------------------------------------------------------------------------------ fine-tuning and the CLI
-def test_finetune_counts_interactions_and_resumes(dataset_dir, tmp_path):
+def test_finetune_counts_interactions_and_resumes(dataset_dir, tmp_path, monkeypatch):
     pre = pretrain(PretrainConfig(dataset=dataset_dir, preset="smoke"), tmp_path / "pre", progress=False)
     cfg = FinetuneConfig(model=pre, scenario="unseen1", preset="smoke", rounds=2)
-    with pytest.raises(KeyboardInterrupt):
-        finetune(cfg, tmp_path / "ft", progress=False, interrupt_after_round=1)
+    with pytest.raises(KeyboardInterrupt), killed_after_round(monkeypatch, 1):
+        finetune(cfg, tmp_path / "ft", progress=False)
     finetune(cfg, tmp_path / "ft", resume=True, progress=False)
     straight = finetune(cfg, tmp_path / "ft2", progress=False)
     a, b = _weights(tmp_path / "ft"), _weights(straight)

@@ -185,6 +185,34 @@ def test_identical_seeds_give_identical_evaluation(tmp_path):
     assert a == (tmp_path / "b" / "evals.csv").read_text()
 
 
+def test_an_imitating_expert_evaluated_after_every_round_has_a_curve_and_the_same_fit(tmp_path):
+    """``evaluate_rounds``: the strong recipe at smoke scale evaluated after each DAgger round
+    fits the same network to the bit (the evaluation is its own environment, the student
+    deterministic), and its learning curve ("fewer interactions" reads it) has a point per
+    round at the rollouts used so far, the last the final evaluation; without it, one point."""
+    from uavris.agents.experts.imitation import ImitationConfig
+    from uavris.experiments.study.claims_tracks import expert_curve
+
+    runs = {}
+    for curve in (False, True):
+        cfg = TrainConfig(algo="ppo", scenario="fig2", seed=0, preset="smoke", eval_episodes=2, total_steps=0,
+                          phase_control="optimizer",
+                          imitation=ImitationConfig(rounds=2, episodes=2, epochs=2, evaluate_rounds=curve))
+        train(cfg, tmp_path / str(curve), progress=False)
+        runs[curve] = tmp_path / str(curve)
+    assert "evaluate_rounds" not in ImitationConfig().to_dict()  # the stage keys of earlier studies hold
+    weights = [(runs[c] / "policy.safetensors").read_bytes() for c in (False, True)]
+    assert weights[0] == weights[1]
+    rows = read_csv(runs[True] / "imitation.csv")
+    final = json.loads((runs[True] / "done.json").read_text())["final_eval"]["mean"]
+    x, y = expert_curve(runs[True])
+    assert list(x) == [float(r["samples"]) for r in rows] and list(y) == [float(r["eval_mean"]) for r in rows]
+    assert x[0] > 0 and np.all(np.diff(x) > 0) and y[-1] == pytest.approx(final, rel=1e-12)
+    x0, y0 = expert_curve(runs[False])
+    assert list(x0) == [x[-1]] and y0[0] == pytest.approx(final, rel=1e-12)
+    assert all(r["eval_mean"] == "nan" for r in read_csv(runs[False] / "imitation.csv"))
+
+
 @pytest.mark.slow
 def test_strong_expert_learns_beyond_hovering_with_optimised_phases(tmp_path):
     """The strong track's expert as the quick preset makes it (PPO on the motion, 6 DAgger

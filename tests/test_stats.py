@@ -4,6 +4,7 @@ numbers worked by hand, SciPy's own t interval and bootstrap, and the rules the 
 from __future__ import annotations
 
 import math
+import re
 
 import numpy as np
 import pytest
@@ -105,11 +106,14 @@ def test_over_layouts_is_the_t_interval_over_units():
     assert (s["ci_low"], s["ci_high"]) == pytest.approx(want, rel=1e-12)
 
 
-@pytest.mark.parametrize("low, high, want", [(0.1, 0.5, "above zero"), (-0.5, -0.1, "below zero"),
-                                             (-0.1, 0.1, "includes zero"), (0.0, 0.1, "includes zero"),
-                                             (float("nan"), float("nan"), "not resolved (one layout)")])
-def test_excludes_zero_states_its_rule(low, high, want):
-    assert _excludes_zero({"mean": 0.0, "ci_low": low, "ci_high": high}) == want
+@pytest.mark.parametrize("n, low, high, want", [(5, 0.1, 0.5, "above zero"), (5, -0.5, -0.1, "below zero"),
+                                                (5, -0.1, 0.1, "includes zero"), (3, 0.0, 0.1, "includes zero"),
+                                                (3, float("nan"), float("nan"), "not resolved"),
+                                                (2, 0.1, 0.5, "not measured (2 layouts)"),
+                                                (1, float("nan"), float("nan"), "not measured (1 layout)")])
+def test_excludes_zero_states_its_rule(n, low, high, want):
+    """What a paired difference's interval says about zero, by the CI rule: nothing under 3 halls."""
+    assert _excludes_zero({"n": n, "mean": 0.0, "ci_low": low, "ci_high": high}) == want
 
 
 REFERENCE_KEYS = ("zero-action", "hover-optimizer", "oracle")
@@ -357,11 +361,26 @@ def test_one_layout_resolves_nothing():
     _, claims = _section(scores)
     zero_shot = next(c for c in claims if "**zero-shot DT >= 96%" in c)
     # 96% of the oracle, 8 and 18 bps/Hz above the others, but one hall gives no interval: no verdict
-    assert ": not measured (96.0% [n/a, n/a] of the oracle" in zero_shot
-    assert zero_shot.count("not resolved (one layout)") == 2
+    assert ": not measured (96.0% (no CI: 1 unit) of the oracle" in zero_shot
+    assert zero_shot.count("not measured (1 layout)") == 2
     bc = next(c for c in claims if "return conditioning on demonstrations" in c)
-    assert bc.endswith("+28.00 [n/a, n/a] bps/Hz per layout, not resolved (one layout).")  # as the percentages
-    assert "minus hovering +8.00 [n/a, n/a] bps/Hz, not resolved (one layout)" in zero_shot
+    assert bc.endswith("+28.00 (no CI: 1 unit) bps/Hz per layout, not measured (1 layout).")  # as the percentages
+    assert "minus hovering +8.00 (no CI: 1 unit) bps/Hz, not measured (1 layout)" in zero_shot
+
+
+def test_two_layouts_print_no_interval_and_no_verdict():
+    """Under 3 halls a report prints the mean alone and "not measured" for every verdict, the
+    worst hall's target and the paired differences' column included (a smoke report printed
+    "59.2% [-412.8%, 531.2%]" and "below zero" over 2 halls)."""
+    scores = {h: {"dt-zero-shot": 40.0 + i, "dt-goal-safe": 49.0 + i, HOVER_OPTIMIZER: 30.0, NEAREST: 20.0,
+                  "bc": 20.0, ORACLE: 50.0 + i} for i, h in enumerate(("h0", "h1"))}
+    lines, claims = _section(scores)
+    text = "\n".join(lines + claims)
+    assert not re.search(r"\d%? \[", text), "an interval over two halls"
+    assert "below zero" not in text and "above zero" not in text and "includes zero" not in text
+    assert "not measured (2 layouts)" in text
+    place = next(c for c in claims if ">= 97.0% of the oracle, no hall below 92%" in c)
+    assert ": not measured (" in place  # its worst hall (98%) alone would have decided it
 
 
 def test_a_row_added_to_the_study_shows_under_its_own_label():

@@ -45,27 +45,25 @@ def main(argv: list[str] | None = None) -> None:
     args = parser.parse_args(argv)
 
     from uavris.agents.references import HOVER_OPTIMIZER, ORACLE
-    from uavris.experiments.engine.scheduling import StudyContext
     from uavris.experiments.study.config import ReproduceConfig
-    from uavris.experiments.study.pipeline import build_pipeline
+    from uavris.experiments.study.finished import Study
     from uavris.experiments.study.report.deployment import NEAREST, layout_scores
     from uavris.experiments.study.reproduce import reproduce
-    from uavris.experiments.study.tracks import evaluation_stage
-    from uavris.io import read_json
     from uavris.stats import over_units
 
     points = sorted(set(args.points))
-    rc = ReproduceConfig(args.preset, track="deployment", train_layouts=points[-1], unseen_layouts=args.unseen,
-                         scaling=tuple(points[:-1]))
+    unseen = {} if args.unseen is None else {"unseen_layouts": args.unseen}
+    # the data curve's smaller training sets are rows of the ablation
+    rc = ReproduceConfig(args.preset, track="deployment", train_layouts=points[-1], scaling=tuple(points[:-1]),
+                         ablation=True, **unseen)
     out = args.out or Path(f"runs/scaling-{args.preset}")
     t0 = time.perf_counter()
     reproduce(rc, out, workers=args.workers, progress=False)
     wall = time.perf_counter() - t0
-    pipeline = build_pipeline(rc, out, StudyContext(1, "local", None))
+    study = Study.open(out)
     track = rc.tracks[0]
-    _, unseen = rc.deployments(track)
-    results = {w.name: read_json(pipeline.directory(track.stage(evaluation_stage(w.name))) / "stage.json")["result"]
-               for w in unseen}
+    _, unseen = study.sites(track)
+    results = {w.name: found[1] for w in unseen if (found := study.evaluation(track, w.name)) is not None}
     scores = layout_scores(results)
     print(f"deployment track, preset {args.preset}: {len(unseen)} unseen layouts x {rc.eval_episodes} episodes; "
           f"machine: {cpu_model()}, {args.workers} workers; wall clock {wall / 60:.1f} min")

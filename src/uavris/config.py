@@ -181,7 +181,7 @@ class PropulsionParams(DictConfig):
             _check(_finite(v) and v > 0, "PropulsionParams", f.name, "a finite number > 0", v)
 
 
-def _unkeyed(default: Any) -> Any:
+def unkeyed(default: Any) -> Any:
     """A field added after a release: written by ``to_dict`` only when set (:data:`uavris.io.OMIT_DEFAULT`),
     so the stage keys of studies made before it hold."""
     return dataclasses.field(default=default, metadata={OMIT_DEFAULT: True})
@@ -203,7 +203,7 @@ class SystemConfig(DictConfig):
     pathloss_exponent: float = 2.4  # path-loss exponent alpha
     tx_power_w: float = 1.0  # transmit power P of each device, W
     noise_dbm: float = -80.0  # noise power sigma^2 at each receiver, dBm
-    reference_gain_db: float = _unkeyed(0.0)  # per-hop path gain at 1 m, dB (0: none, the paper's; free space -40)
+    reference_gain_db: float = unkeyed(0.0)  # per-hop path gain at 1 m, dB (0: none, the paper's; free space -40)
     slot_s: float = 0.5  # slot length Delta t, s
     horizon: int = 100  # slots per episode, T
     v_max: float = 5.0  # the UAV's largest speed, m/s

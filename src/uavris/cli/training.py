@@ -320,7 +320,9 @@ def reproduce_command(args: list[str]) -> None:
     return-conditioned DT's fine-tuning (deploy-finetune-LAYOUT), the data curve
     (deploy-pretrain-nN), the flat encoder (deploy-flat) and the mixed-quality dataset
     (deploy-dataset-mixed, deploy-mixed-dt, deploy-mixed-bc); with --device-counts 3 6 8 every
-    row zero-shot in unseen halls of those counts too (deploy-evaluate-LAYOUT-kK, docs/places.md).
+    row zero-shot in unseen halls of those counts too (deploy-evaluate-LAYOUT-kK, docs/places.md), and
+    with --count-other-layouts N in N halls of another generator at each of them
+    (deploy-evaluate-layout-other-J-kK).
     Each stage is stored under OUT/stages/NAME-KEY (KEY: a hash of its configuration and
     inputs); independent stages run concurrently.
     Writes OUT/report.md and OUT/figures/.

@@ -34,7 +34,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from uavris.agents.policy import Privileged
-from uavris.config import ConfigError, DictConfig, Scenario, SystemConfig
+from uavris.config import ConfigError, DictConfig, Scenario, SystemConfig, unkeyed
 from uavris.env.rollout import rollout
 from uavris.env.simulator import BatchedSimulator
 from uavris.presets import IMITATION_SEED
@@ -53,6 +53,8 @@ class ImitationConfig(DictConfig):
     batch_size: int = 256
     learning_rate: float = 1e-3
     action_std: float = 0.2  # PPO's exploration standard deviation afterwards
+    # evaluate the student after every round (its learning curve, not one point); keyed only when set
+    evaluate_rounds: bool = unkeyed(False)
 
     def __post_init__(self) -> None:
         if self.teacher not in TEACHERS:

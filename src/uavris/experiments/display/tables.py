@@ -13,6 +13,8 @@ from __future__ import annotations
 import math
 from typing import Any, Callable, Iterable, Mapping, Sequence
 
+from uavris.stats import MIN_UNITS
+
 MISSING = "n/a"
 Fmt = Callable[[Any], str]
 
@@ -59,7 +61,11 @@ def rate_interval(low: float | None, high: float | None) -> str:
 
 
 def with_ci(s: Mapping[str, float], fmt: Fmt = num) -> str:
-    """A summary's ``mean [ci_low, ci_high]`` (its missing bounds as ``n/a``)."""
+    """A summary's ``mean [ci_low, ci_high]`` (its missing bounds as ``n/a``); over fewer than
+    :data:`uavris.stats.MIN_UNITS` units (a summary's ``n``) the mean alone, saying so: an
+    interval over two units is too wide to read and supports no verdict."""
+    if s.get("n", MIN_UNITS) < MIN_UNITS:
+        return f"{fmt(s['mean'])} (no CI: {counted(int(s['n']), 'unit')})"
     return f"{fmt(s['mean'])} [{fmt(s['ci_low'])}, {fmt(s['ci_high'])}]"
 
 

@@ -7,13 +7,15 @@ them, the order in which the job runner starts jobs (:mod:`.jobs`, :mod:`.stages
 longest chain first) and the progress bar of ``reproduce`` (each job weighs its cost).
 
 The unit costs were measured on the project machine (2-core AMD EPYC, one job per core,
-quick preset; recalibrated from the job times of a whole quick study on a fresh clone, its
-``schedule.json``): an SB3 env step with the quick networks (64 x 64) from the 50,000-
-step comparison jobs, the paper preset's 256 x 256 networks from
-``benchmarks/paper_wallclock.py``; a simulated slot with a learned policy, with and
-without the per-slot phase optimiser; a DT gradient step at the DT paper's size (batch 64
-windows of 20 slots, width 128, 3 layers), scaled by the tokens it reads. They order and
-weigh jobs; nothing depends on them being exact, only on their ratios being about right.
+quick preset), recalibrated from the job times of a whole quick study on a fresh clone (its
+``schedule.json``, read by ``benchmarks/findings/cost_model.py``; docs/timings.md): an SB3 env
+step with the quick networks (64 x 64), from the comparison's jobs; the paper preset's
+256 x 256 networks from ``benchmarks/paper_wallclock.py`` (an earlier measurement); a
+simulated slot with a learned policy, with and without the per-slot phase optimiser; the exact
+planner's plan and the oracle's (with its global stage) by the number of devices; a DT
+gradient step at the DT paper's size (batch 64 windows of 20 slots, width 128, 3 layers),
+scaled by the tokens it reads. They order and weigh jobs; nothing depends on them being
+exact, only on their ratios being about right.
 """
 
 from __future__ import annotations
@@ -22,24 +24,28 @@ from typing import Any
 
 # SB3 training, seconds per env step (networks of the preset; smoke uses quick's rates).
 SB3_STEP_S: dict[str, dict[str, float]] = {
-    "quick": {"ddpg": 3.1e-3, "td3": 3.2e-3, "sac": 5.8e-3, "ppo": 0.13e-3},
+    "quick": {"ddpg": 5.2e-3, "td3": 5.3e-3, "sac": 9.7e-3, "ppo": 0.22e-3},
     "paper": {"ddpg": 10.3e-3, "td3": 11.4e-3, "sac": 17.8e-3, "ppo": 0.34e-3},
 }
 # A simulated slot of one episode with a learned policy, by who sets the phases, and with the
 # planning oracle as the teacher of imitation (its motion only, no phases).
-SLOT_S = {"agent": 0.2e-3, "optimizer": 0.6e-3}
-IMITATION_SLOT_S = 1.0e-3  # a DAgger slot: the rollout, the oracle's label and its share of the fitting
-PLAN_S = 1.05  # the planning oracle's plan of one hall (the screening grid and the valued candidates)
+SLOT_S = {"agent": 0.46e-3, "optimizer": 1.2e-3}
+# a collected slot costs this share of an evaluated one (one batch, no slot records)
+COLLECT_SHARE = {"agent": 0.3, "optimizer": 0.55}
+IMITATION_SLOT_S = 1.64e-3  # a DAgger slot: the rollout, the oracle's label and its share of the fitting
+PLAN_S = 2.5  # the exact planner's plan of one hall without the global stage (the teacher of the demonstrations)
+# The oracle's plan (the yardstick, with its global stage: docs/model.md section 19) by the number of devices
+ORACLE_PLAN_S = {3: 0.3, 4: 12.0, 5: 20.0, 6: 30.0, 7: 40.0, 8: 50.0}
 PLAN_FAST_S = PLAN_S / 7.7  # the same with the planner's cheap ranking (PlanSettings(exact=False), measured 7.7-11x)
 # A DT gradient step at the DT paper's size: batch 64 windows of 20 slots, width 128, 3 layers;
 # other sizes scale with the slots read times width^2 times depth (the matrix products).
-DT_STEP_S = 0.2
+DT_STEP_S = 0.28
 DT_REFERENCE = 64 * 20 * 128 * 128 * 3
 # What a gradient step costs whatever the model's size (the sampling of windows, the optimiser,
 # the autograd bookkeeping): small models are dominated by it. And the device-set encoder's
 # per-device and pair networks, per state it reads (docs/study.md, section 2).
-DT_STEP_OVERHEAD_S = 0.015
-DEVICE_ENCODER_STATE_S = 2.5e-5
+DT_STEP_OVERHEAD_S = 0.021
+DEVICE_ENCODER_STATE_S = 3.5e-5
 
 
 def _dt_step(batch: int, context: int, width: int, depth: int) -> float:
@@ -56,12 +62,14 @@ def train_cost(cfg: Any) -> float:
     cost += evaluations * cfg.eval_episodes * horizon * SLOT_S[cfg.phase_control]
     if cfg.imitation is not None:
         cost += PLAN_S + cfg.imitation.rounds * cfg.imitation.episodes * horizon * IMITATION_SLOT_S
+        if cfg.imitation.evaluate_rounds:  # each round's student evaluated too
+            cost += cfg.imitation.rounds * cfg.eval_episodes * horizon * SLOT_S[cfg.phase_control]
     return cost
 
 
 def dataset_cost(episodes: int, horizon: int, phase_control: str) -> float:
     """Collecting ``episodes`` expert episodes."""
-    return episodes * horizon * SLOT_S[phase_control]
+    return episodes * horizon * SLOT_S[phase_control] * COLLECT_SHARE[phase_control]
 
 
 def demonstration_cost(halls: int, episodes_per_hall: int, horizon: int, exact_plans: bool = False) -> float:
@@ -92,7 +100,7 @@ def finetune_cost(cfg: Any, horizon: int, phase_control: str, model: Any) -> flo
 
 # The planner's R of one pose (its pairings x 2 NLoS draws, optimised), by the number of devices:
 # K = 3 has one pair at most (the closed form); more pairs, more optimiser per slot.
-POSE_S = {3: 1e-4, 4: 0.015, 5: 0.014, 6: 0.027, 7: 0.045, 8: 0.063}
+POSE_S = {3: 1.5e-4, 4: 0.022, 5: 0.021, 6: 0.040, 7: 0.068, 8: 0.095}
 VALUE_STEP_S = 0.03  # a gradient step of the learned value at width 64, batch 256 (scales with width^2)
 
 
@@ -106,9 +114,15 @@ def value_fit_cost(steps: int, width: int) -> float:
     return steps * VALUE_STEP_S * (width / 64) ** 2
 
 
-def evaluate_cost(policies: int, episodes: int, horizon: int, phase_control: str) -> float:
+def evaluate_cost(policies: int, episodes: int, horizon: int, phase_control: str, devices: int = 4,
+                  oracle_plans: int = 1, generated: bool = False, teacher_plans: int = 0) -> float:
     """Evaluating ``policies`` learned policies and the references (zero action, hover with the
-    optimiser's phases, the planning oracle) on ``episodes`` episodes."""
-    learned = policies * episodes * horizon * SLOT_S[phase_control]
-    references = PLAN_S + 2 * episodes * horizon * SLOT_S["optimizer"]
+    optimiser's phases, the planning oracle) on ``episodes`` episodes in a hall of ``devices``
+    devices: the optimiser's slots grow with its pairs; the oracle plans ``oracle_plans`` times
+    (with and without a safety layer), in a ``generated`` hall with its global stage
+    (:data:`ORACLE_PLAN_S`), and ``teacher_plans`` other halls are planned (a transferred plan's)."""
+    pairs = max(1.0, devices / 4)
+    learned = policies * episodes * horizon * SLOT_S[phase_control] * (pairs if phase_control == "optimizer" else 1.0)
+    plan = ORACLE_PLAN_S.get(devices, ORACLE_PLAN_S[8] * devices / 8) if generated else PLAN_S
+    references = oracle_plans * plan + teacher_plans * PLAN_S + 2 * episodes * horizon * SLOT_S["optimizer"] * pairs
     return learned + references

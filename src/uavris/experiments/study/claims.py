@@ -50,7 +50,9 @@ CLAIMS: dict[str, str] = {
                   "and the expert (Sec. V)",
     "fewer": f"fine-tuning reaches {LEVEL:.0%} of the expert's final level in fewer environment interactions than "
              "the expert (abstract, Sec. VI)",
-    "fewer-total": "the same, counting the interactions of the experts and demonstrations the DT was pre-trained on",
+    "fewer-total": "the same, counting the interactions of the experts and demonstrations the DT was pre-trained on "
+                   "(charged whole to each hall or scenario and spread over those it serves: a verdict only where "
+                   "both agree)",
     "dt-over-bc": "the DT scores above behaviour cloning on the same data (not the paper's: the field's baseline)",
 }
 # What the claims page lists as not measured, with what measuring it would cost.

@@ -26,9 +26,10 @@ from typing import Any, Sequence
 import numpy as np
 
 from uavris.agents.references import HOVER_OPTIMIZER, ORACLE, ZERO_ACTION
+from uavris.config import UNSEEN_SCENARIOS
 from uavris.experiments.study.finished import Study
 from uavris.experiments.study.judgement import NOT_TESTED, Judgement, judgement
-from uavris.experiments.study.tracks import TRACK_SPECS, Track, evaluation_stage, finetune_stage, zero_shot_only
+from uavris.experiments.study.tracks import TRACK_SPECS, Track, zero_shot_only
 from uavris.experiments.tools.targets import variant_key
 from uavris.io import read_csv, read_json
 from uavris.stats import HOLDS, NOT_RESOLVED, REFUTED, interactions_to_level, judged, judged_censored
@@ -53,13 +54,20 @@ def _imitation_samples(run_dir: Path) -> float:
 def expert_curve(run_dir: Path) -> tuple[np.ndarray, np.ndarray]:
     """An expert's periodic evaluations against the environment interactions it had used: an
     expert that imitated the oracle first interacted for its imitation rollouts (the states it
-    labelled), so its evaluations sit after those."""
+    labelled), so its RL evaluations sit after those, and its imitation rounds' evaluations
+    (``evaluate_rounds``) at the rollouts each round had used."""
     imitation = run_dir / "imitation.csv"
     offset = _imitation_samples(run_dir)
     evals = read_csv(run_dir / "evals.csv") if (run_dir / "evals.csv").exists() else []
     x = offset + np.array([float(r["env_steps"]) for r in evals])
     y = np.array([float(r["mean"]) for r in evals])
-    if imitation.exists() and (run_dir / "done.json").exists() and not x.size:  # imitation only: its final score
+    rounds = [r for r in read_csv(imitation) if np.isfinite(float(r.get("eval_mean") or "nan"))] \
+        if imitation.exists() else []
+    if rounds:  # evaluated after every imitation round: the curve's points before any RL step (whose step 0
+        after = x > offset  # is the last round's student again)
+        x = np.concatenate([[float(r["samples"]) for r in rounds], x[after]])
+        y = np.concatenate([[float(r["eval_mean"]) for r in rounds], y[after]])
+    elif imitation.exists() and (run_dir / "done.json").exists() and not x.size:  # imitation only: its final score
         x, y = np.array([offset]), np.array([float(read_json(run_dir / "done.json")["final_eval"]["mean"])])
     return x, y
 
@@ -101,10 +109,10 @@ def _scenario_units(studies: Sequence[Study], track: Track) -> list[dict[str, An
             continue
         _, unseen = st.sites(track)
         pretraining = _pretraining_interactions(st, track)
-        experts = st.done(track.stage("experts-unseen"))
+        experts = st.experts(track, unseen=True)
         for w in unseen:
             found = st.evaluation(track, w.name)
-            ft = st.done(track.stage(finetune_stage(w.name)))
+            ft = st.finetuned(track, w.name)
             if found is None or ft is None or experts is None:
                 continue
             edir, res = found
@@ -117,9 +125,9 @@ def _scenario_units(studies: Sequence[Study], track: Track) -> list[dict[str, An
 
 def _pretraining_interactions(st: Study, track: Track) -> float:
     """The interactions behind the DT's pre-training: its training experts' and the dataset's rollouts."""
-    experts = st.done(track.stage("experts-train"))
+    experts = st.experts(track)
     total = sum(run_interactions(d) for d in sorted((experts / "runs").iterdir())) if experts else float("nan")
-    slots = (st.result(track.stage("dataset")) or {}).get("slots")
+    slots = (st.demonstrations(track) or {}).get("slots")
     return total + float(slots) if slots is not None else float("nan")
 
 
@@ -166,6 +174,26 @@ def within_both_ways(below: Judgement, above: Judgement) -> Judgement:
     text = (f"{below.text} ({below.mean:+.2f} [{below.ci_low:+.2f}, {below.ci_high:+.2f}]); and {above.text} "
             f"({above.mean:+.2f} [{above.ci_low:+.2f}, {above.ci_high:+.2f}]): within only where both are above zero")
     return dataclasses.replace(decides, verdict=verdict, p=p, text=text)
+
+
+def charged_both_ways(whole: Judgement, per_site: Judgement, served: int) -> Judgement:
+    """"Fewer interactions, counting pre-training" under both charging rules: ``whole`` charges
+    the whole pre-training to each unseen hall or scenario, ``per_site`` spreads it over the
+    ``served`` ones it serves (each pays its share). Neither rule is the one true charge, so the
+    cell gives a verdict only where both give the same one, and is not resolved otherwise; it
+    shows the whole charge, its text both, and its p-value (which Holm's correction reads) is
+    the larger of the two where they agree (a verdict that needs both is as sure as its weaker
+    one) and 1 where they do not (no evidence for either verdict: it must not take an early rank
+    in Holm's order and loosen the others' thresholds). A cell that is not judged (too few
+    units) is ``whole`` as it is."""
+    if whole.verdict not in (HOLDS, REFUTED, NOT_RESOLVED):
+        return whole
+    agree = whole.verdict == per_site.verdict
+    text = (f"{whole.text}, charged whole to each ({whole.mean:+,.0f} [{whole.ci_low:+,.0f}, {whole.ci_high:+,.0f}]: "
+            f"{whole.verdict}) and spread over the {served} it serves ({per_site.mean:+,.0f} [{per_site.ci_low:+,.0f}, "
+            f"{per_site.ci_high:+,.0f}]: {per_site.verdict}); a verdict only where both rules give it")
+    return dataclasses.replace(whole, verdict=whole.verdict if agree else NOT_RESOLVED, text=text,
+                               p=max(whole.p, per_site.p) if agree else 1.0)
 
 
 def against_a_real_expert(near: Judgement, expert_over_zero: dict[str, Any] | None) -> Judgement:
@@ -231,6 +259,8 @@ def _fewer(name: str, seeds: list[int], pairs: list[dict[str, Any]], unit: str) 
     its scenarios' is."""
     order, diff = by_seed(seeds, [p["fewer"]["difference"] for p in pairs])
     _, total = by_seed(seeds, [p["fewer"]["difference"] - p["pretraining"] for p in pairs])
+    served = len(UNSEEN_SCENARIOS)  # one pre-training serves every unseen scenario
+    _, shared = by_seed(seeds, [p["fewer"]["difference"] - p["pretraining"] / served for p in pairs])
     low = np.array([any(p["fewer"]["low_bound"] for s, p in zip(seeds, pairs) if s == k) for k in order])
     high = np.array([any(p["fewer"]["high_bound"] for s, p in zip(seeds, pairs) if s == k) for k in order])
     lows, highs = sum(p["fewer"]["low_bound"] for p in pairs), sum(p["fewer"]["high_bound"] for p in pairs)
@@ -239,9 +269,12 @@ def _fewer(name: str, seeds: list[int], pairs: list[dict[str, Any]], unit: str) 
     rule = (f"interactions the scenario's expert needed to first reach {LEVEL:.0%} of its final evaluation minus "
             "those fine-tuning needed (0 where the zero-shot DT starts there)")
     return [judgement("fewer", name, judged_censored(diff, low, high), unit, "seeds", rule + censored),
-            judgement("fewer-total", name, judged_censored(total, low, high), unit, "seeds",
-                      "the same minus the pre-training's interactions (its experts' training and the dataset)"
-                      + censored)]
+            charged_both_ways(
+                judgement("fewer-total", name, judged_censored(total, low, high), unit, "seeds",
+                          "the same minus the pre-training's interactions (its experts' training and the dataset)"
+                          + censored),
+                judgement("fewer-total", name, judged_censored(shared, low, high), unit, "seeds", ""),
+                served)]
 
 
 # ------------------------------------------------------------------------------ the deployment track
@@ -271,8 +304,8 @@ def _seeds_spread(edir: Path, res: dict[str, Any], variant: str) -> float | None
 def _model_queries(study: Study, track: Track) -> str:
     """The model queries behind the deployment track's pre-training, as a phrase: the poses the
     demonstrations' plans valued with ``R`` and the learned value's labels (where recorded)."""
-    demos = study.result(track.stage("dataset")) or {}
-    labels = study.result(track.stage("value-labels")) or {}
+    demos = study.demonstrations(track) or {}
+    labels = study.value_labels(track) or {}
     parts = []
     if "poses_valued" in demos:
         parts.append(f"{demos['poses_valued']:,} poses the plans valued")
@@ -372,8 +405,6 @@ def judge_deployment(study: Study, from_scratch: Sequence[dict[str, Any]] = ()) 
 def _deployment_fewer(study: Study, track: Track, from_scratch: Sequence[dict[str, Any]]) -> list[Judgement]:
     """"Fewer interactions" in the halls ``uavris from-scratch`` measured: the from-scratch
     expert's curve against each seed's fine-tuning curve (places tried), by :func:`interactions_needed`."""
-    from uavris.experiments.study.tracks import places_stage
-
     if not from_scratch:
         return [Judgement(c, "deployment", NOT_TESTED, text="needs the measurement of uavris from-scratch")
                 for c in ("fewer", "fewer-total")]
@@ -383,26 +414,31 @@ def _deployment_fewer(study: Study, track: Track, from_scratch: Sequence[dict[st
     diff, low, high = [], [], []
     for h in from_scratch:
         x, y = (np.asarray(v, dtype=np.float64) for v in h["expert_curve"])
-        res = study.result(track.stage(evaluation_stage(h["hall"]))) or {}
+        res = (study.evaluation(track, h["hall"]) or (None, {}))[1]
         seeds = sorted({v["seed"] or 0 for v in res.values() if v.get("variant") == FINETUNED_DTS[0]})
-        needs = [interactions_needed((x, y), finetune_curve(d / "model"), float(y[-1]))
-                 for d in (study.done(track.stage(places_stage(h["hall"], s))) for s in seeds) if d is not None]
+        needs = [interactions_needed((x, y), finetune_curve(t[0] / "model"), float(y[-1]))
+                 for t in (study.places_tried(track, h["hall"], s) for s in seeds) if t is not None]
         if not needs:
             continue
         diff.append(float(needs[0]["expert"] - np.mean([n["finetune"] for n in needs])))
         low.append(needs[0]["low_bound"])
         high.append(any(n["high_bound"] for n in needs))
-    pre = float(study.result(track.stage("dataset"))["slots"])
+    pre = float((study.demonstrations(track) or {})["slots"])
     unit = f"{len(diff)} unseen halls (uavris from-scratch), fine-tuning the mean of its seeds"
     rule = (f"interactions hybrid PPO from scratch needed to first reach {LEVEL:.0%} of its final evaluation minus "
             "those fine-tuning by trying places needed (0 where its zero-shot start is there); a side that never "
             "does is charged its budget, a bound, on which no verdict rests. Not alike: fine-tuning's curve is its "
             "own evaluations (8 "
             "episodes, without the safety layer), the expert's the study's episodes under it")
+    served = sum(1 for w in study.sites(track)[1] if not zero_shot_only(w, study.config.system))
     return [judgement("fewer", "deployment", judged_censored(diff, low, high), unit, "halls", rule),
-            judgement("fewer-total", "deployment", judged_censored(np.subtract(diff, pre), low, high), unit, "halls",
-                      f"the same minus the {pre:,.0f} environment interactions of the oracle's demonstrations"
-                      + _model_queries(study, track))]
+            charged_both_ways(
+                judgement("fewer-total", "deployment", judged_censored(np.subtract(diff, pre), low, high), unit,
+                          "halls", f"the same minus the {pre:,.0f} environment interactions of the oracle's "
+                          "demonstrations" + _model_queries(study, track)),
+                judgement("fewer-total", "deployment", judged_censored(np.subtract(diff, pre / served), low, high),
+                          unit, "halls", ""),
+                served)]
 
 
 def dt_against_hovering(study: Study) -> list[tuple[int, dict[str, Any]]]:

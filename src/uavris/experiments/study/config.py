@@ -53,6 +53,7 @@ class ReproduceConfig(DictConfig):
     mixed_layouts: int = PRESET  # deployment track: halls of the mixed-quality dataset
     ablation: bool = False  # deployment track: also the ablation's rows (data curve, flat encoder, mixed-quality data)
     device_counts: tuple[int, ...] = ()  # deployment track: also every row zero-shot in unseen halls of these counts
+    count_other_layouts: int = 0  # deployment track: also this many halls of another generator per device count
     system: SystemConfig = dataclasses.field(default_factory=SystemConfig)
 
     def __post_init__(self) -> None:
@@ -78,6 +79,11 @@ class ReproduceConfig(DictConfig):
                 or len(set(counts)) != len(counts):
             raise UavrisError(f"--device-counts {list(counts)}: distinct device counts in [2, {MAX_DEVICES}]")
         object.__setattr__(self, "device_counts", tuple(sorted(counts)))
+        if self.count_other_layouts and not (2 <= self.count_other_layouts <= SIZE_BOUNDS["unseen_layouts"]
+                                             and self.device_counts):
+            raise UavrisError(f"--count-other-layouts {self.count_other_layouts}: 0, or in [2, "
+                              f"{SIZE_BOUNDS['unseen_layouts']:,}] with --device-counts (as --unseen-layouts; "
+                              "fewer than 3 halls print no interval and no verdict)")
         bad = [n for n in self.scaling if not 1 <= n < self.train_layouts]
         if bad:
             raise UavrisError(f"--scaling {list(self.scaling)}: each must be >= 1 and below "
@@ -96,7 +102,7 @@ class ReproduceConfig(DictConfig):
     def sites(self, track: Track) -> tuple[list[Site], list[Site]]:
         """The training and unseen sites of ``track``; with the ablation, the unseen ones
         include as many halls of another generator, and as many of each of ``device_counts``
-        (both zero-shot only)."""
+        with ``count_other_layouts`` of another generator at each of those counts (all zero-shot only)."""
         other = self.unseen_layouts if self.ablation and track.ablation and track.layouts else 0
         return sites(track, self.system, self.train_layouts, self.unseen_layouts, self.layout_seed, other,
-                     self.device_counts if track.places else ())
+                     self.device_counts if track.places else (), self.count_other_layouts)

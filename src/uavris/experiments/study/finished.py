@@ -20,7 +20,7 @@ from uavris.experiments.engine.scheduling import StudyContext
 from uavris.experiments.engine.stages import Pipeline
 from uavris.experiments.study.config import ReproduceConfig
 from uavris.experiments.study.pipeline import TrackStages, build_pipeline, track_stages
-from uavris.experiments.study.tracks import TRACK_SPECS, Track, evaluation_stage
+from uavris.experiments.study.tracks import TRACK_SPECS, Track, evaluation_stage, finetune_stage, places_stage
 from uavris.experiments.study.workers import first_episode_slots
 from uavris.experiments.tools.targets import Row
 from uavris.io import read_json, read_yaml
@@ -71,6 +71,29 @@ class Study:
     def evaluation(self, track: Track, site: str) -> tuple[Path, dict[str, Any]] | None:
         """The evaluation stage of ``track`` in ``site`` (its directory and result), where it finished."""
         name = track.stage(evaluation_stage(site))
+        d = self.done(name)
+        return (d, read_json(d / "stage.json")["result"]) if d else None
+
+    def experts(self, track: Track, unseen: bool = False) -> Path | None:
+        """The directory of ``track``'s experts of its training (or ``unseen``) deployments, where
+        they finished: one run each under ``runs/SITE``."""
+        return self.done(track.stage("experts-unseen" if unseen else "experts-train"))
+
+    def finetuned(self, track: Track, site: str) -> Path | None:
+        """The directory of ``track``'s fine-tuning of the DT in ``site`` (its ``model``), where it finished."""
+        return self.done(track.stage(finetune_stage(site)))
+
+    def demonstrations(self, track: Track) -> dict[str, Any] | None:
+        """What ``track``'s dataset stage recorded (its episodes, ``slots``, poses valued), where it finished."""
+        return self.result(track.stage("dataset"))
+
+    def value_labels(self, track: Track) -> dict[str, Any] | None:
+        """What the learned value's labels stage recorded (halls, counts, poses), where it finished."""
+        return self.result(track.stage("value-labels"))
+
+    def places_tried(self, track: Track, site: str, seed: int) -> tuple[Path, dict[str, Any]] | None:
+        """Seed ``seed``'s fine-tuning by trying places in ``site`` (its directory and result), where it finished."""
+        name = track.stage(places_stage(site, seed))
         d = self.done(name)
         return (d, read_json(d / "stage.json")["result"]) if d else None
 

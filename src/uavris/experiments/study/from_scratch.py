@@ -34,7 +34,7 @@ from uavris.config import DictConfig
 from uavris.errors import ConfigError, UavrisError
 from uavris.experiments.study.claims_tracks import LEVEL, finetune_curve
 from uavris.experiments.study.finished import Study
-from uavris.experiments.study.tracks import SAFE_MARGIN_DEG, TRACK_SPECS, evaluation_stage, places_stage, zero_shot_only
+from uavris.experiments.study.tracks import SAFE_MARGIN_DEG, TRACK_SPECS, zero_shot_only
 from uavris.io import read_csv, write_json
 from uavris.stats import interactions_to_level
 
@@ -66,18 +66,19 @@ def from_scratch(out: str | Path, cfg: FromScratchConfig, dest: Path,
         raise UavrisError(f"{out}: the measurement needs the deployment track's fine-tuning (uavris reproduce --track "
                           "deployment --ablation)")
     _, unseen = study.sites(track)
-    demos = study.result(track.stage("dataset"))
+    demos = study.demonstrations(track)
     measured: dict[str, Any] = {"study": str(Path(out).resolve()), "cpu": machine(), "config": cfg.to_dict(),
                                 "demonstrations": demos, "halls": []}
     for where in [w for w in unseen if not zero_shot_only(w, rc.system)][:cfg.halls]:
-        res = study.result(track.stage(evaluation_stage(where.name)))
-        if res is None:
+        found = study.evaluation(track, where.name)
+        if found is None:
             raise UavrisError(f"{out}: the evaluation in {where.name} has not finished")
+        res = found[1]
         fine = [v for v in res.values() if v["variant"] == "dt-goal-finetuned-safe"]
         finetuned = float(np.mean([v["mean"] for v in fine]))
-        places = [study.done(track.stage(places_stage(where.name, v["seed"] or 0))) for v in fine]
-        used = [study.result(track.stage(places_stage(where.name, v["seed"] or 0)))["env_interactions"]
-                for v in fine]
+        tried = [study.places_tried(track, where.name, v["seed"] or 0) for v in fine]
+        places = [t[0] for t in tried if t is not None]
+        used = [t[1]["env_interactions"] for t in tried if t is not None]
         expert = TrainConfig(algo="ppo", scenario=where.name, start=where.scenario.start, seed=0, preset="quick",
                              total_steps=cfg.steps, eval_every=cfg.eval_every, eval_episodes=rc.eval_episodes,
                              phase_control="optimizer", system=where.system.replace(front_margin_deg=SAFE_MARGIN_DEG))

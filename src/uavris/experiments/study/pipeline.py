@@ -185,7 +185,7 @@ class TrackStages(PlaceStages):
                 continue
             if self.track.phase_control == "optimizer":  # the strong recipe: imitation of the planning oracle
                 cfgs = {d.name: strong_expert_config(d.name, self.rc.seed, self.rc.preset, self.rc.eval_episodes,
-                                                     d.system, d.start) for d in where}
+                                                     d.system, d.start, curve=name == "experts-unseen") for d in where}
                 stages.append(Stage(self.t(name), {"runs": {s: c.to_dict() for s, c in cfgs.items()},
                                                    "format": EXPERT_FORMAT},
                                     partial(self._run_experts, self.t(name), cfgs),
@@ -336,7 +336,9 @@ class TrackStages(PlaceStages):
         sources = transfer_sources(self.track, where, self.train)
         keys = [*self.inputs, *self.finetunes(where)]
         rows = self._rows(where, sources, {k: Path() for k in keys})
-        cost = evaluate_cost(len(rows) - len(REFERENCE_ROWS), self.rc.eval_episodes, self.horizon, self.control)
+        cost = evaluate_cost(len(rows) - len(REFERENCE_ROWS), self.rc.eval_episodes, self.horizon, self.control,
+                             where.devices, 1 + (self.track.front_margin_deg is not None), self.track.layouts,
+                             int(self.track.demonstrations))
         # the hall it reads (its devices, room and start), not only its name: a changed generator or
         # layout is evaluated again instead of read back from an older run
         config = {"episodes": self.rc.eval_episodes, "seed": EVAL_SEED, "track": self.track.name,

@@ -93,14 +93,15 @@ TRACK_SPECS: dict[str, Track] = {  # each track's DT and fine-tuning: uavris.pre
 
 
 def sites(track: Track, system: SystemConfig, train_layouts: int, unseen_layouts: int,
-          layout_seed: int = 0, other_layouts: int = 0, device_counts: Sequence[int] = ()
-          ) -> tuple[list[Site], list[Site]]:
+          layout_seed: int = 0, other_layouts: int = 0, device_counts: Sequence[int] = (),
+          count_other_layouts: int = 0) -> tuple[list[Site], list[Site]]:
     """The training and the unseen sites of ``track`` on ``system``: the paper's eight
     training and two unseen scenarios, or generated layouts (the devices observed), the unseen
     ones followed by ``other_layouts`` halls of another generator (the ``other`` split of
     :class:`uavris.layouts.LayoutGenerator`: a result tuned to the study's generator shows)
     and by ``unseen_layouts`` unseen halls of each of ``device_counts`` devices (named
-    ``layout-unseen-J-kK``)."""
+    ``layout-unseen-J-kK``), each count's followed by ``count_other_layouts`` of the other
+    generator (``layout-other-J-kK``)."""
     if not track.layouts:
         return [Site(s, system) for s in TRAINING_SCENARIOS], [Site(s, system) for s in UNSEEN_SCENARIOS]
     base = system.replace(observe_devices=True)
@@ -109,7 +110,8 @@ def sites(track: Track, system: SystemConfig, train_layouts: int, unseen_layouts
         gen = LayoutGenerator(devices=devices, seed=layout_seed)
         return [Site.of(layout, base) for layout in gen.layouts(split, count, base)]
 
-    counts = [made("unseen", unseen_layouts, k) for k in device_counts if k != system.num_users]
+    counts = [made("unseen", unseen_layouts, k) + made("other", count_other_layouts, k)
+              for k in device_counts if k != system.num_users]
     return made("train", train_layouts), made("unseen", unseen_layouts) + made("other", other_layouts) + sum(counts, [])
 
 
@@ -120,13 +122,15 @@ def zero_shot_only(site: Site, system: SystemConfig) -> bool:
 
 
 def strong_expert_config(scenario: str, seed: int, preset: str, eval_episodes: int, system: SystemConfig,
-                         start: tuple[float, float, float] | None = None) -> TrainConfig:
+                         start: tuple[float, float, float] | None = None, curve: bool = False) -> TrainConfig:
     """The strong track's expert of ``scenario`` (module docstring), starting at ``start`` (a layout's)
     when given: DAgger imitation of the planning oracle's motion into SB3's PPO network
-    (``algo="ppo"`` names the network), and no RL steps after it (``total_steps=0``)."""
+    (``algo="ppo"`` names the network), and no RL steps after it (``total_steps=0``); with
+    ``curve``, evaluated after every round (an unseen scenario's expert, whose learning curve
+    "fewer interactions" reads: its first crossing, not its whole budget)."""
     return TrainConfig(algo="ppo", scenario=scenario, seed=seed, preset=preset, eval_episodes=eval_episodes,
                        system=system, start=start, phase_control="optimizer",
-                       imitation=ImitationConfig(**STRONG_IMITATION[preset]), total_steps=0)
+                       imitation=ImitationConfig(**STRONG_IMITATION[preset], evaluate_rounds=curve), total_steps=0)
 
 
 def nearest_training_scenarios(scenario: str | Scenario, k: int = TRANSFER_NEIGHBOURS) -> list[str]:

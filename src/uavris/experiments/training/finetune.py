@@ -255,14 +255,35 @@ class Places:
         self.chosen = np.asarray(meta["goal"], dtype=np.float64)
 
 
+def improvement_round(cfg: FinetuneConfig, h: int, dt_policy: Callable[..., DTBatchPolicy], model: Any,
+                      opt: Any, rng: np.random.Generator, steps: int, system: SystemConfig, scenario: Scenario,
+                      phase_control: str, places: Places | None
+                      ) -> tuple[list[Trajectory], list[Trajectory], list[float], int]:
+    """Algorithm 1's step ``h`` (paper Sec. IV, stage 2): noisy candidate rollouts, their elites
+    (:func:`select_elites`), and the DT trained on the elites' windows, their returns-to-go from
+    the rewards actually received; with ``places``, the candidates' paired scores choose the
+    place the DT is told next. Returns the candidates, the elites, the losses and the number of
+    gradient steps taken (``steps`` before them)."""
+    cands = _candidates(cfg, h, dt_policy, system, scenario, phase_control, None if places is None else places.places)
+    if places is not None:
+        places.update(cands)
+    elites = select_elites(cands, cfg.elites, cfg.selection)
+    windows = TrainingWindows.for_model(elites, model.cfg, system)
+    count = cfg.epochs_per_round * math.ceil(windows.samples_per_epoch / cfg.batch_size)
+    losses = train_steps(model, opt, windows, rng, steps, count, cfg.batch_size, cfg.learning_rate,
+                         cfg.warmup_steps, cfg.grad_clip)
+    return cands, elites, losses, count
+
+
 def default_finetune_dir(cfg: FinetuneConfig, root: str | Path = "runs/dt") -> Path:
     return Path(root) / f"finetune-{cfg.scenario}-s{cfg.seed}-{cfg.preset}"
 
 
 def finetune(cfg: FinetuneConfig, run_dir: str | Path, *, resume: bool = False, force: bool = False,
-             progress: bool = True, interrupt_after_round: int | None = None, device: str = "cpu") -> Path:
-    """Fine-tune a pre-trained DT in ``cfg.scenario`` (Algorithm 1, stage 2); returns the
-    model directory. ``interrupt_after_round`` is a test hook."""
+             progress: bool = True, device: str = "cpu") -> Path:
+    """Fine-tune a pre-trained DT in ``cfg.scenario`` (Algorithm 1, stage 2): the zero-shot
+    model evaluated (round 0), then ``cfg.rounds`` of :func:`improvement_round`, each evaluated,
+    logged and checkpointed (``resume`` goes on from the last); returns the model directory."""
     import torch
 
     run_dir = Path(run_dir)
@@ -309,16 +330,9 @@ def finetune(cfg: FinetuneConfig, run_dir: str | Path, *, resume: bool = False, 
     clock = RunClock(run_dir, resuming)
     try:
         for h in range(done_round + 1, cfg.rounds + 1):
-            cands = _candidates(cfg, h, dt_policy, system, scenario, phase_control,
-                                None if places is None else places.places)
+            cands, elites, losses, count = improvement_round(cfg, h, dt_policy, model, opt, rng, steps, system,
+                                                             scenario, phase_control, places)
             interactions += sum(tr.length for tr in cands)
-            if places is not None:
-                places.update(cands)
-            elites = select_elites(cands, cfg.elites, cfg.selection)
-            windows = TrainingWindows.for_model(elites, model.cfg, system)  # RTGs from the rewards actually received
-            count = cfg.epochs_per_round * math.ceil(windows.samples_per_epoch / cfg.batch_size)
-            losses = train_steps(model, opt, windows, rng, steps, count, cfg.batch_size, cfg.learning_rate,
-                                  cfg.warmup_steps, cfg.grad_clip)
             steps += count
             ev = evaluate(dt_policy(), system, scenario, cfg.eval_episodes, cfg.eval_seed).summary()
             row = _round_row(h, interactions, steps, cands, elites, losses, ev)
@@ -336,8 +350,6 @@ def finetune(cfg: FinetuneConfig, run_dir: str | Path, *, resume: bool = False, 
                                **({} if places is None else places.state())}, prefix="round", clock=clock)
             bar.update(1)
             bar.set_postfix(eval=f"{ev['mean']:.2f}", refresh=False)
-            if interrupt_after_round is not None and h >= interrupt_after_round:
-                raise KeyboardInterrupt(f"interrupted after round {h} (test hook)")
     finally:
         writer.close()
         bar.close()

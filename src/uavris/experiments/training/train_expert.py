@@ -369,7 +369,7 @@ def train(cfg: TrainConfig, run_dir: str | Path, *, resume: bool = False, force:
     return run_dir / "model.zip"
 
 
-IMITATION_HEADER = ("round", "samples", "loss", "student_gap")
+IMITATION_HEADER = ("round", "samples", "loss", "student_gap", "eval_mean", "eval_ci_low", "eval_ci_high")
 
 
 def _fresh_model(cfg: TrainConfig, env: Any, run_dir: Path, evals: list[dict[str, Any]], progress: bool,
@@ -389,13 +389,18 @@ def _fresh_model(cfg: TrainConfig, env: Any, run_dir: Path, evals: list[dict[str
 
 
 def _imitate(model: Any, cfg: TrainConfig, run_dir: Path, progress: bool) -> None:
-    """Fit ``model`` to the oracle's motion (``cfg.imitation``'s rounds), recorded in imitation.csv."""
+    """Fit ``model`` to the oracle's motion (``cfg.imitation``'s rounds), recorded in imitation.csv;
+    with ``evaluate_rounds``, each round's student evaluated on the run's evaluation episodes
+    (its own environment; the student is deterministic, so the fit is the same to the bit)."""
     assert cfg.imitation is not None
     rows: list[dict[str, Any]] = []
     bar = progress_bar(cfg.imitation.rounds, f"imitation {cfg.scenario}", "round", progress)
+    nan = float("nan")
 
     def on_round(row: dict[str, float]) -> None:
-        rows.append(row)
+        ev = run_evaluation(model, cfg, cfg.eval_episodes).summary() if cfg.imitation.evaluate_rounds else {}
+        rows.append({**row, "eval_mean": ev.get("mean", nan), "eval_ci_low": ev.get("ci_low", nan),
+                     "eval_ci_high": ev.get("ci_high", nan)})
         bar.update(1)
         bar.set_postfix(loss=f"{row['loss']:.4f}", refresh=False)
 

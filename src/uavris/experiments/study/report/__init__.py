@@ -14,16 +14,24 @@ import shutil
 from pathlib import Path
 from typing import Any, Sequence
 
+import numpy as np
 import yaml
 
+from uavris.agents.oracle.bound import episode_bounds
 from uavris.agents.references import HOVER_OPTIMIZER, ORACLE, ZERO_ACTION
 from uavris.config import UNSEEN_SCENARIOS, get_scenario
 from uavris.experiments.display.tables import counted, fraction, interval, markdown_table, num
 from uavris.experiments.engine.jobs import machine
 from uavris.experiments.engine.stages import StageRecord
 from uavris.experiments.study.claims import claims_table, judge_studies
+from uavris.experiments.study.claims_tracks import episode_rates
 from uavris.experiments.study.finished import Study
-from uavris.experiments.study.report.decomposition import counts_section, decomposition_section, value_section
+from uavris.experiments.study.report.decomposition import (
+    count_label,
+    counts_section,
+    decomposition_section,
+    value_section,
+)
 from uavris.experiments.study.report.deployment import (
     NEAREST,
     deployment_section,
@@ -37,7 +45,7 @@ from uavris.experiments.study.report.deployment import (
 )
 from uavris.experiments.study.report.figures import fig3, interactions_figure, trajectory_figure
 from uavris.experiments.study.report.schedule import schedule_figure, stage_table
-from uavris.experiments.study.tracks import Track, evaluation_stage, finetune_stage, zero_shot_only
+from uavris.experiments.study.tracks import Track, evaluation_stage, zero_shot_only
 from uavris.experiments.training.compare import fig2_table
 from uavris.io import atomic_write_text, read_json
 from uavris.presets import EVAL_SEED
@@ -117,9 +125,9 @@ class _Report:
 
     def _claims(self, track: Track, scenario: str, res: dict[str, dict[str, Any]]) -> None:
         """The figure behind the "fewer interactions" claim (judged in the claims table)."""
-        fdir = self.study.directory(track.stage(finetune_stage(scenario)))
-        xdir = self.study.directory(track.stage("experts-unseen"))
-        if (fdir / "model" / "finetune.csv").exists() and (xdir / "runs" / scenario / "evals.csv").exists():
+        fdir, xdir = self.study.finetuned(track, scenario), self.study.experts(track, unseen=True)
+        if fdir is not None and xdir is not None and (fdir / "model" / "finetune.csv").exists() \
+                and (xdir / "runs" / scenario / "evals.csv").exists():
             istem = f"{track.prefix}interactions_{scenario}"
             interactions_figure(scenario, fdir / "model", xdir / "runs" / scenario, self.figs / istem,
                                 res["expert"]["label"])
@@ -130,12 +138,12 @@ class _Report:
         """Unseen layouts as the unit of generalisation (:mod:`.deployment`)."""
         self.add("", f"## {track.title[0].upper() + track.title[1:]}", "")
         _, unseen = self.rc.sites(track)
-        results = {}
+        results, edirs = {}, {}
         for w in unseen:
             name = track.stage(evaluation_stage(w.name))
             found = self.study.evaluation(track, w.name) if name in self.ok else None
             if found is not None:
-                results[w.name] = found[1]
+                edirs[w.name], results[w.name] = found
         missing = [w.name for w in unseen if w.name not in results]
         if missing:
             self.add(f"Not available for {len(missing)} of {len(unseen)} unseen layouts (their evaluation stage did "
@@ -143,11 +151,11 @@ class _Report:
         done = [w for w in unseen if w.name in results]
         own = self.rc.system.num_users
         study = {w.name: results[w.name] for w in done if not zero_shot_only(w, self.rc.system)}
-        other = {w.name: results[w.name] for w in done if w.split == "other"}
-        counts: dict[int, dict[str, Any]] = {}
+        other = {w.name: results[w.name] for w in done if w.split == "other" and w.devices == own}
+        counts: dict[tuple[int, bool], dict[str, Any]] = {}  # (devices, another generator's): halls
         for w in done:
-            if w.split != "other" and w.devices != own:
-                counts.setdefault(w.devices, {})[w.name] = results[w.name]
+            if w.devices != own:
+                counts.setdefault((w.devices, w.split == "other"), {})[w.name] = results[w.name]
         if study:
             self._deployment_group(track, study)
         if other:
@@ -157,13 +165,17 @@ class _Report:
                      "`uavris.layouts.OTHER_SPLIT`): a result tuned to the study's generator would show here.", "")
             self._deployment_group(track, other, "deployment track, another generator's halls", "-other", True)
         if counts:
-            self.add(*counts_section({self.rc.system.num_users: study, **counts}))
-            for k, group in sorted(counts.items()):
-                self.add("", f"### Halls of {k} devices", "",
-                         f"The same models and rows, zero-shot, in unseen halls of {k} devices (the DTs were "
-                         f"pre-trained on halls of {self.rc.system.num_users}; the learned value on halls of "
-                         "several counts).", "")
-                self._deployment_group(track, group, f"deployment track, {k} devices", f"-k{k}", True)
+            columns = {(own, False): study, **({(own, True): other} if other else {}), **counts}
+            bounds = {w.name: float(episode_bounds(w.system, EVAL_SEED + np.arange(results[w.name][ORACLE]["episodes"]))
+                                    .mean()) for w in done}
+            self.add(*counts_section(columns, bounds, lambda lay, row: episode_rates(edirs[lay], row)))
+            for (k, o), group in sorted(counts.items()):
+                drawn = "unseen halls of another generator" if o else "unseen halls"
+                self.add("", f"### Halls of {count_label(k, o)}", "",
+                         f"The same models and rows, zero-shot, in {drawn} of {k} devices (the DTs were "
+                         f"pre-trained on halls of {own}; the learned value on halls of several counts).", "")
+                self._deployment_group(track, group, f"deployment track, {count_label(k, o)}",
+                                       f"-k{k}" + ("-other" if o else ""), True)
 
     def _deployment_group(self, track: Track, results: dict[str, dict[str, Any]],
                           where: str = "deployment track", suffix: str = "", zero_shot_only: bool = False) -> None:

@@ -25,14 +25,14 @@ them the draws the plan was chosen on, so the target's R is not biased upwards):
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 
 from uavris.agents.references import HOVER_OPTIMIZER, ORACLE, ZERO_ACTION
-from uavris.experiments.display.tables import markdown_table, pct, signed, with_ci
+from uavris.experiments.display.tables import counted, markdown_table, pct, signed, with_ci
 from uavris.experiments.study.report.deployment import ORACLE_SAFE, layout_scores, row_facts, row_labels, row_order
-from uavris.stats import over_units
+from uavris.stats import HOLDS, MIN_UNITS, NOT_MEASURED, NOT_RESOLVED, REFUTED, over_units, verdict
 
 BLOCKING_LIMIT = 0.01  # no learned row blocks a device in more than this share of its slots (docs/study.md, section 2)
 
@@ -75,8 +75,13 @@ def decomposition_section(results: dict[str, dict[str, Any]], labels: dict[str, 
     if worst is None:
         return lines, []
     over = [k for k in learned if float(np.mean(block[k])) > BLOCKING_LIMIT]
-    claim = (f"- {where}: **no learned row blocks a device in more than {BLOCKING_LIMIT:.0%} of its slots**: "
-             f"{'holds' if not over else 'does not hold'} (most: {labels[worst]}, "
+    # by the CI rule on the limit minus each row's share over halls: refuted where one row is over it
+    verdicts = [verdict(s["ci_low"], s["ci_high"]) for s in (over_units(BLOCKING_LIMIT - np.asarray(block[k]))
+                                                              for k in learned)]
+    judged = (NOT_MEASURED if len(layouts) < MIN_UNITS else REFUTED if REFUTED in verdicts
+              else HOLDS if all(v == HOLDS for v in verdicts) else NOT_RESOLVED)
+    claim = (f"- {where}: **no learned row blocks a device in more than {BLOCKING_LIMIT:.0%} of its slots "
+             f"(each row's share over halls, its 95% CI below the limit)**: {judged} (most: {labels[worst]}, "
              f"{pct(float(np.mean(block[worst])))} of its slots on average"
              + (f"; above the limit: {', '.join(labels[k] for k in over)}" if over else "") + ").")
     return lines, [claim]
@@ -108,30 +113,76 @@ def value_section(results: dict[str, dict[str, Any]], labels: dict[str, str]) ->
 
 
 COUNT_ROWS = ("dt-goal-safe", "plan-learned", "plan-semi", "dt-zero-shot-safe", "bc-safe", HOVER_OPTIMIZER, ZERO_ACTION)
+PLAN_ROWS = (ORACLE, "plan-learned", "plan-semi")  # the plans a hall's best plan found is the best of
+ABOVE_ORACLE = 1.005  # no learned or semi-amortised row above this fraction of the oracle on average (docs/places.md)
 
 
-def counts_section(groups: dict[int, dict[str, dict[str, Any]]]) -> list[str]:
-    """Any number of devices (docs/places.md): per device count (``groups``: ``{K: {layout: results}}``),
-    each row's fraction of the oracle, mean [95% CI over halls], and the place row minus
-    hovering with optimised phases (paired, bps/Hz)."""
-    scores = {k: layout_scores(g) for k, g in groups.items() if g}
+def count_label(devices: int, other: bool) -> str:
+    """A column of :func:`counts_section`: halls of ``devices`` devices, of the study's generator or another's."""
+    return f"{devices} devices" + (", another generator" if other else "")
+
+
+def halls_below_hovering(results: dict[str, dict[str, Any]], episodes: Callable[[str, str], np.ndarray],
+                         variant: str = "dt-goal-safe") -> str:
+    """"B of N": how many of the N halls of ``results`` with row ``variant`` have a pre-training
+    seed of it below hovering with optimised phases by its paired 95% CI over the evaluation
+    episodes (``episodes(layout, row)``: a row's per-episode rates); "not measured" over fewer
+    than :data:`~uavris.stats.MIN_UNITS` episodes."""
+    below = with_row = 0
+    for lay, res in results.items():
+        seeds = [k for k, v in res.items() if v.get("variant") == variant]
+        if not seeds or HOVER_OPTIMIZER not in res:
+            continue
+        hover = episodes(lay, HOVER_OPTIMIZER)
+        if hover.size < MIN_UNITS:
+            return f"{NOT_MEASURED} ({counted(hover.size, 'episode')})"
+        with_row += 1
+        below += any(over_units(episodes(lay, k) - hover)["ci_high"] < 0 for k in seeds)
+    return f"{below} of {with_row}"
+
+
+def counts_section(groups: dict[tuple[int, bool], dict[str, dict[str, Any]]], bounds: dict[str, float],
+                   episodes: Callable[[str, str], np.ndarray] | None = None) -> list[str]:
+    """Any number of devices (docs/places.md): per column (``groups``: ``{(devices, another
+    generator's): {layout: results}}``, shown in order of devices, the study's generator first),
+    each row's fraction of the oracle, mean [95% CI over halls], the place row minus hovering
+    with optimised phases (paired, bps/Hz), the halls where a seed of the goal-conditioned DT is
+    below hovering (:func:`halls_below_hovering`), the rows above :data:`ABOVE_ORACLE` of the
+    oracle, and the best plan found in each hall as a fraction of the bound no controller can
+    beat (``bounds``: its mean over the hall's evaluation episodes,
+    :func:`uavris.agents.oracle.bound.episode_bounds`)."""
+    scores = {count_label(*c): layout_scores(groups[c]) for c in sorted(groups) if groups[c]}
+    by_label = {count_label(*c): g for c, g in groups.items()}
     if len(scores) < 2:
         return []
     keys = [r for r in COUNT_ROWS if all(r in s[lay] for s in scores.values() for lay in s)]
-    labels = row_labels(groups[min(scores)])
+    labels = row_labels(next(g for g in by_label.values() if g))
 
-    def frac(k: int, r: str) -> str:
-        return with_ci(over_units([scores[k][lay][r] / scores[k][lay][ORACLE] for lay in scores[k]]), pct)
+    def fractions(c: str, r: str) -> list[float]:
+        return [scores[c][lay][r] / scores[c][lay][ORACLE] for lay in scores[c]]
 
-    rows = [(labels[r], *(frac(k, r) for k in sorted(scores))) for r in keys]
+    rows = [(labels[r], *(with_ci(over_units(fractions(c, r)), pct) for c in scores)) for r in keys]
     if "dt-goal-safe" in keys:
         rows.append(("place row minus hovering with optimised phases (bps/Hz)",
-                     *(with_ci(over_units([scores[k][lay]["dt-goal-safe"] - scores[k][lay][HOVER_OPTIMIZER]
-                                           for lay in scores[k]]), signed) for k in sorted(scores))))
-    rows.append(("oracle (bps/Hz)", *(f"{np.mean([scores[k][lay][ORACLE] for lay in scores[k]]):.2f}"
-                                       for k in sorted(scores))))
+                     *(with_ci(over_units([scores[c][lay]["dt-goal-safe"] - scores[c][lay][HOVER_OPTIMIZER]
+                                           for lay in scores[c]]), signed) for c in scores)))
+    rows.append(("oracle (bps/Hz)", *(f"{np.mean([scores[c][lay][ORACLE] for lay in scores[c]]):.2f}"
+                                       for c in scores)))
+    if all(lay in bounds for s in scores.values() for lay in s):
+        rows.append(("best plan found / the bound no controller can beat",
+                     *(with_ci(over_units([max(v for r, v in scores[c][lay].items() if r in PLAN_ROWS)
+                                           / bounds[lay] for lay in scores[c]]), pct) for c in scores)))
+    if episodes is not None and "dt-goal-safe" in keys:
+        rows.append(("halls where a seed of the goal-conditioned DT is below hovering with optimised phases (paired "
+                     "95% CI over episodes)", *(halls_below_hovering(by_label[c], episodes) for c in scores)))
+    learned = [r for r in keys if r not in (HOVER_OPTIMIZER, ZERO_ACTION)]
+    above = [f"{labels[r]} with {c} ({pct(float(np.mean(fractions(c, r))))})"
+             for c in scores for r in learned if np.mean(fractions(c, r)) > ABOVE_ORACLE]
     return ["", "### Any number of devices", "",
             "Fraction of the oracle, mean [95% CI over halls], in unseen halls of each device count (halls per "
-            "count: " + ", ".join(f"{k}: {len(scores[k])}" for k in sorted(scores)) + ").", "",
-            *markdown_table(("policy", *(f"{k} devices" for k in sorted(scores))), rows,
-                            "l" + "r" * len(scores))]
+            "column: " + ", ".join(f"{c}: {len(scores[c])}" for c in scores) + "). The bound (docs/model.md, "
+            "\"The bound\") is loose: the best plan's fraction of it says how much room any controller could "
+            "have left, not how good the plan is.", "",
+            *markdown_table(("policy", *scores), rows, "l" + "r" * len(scores)), "",
+            f"Learned or semi-amortised rows above {pct(ABOVE_ORACLE)} of the oracle on average (a ceiling that "
+            "gives way): " + ("; ".join(above) if above else "none") + "."]
