@@ -52,7 +52,7 @@ BAD_FLOAT = ["nan", "inf", "-inf", "abc"]
 SIGNED = {"noise_dbm", "target_return", "reference_gain_db"}
 # Integers for which 0 is a valid count or seed; every other integer flag must be >= 1.
 ZERO_OK = {"seed", "eval_seed", "collect_seed", "learning_starts", "warmup_steps", "total_steps", "layout_seed",
-           "top_k"}  # top_k 0: the learned value alone
+           "top_k", "count_other_layouts"}  # top_k 0: the learned value alone; count_other_layouts 0: none
 
 
 def _numeric_flags(cls: type, prefix: str = "") -> list[tuple[str, str, type]]:
