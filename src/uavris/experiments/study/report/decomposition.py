@@ -31,8 +31,15 @@ import numpy as np
 
 from uavris.agents.references import HOVER_OPTIMIZER, ORACLE, ZERO_ACTION
 from uavris.experiments.display.tables import counted, markdown_table, pct, signed, with_ci
-from uavris.experiments.study.report.deployment import ORACLE_SAFE, layout_scores, row_facts, row_labels, row_order
-from uavris.stats import HOLDS, MIN_UNITS, NOT_MEASURED, NOT_RESOLVED, REFUTED, over_units, verdict
+from uavris.experiments.study.report.deployment import (
+    ORACLE_SAFE,
+    every,
+    layout_scores,
+    row_facts,
+    row_labels,
+    row_order,
+)
+from uavris.stats import MIN_UNITS, NOT_MEASURED, over_units, verdict
 
 BLOCKING_LIMIT = 0.01  # no learned row blocks a device in more than this share of its slots (docs/study.md, section 2)
 
@@ -78,8 +85,7 @@ def decomposition_section(results: dict[str, dict[str, Any]], labels: dict[str, 
     # by the CI rule on the limit minus each row's share over halls: refuted where one row is over it
     verdicts = [verdict(s["ci_low"], s["ci_high"]) for s in (over_units(BLOCKING_LIMIT - np.asarray(block[k]))
                                                               for k in learned)]
-    judged = (NOT_MEASURED if len(layouts) < MIN_UNITS else REFUTED if REFUTED in verdicts
-              else HOLDS if all(v == HOLDS for v in verdicts) else NOT_RESOLVED)
+    judged = NOT_MEASURED if len(layouts) < MIN_UNITS else every(*verdicts)
     claim = (f"- {where}: **no learned row blocks a device in more than {BLOCKING_LIMIT:.0%} of its slots "
              f"(each row's share over halls, its 95% CI below the limit)**: {judged} (most: {labels[worst]}, "
              f"{pct(float(np.mean(block[worst])))} of its slots on average"
