@@ -22,7 +22,7 @@ from uavris.env.simulator import BatchedSimulator
 from uavris.experiments.study.report.decomposition import decomposition_section
 from uavris.experiments.study.report.deployment import row_labels
 from uavris.experiments.study.workers import _decomposition, _Whereabouts, oracle_target
-from uavris.experiments.tools.targets import Row, Target
+from uavris.experiments.tools.targets import DTModel, Row
 from uavris.layouts import Layout, Site
 from uavris.physics.phase_opt import optimize_slot_phases
 
@@ -83,7 +83,7 @@ def test_a_tilt_that_puts_a_device_behind_costs_what_hovering_tilted_costs(hall)
     assert d["end_rate_level"] - d["end_rate_own"] > 1.0  # a lost device costs bps/Hz, not a rounding
     assert d["behind_share"] > 0.0
     # the report's table and claim: the tilted row blocks, the level one does not
-    learned = Row("dt-zero-shot", "zero-shot DT", Target.of_model(Path("model")))
+    learned = Row("dt-zero-shot", "zero-shot DT", DTModel.at(Path("model")))
     oracle = {"mean": 40.0, "label": "oracle", **Row.reference("oracle").facts(),
               **oracle_target(Site("mine", system, where.start)), **d, "behind_share": 0.0}
     results = {"mine": {"oracle": oracle, "dt-zero-shot": {"mean": 30.0, "label": "zero-shot DT", **learned.facts(),
@@ -101,7 +101,7 @@ def test_no_learned_row_blocks_a_device_is_judged_by_its_interval_over_halls(sha
     """"No learned row blocks a device in more than 1% of its slots", by the CI rule on the limit
     minus the row's share over halls (scipy's t interval here): holds where the interval lies
     above zero, refuted where below, not resolved otherwise, not measured under 3 halls."""
-    learned = Row("dt-zero-shot", "zero-shot DT", Target.of_model(Path("model")))
+    learned = Row("dt-zero-shot", "zero-shot DT", DTModel.at(Path("model")))
     d = {"end_rate_level": 30.0, "end_rate_own": 30.0}
     results = {f"h{i}": {"oracle": {"mean": 40.0, "label": "oracle", **Row.reference("oracle").facts(), **d,
                                     "plan_rate_level": 31.0, "behind_share": 0.0},

@@ -29,6 +29,15 @@ def test_readme_has_python_blocks() -> None:
     assert len(_python_blocks()) >= 3
 
 
+def test_readme_is_a_front_page() -> None:
+    """Under 150 lines, a runnable example (a Python block, which the test below runs) within its
+    first 40, and no table of verdicts (the results pages hold it)."""
+    lines = README.read_text(encoding="utf-8").splitlines()
+    assert len(lines) <= 150
+    assert lines.index("```python") < 40
+    assert not any(line.startswith("| claim |") for line in lines)
+
+
 def test_docs_have_python_blocks() -> None:
     """The pages the README's examples moved to still hold them (the collection is not empty)."""
     for name in ("getting-started.md", "controller.md", "halls.md", "environment.md"):

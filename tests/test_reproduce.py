@@ -547,6 +547,35 @@ def test_reproduce_estimate_runs_nothing(tmp_path: Path, capsys: pytest.CaptureF
     assert list(tmp_path.iterdir()) == []
 
 
+def test_the_estimate_of_a_study_in_part_is_that_of_what_is_left(tmp_path: Path,
+                                                                  capsys: pytest.CaptureFixture[str]) -> None:
+    """A stage the output directory holds is "done" in the estimate, and the clock and work are
+    those of the rest (the replay of the stages left, worked out here with the forecast's own
+    replay over the same costs)."""
+    from uavris.cli import main
+    from uavris.experiments.engine.forecast import replay
+
+    flags = ["reproduce", "--preset", "quick", "--estimate", "--expert-algo", "ppo", "--track", "paper",
+             "--out", str(tmp_path)]
+    assert main(flags) == 0
+    whole = capsys.readouterr().out
+    rc = ReproduceConfig("quick", expert_algo="ppo", track="paper")
+    pipeline = build_pipeline(rc, tmp_path, StudyContext(2, "local", None))
+    (pipeline.directory("compare")).mkdir(parents=True)
+    (pipeline.directory("compare") / "stage.json").write_text("{}")
+    assert main(flags) == 0
+    part = capsys.readouterr().out
+    assert "| compare | 12 | done |" in part and "| compare | 12 | " in whole and "1 of" in part
+    left = {n: (st.deps, st.costs) for n, st in pipeline.stages.items() if n != "compare"}
+    wall = replay(left, pipeline.downstream(2), 2, {"compare"})[0]
+    assert f"{wall / 60:.0f} min)" in part.splitlines()[0]
+    work = sum(sum(c) for _, c in left.values())
+    assert f"work left {work / 3600:.1f} core-hours" in part
+    assert wall < float(re.search(r"\((\d+) min\)", whole).group(1)) * 60
+    assert main([*flags, "--force", "compare"]) == 0  # a stage --force runs again is not done
+    assert capsys.readouterr().out == whole
+
+
 def test_the_progress_bar_counts_this_invocations_work(tmp_path: Path) -> None:
     """A stage finished earlier leaves the bar's total (a resumed study does not look nearly
     done at once); a stage that runs moves the bar by its expected cost; a stage's known
@@ -613,3 +642,46 @@ def test_the_comparison_runs_for_the_studys_number_of_steps(tmp_path):
     assert {c.total_steps for c in cfgs.values()} == {320} and len(cfgs) == 4
     assert {c.total_steps for c in comparison_configs("smoke", 1, ("sac",), "fig2", 4, RC.system).values()} == {
         TRAIN["smoke"]["total_steps"]}
+
+
+@pytest.mark.slow
+def test_a_stage_kind_registered_in_a_test_module_runs_and_is_reported(smoke_run, tmp_path, request, capsys):
+    """A new kind of stage is one object in the user's own module (study.pipeline.StageKind):
+    the command line schedules it (--estimate, --force) and the report has its section; the
+    study's own stages, unchanged, are skipped."""
+    from uavris.cli import main
+    from uavris.experiments.study import pipeline as pipeline_module
+    from uavris.experiments.study.pipeline import StageKind, register_stage_kind
+
+    out = tmp_path / "study"
+    shutil.copytree(smoke_run[0], out)
+
+    def count_rows(d: Path, deps: dict[str, Path]) -> dict:
+        rows = read_json(deps["evaluate-unseen1"] / "stage.json")["result"]
+        (d / "rows.txt").write_text("\n".join(sorted(rows)))
+        return {"rows": len(rows)}
+
+    def stages(rc: ReproduceConfig, ctx: StudyContext) -> list[Stage]:
+        return [Stage("rows-counted", {"episodes": rc.eval_episodes}, count_rows, ("evaluate-unseen1",))]
+
+    saved = list(pipeline_module.STAGE_KINDS)  # the registry as it was, restored after
+    request.addfinalizer(lambda: pipeline_module.STAGE_KINDS.__setitem__(slice(None), saved))
+    register_stage_kind(StageKind("rows-counted", "Rows counted", stages,
+                                  lambda study: [f"{study.result('rows-counted')['rows']} rows in unseen1."]))
+    flags = ["reproduce", "--preset", "smoke", "--compare-seeds", "1", "--eval-episodes", "3", "--trajectories",
+             "2", "--out", str(out), "--no-progress"]
+    assert main([*flags, "--estimate"]) == 0
+    assert "| rows-counted |" in capsys.readouterr().out
+    # a finished stage's timing.json is written when it runs: the study's own are not run again
+    before = {p.parent.name: p.read_text() for p in (out / "stages").glob("*/timing.json")}
+    assert main(flags) == 0
+    after = {p.parent.name: p.read_text() for p in (out / "stages").glob("*/timing.json")}
+    [new] = set(after) - set(before)
+    assert new.startswith("rows-counted-") and all(after[k] == v for k, v in before.items())
+    unseen1 = read_json(next((out / "stages").glob("evaluate-unseen1-*")) / "stage.json")["result"]
+    text = (out / "report.md").read_text()
+    assert f"## Rows counted\n\n{len(unseen1)} rows in unseen1." in text
+    (out / "stages" / new / "rows.txt").unlink()
+    assert main([*flags, "--force", "rows-counted"]) == 0  # --force knows it, and runs it again
+    assert (out / "stages" / new / "rows.txt").read_text().splitlines() == sorted(unseen1)
+    assert read_json(out / "stages" / new / "stage.json")["result"] == {"rows": len(unseen1)}

@@ -62,10 +62,10 @@ def plan_command(args: list[str]) -> None:
             raise UsageError("--controller and --learned both name a learned value; pass one of them")
         from dataclasses import replace
 
-        from uavris.experiments.tools.targets import read_controller
+        from uavris.experiments.tools.targets import LearnedValue, read_controller
 
         told = read_controller(a.controller).goal_from
-        if told is None or told.kind != "value":
+        if not isinstance(told, LearnedValue):
             raise UsageError(f"--controller {a.controller}: its row is told no learned place (no learned value)")
         a = replace(a, learned=told.path, top_k=told.top_k)
     if a.layout is None:

@@ -303,7 +303,8 @@ class ReproduceArgs:
     """show a progress bar"""
     estimate: bool = False
     """print each stage's expected core-minutes and the expected wall clock on --workers, and exit (nothing run
-    or written; the cost model of uavris.experiments.engine.costs, measured on a 2-core AMD EPYC)"""
+    or written; the stages OUT already holds are "done" and the clock is that of the rest; the cost model of
+    uavris.experiments.engine.costs, measured on a 2-core AMD EPYC)"""
 
 
 def reproduce_command(args: list[str]) -> None:
@@ -335,7 +336,7 @@ def reproduce_command(args: list[str]) -> None:
     a = parse(ReproduceArgs, args, "uavris reproduce", reproduce_command.__doc__ or "",
               default=ReproduceArgs(ReproduceConfig(system=system, **_given(preset=c.preset))))
     if a.estimate:
-        print(estimate(a.study, a.workers), end="")
+        print(estimate(a.study, a.workers, a.out or Path("runs") / a.study.preset, a.force), end="")
         return
     output_dir(a.out)
     report = reproduce(a.study, a.out or Path("runs") / a.study.preset, workers=a.workers, backend=a.backend,

@@ -247,23 +247,38 @@ def facing_attitudes(c: SystemConfig, places: NDArray) -> NDArray[np.float64]:
 
 def refine(c: SystemConfig, s: PlanSettings, q: NDArray, att: NDArray, r_q: float, rate: Any
            ) -> tuple[NDArray, NDArray]:
-    """Step 4: the pattern search on ``R`` from the pose ``(q, att)``, down to ``min_step``."""
-    q, att, r_best = q.copy(), np.asarray(att, dtype=np.float64).copy(), r_q
-    pos_step, att_step = s.refine_step, c.attitude_step_rad
-    for _ in range(s.max_refinements):
-        if pos_step < s.min_step:
-            break
+    """Step 4: the pattern search on ``R`` from the pose ``(q, att)``, down to ``min_step``, at most
+    ``max_refinements`` batches; each pose taken with its attitude wrapped, as the UAV holds it."""
+    q, att, _ = pattern_search(c, q.copy(), np.asarray(att, dtype=np.float64).copy(), r_q, rate, s.refine_step,
+                               s.min_step, tolerance=1e-6, max_batches=s.max_refinements, settle=ph.wrap_angle)
+    return q, att
+
+
+def pattern_search(c: SystemConfig, q: NDArray, att: NDArray, v: float, value: Any, first_step: float,
+                   min_step: float, *, tolerance: float, max_batches: int | None = None,
+                   settle: Any = lambda att: att) -> tuple[NDArray, NDArray, float]:
+    """The pattern search of the planner (step 4) and of the wider search
+    (:mod:`.search`): from the pose ``(q, att)`` worth ``v``, the neighbours of
+    :func:`pattern_neighbours` valued in one batch (``value`` of positions and attitudes), the
+    best taken where it improves on ``v`` by more than ``tolerance`` (``settle`` of its attitude),
+    else both steps halved (the attitude's from the system's ``attitude_step_rad``), until the
+    position step is below ``min_step`` or after ``max_batches`` rounds (a round with no feasible
+    neighbour counts, though it values none). Returns the pose found and its value."""
+    pos_step, att_step = first_step, c.attitude_step_rad
+    batches = 0
+    while pos_step >= min_step and (max_batches is None or batches < max_batches):
+        batches += 1
         nq, na, ok = pattern_neighbours(c, q, att, pos_step, att_step)
         if not ok.any():
             pos_step, att_step = pos_step / 2, att_step / 2
             continue
-        nr = rate(nq[ok], na[ok])
-        i = int(np.argmax(nr))
-        if nr[i] > r_best + 1e-6:
-            q, att, r_best = nq[ok][i], ph.wrap_angle(na[ok][i]), float(nr[i])
+        nv = value(nq[ok], na[ok])
+        i = int(np.argmax(nv))
+        if nv[i] > v + tolerance:
+            q, att, v = nq[ok][i], settle(na[ok][i]), float(nv[i])
         else:
             pos_step, att_step = pos_step / 2, att_step / 2
-    return q, att
+    return q, att, v
 
 
 def pattern_neighbours(c: SystemConfig, q: NDArray, att: NDArray, pos_step: float, att_step: float

@@ -16,7 +16,7 @@ the pose (:func:`.objective.expected_optimised_rate`). The search:
 3. at the ``top`` best so far (at least ``grid_step`` apart), every attitude of a grid of
    yaw, pitch and roll (``attitudes_deg`` each);
 4. a pattern search in position and attitude from each of the ``refine`` best, down to
-   ``min_step``, over the planner's own neighbours (:func:`.planner.pattern_neighbours`: the
+   ``min_step``, the planner's own (:func:`.planner.pattern_search`, its neighbours: the
    attitude safety layer's limit included where the system has one).
 
 Its draws are not the planner's (``seed``), so the oracle is not judged on its own common
@@ -45,7 +45,7 @@ from uavris.agents.oracle.objective import (
     top_apart,
     trip_slots,
 )
-from uavris.agents.oracle.planner import Plan, pattern_neighbours
+from uavris.agents.oracle.planner import Plan, pattern_search
 from uavris.config import SystemConfig
 
 Valuer = Callable[[NDArray[np.float64], NDArray[np.float64]], NDArray[np.float64]]  # R of (P, 3) positions, attitudes
@@ -112,27 +112,11 @@ def exhaustive_plan(config: SystemConfig, start: tuple[float, float, float],
     order = np.argsort(-va, kind="stable")[:s.refine]
     best = max(((q_all[i], a_all[i], float(va[i])) for i in order), key=lambda x: x[2])
     for i in order:
-        q, att, vb = _pattern_search(c, s, q_all[i].copy(), a_all[i].copy(), float(va[i]), value)
+        q, att, vb = pattern_search(c, q_all[i].copy(), a_all[i].copy(), float(va[i]), value, s.refine_step,
+                                    s.min_step, tolerance=1e-9)
         if vb > best[2]:
             best = (q, att, vb)
     return Found(np.asarray(best[0]), ph.wrap_angle(np.asarray(best[1])), best[2], count)
-
-
-def _pattern_search(c: SystemConfig, s: SearchSettings, q: NDArray, att: NDArray, vq: float,
-                    value: Callable[[NDArray, NDArray], NDArray]) -> tuple[NDArray, NDArray, float]:
-    pos_step, att_step = s.refine_step, c.attitude_step_rad
-    while pos_step >= s.min_step:
-        nq, na, ok = pattern_neighbours(c, q, att, pos_step, att_step)
-        if not ok.any():
-            pos_step, att_step = pos_step / 2, att_step / 2
-            continue
-        nv = value(nq[ok], na[ok])
-        i = int(np.argmax(nv))
-        if nv[i] > vq + 1e-9:
-            q, att, vq = nq[ok][i], na[ok][i], float(nv[i])
-        else:
-            pos_step, att_step = pos_step / 2, att_step / 2
-    return q, att, vq
 
 
 @dataclass(frozen=True)

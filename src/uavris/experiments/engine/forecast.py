@@ -1,7 +1,7 @@
 """When the study will end: an event-driven replay of the job runner over the expected costs.
 
 Lives here: :func:`replay` (the runner's order: a free worker takes the queued job of the
-longest remaining chain), :func:`expected_schedule` (the whole study before it starts, for
+longest remaining chain), :func:`expected_schedule` (the study, or what is left of it, before it runs, for
 ``reproduce --estimate``) and :func:`eta_seconds` (what is left of a running study, for
 the progress bar). Not here: the costs (:mod:`.costs`) and the bar (:mod:`.scheduling`).
 
@@ -77,13 +77,15 @@ def replay(stages: Mapping[str, tuple[Sequence[str], Sequence[float]]], after: M
     return t, {name: (a, b) for name, (a, b) in spans.items()}
 
 
-def expected_schedule(pipeline: Any, workers: int) -> tuple[float, dict[str, tuple[float, float]]]:
-    """The study's expected wall clock on ``workers`` workers, from the cost model (:mod:`.costs`),
-    before anything ran: the :func:`replay` of every stage of ``pipeline`` (a
-    :class:`~uavris.experiments.engine.stages.Pipeline`). Returns the expected seconds and, per
-    stage, its expected (start, end). An estimate: the unit costs were measured on one machine."""
-    stages = {name: (st.deps, st.costs) for name, st in pipeline.stages.items()}
-    return replay(stages, pipeline.downstream(workers), workers)
+def expected_schedule(pipeline: Any, workers: int, done: Collection[str] = ()
+                      ) -> tuple[float, dict[str, tuple[float, float]]]:
+    """The study's expected wall clock on ``workers`` workers, from the cost model (:mod:`.costs`):
+    the :func:`replay` of every stage of ``pipeline`` (a
+    :class:`~uavris.experiments.engine.stages.Pipeline`) but the ``done`` ones. Returns the
+    expected seconds and, per stage left, its expected (start, end). An estimate: the unit costs
+    were measured on one machine."""
+    stages = {name: (st.deps, st.costs) for name, st in pipeline.stages.items() if name not in done}
+    return replay(stages, pipeline.downstream(workers), workers, done) if stages else (0.0, {})
 
 
 def eta_seconds(stages: Mapping[str, tuple[Sequence[str], Sequence[float]]], after: Mapping[str, float],

@@ -123,8 +123,8 @@ class Study:
                               f"{', '.join(rows)}")
         row = rows[key]
         for target in (*([row.target] if row.target is not None else []), *row.members):
-            if target.path is not None and not target.path.exists():
-                raise UavrisError(f"--row {key}: {target.path} does not exist yet (its stage has not finished; "
+            if target.location() is not None and not Path(str(target.location())).exists():
+                raise UavrisError(f"--row {key}: {target.location()} does not exist yet (its stage has not finished; "
                                   f"rerun uavris reproduce --out {self.out})")
         return row
 

@@ -39,13 +39,15 @@ interleave.
 from __future__ import annotations
 
 import dataclasses
+from dataclasses import dataclass
 from functools import partial
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any, Callable, Sequence
 
 from uavris import runs
 from uavris.agents.dt.dataset import DATASET_FORMAT_VERSION
 from uavris.agents.experts import ALGORITHMS
+from uavris.errors import ConfigError
 from uavris.experiments.engine.costs import (
     dataset_cost,
     demonstration_cost,
@@ -95,9 +97,35 @@ from uavris.presets import COLLECT_SEED, DEMONSTRATION_CHUNK, EVAL_SEED, TRACK_F
 EXPERT_FORMAT = 2
 
 
+@dataclass(frozen=True)
+class StageKind:
+    """A kind of stage a study runs beside its tracks' own, added from outside uavris's modules
+    (:func:`register_stage_kind`): the stages it makes for a study (``stages``: their names are
+    what ``--force`` and ``--estimate`` show, their configurations their keys, their ``run``
+    what they write), and its section of the report (``section``: the lines under the heading
+    ``title``, read from the study, e.g. :meth:`~.finished.Study.result` of its stages)."""
+
+    name: str
+    title: str
+    stages: Callable[[ReproduceConfig, StudyContext], list[Stage]]
+    section: Callable[[Any], list[str]]  # of the study (a finished.Study, which reads this module)
+
+
+STAGE_KINDS: list[StageKind] = []  # the registered kinds, in the order they were registered
+
+
+def register_stage_kind(kind: StageKind) -> StageKind:
+    """Add ``kind`` to every study built from now on in this process (its stages after the
+    tracks', its section after theirs in the report: "not run" where its stages did not
+    finish); registering a kind of the same name again replaces it."""
+    STAGE_KINDS[:] = [k for k in STAGE_KINDS if k.name != kind.name] + [kind]
+    return kind
+
+
 def build_pipeline(rc: ReproduceConfig, out: Path, ctx: StudyContext) -> Pipeline:
     """The study's stages in dependency order: the comparison (paper track), then every
-    track's experts, then every track's dataset, pre-training, fine-tuning and evaluation."""
+    track's experts, then every track's dataset, pre-training, fine-tuning and evaluation,
+    then the stages of each registered :class:`StageKind`."""
     stages = []
     if any(t.name == "paper" for t in rc.tracks):
         stages.append(dataclasses.replace(_compare_stage(rc, ctx), group="compare"))
@@ -105,6 +133,13 @@ def build_pipeline(rc: ReproduceConfig, out: Path, ctx: StudyContext) -> Pipelin
     for part in ("experts", "dt"):
         for t in tracks:
             stages += [dataclasses.replace(st, group=t.track.name) for st in getattr(t, part)()]
+    for kind in STAGE_KINDS:
+        stages += [dataclasses.replace(st, group=kind.name) for st in kind.stages(rc, ctx)]
+    names = [st.name for st in stages]
+    twice = sorted({n for n in names if names.count(n) > 1})
+    if twice:
+        raise ConfigError(f"the study has two stages named {', '.join(twice)} (a registered stage kind's name is "
+                          "one of the study's own)")
     return Pipeline(out, stages)
 
 

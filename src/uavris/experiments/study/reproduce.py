@@ -28,23 +28,35 @@ from uavris.runs.lock import locked
 
 
 # ------------------------------------------------------------------------------------------ entry point
-def estimate(rc: ReproduceConfig, workers: int) -> str:
+def estimate(rc: ReproduceConfig, workers: int, out: str | Path | None = None, force: Sequence[str] = ()) -> str:
     """The study's stages with their expected core-minutes and expected start and end on
-    ``workers`` workers, and the expected wall clock (:func:`~.forecast.expected_schedule`),
-    as markdown. Nothing is run or written."""
+    ``workers`` workers, and the expected wall clock (:func:`~.forecast.expected_schedule`), as
+    markdown. Where ``out`` holds this study in part, its finished stages (but those named in
+    ``force``) are "done" and the clock is that of what is left (what ``reproduce`` with the
+    same ``force`` would run now). Nothing is run or written."""
     if workers < 1:
         raise UavrisError(f"--workers must be >= 1, got {workers}")
-    pipeline = build_pipeline(rc, Path("<estimate>"), StudyContext(workers, "local", None))
-    wall, spans = expected_schedule(pipeline, workers)
+    pipeline = build_pipeline(rc, Path(out) if out is not None else Path("<estimate>"),
+                              StudyContext(workers, "local", None))
+    done = {name for name in pipeline.stages if out is not None and name not in force and pipeline.is_done(name)}
+    wall, spans = expected_schedule(pipeline, workers, done)
     algo = rc.expert_algo if rc.expert_algo != AUTO else "the dearest algorithm (SAC) until the comparison chooses"
+
+    def row(name: str, st: Any) -> tuple[Any, ...]:
+        if name in done:
+            return name, len(st.costs), "done", "", ""
+        return (name, len(st.costs), f"{sum(st.costs) / 60:.1f}", f"{spans[name][0] / 60:.1f}",
+                f"{spans[name][1] / 60:.1f}")
+
     table = markdown_table(("stage", "jobs", "core-min", "expected start (min)", "expected end (min)"),
-                           [(name, len(st.costs), f"{sum(st.costs) / 60:.1f}", f"{spans[name][0] / 60:.1f}",
-                             f"{spans[name][1] / 60:.1f}") for name, st in pipeline.stages.items()], "lrrrr")
-    lines = [f"expected wall clock of `uavris reproduce --preset {rc.preset} --track {rc.track}` on {workers} "
-             f"worker(s): {wall / 3600:.1f} h ({wall / 60:.0f} min); paper-track experts: {algo}", "", *table]
-    total = sum(sum(st.costs) for st in pipeline.stages.values())
-    lines += ["", f"total work {total / 3600:.1f} core-hours; unit costs measured on a 2-core AMD EPYC, one job per "
-              "core (uavris.experiments.engine.costs); an estimate, not a promise", ""]
+                           [row(name, st) for name, st in pipeline.stages.items()], "lrrrr")
+    what = f"what is left of {out} ({len(done)} of {len(pipeline.stages)} stages done)" if done else \
+        f"`uavris reproduce --preset {rc.preset} --track {rc.track}`"
+    lines = [f"expected wall clock of {what} on {workers} worker(s): {wall / 3600:.1f} h ({wall / 60:.0f} min); "
+             f"paper-track experts: {algo}", "", *table]
+    total = sum(sum(st.costs) for name, st in pipeline.stages.items() if name not in done)
+    lines += ["", f"{'work left' if done else 'total work'} {total / 3600:.1f} core-hours; unit costs measured on a "
+              "2-core AMD EPYC, one job per core (uavris.experiments.engine.costs); an estimate, not a promise", ""]
     return "\n".join(lines)
 
 

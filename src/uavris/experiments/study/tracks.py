@@ -43,7 +43,7 @@ import numpy as np
 from uavris.agents.experts.imitation import ImitationConfig
 from uavris.agents.references import HOVER_OPTIMIZER, ORACLE, ZERO_ACTION
 from uavris.config import SCENARIOS, TRAINING_SCENARIOS, UNSEEN_SCENARIOS, Scenario, SystemConfig, get_scenario
-from uavris.experiments.tools.targets import Row, Target
+from uavris.experiments.tools.targets import DTModel, ExpertRun, LearnedValue, Row
 from uavris.experiments.training.train_expert import TrainConfig
 from uavris.layouts import LayoutGenerator, Site, layout_distance
 from uavris.presets import STRONG_IMITATION
@@ -189,12 +189,12 @@ def _learned_rows(track: Track, site: Site, sources: list[tuple[str, float]], di
     rows: list[tuple[Row, bool]] = []
     if track.unseen_experts:
         rows.append((Row("expert", "expert trained in the scenario",
-                         Target.of_model(dirs["experts-unseen"] / "runs" / site.name, "expert"), kind="expert"), False))
+                         ExpertRun.at(dirs["experts-unseen"] / "runs" / site.name), kind="expert"), False))
     if finetune_stage(site.name) in dirs:
-        rows.append((Row("dt-finetuned", "fine-tuned DT", Target.of_model(dirs[finetune_stage(site.name)] / "model")),
+        rows.append((Row("dt-finetuned", "fine-tuned DT", DTModel.at(dirs[finetune_stage(site.name)] / "model")),
                      True))
     seeded = len({m.seed for m in models}) > 1
-    value = Target.of_model(dirs["value"] / "value", "value") if "value" in dirs else None
+    value = LearnedValue.at(dirs["value"] / "value") if "value" in dirs else None
     if train and site.devices != train[0].devices:  # a flat encoder's weights read its training halls' count only
         models = [m for m in models if dict(m.model).get("state_encoder") != "flat"]
     # the headline controller is told the semi-amortised place (V's top places and staying, valued by R):
@@ -202,19 +202,19 @@ def _learned_rows(track: Track, site: Site, sources: list[tuple[str, float]], di
     semi = dataclasses.replace(value, top_k=SEMI_TOP_K) if value is not None else None
     for m in models:
         goal = {"goal_from": semi} if m.row == "dt-goal" else {}
-        rows.append((Row(m.row, m.label, Target.of_model(dirs[m.stage] / "model"), seed=m.seed if seeded else None,
+        rows.append((Row(m.row, m.label, DTModel.at(dirs[m.stage] / "model"), seed=m.seed if seeded else None,
                          training_halls=m.halls, **goal), not m.ablation))
     for m in models:  # fine-tuned by trying places in this hall: it keeps the place it chose
         stage = places_stage(site.name, m.seed)
         if m.row == "dt-goal" and stage in dirs:
             rows.append((Row("dt-goal-finetuned", "goal-conditioned DT, fine-tuned by trying places",
-                             Target.of_model(dirs[stage] / "model"), seed=m.seed if seeded else None), True))
+                             DTModel.at(dirs[stage] / "model"), seed=m.seed if seeded else None), True))
     if value is not None:
         rows += [(Row("plan-learned", "learned planner's place (V's argmax), flown by the oracle's controller",
                       value), False),
                  (Row("plan-semi", f"learned planner's top {SEMI_TOP_K} places valued by R, flown by the oracle's "
                       "controller", semi), False)]
-    dts = [Target.of_model(dirs[m.stage] / "model") for m in models if m.row == "dt-zero-shot"]
+    dts = [DTModel.at(dirs[m.stage] / "model") for m in models if m.row == "dt-zero-shot"]
     if len(dts) > 1:
         rows.append((Row("dt-ensemble", f"zero-shot DT, ensemble of the {len(dts)} seeds' models (mean action)",
                          members=tuple(dts)), True))
@@ -226,7 +226,7 @@ def _learned_rows(track: Track, site: Site, sources: list[tuple[str, float]], di
                              kind="transfer", rank=rank), False))
             continue
         label = f"transferred from {src}{near}" + (f", {dist:.1f} m" if track.layouts else "")
-        rows.append((Row(f"transfer-{src}", label, Target.of_model(dirs["experts-train"] / "runs" / src, "expert"),
+        rows.append((Row(f"transfer-{src}", label, ExpertRun.at(dirs["experts-train"] / "runs" / src),
                          kind="transfer", rank=rank), False))
     return rows
 

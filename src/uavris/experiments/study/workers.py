@@ -18,7 +18,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from uavris.experiments.study.tracks import TRACK_SPECS, Track
-from uavris.experiments.tools.targets import Row
+from uavris.experiments.tools.targets import LearnedValue, Row
 from uavris.io import read_json, write_json
 from uavris.layouts import Site
 from uavris.presets import EVAL_SEED
@@ -179,7 +179,7 @@ def evaluate_rows(out: Path, site: Site, track: Track, episodes: int, rows: Sequ
         oracle = PlanningOracle()
         result[ORACLE].update(oracle_target(site, oracle))
         for row in rows:
-            if row.target is not None and row.target.kind == "value" and not row.target.top_k:
+            if isinstance(row.target, LearnedValue) and not row.target.top_k:
                 result[row.key].update(value_accuracy(site, row.target.planner_model(), oracle))
     return result
 

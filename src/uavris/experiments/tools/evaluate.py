@@ -27,7 +27,7 @@ from uavris.env.rollout import policy_phase_control
 from uavris.env.wrappers import check_phase_control
 from uavris.errors import UavrisError
 from uavris.experiments.display.progress import progress_bar
-from uavris.experiments.tools.targets import Row, Target, as_row, resolve_target
+from uavris.experiments.tools.targets import Controller, Reference, Row, Target, as_row, resolve_target
 from uavris.experiments.tools.trajectory import SlotLog, rate_by_active_pairs, trajectory_plot, write_slots
 from uavris.io import file_part, write_csv, write_json
 from uavris.layouts import Layout, resolve_layout
@@ -80,7 +80,7 @@ def evaluate_target(target: str | Target | Row, scenario: str | Scenario | None,
     if isinstance(target, (str, Path)):
         target = resolve_target(target)
     # a study's row, or one exported as a controller directory: named by its key
-    study_row = isinstance(target, Row) or target.kind == "controller"
+    study_row = isinstance(target, (Row, Controller))
     row = as_row(target)
     system = system or row.own_system()
     if layout is not None:
@@ -100,7 +100,7 @@ def evaluate_target(target: str | Target | Row, scenario: str | Scenario | None,
     where = get_scenario(scenario)
     where.validate_for(evaluated)
     # every policy beside the three references the docs read results against (not a reference beside itself)
-    reference = row.target is not None and row.target.kind == "reference"
+    reference = isinstance(row.target, Reference)
     beside = [] if reference or not references else [ZERO_ACTION, HOVER_OPTIMIZER, ORACLE]
     with progress_bar((1 + len(beside)) * episodes * system.horizon, f"evaluate {where.name}", "slot", progress,
                       leave=False) as bar:
@@ -151,7 +151,7 @@ def results_dir(target: Target | Row) -> Path:
     """Where ``evaluate`` writes a target's results without ``--out``: beside a run, model or
     controller (``DIR/eval``), ``runs/rows/ROW`` for a study's row, ``runs/baselines/NAME/eval``
     for a reference, ``runs/policies/FILE_py_NAME/eval`` for a user's policy."""
-    if isinstance(target, Target) and target.kind == "controller":
+    if isinstance(target, Controller):
         return target.default_out()
     row = as_row(target)
     if isinstance(target, Row) or row.target is None:
@@ -168,7 +168,7 @@ def paired_summary(d: Any) -> dict[str, float]:
 def outside_training(row: Row, system: SystemConfig, name: str) -> str | None:
     """One line when a trained model flies a hall outside what it was trained in (another room,
     or a device beyond the training room's extent): its numbers are an extrapolation."""
-    trained = row.target is not None and row.target.kind in ("dt", "expert") or bool(row.members)
+    trained = row.target is not None and row.target.trained or bool(row.members)
     if not trained:
         return None
     own = row.own_system()
@@ -209,8 +209,4 @@ def file_token(row: Row, study_row: bool) -> str:
     """What a result file's name starts with: the row, the reference or the policy evaluated
     (a user's ``path/FILE.py:NAME`` as ``FILE_py_NAME``; two targets into one folder never
     share a file)."""
-    t = row.target
-    if not study_row and t is not None and t.kind == "user":
-        return t.file_name()
-    return file_part(row.key if study_row or t is None else str(t.reference) if t.kind == "reference" else
-                     Path(t.name).name)
+    return file_part(row.key) if study_row or row.target is None else row.target.file_token()

@@ -26,6 +26,7 @@ from uavris.experiments.engine.stages import StageRecord
 from uavris.experiments.study.claims import claims_table, judge_studies
 from uavris.experiments.study.claims_tracks import episode_rates
 from uavris.experiments.study.finished import Study
+from uavris.experiments.study.pipeline import STAGE_KINDS
 from uavris.experiments.study.report.decomposition import (
     count_label,
     counts_section,
@@ -300,6 +301,10 @@ def write_report(study: Study, records: Sequence[StageRecord], wall_s: float, or
     for t in rc.tracks:
         if t.layouts:
             rep.deployment(t)
+    for kind in STAGE_KINDS:  # the kinds of stage registered beside the tracks' (study.pipeline.StageKind)
+        waiting = [n for n, st in study.pipeline.stages.items() if st.group == kind.name and not study.done(n)]
+        rep.add("", f"## {kind.title}", "", *([f"Not run: its stages {', '.join(waiting)} did not finish."]
+                                              if waiting else kind.section(study)))
     rep.add("", "## Further claims, checked", "", *(rep.claims or ["None in these tracks."]),
             "", "The paper's numbers come from its own, unstated parameters (noise power, slot length, energy budget, "
             "training length); ours are in `docs/model.md` and below. Where a claim does not hold here, that is the "
