@@ -685,3 +685,38 @@ def test_a_stage_kind_registered_in_a_test_module_runs_and_is_reported(smoke_run
     assert main([*flags, "--force", "rows-counted"]) == 0  # --force knows it, and runs it again
     assert (out / "stages" / new / "rows.txt").read_text().splitlines() == sorted(unseen1)
     assert read_json(out / "stages" / new / "stage.json")["result"] == {"rows": len(unseen1)}
+
+
+@pytest.mark.slow
+def test_report_only_writes_the_report_of_a_study_in_part_and_runs_nothing(smoke_run, tmp_path, capsys):
+    """A study stopped part-way: its report so far, from the stages it holds, nothing run (the
+    stage removed here stays removed); while another invocation writes the study, one line."""
+    from uavris.cli import main
+    from uavris.runs.lock import locked
+
+    out = tmp_path / "study"
+    shutil.copytree(smoke_run[0], out)
+    (out / "report.md").unlink()
+    [gone] = (out / "stages").glob("evaluate-unseen2-*")
+    shutil.rmtree(gone)
+    total = len(build_pipeline(RC, out, StudyContext(1, "local", None)).stages)
+    flags = ["reproduce", "--preset", "smoke", "--compare-seeds", "1", "--eval-episodes", "3", "--trajectories",
+             "2", "--out", str(out), "--no-progress", "--report-only"]
+    assert main(flags) == 0
+    assert not gone.exists()
+    text = (out / "report.md").read_text()
+    assert f"{total - 1} of the study's {total} stages had finished" in text
+    unseen1 = read_json(next((out / "stages").glob("evaluate-unseen1-*")) / "stage.json")["result"]
+    assert f"| {unseen1['dt-zero-shot']['label']} | {unseen1['dt-zero-shot']['mean']:.2f} |" in text
+    capsys.readouterr()
+    with locked(out, "another reproduce"):
+        assert main(flags) == 2
+    assert "is being written by" in capsys.readouterr().err
+
+
+def test_report_only_of_a_folder_without_a_study_is_one_line(tmp_path, capsys):
+    from uavris.cli import main
+
+    assert main(["reproduce", "--preset", "smoke", "--out", str(tmp_path), "--report-only", "--no-progress"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "holds no study" in err and "\n" not in err

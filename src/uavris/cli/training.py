@@ -301,6 +301,9 @@ class ReproduceArgs:
     """torch device (auto: CUDA when torch sees one)"""
     progress: bool = True
     """show a progress bar"""
+    report_only: bool = False
+    """run nothing: write OUT/report.md and its figures from the stages OUT holds (a study stopped part-way; the
+    same flags as its run)"""
     estimate: bool = False
     """print each stage's expected core-minutes and the expected wall clock on --workers, and exit (nothing run
     or written; the stages OUT already holds are "done" and the clock is that of the rest; the cost model of
@@ -341,7 +344,7 @@ def reproduce_command(args: list[str]) -> None:
     output_dir(a.out)
     report = reproduce(a.study, a.out or Path("runs") / a.study.preset, workers=a.workers, backend=a.backend,
                        ray_address=a.ray_address, force=a.force, progress=a.progress,
-                       device=resolve_device(a.device))
+                       device=resolve_device(a.device), report_only=a.report_only)
     print(f"report: {report}")
 
 

@@ -171,14 +171,22 @@ class Pipeline:
                 raise
         return [records[name] for name in self.stages]
 
+    def finished(self) -> list[StageRecord]:
+        """The records of the stages finished so far ("skipped", with the wall clock they took),
+        in pipeline order, running none: what a report of a study stopped part-way reads."""
+        return [self._finished_record(name) for name in self.stages if self.is_done(name)]
+
+    def _finished_record(self, name: str) -> StageRecord:
+        d = self.directory(name)
+        return StageRecord(name, self.stages[name].key, d, "skipped", float(read_timing(d).get("wall_s", 0.0)),
+                           read_json(d / "stage.json").get("result"))
+
     def _run_stage(self, st: Stage, forced: bool) -> StageRecord:
         d = self.directory(st.name)
         if forced and d.exists():
             shutil.rmtree(d)
         if self.is_done(st.name):
-            meta = read_json(d / "stage.json")
-            return StageRecord(st.name, st.key, d, "skipped", float(read_timing(d).get("wall_s", 0.0)),
-                               meta.get("result"))
+            return self._finished_record(st.name)
         d.mkdir(parents=True, exist_ok=True)
         start = time.time()
         try:

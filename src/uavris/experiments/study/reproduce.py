@@ -62,12 +62,16 @@ def estimate(rc: ReproduceConfig, workers: int, out: str | Path | None = None, f
 
 def reproduce(rc: ReproduceConfig, out: str | Path, *, workers: int = 2, backend: str = "local",
               ray_address: str | None = None, force: Sequence[str] = (), progress: bool = True,
-              device: str = "cpu") -> Path:
+              device: str = "cpu", report_only: bool = False) -> Path:
     """Run (or resume) the whole study into ``out`` (torch on ``device``); returns the report path.
+    ``report_only``: run nothing, write the report of the stages ``out`` holds (a study stopped
+    part-way, while no other invocation writes it).
 
     Raises :class:`UavrisError` at the end when any job or stage failed (after writing the
     report of everything that finished).
     """
+    if report_only:
+        return _report_only(rc, Path(out), workers)
     if backend not in BACKENDS:
         raise UavrisError(f"unknown backend {backend!r}; choose one of {', '.join(BACKENDS)}")
     if workers < 1:
@@ -92,6 +96,21 @@ def reproduce(rc: ReproduceConfig, out: str | Path, *, workers: int = 2, backend
         raise
     finally:
         bar.close()
+
+
+def _report_only(rc: ReproduceConfig, out: Path, workers: int) -> Path:
+    """The report of the stages ``out`` holds, nothing run (:func:`reproduce`'s ``report_only``)."""
+    from uavris.experiments.study.report import write_report
+
+    if not (out / STUDY_FILE).is_file():
+        raise UavrisError(f"--report-only: {out} holds no study (no {STUDY_FILE}); run uavris reproduce first")
+    pipeline = build_pipeline(rc, out, StudyContext(workers, "local", None))
+    with locked(out, "uavris reproduce"):  # one writer: not while a study runs into it
+        records = pipeline.finished()
+        if not records:
+            raise UavrisError(f"--report-only: no stage of this study has finished in {out} (its parameters are "
+                              "the study's: the same flags as the run)")
+        return write_report(Study(out, rc, pipeline), records, 0.0, ran=False)
 
 
 def _run(rc: ReproduceConfig, out: Path, pipeline: Any, ctx: StudyContext, force: Sequence[str], bar: Any,

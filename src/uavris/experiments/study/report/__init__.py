@@ -268,9 +268,11 @@ def claims_section(study: Study) -> list[str]:
                     for j in judgements]
 
 
-def write_report(study: Study, records: Sequence[StageRecord], wall_s: float, origin: float = math.nan) -> Path:
+def write_report(study: Study, records: Sequence[StageRecord], wall_s: float, origin: float = math.nan,
+                 ran: bool = True) -> Path:
     """``study``'s report (``OUT/report.md``) and figures (``OUT/figures``), its stages' ``records``
-    being this invocation's (run or skipped); returns the report's path."""
+    being this invocation's (run or skipped; ``ran`` False: the finished ones of a study this
+    invocation ran nothing of, ``--report-only``); returns the report's path."""
     rep = _Report(study, records)
     out, rc = study.out, study.config
     rep.add(f"# uavris reproduction of the paper, preset `{rc.preset}`", "",
@@ -282,14 +284,19 @@ def write_report(study: Study, records: Sequence[StageRecord], wall_s: float, or
             "level, all phases equal) and the oracle (`uavris.agents.oracle`: optimised phases every slot, motion "
             "planned over the whole room; docs/model.md section 19). 'vs zero action' says whether the policy's 95% "
             "CI lies above or below the zero action's mean ('tie': not resolved).",
-            "", f"Machine: {machine()}.", "", "## The paper's claims, judged", "", *claims_section(study), "",
+            "", f"Machine: {machine()}.", "",
+            *([] if ran else [f"Written by `uavris reproduce --report-only`, which runs nothing: {len(records)} of "
+                              f"the study's {len(study.pipeline.stages)} stages had finished; what the others would "
+                              "give is not here.", ""]),
+            "## The paper's claims, judged", "", *claims_section(study), "",
             "## Stages", "")
     schedule = read_json(out / "schedule.json") if (out / "schedule.json").exists() else {"jobs": [], "workers": 1}
     groups = {name: st.group for name, st in study.pipeline.stages.items()}
     if schedule_figure(schedule["jobs"], int(schedule["workers"]), rep.figs / "schedule", groups):
         rep.add("![schedule](figures/schedule.png)", "")
     rep.add(*stage_table(records, schedule["jobs"], origin))
-    rep.add("", f"Total wall clock of this invocation: {wall_s / 60:.1f} min. Stages run as soon as their inputs "
+    rep.add("", (f"Total wall clock of this invocation: {wall_s / 60:.1f} min. " if ran else "")
+            + "Stages run as soon as their inputs "
                 "are ready, and a free worker takes the job whose stage heads the longest remaining chain of work "
                 "(expected costs: `uavris.experiments.engine.costs`); start and end are minutes after this invocation "
                 "began, workers the slots that ran the stage's jobs. A stage finished by an earlier invocation is "
