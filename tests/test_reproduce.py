@@ -253,6 +253,8 @@ def test_stage_keys_chain_through_dependencies(tmp_path):
     assert ran == ["a", "b", "c", "a", "c"]  # b does not depend on a
     pipe({"v": 2}).run(force=("b",), concurrent=False)
     assert ran[-1] == "b"
+    pipe({"v": 2}).run(force=("a",), concurrent=False)
+    assert ran[-2:] == ["a", "c"]  # forcing a stage runs what depends on it again (c read a's old result)
 
 
 def test_concurrent_run_respects_dependencies(tmp_path):
@@ -700,18 +702,26 @@ def test_report_only_writes_the_report_of_a_study_in_part_and_runs_nothing(smoke
     [gone] = (out / "stages").glob("evaluate-unseen2-*")
     shutil.rmtree(gone)
     total = len(build_pipeline(RC, out, StudyContext(1, "local", None)).stages)
-    flags = ["reproduce", "--preset", "smoke", "--compare-seeds", "1", "--eval-episodes", "3", "--trajectories",
-             "2", "--out", str(out), "--no-progress", "--report-only"]
-    assert main(flags) == 0
-    assert not gone.exists()
+
+    def others() -> dict[str, float]:  # every file but the report and its figures, with its time of change
+        return {str(p): p.stat().st_mtime_ns for p in out.rglob("*")
+                if p.is_file() and p.name not in ("report.md", ".uavris.lock") and "figures" not in p.parts}
+
+    before = others()
+    # the study's own parameters (study.yaml), whatever the study flags say
+    assert main(["reproduce", "--preset", "quick", "--out", str(out), "--no-progress", "--report-only"]) == 0
+    assert not gone.exists() and others() == before
     text = (out / "report.md").read_text()
-    assert f"{total - 1} of the study's {total} stages had finished" in text
+    assert f"{total - 1} of the study's {total} stages had finished (not evaluate-unseen2)" in text
     unseen1 = read_json(next((out / "stages").glob("evaluate-unseen1-*")) / "stage.json")["result"]
     assert f"| {unseen1['dt-zero-shot']['label']} | {unseen1['dt-zero-shot']['mean']:.2f} |" in text
     capsys.readouterr()
+    flags = ["reproduce", "--out", str(out), "--no-progress", "--report-only"]
     with locked(out, "another reproduce"):
         assert main(flags) == 2
     assert "is being written by" in capsys.readouterr().err
+    assert main([*flags, "--force", "pretrain"]) == 2  # it runs nothing: no stage to force
+    assert "neither --estimate nor --force" in capsys.readouterr().err
 
 
 def test_report_only_of_a_folder_without_a_study_is_one_line(tmp_path, capsys):

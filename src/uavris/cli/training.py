@@ -296,14 +296,14 @@ class ReproduceArgs:
     ray_address: Unset[str] = None
     """address of a running Ray cluster (default: start a local instance)"""
     force: tuple[str, ...] = ()
-    """stage(s) to rerun even if finished, e.g. --force pretrain"""
+    """stage(s) to rerun even if finished, with every stage that depends on them, e.g. --force pretrain"""
     device: Device = "cpu"
     """torch device (auto: CUDA when torch sees one)"""
     progress: bool = True
     """show a progress bar"""
     report_only: bool = False
-    """run nothing: write OUT/report.md and its figures from the stages OUT holds (a study stopped part-way; the
-    same flags as its run)"""
+    """run nothing: write OUT/report.md and its figures from the stages OUT holds, of the study OUT/study.yaml
+    says (its last invocation's parameters; the study's flags are not read): a study stopped part-way"""
     estimate: bool = False
     """print each stage's expected core-minutes and the expected wall clock on --workers, and exit (nothing run
     or written; the stages OUT already holds are "done" and the clock is that of the rest; the cost model of
@@ -338,13 +338,18 @@ def reproduce_command(args: list[str]) -> None:
     c = read_first(_Preset, args, "uavris reproduce")
     a = parse(ReproduceArgs, args, "uavris reproduce", reproduce_command.__doc__ or "",
               default=ReproduceArgs(ReproduceConfig(system=system, **_given(preset=c.preset))))
+    out = a.out or Path("runs") / a.study.preset
+    if a.report_only and (a.estimate or a.force):
+        raise UsageError("--report-only runs nothing: it takes neither --estimate nor --force")
     if a.estimate:
-        print(estimate(a.study, a.workers, a.out or Path("runs") / a.study.preset, a.force), end="")
+        print(estimate(a.study, a.workers, out, a.force), end="")
         return
     output_dir(a.out)
-    report = reproduce(a.study, a.out or Path("runs") / a.study.preset, workers=a.workers, backend=a.backend,
-                       ray_address=a.ray_address, force=a.force, progress=a.progress,
-                       device=resolve_device(a.device), report_only=a.report_only)
+    if a.report_only:
+        print(f"report: {reproduce(a.study, out, report_only=True)}")
+        return
+    report = reproduce(a.study, out, workers=a.workers, backend=a.backend, ray_address=a.ray_address, force=a.force,
+                       progress=a.progress, device=resolve_device(a.device))
     print(f"report: {report}")
 
 

@@ -24,11 +24,13 @@ The paper gives no hyperparameters. Ours, with their reasons:
   6.6 to 9.0 bps/Hz over the same steps. Replay 1e6 (paper) or 2e5 (quick); batch
   256/128; learning rate 1e-3 (DDPG, TD3) and 3e-4 (SAC, its usual); exploration:
   Gaussian noise sigma = 0.1 on DDPG/TD3 actions, SAC's automatic entropy.
-- PPO: 16 parallel systems x 256 steps per rollout (128 in ``quick``), 10 epochs of
-  minibatch 256, lr 3e-4, GAE 0.95, clip 0.2: the standard continuous-control settings.
+- PPO (``paper`` and ``quick``): 16 parallel systems x 256 steps per rollout (128 in
+  ``quick``), 10 epochs of minibatch 256, lr 3e-4, GAE 0.95, clip 0.2: the standard
+  continuous-control settings.
 
-The values are :class:`Hyperparams`' defaults (the ``paper`` preset) and the tables of
-:mod:`uavris.presets` (``quick`` and ``smoke``); ``uavris train --help`` shows a preset's.
+The values are :class:`Hyperparams`' defaults overlaid by :data:`uavris.presets.ALGO_HYPERPARAMS`
+(per algorithm) and :data:`uavris.presets.HYPERPARAMS` (per preset: ``smoke`` is far smaller);
+``uavris train --algo ALGO --preset PRESET --help`` shows them.
 """
 
 from __future__ import annotations

@@ -27,7 +27,7 @@ import time
 from concurrent.futures import FIRST_COMPLETED, Future, ThreadPoolExecutor, wait
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any, Callable, Iterable
 
 from uavris.experiments.engine.jobs import abort_runners
 from uavris.io import read_json, to_plain, write_json
@@ -113,6 +113,16 @@ class Pipeline:
                 after[dep] = max(after[dep], st.duration(workers) + after[name])
         return after
 
+    def with_dependents(self, names: Iterable[str]) -> set[str]:
+        """``names`` and every stage that depends on one of them, directly or not: what forcing
+        them runs again (a dependent's key holds its inputs' settings, not their results, so it
+        would otherwise keep a result made from the old ones)."""
+        chosen = set(names)
+        for name, st in self.stages.items():  # stages are in dependency order
+            if any(dep in chosen for dep in st.deps):
+                chosen.add(name)
+        return chosen
+
     def directory(self, name: str) -> Path:
         st = self.stages[name]
         return self.out / "stages" / f"{name}-{st.key}"
@@ -123,6 +133,7 @@ class Pipeline:
     def run(self, force: tuple[str, ...] = (), on_stage: Callable[[StageRecord], None] | None = None,
             concurrent: bool = True) -> list[StageRecord]:
         """Run every stage whose inputs are ready; returns the records in pipeline order.
+        ``force``: stages to run again, with every stage that depends on them.
 
         With ``concurrent`` (the default) independent stages run at the same time, each in a
         thread of this process: their heavy work goes through a shared job runner, which
@@ -133,6 +144,7 @@ class Pipeline:
         unknown = [f for f in force if f not in self.stages]
         if unknown:
             raise ValueError(f"--force names unknown stage(s) {unknown}; stages: {list(self.stages)}")
+        force = tuple(self.with_dependents(force))
         records: dict[str, StageRecord] = {}
         pending = dict(self.stages)
         running: dict[Future[StageRecord], str] = {}

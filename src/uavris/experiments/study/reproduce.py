@@ -31,14 +31,16 @@ from uavris.runs.lock import locked
 def estimate(rc: ReproduceConfig, workers: int, out: str | Path | None = None, force: Sequence[str] = ()) -> str:
     """The study's stages with their expected core-minutes and expected start and end on
     ``workers`` workers, and the expected wall clock (:func:`~.forecast.expected_schedule`), as
-    markdown. Where ``out`` holds this study in part, its finished stages (but those named in
-    ``force``) are "done" and the clock is that of what is left (what ``reproduce`` with the
-    same ``force`` would run now). Nothing is run or written."""
+    markdown. Where ``out`` holds this study in part, its finished stages (but those ``force``
+    runs again: the named ones and what depends on them) are "done" and the clock is that of
+    what is left (what ``reproduce`` with the same ``force`` would run now). Nothing is run or
+    written."""
     if workers < 1:
         raise UavrisError(f"--workers must be >= 1, got {workers}")
     pipeline = build_pipeline(rc, Path(out) if out is not None else Path("<estimate>"),
                               StudyContext(workers, "local", None))
-    done = {name for name in pipeline.stages if out is not None and name not in force and pipeline.is_done(name)}
+    forced = pipeline.with_dependents(f for f in force if f in pipeline.stages)
+    done = {name for name in pipeline.stages if out is not None and name not in forced and pipeline.is_done(name)}
     wall, spans = expected_schedule(pipeline, workers, done)
     algo = rc.expert_algo if rc.expert_algo != AUTO else "the dearest algorithm (SAC) until the comparison chooses"
 
@@ -64,14 +66,15 @@ def reproduce(rc: ReproduceConfig, out: str | Path, *, workers: int = 2, backend
               ray_address: str | None = None, force: Sequence[str] = (), progress: bool = True,
               device: str = "cpu", report_only: bool = False) -> Path:
     """Run (or resume) the whole study into ``out`` (torch on ``device``); returns the report path.
-    ``report_only``: run nothing, write the report of the stages ``out`` holds (a study stopped
-    part-way, while no other invocation writes it).
+    ``report_only``: run nothing, write the report of the stages ``out`` holds, of the study its
+    ``study.yaml`` says (``rc`` is not read; a study stopped part-way, while no other invocation
+    writes it).
 
     Raises :class:`UavrisError` at the end when any job or stage failed (after writing the
     report of everything that finished).
     """
     if report_only:
-        return _report_only(rc, Path(out), workers)
+        return _report_only(Path(out))
     if backend not in BACKENDS:
         raise UavrisError(f"unknown backend {backend!r}; choose one of {', '.join(BACKENDS)}")
     if workers < 1:
@@ -98,19 +101,19 @@ def reproduce(rc: ReproduceConfig, out: str | Path, *, workers: int = 2, backend
         bar.close()
 
 
-def _report_only(rc: ReproduceConfig, out: Path, workers: int) -> Path:
-    """The report of the stages ``out`` holds, nothing run (:func:`reproduce`'s ``report_only``)."""
+def _report_only(out: Path) -> Path:
+    """The report of the stages ``out`` holds, of the study its ``study.yaml`` says (the last
+    invocation's parameters), nothing run (:func:`reproduce`'s ``report_only``)."""
     from uavris.experiments.study.report import write_report
 
     if not (out / STUDY_FILE).is_file():
         raise UavrisError(f"--report-only: {out} holds no study (no {STUDY_FILE}); run uavris reproduce first")
-    pipeline = build_pipeline(rc, out, StudyContext(workers, "local", None))
-    with locked(out, "uavris reproduce"):  # one writer: not while a study runs into it
-        records = pipeline.finished()
+    study = Study.open(out)
+    with locked(out, "uavris reproduce --report-only"):  # one writer: not while a study runs into it
+        records = study.pipeline.finished()
         if not records:
-            raise UavrisError(f"--report-only: no stage of this study has finished in {out} (its parameters are "
-                              "the study's: the same flags as the run)")
-        return write_report(Study(out, rc, pipeline), records, 0.0, ran=False)
+            raise UavrisError(f"--report-only: no stage of the study in {out} has finished")
+        return write_report(study, records, 0.0, ran=False)
 
 
 def _run(rc: ReproduceConfig, out: Path, pipeline: Any, ctx: StudyContext, force: Sequence[str], bar: Any,

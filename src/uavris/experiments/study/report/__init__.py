@@ -268,6 +268,16 @@ def claims_section(study: Study) -> list[str]:
                     for j in judgements]
 
 
+def _report_only_line(study: Study, records: Sequence[StageRecord]) -> str:
+    """What a report of a study in part (``--report-only``) says first: how much of it there is."""
+    finished = {r.name for r in records}
+    waiting = [name for name in study.pipeline.stages if name not in finished]
+    named = ", ".join(waiting[:10]) + (f" and {len(waiting) - 10} more" if len(waiting) > 10 else "")
+    return (f"Written by `uavris reproduce --report-only`, which runs nothing: {len(records)} of the study's "
+            f"{len(study.pipeline.stages)} stages had finished" + (f" (not {named})" if waiting else "")
+            + "; what the others would give is not here.")
+
+
 def write_report(study: Study, records: Sequence[StageRecord], wall_s: float, origin: float = math.nan,
                  ran: bool = True) -> Path:
     """``study``'s report (``OUT/report.md``) and figures (``OUT/figures``), its stages' ``records``
@@ -285,22 +295,22 @@ def write_report(study: Study, records: Sequence[StageRecord], wall_s: float, or
             "planned over the whole room; docs/model.md section 19). 'vs zero action' says whether the policy's 95% "
             "CI lies above or below the zero action's mean ('tie': not resolved).",
             "", f"Machine: {machine()}.", "",
-            *([] if ran else [f"Written by `uavris reproduce --report-only`, which runs nothing: {len(records)} of "
-                              f"the study's {len(study.pipeline.stages)} stages had finished; what the others would "
-                              "give is not here.", ""]),
+            *([] if ran else [_report_only_line(study, records), ""]),
             "## The paper's claims, judged", "", *claims_section(study), "",
             "## Stages", "")
-    schedule = read_json(out / "schedule.json") if (out / "schedule.json").exists() else {"jobs": [], "workers": 1}
+    # the schedule of the invocation that ran the stages (an interrupted one writes none: not another's)
+    schedule = read_json(out / "schedule.json") if ran and (out / "schedule.json").exists() else \
+        {"jobs": [], "workers": 1}
     groups = {name: st.group for name, st in study.pipeline.stages.items()}
     if schedule_figure(schedule["jobs"], int(schedule["workers"]), rep.figs / "schedule", groups):
         rep.add("![schedule](figures/schedule.png)", "")
     rep.add(*stage_table(records, schedule["jobs"], origin))
-    rep.add("", (f"Total wall clock of this invocation: {wall_s / 60:.1f} min. " if ran else "")
-            + "Stages run as soon as their inputs "
+    rep.add("", f"Total wall clock of this invocation: {wall_s / 60:.1f} min. Stages run as soon as their inputs "
                 "are ready, and a free worker takes the job whose stage heads the longest remaining chain of work "
                 "(expected costs: `uavris.experiments.engine.costs`); start and end are minutes after this invocation "
                 "began, workers the slots that ran the stage's jobs. A stage finished by an earlier invocation is "
-                "'skipped' here, with the wall clock it took then.")
+                "'skipped' here, with the wall clock it took then." if ran else
+            "Every stage here finished in an earlier invocation ('skipped', with the wall clock it took then).")
     rep.fig2()
     scenario_tracks = [t for t in rc.tracks if not t.layouts]
     results = {t.name: rep.track(t) for t in scenario_tracks}
