@@ -257,6 +257,16 @@ def test_stage_keys_chain_through_dependencies(tmp_path):
     assert ran[-2:] == ["a", "c"]  # forcing a stage runs what depends on it again (c read a's old result)
 
 
+def test_a_pipeline_refuses_two_stages_of_one_name(tmp_path):
+    """A stage's name is its folder and what --force names: a second stage of that name (a stage
+    kind registered beside a study under one of its names) is one error, not a silent replacement."""
+    def run(d, deps):
+        return {}
+
+    with pytest.raises(UavrisError, match="two stages named 'a'"):
+        Pipeline(tmp_path, [Stage("a", {"v": 1}, run), Stage("b", {}, run), Stage("a", {"v": 2}, run)])
+
+
 def test_concurrent_run_respects_dependencies(tmp_path):
     """Independent stages may start in any order; a dependent one only after its input."""
     ran = []

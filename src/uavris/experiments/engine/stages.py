@@ -29,6 +29,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Iterable
 
+from uavris.errors import ConfigError
 from uavris.experiments.engine.jobs import abort_runners
 from uavris.io import read_json, to_plain, write_json
 from uavris.runs import TIMING_FILE, read_timing
@@ -96,6 +97,9 @@ class Pipeline:
         self.out = Path(out)
         self.stages: dict[str, Stage] = {}
         for st in stages:
+            if st.name in self.stages:  # a stage's name is its folder and what --force names: one each
+                raise ConfigError(f"the pipeline has two stages named {st.name!r} (a stage kind registered beside "
+                                  "a study may not take the name of one of its own)")
             missing = [d for d in st.deps if d not in self.stages]
             if missing:
                 raise ValueError(f"stage {st.name} depends on unknown or later stages {missing}")

@@ -123,8 +123,9 @@ class Study:
                               f"{', '.join(rows)}")
         row = rows[key]
         for target in (*([row.target] if row.target is not None else []), *row.members):
-            if target.location() is not None and not Path(str(target.location())).exists():
-                raise UavrisError(f"--row {key}: {target.location()} does not exist yet (its stage has not finished; "
+            where = target.location()
+            if where is not None and not where.exists():
+                raise UavrisError(f"--row {key}: {where} does not exist yet (its stage has not finished; "
                                   f"rerun uavris reproduce --out {self.out})")
         return row
 

@@ -47,7 +47,6 @@ from typing import Any, Callable, Sequence
 from uavris import runs
 from uavris.agents.dt.dataset import DATASET_FORMAT_VERSION
 from uavris.agents.experts import ALGORITHMS
-from uavris.errors import ConfigError
 from uavris.experiments.engine.costs import (
     dataset_cost,
     demonstration_cost,
@@ -135,12 +134,7 @@ def build_pipeline(rc: ReproduceConfig, out: Path, ctx: StudyContext) -> Pipelin
             stages += [dataclasses.replace(st, group=t.track.name) for st in getattr(t, part)()]
     for kind in STAGE_KINDS:
         stages += [dataclasses.replace(st, group=kind.name) for st in kind.stages(rc, ctx)]
-    names = [st.name for st in stages]
-    twice = sorted({n for n in names if names.count(n) > 1})
-    if twice:
-        raise ConfigError(f"the study has two stages named {', '.join(twice)} (a registered stage kind's name is "
-                          "one of the study's own)")
-    return Pipeline(out, stages)
+    return Pipeline(out, stages)  # which refuses two stages of one name
 
 
 def track_stages(rc: ReproduceConfig, ctx: StudyContext) -> list[TrackStages]:
