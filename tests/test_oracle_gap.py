@@ -38,3 +38,25 @@ def test_the_episode_value_of_a_trip_worked_by_hand():
     cfg = SystemConfig()
     far = trip_slots(cfg, np.zeros(3), np.array([[0.0, 0.0, 0.0], [1e4, 0.0, 0.0]]))
     assert far.tolist() == [0, cfg.horizon]  # no trip; a trip beyond reach takes the whole episode
+
+
+def test_the_search_allows_only_the_poses_the_oracle_may_plan():
+    # A made-up R whose peak tilts the RIS 60 degrees: from 5 m up some of the paper's devices are then
+    # behind the plane. Without a margin the search finds the peak; with the oracle's 1-degree margin
+    # every pose it returns keeps each device that far in front (the elevation from the geometry).
+    from uavris import physics as ph
+
+    best_q, best_a = np.array([20.0, 17.0, 5.0]), np.radians([0.0, 60.0, 0.0])
+
+    def valuer(q, att):
+        return 50.0 - np.sum((q - best_q) ** 2, axis=-1) - 10.0 * np.sum((att - best_a) ** 2, axis=-1)
+
+    settings = SearchSettings(grid_step=4.0, top=4, refine=2, attitudes_deg=(-60.0, -30.0, 0.0, 30.0, 60.0))
+    free = exhaustive_plan(SystemConfig(), tuple(best_q), settings, valuer)
+    users = np.asarray(SystemConfig().users)
+    assert ph.worst_elevation(free.attitude, free.target, users) < 0  # the peak blocks a device
+    kept = exhaustive_plan(SystemConfig(front_margin_deg=1.0), tuple(best_q), settings, valuer)
+    rot = ph.rotation_matrix(*kept.attitude)
+    d = kept.target - users  # eq. (11): from each device to the RIS, against its normal
+    assert (d @ rot[:, 2] / np.linalg.norm(d, axis=1)).min() >= np.sin(np.radians(1.0)) - 1e-12
+    assert kept.value < free.value

@@ -88,6 +88,10 @@ class PlanSettings:
     global_z_step: float = 2.0  # m in height
     global_regions: int = 6  # its best places, a grid step apart, valued by R beside the screen's
     refine_from: int = 2  # the best candidates the pattern search starts from
+    # every pose of the plan keeps each device this far (deg) in front of the RIS, as the attitude safety
+    # layer would; None: only the system's own margin. A plan on the edge loses a device behind the plane
+    # to the hover's drift (docs/model.md section 19); the teacher keeps None, its demonstrations unchanged
+    front_margin_deg: float | None = 1.0
 
     def __post_init__(self) -> None:
         for name in ("grid_step", "refine_step", "min_step", "global_z_step"):
@@ -102,6 +106,17 @@ class PlanSettings:
             raise ValueError(f"PlanSettings.check_batches must be >= 2 (a standard error), got {self.check_batches!r}")
         if self.max_refinements < 0 or self.seed < 0:
             raise ValueError("PlanSettings.max_refinements and seed must be >= 0")
+        m = self.front_margin_deg
+        if m is not None and not (math.isfinite(m) and 0 <= m < 90):
+            raise ValueError(f"PlanSettings.front_margin_deg must be None or in [0, 90) degrees, got {m!r}")
+
+
+def holding(config: SystemConfig, margin_deg: float | None) -> SystemConfig:
+    """``config`` with the attitude safety layer's margin at least ``margin_deg`` (its own where larger):
+    the system a plan is made in, so that its every pose is one the UAV can hold."""
+    if margin_deg is None or (config.front_margin_deg is not None and config.front_margin_deg >= margin_deg):
+        return config
+    return config.replace(front_margin_deg=margin_deg)
 
 
 @dataclass(frozen=True)
@@ -118,6 +133,7 @@ class Plan:
     poses_valued: int  # poses evaluated with the optimiser for this plan (the cost; memoised ones excluded)
     candidates: tuple[tuple[tuple[float, ...], float, float], ...]  # (position, R, value) of each candidate
     rate_se: float = 0.0  # standard error of ``rate`` (the fresh batches'), bps/Hz
+    front_margin_deg: float | None = None  # the margin it keeps (PlanSettings.front_margin_deg), its flight too
 
 
 # The cheap estimate of R that ranks poses with PlanSettings(exact=False): one NLoS draw, and
@@ -134,7 +150,7 @@ RANK_OPTIMISER = dict(restarts=0, noise_levels=(1e3, 1.0), iterations=20)
 
 # Today's planner without the global stage: the demonstrations' teacher, made in hundreds of halls,
 # where the yardstick's cost (the oracle's, made once per evaluated hall) must not go.
-TEACHER = PlanSettings(global_step=0.0, refine_from=1)
+TEACHER = PlanSettings(global_step=0.0, refine_from=1, front_margin_deg=None)
 
 FINALIST_CANDIDATES = 3  # the best candidates by the planning value, unrefined, among the finalists beside the refined
 
@@ -157,7 +173,7 @@ def plan_target(config: SystemConfig, start: tuple[float, float, float], setting
     candidates and the refinement path do not depend on the start, so later scenarios
     mostly reuse the first one's work.
     """
-    c, s = config, settings
+    c, s = holding(config, settings.front_margin_deg), settings
     start_q = np.asarray(start, dtype=np.float64)
     level = np.zeros(3)
     memo = {} if memo is None else memo
@@ -239,10 +255,16 @@ def facing_attitudes(c: SystemConfig, places: NDArray) -> NDArray[np.float64]:
     roll = np.clip(-np.arcsin(np.clip(n[:, 1], -1.0, 1.0)), -MAX_FACING_TILT, MAX_FACING_TILT)
     pitch = np.clip(np.arctan2(n[:, 0], n[:, 2]), -MAX_FACING_TILT, MAX_FACING_TILT)
     att = np.stack([np.zeros(len(places)), pitch, roll], axis=1)
-    if c.front_margin_deg is not None:
-        held = ph.worst_elevation(att, places, np.asarray(c.users)) >= np.sin(np.radians(c.front_margin_deg))
-        att[~held] = 0.0
+    att[~held(c, places, att)] = 0.0
     return att
+
+
+def held(c: SystemConfig, places: NDArray, atts: NDArray) -> NDArray[np.bool_]:
+    """Which poses the attitude safety layer lets the UAV hold: every device at least ``c.front_margin_deg``
+    in front of the RIS (docs/model.md section 3); all of them where the system has no margin."""
+    if c.front_margin_deg is None:
+        return np.ones(len(places), dtype=bool)
+    return ph.worst_elevation(atts, places, np.asarray(c.users)) >= np.sin(np.radians(c.front_margin_deg))
 
 
 def refine(c: SystemConfig, s: PlanSettings, q: NDArray, att: NDArray, r_q: float, rate: Any
@@ -291,10 +313,7 @@ def pattern_neighbours(c: SystemConfig, q: NDArray, att: NDArray, pos_step: floa
     nq = np.concatenate([q + pos_step * eye, q - pos_step * eye, np.repeat(q[None], 6 if att_step > 0 else 0, 0)])
     na = np.concatenate([np.repeat(att[None], 6, 0)] + ([att + att_step * eye, att - att_step * eye]
                                                       if att_step > 0 else []))
-    ok = feasible(c, nq)
-    if c.front_margin_deg is not None:  # the attitude safety layer: no pose it would not let the UAV hold
-        ok &= ph.worst_elevation(na, nq, np.asarray(c.users)) >= np.sin(np.radians(c.front_margin_deg))
-    return nq, na, ok
+    return nq, na, feasible(c, nq) & held(c, nq, na)
 
 
 def check_finalists(c: SystemConfig, s: PlanSettings, start_q: NDArray, finalists: list[tuple[NDArray, NDArray]],
@@ -324,5 +343,5 @@ def check_finalists(c: SystemConfig, s: PlanSettings, start_q: NDArray, finalist
                 rate=float(rate.mean()), start_rate=float(stated[0].mean()), travel_slots=int(slots[chosen]),
                 value=float(episode(stated, slots[keep])[-1].mean()),
                 poses_valued=valued + (len(unique) + len(keep)) * b, candidates=table,
-                rate_se=float(rate.std(ddof=1) / math.sqrt(b)))
+                rate_se=float(rate.std(ddof=1) / math.sqrt(b)), front_margin_deg=s.front_margin_deg)
 

@@ -14,14 +14,17 @@ the pose (:func:`.objective.expected_optimised_rate`). The search:
    finer grid (``fine_step``, within ``fine_reach`` of the place), level: wider than the learned
    planner's 2 m and 0.5 m grids, which found places above the oracle's;
 3. at the ``top`` best so far (at least ``grid_step`` apart), every attitude of a grid of
-   yaw, pitch and roll (``attitudes_deg`` each);
+   yaw, pitch and roll (``attitudes_deg`` each) that the UAV can hold (under the system's
+   front margin: :func:`.planner.held`);
 4. a pattern search in position and attitude from each of the ``refine`` best, down to
    ``min_step``, the planner's own (:func:`.planner.pattern_search`, its neighbours: the
    attitude safety layer's limit included where the system has one).
 
-Its draws are not the planner's (``seed``), so the oracle is not judged on its own common
-random numbers; :func:`plan_gap` then values both poses and staying on ``batches`` fresh
-batches with a many-restart optimiser, and gives their paired difference.
+To measure the oracle, search the system it plans in (:func:`.planner.holding` with its
+settings' margin): the same poses are allowed to both. Its draws are not the planner's
+(``seed``), so the oracle is not judged on its own common random numbers; :func:`plan_gap`
+then values both poses and staying on ``batches`` fresh batches with a many-restart
+optimiser, and gives their paired difference.
 """
 
 from __future__ import annotations
@@ -45,7 +48,7 @@ from uavris.agents.oracle.objective import (
     top_apart,
     trip_slots,
 )
-from uavris.agents.oracle.planner import Plan, pattern_search
+from uavris.agents.oracle.planner import Plan, held, pattern_search
 from uavris.config import SystemConfig
 
 Valuer = Callable[[NDArray[np.float64], NDArray[np.float64]], NDArray[np.float64]]  # R of (P, 3) positions, attitudes
@@ -108,6 +111,8 @@ def exhaustive_plan(config: SystemConfig, start: tuple[float, float, float],
     poses = [(grid[i], a) for i in chosen for a in angles]
     q_all = np.array([p for p, _ in poses])
     a_all = np.array([a for _, a in poses])
+    keep = held(c, q_all, a_all)  # under the system's margin, only the poses the UAV can hold (as the plan's)
+    q_all, a_all = q_all[keep], a_all[keep]
     va = value(q_all, a_all)
     order = np.argsort(-va, kind="stable")[:s.refine]
     best = max(((q_all[i], a_all[i], float(va[i])) for i in order), key=lambda x: x[2])
