@@ -364,13 +364,13 @@ def gone(pid):
 def study(args):
     """As `uavris reproduce` runs its jobs: from a stage's thread, which the main thread waits
     for before it closes the runner (without abort) and then releases the study's lock."""
-    runner = JobRunner(2)
+    runner = JobRunner({workers})
     try:
         with ThreadPoolExecutor(1) as stages:
             wait([stages.submit(runner.run, {jobs})])
     finally:
         runner.close()
-        pids = [int(p.name) for p in Path({pids!r}).glob("[0-9]*")]
+        pids = [int(p.name) for p in Path({pids!r}).glob("[0-9]*") if int(p.name) != os.getpid()]
         Path({pids!r}, "closed").write_text(str(all(gone(p) for p in pids)))
 
 
@@ -420,28 +420,36 @@ def test_ctrl_c_in_a_program_that_runs_a_study_stops_its_workers(tmp_path: Path)
         _kill_all(proc, workers)
 
 
+@pytest.mark.parametrize("workers", [2, 1])
 @pytest.mark.parametrize("signame, code, line", [("SIGTERM", 143, "terminated (SIGTERM)"),
                                                   ("SIGINT", 130, "interrupted")])
 def test_a_signal_stops_the_workers_of_jobs_a_stage_thread_waits_for(tmp_path: Path, signame: str, code: int,
-                                                                      line: str):
+                                                                      line: str, workers: int):
     """A study's main thread waits for its stages' threads, and they for their jobs, before the
     runner is closed: the main thread's unwinding alone would wait for every running job (and,
     on Ctrl-C, start the jobs waiting). The workers are stopped at once instead, and the
-    runner's close returns only after they ended (the study's lock is released after it)."""
+    runner's close returns only after they ended (the study's lock is released after it). With
+    one worker the job runs in the command's own process, in the stage's thread, which the
+    signal does not reach: it is stopped there too (before, `uavris reproduce --workers 1` ran
+    its job to the end, minutes, after SIGTERM)."""
     import signal
     import sys
 
     pids = tmp_path / "pids"
     pids.mkdir()
     err = tmp_path / "stderr"
-    proc, workers = _start([sys.executable, "-c", STUDY.format(jobs=_hang_jobs(pids), pids=str(pids))], err), []
+    script = STUDY.format(jobs=_hang_jobs(pids), pids=str(pids), workers=workers)
+    proc, workers_seen = _start([sys.executable, "-c", script], err), []
     try:
-        workers = _workers(pids, proc, err)
+        workers_seen = _workers(pids, proc, err, n=workers)
+        if workers == 1:
+            assert workers_seen == [proc.pid]  # the job runs in the command itself
+            workers_seen = []
         os.kill(proc.pid, getattr(signal, signame))  # the command alone, as `kill` sends it
         assert proc.wait(timeout=HANG_S / 4) == code, err.read_text()
         assert err.read_text().strip() == (f"uavris: {line}; rerun the same command to continue "
                                            "(what finished is reused)"), err.read_text()
         assert (pids / "closed").read_text() == "True"  # the workers had ended when close returned
-        assert not _running_after(workers, 1.0)
+        assert not _running_after(workers_seen, 1.0)
     finally:
-        _kill_all(proc, workers)
+        _kill_all(proc, workers_seen)

@@ -200,6 +200,17 @@ _RUNNERS: weakref.WeakSet[JobRunner] = weakref.WeakSet()  # every runner of this
 _RUNNERS_LOCK = threading.Lock()  # abort_runners reads _RUNNERS in a thread of its own
 
 
+def _interrupt_thread(ident: int) -> None:
+    """Raise KeyboardInterrupt in the thread ``ident`` at its next Python instruction. With one
+    worker a study runs each job in the command's own process, in the thread of the job's stage;
+    Ctrl-C and SIGTERM land in the main thread, which waits for that thread, so without this the
+    job would run to its end (minutes) before the command stopped. CPython's own call for it
+    (``PyThreadState_SetAsyncExc``): compiled code (numba, torch) finishes its current call first."""
+    import ctypes
+
+    ctypes.pythonapi.PyThreadState_SetAsyncExc(ctypes.c_ulong(ident), ctypes.py_object(KeyboardInterrupt))
+
+
 def abort_runners() -> None:
     """Close every job runner of this process with ``abort``: how Ctrl-C and SIGTERM reach the
     workers (:mod:`uavris.cli`). The command's main thread unwinds from the signal, but a
@@ -248,6 +259,7 @@ class JobRunner:
         self._waiting: list[tuple[float, int, Job, Future[JobResult] | None]] = []  # heap: (-priority, order, ...)
         self._order = itertools.count()
         self._busy = 0
+        self._here: int | None = None  # the thread running a job in this process (one worker), while it runs
         self._free = list(range(self.workers))  # worker slots, lowest first
         self._held = False
         self._closing = False  # close() began (Ctrl-C, or the end): nothing new is started
@@ -295,6 +307,10 @@ class JobRunner:
             if fut is not None:
                 fut.set_result(_interrupted(job))
         if abort:
+            with self._lock:
+                here = self._here
+            if here is not None and here != threading.main_thread().ident:
+                _interrupt_thread(here)
             for pool in pools:
                 for process in list((getattr(pool, "_processes", None) or {}).values()):
                     process.terminate()
@@ -429,7 +445,7 @@ class JobRunner:
         finally:
             with self._lock:
                 self.active.pop(id(job), None)
-                self._busy = 0
+                self._busy, self._here = 0, None
                 self._lock.notify_all()
         res = dataclasses.replace(res, worker=0, start=started, end=time.time())
         if on_done:
@@ -446,7 +462,7 @@ class JobRunner:
             if self._closing:
                 return None
             heapq.heappop(self._waiting)
-            self._busy = 1
+            self._busy, self._here = 1, threading.get_ident()
             started = time.time()
             self.active[id(job)] = (job, started)
             return started
