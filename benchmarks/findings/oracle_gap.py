@@ -170,6 +170,9 @@ def main(argv: list[str] | None = None) -> int:
     from uavris.io import read_json, write_json
 
     args.out.mkdir(parents=True, exist_ok=True)
+    from uavris.physics.phase_opt import compile_optimiser
+
+    compile_optimiser()  # before any clock starts: a cold cache would time numba's compilation as a plan's
     todo = halls(args.counts, args.halls, args.other_counts, args.other)
     done: dict[str, dict] = {}
     from uavris.agents.oracle.planner import PlanSettings
