@@ -69,6 +69,10 @@ from uavris.agents.oracle.objective import (
 )
 from uavris.config import SystemConfig
 
+# The attitude safety layer's margin (SystemConfig.front_margin_deg, docs/model.md section 3) that the
+# oracle plans and flies with, and the deployment track's "safe" rows fly with (docs/study.md section 2).
+SAFE_MARGIN_DEG = 1.0
+
 
 @dataclass(frozen=True)
 class PlanSettings:
@@ -91,7 +95,7 @@ class PlanSettings:
     # every pose of the plan keeps each device this far (deg) in front of the RIS, as the attitude safety
     # layer would; None: only the system's own margin. A plan on the edge loses a device behind the plane
     # to the hover's drift (docs/model.md section 19); the teacher keeps None, its demonstrations unchanged
-    front_margin_deg: float | None = 1.0
+    front_margin_deg: float | None = SAFE_MARGIN_DEG
 
     def __post_init__(self) -> None:
         for name in ("grid_step", "refine_step", "min_step", "global_z_step"):

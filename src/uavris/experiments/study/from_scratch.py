@@ -30,11 +30,12 @@ from typing import Any, Callable
 
 import numpy as np
 
+from uavris.agents.oracle.planner import SAFE_MARGIN_DEG
 from uavris.config import DictConfig
 from uavris.errors import ConfigError, UavrisError
 from uavris.experiments.study.claims_tracks import LEVEL, finetune_curve
 from uavris.experiments.study.finished import Study
-from uavris.experiments.study.tracks import SAFE_MARGIN_DEG, TRACK_SPECS, zero_shot_only
+from uavris.experiments.study.tracks import TRACK_SPECS, zero_shot_only
 from uavris.io import read_csv, write_json
 from uavris.stats import interactions_to_level
 

@@ -41,6 +41,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from uavris.agents.experts.imitation import ImitationConfig
+from uavris.agents.oracle.planner import SAFE_MARGIN_DEG
 from uavris.agents.references import HOVER_OPTIMIZER, ORACLE, ZERO_ACTION
 from uavris.config import SCENARIOS, TRAINING_SCENARIOS, UNSEEN_SCENARIOS, Scenario, SystemConfig, get_scenario
 from uavris.experiments.tools.targets import DTModel, ExpertRun, LearnedValue, Row
@@ -49,9 +50,6 @@ from uavris.layouts import LayoutGenerator, Site, layout_distance
 from uavris.presets import STRONG_IMITATION
 
 TRANSFER_NEIGHBOURS = 2
-# The attitude safety layer's margin in the deployment track's "safe" rows: every device at least
-# this far in front of the RIS plane (SystemConfig.front_margin_deg; docs/study.md section 2).
-SAFE_MARGIN_DEG = 1.0
 SEMI_TOP_K = 3  # the semi-amortised learned planner: its top places valued by R
 REFERENCE_ROWS = (ZERO_ACTION, HOVER_OPTIMIZER, ORACLE)  # every evaluation stage scores them beside its rows
 TRACKS: tuple[str, ...] = ("paper", "strong", "deployment")
