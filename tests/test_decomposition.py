@@ -48,8 +48,9 @@ def _monte_carlo_rate(system, where, position, attitude, n=4096):
 
 def _flown(system, where, plan, attitude):
     rec = _Whereabouts(system, EPISODES)
-    res = evaluate(PlannedFlight(dataclasses.replace(plan, attitude=np.asarray(attitude, dtype=np.float64))),
-                   system, where, EPISODES, 1_000_000, on_slot=rec)
+    # flown as given: the attitude kept whatever it blocks (a plan with a margin would cut the tilt)
+    given = dataclasses.replace(plan, attitude=np.asarray(attitude, dtype=np.float64), front_margin_deg=None)
+    res = evaluate(PlannedFlight(given), system, where, EPISODES, 1_000_000, on_slot=rec)
     return res, rec
 
 

@@ -386,7 +386,7 @@ from uavris.experiments.engine.scheduling import StudyContext
 from uavris.experiments.engine.stages import Pipeline, Stage
 from uavris.experiments.engine.jobs import Job
 
-ctx = StudyContext(2, "local", None)
+ctx = StudyContext({workers}, "local", None)
 jobs = {jobs}
 stage = Stage("held", {{}}, lambda d, deps: ctx.submit("held", jobs), costs=(1.0, 1.0))
 try:
@@ -398,26 +398,82 @@ finally:
 '''
 
 
-def test_ctrl_c_in_a_program_that_runs_a_study_stops_its_workers(tmp_path: Path):
+@pytest.mark.parametrize("workers", [2, 1])
+def test_ctrl_c_in_a_program_that_runs_a_study_stops_its_workers(tmp_path: Path, workers: int):
     """A program that calls the library (no uavris command, so no signal handler of ours) gets
     KeyboardInterrupt on Ctrl-C while its stages wait for their jobs: the pipeline stops the
-    workers (they ignore SIGINT themselves) instead of waiting for their jobs to end."""
+    workers (they ignore SIGINT themselves) instead of waiting for their jobs to end; with one
+    worker, the job its stage's thread runs in the program itself."""
     import signal
     import sys
 
     pids = tmp_path / "pids"
     pids.mkdir()
     err = tmp_path / "stderr"
-    script = LIBRARY_STUDY.format(jobs=_hang_jobs(pids), out=str(tmp_path))
-    proc, workers = _start([sys.executable, "-c", script], err), []
+    script = LIBRARY_STUDY.format(jobs=_hang_jobs(pids), out=str(tmp_path), workers=workers)
+    proc, seen = _start([sys.executable, "-c", script], err), []
     try:
-        workers = _workers(pids, proc, err)
+        seen = _workers(pids, proc, err, n=workers)
+        workers = [p for p in seen if p != proc.pid]
         os.kill(proc.pid, signal.SIGINT)  # the program alone, as a notebook's interrupt sends it
         proc.wait(timeout=HANG_S / 4)
         assert (tmp_path / "interrupted").exists(), err.read_text()
         assert not _running_after(workers, 5.0), f"workers {workers} outlived the interrupt"
     finally:
-        _kill_all(proc, workers)
+        _kill_all(proc, [p for p in seen if p != proc.pid])
+
+
+# A job that records its process's pid, runs until it is interrupted, then cleans up for 0.3 s of
+# Python and leaves a mark: a second interrupt in its cleanup would cut the mark off.
+CLEANED = ("import os, pathlib, time\npathlib.Path({pids!r}, str(os.getpid())).touch()\ntry:\n"
+           "    while True:\n        time.sleep(0.05)\nfinally:\n    t = time.time()\n"
+           "    while time.time() - t < 0.3:\n        pass\n    pathlib.Path({pids!r}, 'cleaned').touch()\n")
+
+COMMAND_STUDY = '''
+import sys
+from pathlib import Path
+
+import uavris.cli as cli
+from uavris.experiments.engine.jobs import Job
+from uavris.experiments.engine.scheduling import StudyContext
+from uavris.experiments.engine.stages import Pipeline, Stage
+
+
+def study(args):
+    ctx = StudyContext(1, "local", None)
+    job = Job("cleaned", exec, ({job!r},), Path({out!r}) / "cleaned.log")
+    stage = Stage("cleaned", {{}}, lambda d, deps: ctx.submit("cleaned", [job]), costs=(1.0,))
+    try:
+        Pipeline(Path({out!r}), [stage]).run()
+    finally:
+        ctx.close()
+
+
+cli.command = lambda name: study
+sys.exit(cli.main(["reproduce"]))
+'''
+
+
+def test_sigterm_stops_a_job_the_command_runs_itself_after_its_cleanup(tmp_path: Path):
+    """`uavris reproduce --workers 1`: the job runs in its stage's thread; SIGTERM reaches the
+    main thread, whose handler and whose pipeline both abort the runner. The job is interrupted,
+    its cleanup runs to its end, and the command stops in one line with 143."""
+    import signal
+    import sys
+
+    pids = tmp_path / "pids"
+    pids.mkdir()
+    err = tmp_path / "stderr"
+    script = COMMAND_STUDY.format(job=CLEANED.format(pids=str(pids)), out=str(tmp_path))
+    proc = _start([sys.executable, "-c", script], err)
+    try:
+        assert _workers(pids, proc, err, n=1) == [proc.pid]
+        os.kill(proc.pid, signal.SIGTERM)
+        assert proc.wait(timeout=HANG_S / 4) == 143, err.read_text()
+        assert (pids / "cleaned").exists(), "a second interrupt cut the job's cleanup short"
+        assert err.read_text().strip().startswith("uavris: terminated (SIGTERM)"), err.read_text()
+    finally:
+        _kill_all(proc, [])
 
 
 @pytest.mark.parametrize("workers", [2, 1])
@@ -453,3 +509,26 @@ def test_a_signal_stops_the_workers_of_jobs_a_stage_thread_waits_for(tmp_path: P
         assert not _running_after(workers_seen, 1.0)
     finally:
         _kill_all(proc, workers_seen)
+
+
+def test_a_second_abort_does_not_interrupt_the_jobs_cleanup(tmp_path: Path):
+    """Two aborts of one runner (Ctrl-C's handler and the pipeline both close it), the second
+    while the in-process job cleans up after the first: the job is interrupted once; before, the
+    second abort interrupted its cleanup too."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    pids = tmp_path / "pids"
+    pids.mkdir()
+    runner = JobRunner(1)
+    job = Job("cleaned", exec, (CLEANED.format(pids=str(pids)),), tmp_path / "cleaned.log")
+    with ThreadPoolExecutor(1) as stage:
+        running = stage.submit(runner.run, [job])
+        deadline = time.time() + HANG_S
+        while not list(pids.glob("[0-9]*")) and time.time() < deadline:
+            time.sleep(0.01)
+        runner.close(abort=True)
+        time.sleep(0.05)  # the job is in its cleanup now (0.3 s of Python)
+        runner.close(abort=True)
+        with pytest.raises(KeyboardInterrupt):
+            running.result(timeout=HANG_S)
+    assert (pids / "cleaned").exists(), "the second abort interrupted the job's cleanup"

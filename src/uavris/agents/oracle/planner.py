@@ -152,8 +152,9 @@ RANK_DRAWS = 1
 RANK_OPTIMISER = dict(restarts=0, noise_levels=(1e3, 1.0), iterations=20)
 
 
-# Today's planner without the global stage: the demonstrations' teacher, made in hundreds of halls,
-# where the yardstick's cost (the oracle's, made once per evaluated hall) must not go.
+# Today's planner without the global stage and without the front margin: the demonstrations' teacher, made
+# in hundreds of halls, where the yardstick's cost (the oracle's, made once per evaluated hall) must not go,
+# and whose plans (the demonstrations) are the earlier version's.
 TEACHER = PlanSettings(global_step=0.0, refine_from=1, front_margin_deg=None)
 
 FINALIST_CANDIDATES = 3  # the best candidates by the planning value, unrefined, among the finalists beside the refined

@@ -52,7 +52,7 @@ from numpy.typing import NDArray
 from uavris import physics as ph
 from uavris.agents.oracle.lookahead import choose_moves
 from uavris.agents.oracle.objective import approach_speed
-from uavris.agents.oracle.planner import Plan, PlanSettings, plan_target
+from uavris.agents.oracle.planner import Plan, PlanSettings, holding, plan_target
 from uavris.agents.policy import Privileged
 from uavris.config import SystemConfig
 from uavris.env.simulator import BatchedSimulator, phases_to_action
@@ -136,7 +136,7 @@ def fly_to(sim: BatchedSimulator, plan: Plan) -> tuple[NDArray[np.float64], NDAr
     if plan.front_margin_deg is not None:
         # A plan that keeps a margin is flown keeping it: the turn is cut as the attitude safety layer
         # cuts it, at the pose the slot's move reaches. Without the cut, a turn begun short of the
-        # target, or the hover's drift, put a device behind the RIS for 2-12% of the slots of some
+        # target, or the hover's drift, put a device behind the RIS for 1-12% of the slots of some
         # 3-device halls (docs/model.md section 19).
         accel_done = ph.feasible_acceleration(sim.vel, ph.limit_norm(accel, c.a_max), c.slot_s, c.v_max, c.a_max)
         moved, _ = ph.kinematic_step(sim.pos, sim.vel, accel_done, c.slot_s, sim.low, sim.high, sim.users,
@@ -209,8 +209,11 @@ class PlanningOracle:
     def plan(self, config: SystemConfig, start: tuple[float, float, float]) -> Plan:
         key = (config, tuple(start))
         if key not in self.plans:
-            memo = self._memo.setdefault(config, {})
-            shared = (self.settings, config, tuple(float(x) for x in start))
+            # the system the plan is made in (plan_target's): a row under the safety layer with the
+            # plan's own margin shares the plan of the row without it
+            planning = holding(config, self.settings.front_margin_deg)
+            memo = self._memo.setdefault(planning, {})
+            shared = (self.settings, planning, tuple(float(x) for x in start))
             if not memo and shared in _FRESH_PLANS:
                 plan, valued = _FRESH_PLANS[shared]
                 _FRESH_PLANS.move_to_end(shared)

@@ -92,7 +92,7 @@ def learned_plan(model: PoseValue, config: SystemConfig, start: tuple[float, flo
     level = np.zeros(3)
     if settings.top_k:
         best = top_apart(values, places, settings.top_k, settings.separation)
-        checks = PlanSettings(check_batches=settings.check_batches)
+        checks = PlanSettings(check_batches=settings.check_batches, front_margin_deg=None)  # level places: none to keep
         table = tuple((tuple(float(x) for x in places[i]), float("nan"), float(values[i])) for i in best)
         finalists = [(start_q, level), *((places[i], level) for i in best)]
         return check_finalists(config, checks, start_q, finalists, 0, table)

@@ -307,8 +307,8 @@ class JobRunner:
             if fut is not None:
                 fut.set_result(_interrupted(job))
         if abort:
-            with self._lock:
-                here = self._here
+            with self._lock:  # taken once: a second close (the signal's thread and the pipeline both abort) sends none
+                here, self._here = self._here, None
             if here is not None and here != threading.main_thread().ident:
                 _interrupt_thread(here)
             for pool in pools:

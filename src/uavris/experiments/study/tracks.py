@@ -163,7 +163,8 @@ def track_rows(track: Track, site: Site, sources: list[tuple[str, float]], dirs:
     are the training sites transferred from (:func:`transfer_sources`). With the track's
     safety margin the learned controller is the policy under the attitude safety layer: every
     zero-shot and fine-tuned DT and behaviour cloning (the DT's baseline, so it gets the same
-    layer) is scored under it, and the oracle under it too (what the margin costs). The same
+    layer) is scored under it, and the oracle under it too (the oracle keeps the same margin in
+    its plan and flight: the two oracle rows differ only by the layer's second cut). The same
     policies without the layer, and every zero-shot DT with its attitude held level, are the
     ``ablation``'s rows (what the layer adds, and the alternative of never tilting)."""
     learned = _learned_rows(track, site, sources, dirs, models, train)

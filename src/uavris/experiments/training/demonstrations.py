@@ -22,7 +22,8 @@ Quality (``DemonstrationConfig.quality``):
   the start, and the oracle's motion with Gaussian noise (``noise`` on every motion entry),
   each with its true returns: the dataset on which return conditioning can matter.
 
-Plans: the teacher (``TEACHER``: the planner without the global stage that makes the yardstick) in
+Plans: the teacher (``TEACHER``: the planner without the global stage that makes the yardstick, and
+without the front margin the yardstick keeps) in
 its cheap ranking (``exact=False``) chooses each hall's
 target, 11x cheaper than the reference planner for plans worth 0.23% less on average (1.2%
 in the worst of 27 halls and scenarios measured): a demonstration is training data, not a
