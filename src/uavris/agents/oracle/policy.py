@@ -209,9 +209,7 @@ class PlanningOracle:
     def plan(self, config: SystemConfig, start: tuple[float, float, float]) -> Plan:
         key = (config, tuple(start))
         if key not in self.plans:
-            # the system the plan is made in (plan_target's): a row under the safety layer with the
-            # plan's own margin shares the plan of the row without it
-            planning = holding(config, self.settings.front_margin_deg)
+            planning = self._planning(config)
             memo = self._memo.setdefault(planning, {})
             shared = (self.settings, planning, tuple(float(x) for x in start))
             if not memo and shared in _FRESH_PLANS:
@@ -229,11 +227,16 @@ class PlanningOracle:
             self.plans[key] = plan
         return self.plans[key]
 
+    def _planning(self, config: SystemConfig) -> SystemConfig:
+        """The system its plans of ``config`` are made in (:func:`.planner.holding`): a system under the
+        safety layer with the plans' own margin shares the plans and valued poses of the one without it."""
+        return holding(config, self.settings.front_margin_deg)
+
     def valued_poses(self, config: SystemConfig) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """The poses ``(P, 6)`` (position, attitude) its plans of ``config`` valued with ``R``
         itself (the reference planner's, not the cheap ranking's), and ``R`` at each: what a
         learned value of a pose can be fitted to, at no cost beyond the plans."""
-        memo = self._memo.get(config, {})
+        memo = self._memo.get(self._planning(config), {})
         exact = [(np.frombuffer(key[1:], dtype=np.float64), value) for key, value in memo.items() if key[:1] == b"\x01"]
         if not exact:
             return np.zeros((0, 6)), np.zeros(0)
