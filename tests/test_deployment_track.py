@@ -15,6 +15,7 @@ from report_check import check_deployment_report
 
 from uavris.agents.dt.dataset import load_dataset
 from uavris.agents.oracle.bound import episode_bounds
+from uavris.config import SystemConfig
 from uavris.errors import UavrisError
 from uavris.experiments.engine.scheduling import StudyContext
 from uavris.experiments.engine.stages import Pipeline
@@ -34,8 +35,11 @@ from uavris.io import read_json
 from uavris.layouts import LayoutGenerator, layout_distance
 from uavris.presets import EVAL_SEED
 
+# Episodes of 25 slots: the stages and rows are the same at any horizon, and every slot an evaluation
+# scores costs an optimised slot (the suite's time; the planners' costs do not depend on it).
+SMOKE_SYSTEM = SystemConfig(horizon=25)
 RC = ReproduceConfig("smoke", track="deployment", eval_episodes=2, dt_seeds=2, scaling=(1,), ablation=True,
-                     device_counts=(3,), count_other_layouts=2)
+                     device_counts=(3,), count_other_layouts=2, system=SMOKE_SYSTEM)
 
 
 def test_the_other_generators_halls_at_each_device_count_are_sites_of_their_own():
@@ -397,9 +401,7 @@ def test_a_row_added_in_one_place_is_in_the_tables_the_decomposition_and_the_cla
 def test_a_study_of_three_devices_treats_its_own_halls_as_its_own(tmp_path):
     """A deployment study whose system has 3 devices: its generated halls (named ...-k3) are its
     own, fine-tuned there and reported in the main table, not as halls of another count."""
-    from uavris.config import SystemConfig
-
-    three = SystemConfig(users=((10.0, 10.0, 1.0), (30.0, 12.0, 0.5), (20.0, 30.0, 1.2)))
+    three = dataclasses.replace(SMOKE_SYSTEM, users=((10.0, 10.0, 1.0), (30.0, 12.0, 0.5), (20.0, 30.0, 1.2)))
     rc = ReproduceConfig("smoke", track="deployment", eval_episodes=2, dt_seeds=1, train_layouts=2, scaling=(1,),
                          mixed_layouts=1, ablation=True, system=three)
     pipeline = build_pipeline(rc, tmp_path, StudyContext(1, "local", None))
@@ -443,9 +445,11 @@ def test_the_studys_controller_leaves_the_study_in_one_directory(deployment_run,
                      str(tmp_path / name), "--no-progress"]) == 0
         [cell] = read_json(tmp_path / name / "benchmark.json")["cells"]
         assert cell["mean"] == pytest.approx(want["mean"], abs=1e-12), name
-    # a sweep of one cell in that hall (the default Rician factor): the same episodes' mean
+    # a sweep of one cell in that hall (the default Rician factor): the same episodes' mean (a sweep's system
+    # is its command line's, the controller's safety layer applied to it: the study's horizon given)
     assert main(["sweep", str(ctl), "--layout", "layout-unseen-0", "--param", "system.rician-factor", "8",
-                 "--episodes", "8", "--workers", "1", "--out", str(tmp_path / "s"), "--no-progress"]) == 0
+                 "--system.horizon", str(RC.system.horizon), "--episodes", "8", "--workers", "1",
+                 "--out", str(tmp_path / "s"), "--no-progress"]) == 0
     [cell] = [read_json(p) for p in (tmp_path / "s" / "cells").glob("*.json")]
     assert cell["mean"] == pytest.approx(want["mean"], abs=1e-12)
     # plan --controller: the planner of its row (the semi-amortised one), as plan --learned --top-k with the

@@ -28,7 +28,8 @@ from uavris.experiments.training import pretrain as pretrain_module
 from uavris.experiments.training.train_expert import TrainConfig, train_job
 from uavris.io import read_json
 
-RC = ReproduceConfig("smoke", compare_seeds=1, eval_episodes=3, trajectories=2)
+# Episodes of 25 slots: the stages are the same at any horizon, and the evaluations' time is per slot.
+RC = ReproduceConfig("smoke", compare_seeds=1, eval_episodes=3, trajectories=2, system=SystemConfig(horizon=25))
 # The stage graph with the deployment ablation (tests/test_deployment_track.py runs its smoke study)
 ABLATION = dataclasses.replace(RC, ablation=True)
 
@@ -348,7 +349,8 @@ def test_ray_backend_gives_the_same_numbers_as_the_process_pool(smoke_run, tmp_p
     out, _, _ = smoke_run
     stage = next((out / "stages").glob("experts-unseen-*"))
     algo = read_json(stage / "stage.json")["result"]["algo"]
-    cfg = TrainConfig(algo=algo, scenario="unseen1", seed=RC.seed, preset="smoke", eval_episodes=RC.eval_episodes)
+    cfg = TrainConfig(algo=algo, scenario="unseen1", seed=RC.seed, preset="smoke", eval_episodes=RC.eval_episodes,
+                      system=RC.system)
     local_dir = stage / "runs" / "unseen1"
     jobs = [Job(f"{algo}-unseen1", train_job, (cfg.to_dict(), str(tmp_path / "ray" / "unseen1")),
                 tmp_path / "ray.log")]
@@ -681,7 +683,7 @@ def test_a_stage_kind_registered_in_a_test_module_runs_and_is_reported(smoke_run
     register_stage_kind(StageKind("rows-counted", "Rows counted", stages,
                                   lambda study: [f"{study.result('rows-counted')['rows']} rows in unseen1."]))
     flags = ["reproduce", "--preset", "smoke", "--compare-seeds", "1", "--eval-episodes", "3", "--trajectories",
-             "2", "--out", str(out), "--no-progress"]
+             "2", "--system.horizon", str(RC.system.horizon), "--out", str(out), "--no-progress"]
     assert main([*flags, "--estimate"]) == 0
     assert "| rows-counted |" in capsys.readouterr().out
     # a finished stage's timing.json is written when it runs: the study's own are not run again
