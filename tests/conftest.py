@@ -24,6 +24,11 @@ os.environ.setdefault("UAVRIS_SEAL_KEY", "5eed" * 16)
 
 # Decision Transformer tests: short episodes keep rollouts cheap; the layout does not depend on T.
 SHORT = SystemConfig(horizon=16)
+# The smoke studies' system (tests/test_reproduce.py, tests/test_deployment_track.py): their stages,
+# rows and report are the same at any horizon, and an evaluation's time is per slot. The energy
+# budget is scaled with the horizon (hovering costs about 84 J a slot), so that episodes still end on
+# it before the horizon, as at 100 slots and 8,000 J.
+SMOKE_SYSTEM = SystemConfig(horizon=25, energy_budget_j=2000.0)
 
 
 # The files that run whole smoke studies take most of the suite's time: under `make test`

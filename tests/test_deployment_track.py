@@ -13,9 +13,9 @@ import numpy as np
 import pytest
 from report_check import check_deployment_report
 
+from tests.conftest import SMOKE_SYSTEM
 from uavris.agents.dt.dataset import load_dataset
 from uavris.agents.oracle.bound import episode_bounds
-from uavris.config import SystemConfig
 from uavris.errors import UavrisError
 from uavris.experiments.engine.scheduling import StudyContext
 from uavris.experiments.engine.stages import Pipeline
@@ -35,9 +35,6 @@ from uavris.io import read_json
 from uavris.layouts import LayoutGenerator, layout_distance
 from uavris.presets import EVAL_SEED
 
-# Episodes of 25 slots: the stages and rows are the same at any horizon, and every slot an evaluation
-# scores costs an optimised slot (the suite's time; the planners' costs do not depend on it).
-SMOKE_SYSTEM = SystemConfig(horizon=25)
 RC = ReproduceConfig("smoke", track="deployment", eval_episodes=2, dt_seeds=2, scaling=(1,), ablation=True,
                      device_counts=(3,), count_other_layouts=2, system=SMOKE_SYSTEM)
 
@@ -448,7 +445,8 @@ def test_the_studys_controller_leaves_the_study_in_one_directory(deployment_run,
     # a sweep of one cell in that hall (the default Rician factor): the same episodes' mean (a sweep's system
     # is its command line's, the controller's safety layer applied to it: the study's horizon given)
     assert main(["sweep", str(ctl), "--layout", "layout-unseen-0", "--param", "system.rician-factor", "8",
-                 "--system.horizon", str(RC.system.horizon), "--episodes", "8", "--workers", "1",
+                 "--system.horizon", str(RC.system.horizon),
+                 "--system.energy-budget-j", str(RC.system.energy_budget_j), "--episodes", "8", "--workers", "1",
                  "--out", str(tmp_path / "s"), "--no-progress"]) == 0
     [cell] = [read_json(p) for p in (tmp_path / "s" / "cells").glob("*.json")]
     assert cell["mean"] == pytest.approx(want["mean"], abs=1e-12)

@@ -45,6 +45,7 @@ def test_the_optimiser_gives_the_same_bits_compiled_for_the_host_and_for_a_gener
         # the generic one compiled afresh into a cache of its own (numba keys its cache by the CPU as well)
         env = dict(os.environ)
         env.pop("NUMBA_CPU_NAME", None)
+        env.pop("NUMBA_CPU_FEATURES", None)
         if cpu == "generic":
             env.update(NUMBA_CPU_NAME="generic", NUMBA_CACHE_DIR=str(tmp_path / "cache-generic"))
         out = tmp_path / f"{cpu}.npy"

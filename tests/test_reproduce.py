@@ -15,7 +15,7 @@ import pytest
 from ray_cluster import can_unshare, two_node_cluster
 from report_check import check_deployment_claims, check_deployment_report, check_track_claims, mean_ci
 
-from uavris.config import SystemConfig
+from tests.conftest import SMOKE_SYSTEM
 from uavris.errors import UavrisError
 from uavris.experiments.engine.jobs import Job, JobRunner, run_jobs
 from uavris.experiments.engine.scheduling import StudyContext
@@ -28,8 +28,7 @@ from uavris.experiments.training import pretrain as pretrain_module
 from uavris.experiments.training.train_expert import TrainConfig, train_job
 from uavris.io import read_json
 
-# Episodes of 25 slots: the stages are the same at any horizon, and the evaluations' time is per slot.
-RC = ReproduceConfig("smoke", compare_seeds=1, eval_episodes=3, trajectories=2, system=SystemConfig(horizon=25))
+RC = ReproduceConfig("smoke", compare_seeds=1, eval_episodes=3, trajectories=2, system=SMOKE_SYSTEM)
 # The stage graph with the deployment ablation (tests/test_deployment_track.py runs its smoke study)
 ABLATION = dataclasses.replace(RC, ablation=True)
 
@@ -195,7 +194,7 @@ def test_changed_parameter_invalidates_exactly_its_dependents(tmp_path):
     # the paper track's experts follow the comparison (they are its winner's)
     assert changed(compare_seeds=2) == {"compare", "experts-train", "experts-unseen"} | dt
     assert changed(expert_algo="ppo") == {"experts-train", "experts-unseen"} | dt
-    assert changed(system=SystemConfig(noise_dbm=-90.0)) == set(base.stages)
+    assert changed(system=ABLATION.system.replace(noise_dbm=-90.0)) == set(base.stages)
     # other layouts: only the deployment track's stages
     assert changed(layout_seed=1) == deploy
     assert changed(scaling=()) == {"deploy-pretrain-n1", "deploy-pretrain-n1-s1"} | evaluations
@@ -683,7 +682,8 @@ def test_a_stage_kind_registered_in_a_test_module_runs_and_is_reported(smoke_run
     register_stage_kind(StageKind("rows-counted", "Rows counted", stages,
                                   lambda study: [f"{study.result('rows-counted')['rows']} rows in unseen1."]))
     flags = ["reproduce", "--preset", "smoke", "--compare-seeds", "1", "--eval-episodes", "3", "--trajectories",
-             "2", "--system.horizon", str(RC.system.horizon), "--out", str(out), "--no-progress"]
+             "2", "--system.horizon", str(RC.system.horizon), "--system.energy-budget-j",
+             str(RC.system.energy_budget_j), "--out", str(out), "--no-progress"]
     assert main([*flags, "--estimate"]) == 0
     assert "| rows-counted |" in capsys.readouterr().out
     # a finished stage's timing.json is written when it runs: the study's own are not run again
