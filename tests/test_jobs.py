@@ -218,6 +218,14 @@ def _workers(pids: Path, proc, err: Path, n: int = 2) -> list[int]:
     return found
 
 
+def _appears(folder: Path, pattern: str) -> None:
+    """Wait until a file matching ``pattern`` is in ``folder`` (at most HANG_S)."""
+    deadline = time.time() + HANG_S
+    while not list(folder.glob(pattern)):
+        assert time.time() < deadline, f"no {pattern} in {folder} after {HANG_S} s"
+        time.sleep(0.01)
+
+
 def _gone(pid: int) -> bool:
     """True once ``pid`` has ended: no such process, or a zombie (re-parented to an init that
     does not reap it)."""
@@ -423,11 +431,13 @@ def test_ctrl_c_in_a_program_that_runs_a_study_stops_its_workers(tmp_path: Path,
         _kill_all(proc, [p for p in seen if p != proc.pid])
 
 
-# A job that records its process's pid, runs until it is interrupted, then cleans up for 0.3 s of
-# Python and leaves a mark: a second interrupt in its cleanup would cut the mark off.
+# A job that records its process's pid, runs until it is interrupted, then marks that its cleanup
+# began, cleans up for 1 s of Python and leaves a mark: a second interrupt in its cleanup would cut
+# the last mark off.
 CLEANED = ("import os, pathlib, time\npathlib.Path({pids!r}, str(os.getpid())).touch()\ntry:\n"
-           "    while True:\n        time.sleep(0.05)\nfinally:\n    t = time.time()\n"
-           "    while time.time() - t < 0.3:\n        pass\n    pathlib.Path({pids!r}, 'cleaned').touch()\n")
+           "    while True:\n        time.sleep(0.05)\nfinally:\n    pathlib.Path({pids!r}, 'cleaning').touch()\n"
+           "    t = time.time()\n    while time.time() - t < 1.0:\n        pass\n"
+           "    pathlib.Path({pids!r}, 'cleaned').touch()\n")
 
 COMMAND_STUDY = '''
 import sys
@@ -523,11 +533,9 @@ def test_a_second_abort_does_not_interrupt_the_jobs_cleanup(tmp_path: Path):
     job = Job("cleaned", exec, (CLEANED.format(pids=str(pids)),), tmp_path / "cleaned.log")
     with ThreadPoolExecutor(1) as stage:
         running = stage.submit(runner.run, [job])
-        deadline = time.time() + HANG_S
-        while not list(pids.glob("[0-9]*")) and time.time() < deadline:
-            time.sleep(0.01)
+        _appears(pids, "[0-9]*")
         runner.close(abort=True)
-        time.sleep(0.05)  # the job is in its cleanup now (0.3 s of Python)
+        _appears(pids, "cleaning")  # the job is in its cleanup now (1 s of Python), whatever the load
         runner.close(abort=True)
         with pytest.raises(KeyboardInterrupt):
             running.result(timeout=HANG_S)
