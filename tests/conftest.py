@@ -3,6 +3,8 @@ import uavris  # noqa: F401 - first: it pins the float path before numpy loads, 
 # isort: on
 import contextlib
 import os
+import shutil
+import tempfile
 from typing import Iterator
 
 import numpy as np
@@ -14,6 +16,7 @@ settings.register_profile("ci", derandomize=True, max_examples=200)
 if os.environ.get("CI"):
     settings.load_profile("ci")
 
+from uavris.agents.oracle.store import STORE_ENV  # noqa: E402
 from uavris.config import SystemConfig  # noqa: E402 - after the hypothesis profile is registered
 from uavris.experiments.engine.jobs import configure_threads  # noqa: E402
 
@@ -21,6 +24,11 @@ configure_threads()  # one thread per test process, as in every worker and the c
 # The seal of uavris's own pickles (uavris.runs.seal): one key for the tests and every process they start,
 # none written to the user's home (test_seal_key_is_made_once_and_kept_private tests the key file).
 os.environ.setdefault("UAVRIS_SEAL_KEY", "5eed" * 16)
+# One plan store for the run (uavris.agents.oracle.store), made by the first process (xdist's controller,
+# before it starts its workers) and inherited by every process the tests start: a hall that several
+# files' studies and tests plan is planned once. Fresh each run, so every plan is made by this code.
+if "PYTEST_XDIST_WORKER" not in os.environ and STORE_ENV not in os.environ:
+    os.environ[STORE_ENV] = _RUN_STORE = tempfile.mkdtemp(prefix="uavris-test-plans-")
 
 # Decision Transformer tests: short episodes keep rollouts cheap; the layout does not depend on T.
 SHORT = SystemConfig(horizon=16)
@@ -35,6 +43,12 @@ SMOKE_SYSTEM = SystemConfig(horizon=25, energy_budget_j=2000.0)
 # (`-n 2 --dist loadfile --no-loadscope-reorder`) they start first, one on each worker, and the
 # other files fill in around them (by default xdist starts the files with the most tests first).
 STUDIES_FIRST = ("test_reproduce.py", "test_deployment_track.py")
+
+
+def pytest_unconfigure(config: pytest.Config) -> None:
+    store = globals().get("_RUN_STORE")
+    if store and "PYTEST_XDIST_WORKER" not in os.environ:
+        shutil.rmtree(store, ignore_errors=True)
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:

@@ -329,6 +329,7 @@ def test_an_oracle_takes_the_plan_another_made_from_the_same_state(config, monke
     from uavris.agents.oracle.planner import TEACHER
 
     start = SCENARIOS["fig2"].start
+    monkeypatch.delenv("UAVRIS_PLAN_STORE", raising=False)  # this process's sharing alone (the store: test_plan_store)
     monkeypatch.setattr(oracle_module, "_FRESH_PLANS", type(oracle_module._FRESH_PLANS)())
     first = oracle_policy(settings=TEACHER)  # the cheaper planner: the sharing is the same
     made = first.plan(config, start)

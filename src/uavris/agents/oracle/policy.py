@@ -50,6 +50,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from uavris import physics as ph
+from uavris.agents.oracle import store
 from uavris.agents.oracle.lookahead import choose_moves
 from uavris.agents.oracle.objective import approach_speed
 from uavris.agents.oracle.planner import Plan, PlanSettings, holding, plan_target
@@ -192,7 +193,8 @@ class PlanningOracle:
     a function of the settings, the system and the start alone (its random numbers are the
     settings' seed), so a plan another instance of this process made from the same state
     (no pose of that system valued yet) is taken as it is, with the poses it valued
-    (:meth:`valued_poses` is then what it would have been).
+    (:meth:`valued_poses` is then what it would have been); so is one another process made,
+    where the plan store is on (:mod:`.store`).
     """
 
     privileged: ClassVar[bool] = True  # reads the simulator's state (uavris.agents.policy)
@@ -212,20 +214,33 @@ class PlanningOracle:
             planning = self._planning(config)
             memo = self._memo.setdefault(planning, {})
             shared = (self.settings, planning, tuple(float(x) for x in start))
-            if not memo and shared in _FRESH_PLANS:
-                plan, valued = _FRESH_PLANS[shared]
-                _FRESH_PLANS.move_to_end(shared)
+            # made from nothing by another oracle: of this process, or of another one (on disk, where on)
+            stored = store.key(*shared) if not memo and store.directory() else None
+            kept = (None if memo else _FRESH_PLANS.get(shared)) or (store.load(stored) if stored else None)
+            if kept is not None:
+                plan, valued = kept
                 memo.update(valued)
+                if shared in _FRESH_PLANS:
+                    _FRESH_PLANS.move_to_end(shared)
+                else:
+                    self._share(shared, plan, memo)
             else:
                 fresh = not memo
                 plan = plan_target(config, start, self.settings, memo)
                 if fresh:
-                    plan.target.flags.writeable = plan.attitude.flags.writeable = False  # shared from now on
-                    _FRESH_PLANS[shared] = (plan, dict(memo))
-                    while len(_FRESH_PLANS) > FRESH_PLANS_KEPT:
-                        _FRESH_PLANS.popitem(last=False)
+                    self._share(shared, plan, memo)
+                    if stored:
+                        store.save(stored, plan, memo)
             self.plans[key] = plan
         return self.plans[key]
+
+    @staticmethod
+    def _share(shared: tuple[Any, ...], plan: Plan, memo: dict[bytes, float]) -> None:
+        """Offer a plan made from nothing (and the poses it valued) to the other oracles of this process."""
+        plan.target.flags.writeable = plan.attitude.flags.writeable = False  # shared from now on
+        _FRESH_PLANS[shared] = (plan, dict(memo))
+        while len(_FRESH_PLANS) > FRESH_PLANS_KEPT:
+            _FRESH_PLANS.popitem(last=False)
 
     def _planning(self, config: SystemConfig) -> SystemConfig:
         """The system its plans of ``config`` are made in (:func:`.planner.holding`): a system under the

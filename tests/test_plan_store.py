@@ -1,0 +1,133 @@
+"""The plan store (uavris.agents.oracle.store): a plan one process made is taken by another as it
+was made, under a key that changes with everything the plan depends on, and a file in the store
+that is not a plan (or tries to run code) is planned again."""
+
+import os
+import pickle
+import shutil
+import subprocess
+import sys
+from collections import OrderedDict
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from uavris.agents.oracle import policy as oracle_module
+from uavris.agents.oracle import store
+from uavris.agents.oracle.planner import PlanSettings
+from uavris.agents.oracle.policy import oracle_policy
+from uavris.config import SCENARIOS, SystemConfig
+
+START = SCENARIOS["fig2"].start
+# A planner that looks little (the store keeps any plan alike): one screened candidate, no refinement
+TEACHER = PlanSettings(global_step=0.0, candidates=1, refine_from=1, max_refinements=0, check_batches=2,
+                       nlos_draws=1, front_margin_deg=None)
+
+
+@pytest.fixture
+def on(tmp_path, monkeypatch):
+    """A fresh store, and no plan shared in this process."""
+    monkeypatch.setenv(store.STORE_ENV, str(tmp_path / "plans"))
+    monkeypatch.setattr(oracle_module, "_FRESH_PLANS", OrderedDict())
+    return tmp_path / "plans"
+
+
+def _no_planning(monkeypatch):
+    def refuse(*args, **kwargs):
+        raise AssertionError("planned although the store holds the plan")
+
+    monkeypatch.setattr(oracle_module, "plan_target", refuse)
+
+
+def _same(a, b):
+    for field in ("start", "rate", "start_rate", "travel_slots", "value", "poses_valued", "candidates", "rate_se",
+                  "front_margin_deg"):
+        assert getattr(a, field) == getattr(b, field), field
+    np.testing.assert_array_equal(a.target, b.target)
+    np.testing.assert_array_equal(a.attitude, b.attitude)
+
+
+def test_a_plan_another_process_made_is_taken_as_it_was_made(on, monkeypatch):
+    """A child process plans the paper's hall with the store on; this process then takes that plan
+    without planning: every field equal to its own plan made from nothing (store off), and the same
+    valued poses, which the learned value's labels read."""
+    code = ("import uavris; from uavris.agents.oracle.planner import PlanSettings as P; "
+            "from uavris.agents.oracle.policy import oracle_policy; from uavris.config import SCENARIOS, SystemConfig; "
+            f"oracle_policy(settings=P(**{TEACHER.__dict__!r})).plan(SystemConfig(), SCENARIOS['fig2'].start)")
+    subprocess.run([sys.executable, "-c", code], check=True, env={**os.environ, store.STORE_ENV: str(on)})
+    assert len(list(on.glob("*.npz"))) == 1
+    monkeypatch.delenv(store.STORE_ENV)
+    alone = oracle_policy(settings=TEACHER)
+    made = alone.plan(SystemConfig(), START)  # from nothing: the store is off
+
+    monkeypatch.setenv(store.STORE_ENV, str(on))
+    monkeypatch.setattr(oracle_module, "_FRESH_PLANS", OrderedDict())
+    _no_planning(monkeypatch)
+    taken = oracle_policy(settings=TEACHER)
+    _same(taken.plan(SystemConfig(), START), made)
+    for a, b in zip(taken.valued_poses(SystemConfig()), alone.valued_poses(SystemConfig())):
+        np.testing.assert_array_equal(a, b)
+
+
+def test_another_setting_system_or_start_is_planned_anew(on, monkeypatch):
+    """A stored plan answers only the settings, system and start it was made for."""
+    oracle_policy(settings=TEACHER).plan(SystemConfig(), START)
+    calls = []
+    real = oracle_module.plan_target
+    monkeypatch.setattr(oracle_module, "plan_target", lambda *a, **k: calls.append(a[1]) or real(*a, **k))
+    other_seed = PlanSettings(**{**TEACHER.__dict__, "seed": 1})
+    for settings, system, start in ((other_seed, SystemConfig(), START), (TEACHER, SystemConfig(horizon=50), START),
+                                    (TEACHER, SystemConfig(), (10.0, 10.0, 4.0))):
+        monkeypatch.setattr(oracle_module, "_FRESH_PLANS", OrderedDict())
+        oracle_policy(settings=settings).plan(system, start)
+    assert calls == [START, START, (10.0, 10.0, 4.0)]
+    assert len(list(on.glob("*.npz"))) == 4
+
+
+class _Runs:
+    def __init__(self, marker: Path) -> None:
+        self.marker = marker
+
+    def __reduce__(self):
+        return (Path.touch, (self.marker,))
+
+
+def test_a_file_that_is_not_a_plan_is_planned_again_and_runs_no_code(on, monkeypatch, tmp_path):
+    """Garbage, a truncated plan and an archive of pickled objects under a plan's key: each is planned
+    again (the same plan as from nothing), and the pickle's code never runs."""
+    made = oracle_policy(settings=TEACHER).plan(SystemConfig(), START)
+    (path,) = on.glob("*.npz")
+    good = path.read_bytes()
+    marker = tmp_path / "ran"
+    evil = tmp_path / "evil.npz"
+    np.savez(evil, numbers=np.array([_Runs(marker)], dtype=object))
+    assert pickle.loads(pickle.dumps(_Runs(marker))) is None and marker.exists()  # the payload does run if unpickled
+    marker.unlink()
+    for bad in (b"not a plan", good[: len(good) // 2], evil.read_bytes()):
+        path.write_bytes(bad)
+        monkeypatch.setattr(oracle_module, "_FRESH_PLANS", OrderedDict())
+        _same(oracle_policy(settings=TEACHER).plan(SystemConfig(), START), made)
+        assert not marker.exists()
+        assert path.read_bytes() == good  # planned again, and stored again
+
+
+def test_the_key_changes_with_the_code_and_the_float_path(monkeypatch, tmp_path):
+    """One changed byte in any source file of the package, or another kernel pinned for the
+    libraries, is another key: a stored plan is the one this code makes on this float path."""
+    args = (TEACHER, SystemConfig(), START)
+    package = Path(store.__file__).resolve().parents[2]
+    copy = tmp_path / "uavris"
+    shutil.copytree(package, copy, ignore=shutil.ignore_patterns("__pycache__", "*.so"))
+    monkeypatch.setattr(store, "__file__", str(copy / "agents" / "oracle" / "store.py"))
+    keys = []
+    for change in (None, "physics", "float"):
+        if change == "physics":
+            channel = copy / "physics" / "channel.py"
+            channel.write_bytes(channel.read_bytes() + b"\n")
+        if change == "float":
+            monkeypatch.setenv("OPENBLAS_CORETYPE", "SkylakeX")
+        store.fingerprint.cache_clear()
+        keys.append(store.key(*args))
+    store.fingerprint.cache_clear()
+    assert len(set(keys)) == 3
