@@ -16,6 +16,7 @@ settings.register_profile("ci", derandomize=True, max_examples=200)
 if os.environ.get("CI"):
     settings.load_profile("ci")
 
+from uavris.agents.oracle.planner import PlanSettings  # noqa: E402
 from uavris.agents.oracle.store import STORE_ENV  # noqa: E402
 from uavris.config import SystemConfig  # noqa: E402 - after the hypothesis profile is registered
 from uavris.experiments.engine.jobs import configure_threads  # noqa: E402
@@ -37,6 +38,10 @@ SHORT = SystemConfig(horizon=16)
 # budget is scaled with the horizon (hovering costs about 84 J a slot), so that episodes still end on
 # it before the horizon, as at 100 slots and 8,000 J.
 SMOKE_SYSTEM = SystemConfig(horizon=25, energy_budget_j=2000.0)
+# A planner that looks little (one screened candidate, no refinement, two checking batches): for tests of
+# how plans are shared and stored, which are the same for any plan.
+GLANCE = PlanSettings(global_step=0.0, candidates=1, refine_from=1, max_refinements=0, check_batches=2, nlos_draws=1,
+                      front_margin_deg=None)
 
 
 # The files that run whole smoke studies take most of the suite's time: under `make test`

@@ -325,13 +325,13 @@ def test_an_oracle_takes_the_plan_another_made_from_the_same_state(config, monke
     """A study's evaluation of a hall plans it for several rows (the oracle's, the DT told its
     place, the report's target): the second oracle takes the first one's plan and the poses it
     valued instead of planning again, and both equal what an oracle plans with nothing shared."""
+    from tests.conftest import GLANCE as TEACHER  # a planner that looks little: the sharing is the same
     from uavris.agents.oracle import policy as oracle_module
-    from uavris.agents.oracle.planner import TEACHER
 
     start = SCENARIOS["fig2"].start
     monkeypatch.delenv("UAVRIS_PLAN_STORE", raising=False)  # this process's sharing alone (the store: test_plan_store)
     monkeypatch.setattr(oracle_module, "_FRESH_PLANS", type(oracle_module._FRESH_PLANS)())
-    first = oracle_policy(settings=TEACHER)  # the cheaper planner: the sharing is the same
+    first = oracle_policy(settings=TEACHER)
     made = first.plan(config, start)
     calls = []
     monkeypatch.setattr(oracle_module, "plan_target", lambda *a, **k: calls.append(a[1]) or plan_target(*a, **k))

@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from tests.conftest import GLANCE as TEACHER  # the store keeps any plan alike
 from uavris.agents.oracle import policy as oracle_module
 from uavris.agents.oracle import store
 from uavris.agents.oracle.planner import PlanSettings
@@ -20,9 +21,6 @@ from uavris.agents.oracle.policy import oracle_policy
 from uavris.config import SCENARIOS, SystemConfig
 
 START = SCENARIOS["fig2"].start
-# A planner that looks little (the store keeps any plan alike): one screened candidate, no refinement
-TEACHER = PlanSettings(global_step=0.0, candidates=1, refine_from=1, max_refinements=0, check_batches=2,
-                       nlos_draws=1, front_margin_deg=None)
 
 
 @pytest.fixture
@@ -131,3 +129,16 @@ def test_the_key_changes_with_the_code_and_the_float_path(monkeypatch, tmp_path)
         keys.append(store.key(*args))
     store.fingerprint.cache_clear()
     assert len(set(keys)) == 3
+
+
+def test_a_study_keeps_its_plans_in_its_folder_unless_a_store_is_named(monkeypatch, tmp_path):
+    """reproduce's workers inherit the store its block sets (uavris.experiments.study.reproduce); after the
+    block the environment is as it was, and a store the user named is the one used."""
+    monkeypatch.delenv(store.STORE_ENV, raising=False)
+    with store.kept_in(tmp_path / "plans") as folder:
+        assert folder == tmp_path / "plans" and store.directory() == folder
+    assert store.directory() is None
+    monkeypatch.setenv(store.STORE_ENV, str(tmp_path / "mine"))
+    with store.kept_in(tmp_path / "plans") as folder:
+        assert folder == store.directory() == tmp_path / "mine"
+    assert store.directory() == tmp_path / "mine"

@@ -18,7 +18,8 @@ numba, the CPU kind, and the environment that pins the libraries' kernels
 the one this code would make here. A file is plain numbers (``.npz`` read without pickle): a store
 someone else filled cannot run code; one that does not read as a plan is planned again.
 
-Off unless ``$UAVRIS_PLAN_STORE`` names a directory (the test suite sets one per run).
+Off unless ``$UAVRIS_PLAN_STORE`` names a directory: a study keeps its workers' plans in its own
+``plans/`` folder (:func:`kept_in`), the test suite one per run.
 """
 
 from __future__ import annotations
@@ -29,8 +30,10 @@ import io
 import os
 import platform
 import zipfile
+from contextlib import contextmanager
 from importlib import metadata
 from pathlib import Path
+from typing import Iterator
 
 import numpy as np
 
@@ -43,6 +46,21 @@ STORE_ENV = "UAVRIS_PLAN_STORE"
 # the environment that chooses the libraries' kernels (uavris.float_paths) and numba's target
 _FLOAT_ENV = ("UAVRIS_NATIVE_FLOATS", "NPY_DISABLE_CPU_FEATURES", *PINNED, "NUMBA_CPU_NAME", "NUMBA_CPU_FEATURES")
 _MEMO_KEY_BYTES = 1 + 6 * 8  # a memo key: exact flag, then the pose (position, attitude) as float64
+
+
+@contextmanager
+def kept_in(folder: Path) -> Iterator[Path]:
+    """The store on in ``folder`` for the block, in this process and the workers it starts (they
+    inherit the environment); a store the user named is kept instead."""
+    named = os.environ.get(STORE_ENV)
+    if named:
+        yield Path(named)
+        return
+    os.environ[STORE_ENV] = str(folder)
+    try:
+        yield folder
+    finally:
+        os.environ.pop(STORE_ENV, None)
 
 
 def directory() -> Path | None:

@@ -14,6 +14,7 @@ import time
 from pathlib import Path
 from typing import Any, Sequence
 
+from uavris.agents.oracle.store import kept_in as plans_kept_in
 from uavris.errors import UavrisError
 from uavris.experiments.display.progress import progress_bar
 from uavris.experiments.display.tables import markdown_table
@@ -25,6 +26,8 @@ from uavris.experiments.study.finished import STUDY_FILE, Study
 from uavris.experiments.study.pipeline import build_pipeline
 from uavris.io import write_json, write_yaml
 from uavris.runs.lock import locked
+
+PLANS_DIR = "plans"  # in a study's folder: the plans its workers' oracles share (uavris.agents.oracle.store)
 
 
 # ------------------------------------------------------------------------------------------ entry point
@@ -91,9 +94,12 @@ def reproduce(rc: ReproduceConfig, out: str | Path, *, workers: int = 2, backend
         bar.close()
         raise UavrisError(f"--force names unknown stage(s) {unknown}; stages: {list(pipeline.stages) + ['report']}")
     try:
-        ctx.runner.connect()  # a cluster that cannot be reached: one line, before anything is written
-        with locked(out, "uavris reproduce"):  # one invocation writes a study at a time
-            return _run(rc, out, pipeline, ctx, force, bar, progress, workers)
+        # the workers' oracles plan each hall once between them (uavris.agents.oracle.store); set before a
+        # local Ray instance starts, whose workers inherit it
+        with plans_kept_in(Path(os.path.abspath(out)) / PLANS_DIR):
+            ctx.runner.connect()  # a cluster that cannot be reached: one line, before anything is written
+            with locked(out, "uavris reproduce"):  # one invocation writes a study at a time
+                return _run(rc, out, pipeline, ctx, force, bar, progress, workers)
     except BaseException:
         ctx.runner.close()  # Ray too, where it was joined and the study never began
         raise
