@@ -325,26 +325,26 @@ def test_an_oracle_takes_the_plan_another_made_from_the_same_state(config, monke
     """A study's evaluation of a hall plans it for several rows (the oracle's, the DT told its
     place, the report's target): the second oracle takes the first one's plan and the poses it
     valued instead of planning again, and both equal what an oracle plans with nothing shared."""
-    from tests.conftest import GLANCE as TEACHER  # a planner that looks little: the sharing is the same
+    from tests.conftest import GLANCE  # a planner that looks little: the sharing is the same
     from uavris.agents.oracle import policy as oracle_module
 
     start = SCENARIOS["fig2"].start
     monkeypatch.delenv("UAVRIS_PLAN_STORE", raising=False)  # this process's sharing alone (the store: test_plan_store)
     monkeypatch.setattr(oracle_module, "_FRESH_PLANS", type(oracle_module._FRESH_PLANS)())
-    first = oracle_policy(settings=TEACHER)
+    first = oracle_policy(settings=GLANCE)
     made = first.plan(config, start)
     calls = []
     monkeypatch.setattr(oracle_module, "plan_target", lambda *a, **k: calls.append(a[1]) or plan_target(*a, **k))
-    second = oracle_policy(settings=TEACHER)
+    second = oracle_policy(settings=GLANCE)
     assert second.plan(config, start) is made and calls == []
     np.testing.assert_array_equal(second.valued_poses(config)[1], first.valued_poses(config)[1])
     assert second.plan(config, (10.0, 10.0, 4.0)) is not made and len(calls) == 1  # another start: planned
-    third = oracle_policy(settings=TEACHER)
+    third = oracle_policy(settings=GLANCE)
     third.plan(config, (10.0, 10.0, 4.0))
     assert third.plan(config, start) is not made  # it had valued poses: it plans itself
     assert calls == [(10.0, 10.0, 4.0), (10.0, 10.0, 4.0), start]
     oracle_module._FRESH_PLANS.clear()
-    alone = oracle_policy(settings=TEACHER)
+    alone = oracle_policy(settings=GLANCE)
     again = alone.plan(config, start)
     np.testing.assert_array_equal(again.target, made.target)
     assert (again.value, again.poses_valued) == (made.value, made.poses_valued)

@@ -16,6 +16,7 @@ from ray_cluster import can_unshare, two_node_cluster
 from report_check import check_deployment_claims, check_deployment_report, check_track_claims, mean_ci
 
 from tests.conftest import SMOKE_SYSTEM
+from uavris.agents.oracle.store import STORE_ENV
 from uavris.errors import UavrisError
 from uavris.experiments.engine.jobs import Job, JobRunner, run_jobs
 from uavris.experiments.engine.scheduling import StudyContext
@@ -359,7 +360,7 @@ def test_ray_backend_gives_the_same_numbers_as_the_process_pool(smoke_run, tmp_p
 
 
 @pytest.mark.slow
-def test_reproduce_on_ray_gives_the_process_pools_numbers(smoke_run, tmp_path):
+def test_reproduce_on_ray_gives_the_process_pools_numbers(smoke_run, tmp_path, monkeypatch):
     """``reproduce --backend ray`` on a local Ray instance with two workers: a whole track
     (experts in parallel, the DT chain, evaluations), every stage's result the same as the
     local pool's in the smoke run (stages are keyed by their configuration: same keys). Where a
@@ -371,6 +372,7 @@ def test_reproduce_on_ray_gives_the_process_pools_numbers(smoke_run, tmp_path):
         pytest.skip("test_a_study_on_ray_nodes_that_share_no_file_system runs a track through Ray here")
     out, _, _ = smoke_run
     ray_out = tmp_path / "ray"
+    monkeypatch.delenv(STORE_ENV, raising=False)  # the study's own store: its workers make every plan
     reproduce(dataclasses.replace(RC, track="strong"), ray_out, workers=2, backend="ray", progress=False)
     ray_stages = sorted(p.parent.name for p in (ray_out / "stages").glob("*/stage.json"))
     assert len(ray_stages) >= 8 and all(name.startswith("strong-") for name in ray_stages)
@@ -379,6 +381,7 @@ def test_reproduce_on_ray_gives_the_process_pools_numbers(smoke_run, tmp_path):
                 == read_json(out / "stages" / name / "stage.json")["result"]), name
     schedule = read_json(ray_out / "schedule.json")
     assert len(schedule["jobs"]) > len(ray_stages)  # more than one job a stage went through Ray
+    assert list((ray_out / "plans").glob("*.npz"))  # the workers shared their plans in the study's folder
 
 
 def _without_times(obj):
@@ -399,7 +402,7 @@ def _stage_files(root: Path) -> set[Path]:
 
 
 @pytest.mark.slow
-def test_a_study_on_ray_nodes_that_share_no_file_system(smoke_run, tmp_path):
+def test_a_study_on_ray_nodes_that_share_no_file_system(smoke_run, tmp_path, monkeypatch):
     """The deployment track on a two-node Ray cluster whose far node sees an empty
     file system at OUT, that node killed while it evaluates a hall. The study completes, and
     OUT holds what the local run's holds: every stage's record, the same files, the same
@@ -410,6 +413,7 @@ def test_a_study_on_ray_nodes_that_share_no_file_system(smoke_run, tmp_path):
         pytest.skip(f"a node with a file system of its own cannot be made here: {why}")
     local, _, _ = smoke_run
     out = tmp_path / "study"
+    monkeypatch.delenv(STORE_ENV, raising=False)  # the nodes plan for themselves: no plan read from the local run's
     killed: list[tuple[str, bool]] = []
     with two_node_cluster(out, tmp_path / "cluster-logs") as cluster:
         stop = threading.Event()

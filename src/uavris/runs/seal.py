@@ -1,6 +1,6 @@
 """Which pickled files uavris may unpickle: the ones it wrote itself, sealed with a secret of this user.
 
-Lives here: :func:`seal` (write ``FILE.seal``, an HMAC-SHA256 of the file under the key),
+Lives here: :func:`seal` (write ``FILE.seal``, an HMAC-SHA256 of the file under the key), :func:`mac`,
 :func:`is_sealed` and :func:`check_sealed` (the one-line refusal). Not here: what is pickled
 (SB3's archives and replay buffer, the resume state: :mod:`uavris.experiments.training.train_expert`)
 and the files a user may pass to any command, which are never pickles (safetensors + JSON:
@@ -71,6 +71,12 @@ def _digest(path: Path) -> str:
         for block in iter(lambda: f.read(1 << 20), b""):
             mac.update(block)
     return mac.hexdigest()
+
+
+def mac(data: bytes) -> str:
+    """The HMAC of ``data`` under this user's key: a mark only this user's uavris can make (a plan
+    file's, :mod:`uavris.agents.oracle.store`)."""
+    return hmac.new(_key(), data, digestmod=hashlib.sha256).hexdigest()
 
 
 def seal(path: Path) -> None:

@@ -216,7 +216,8 @@ class PlanningOracle:
             shared = (self.settings, planning, tuple(float(x) for x in start))
             # made from nothing by another oracle: of this process, or of another one (on disk, where on)
             stored = store.key(*shared) if not memo and store.directory() else None
-            kept = (None if memo else _FRESH_PLANS.get(shared)) or (store.load(stored) if stored else None)
+            kept = (None if memo else _FRESH_PLANS.get(shared)) or (store.load(stored, shared[2], self.settings)
+                                                                     if stored else None)
             if kept is not None:
                 plan, valued = kept
                 memo.update(valued)

@@ -1,9 +1,9 @@
 """Plans kept on disk, so that processes of one study (or one test run) plan each hall once.
 
-Lives here: :func:`load` and :func:`save` of a plan and the poses it valued, under a key that
-names everything the plan is a function of, and :data:`STORE_ENV`, the variable that switches
-the store on. Not here: the plan itself (:mod:`.planner`), the in-process sharing of plans
-(:mod:`.policy`).
+Lives here: :func:`load` and :func:`save` of a plan and the poses it valued, under a :func:`key`
+that names everything the plan is a function of, :func:`kept_in` (the store on for a block) and
+:data:`STORE_ENV`, the variable that switches it on. Not here: the plan itself (:mod:`.planner`),
+the in-process sharing of plans (:mod:`.policy`).
 
 Why: an oracle's plan is a function of its settings, the system and the start alone (its random
 numbers are the settings' seed), and of the code and the float path that compute it. Processes
@@ -12,11 +12,14 @@ for its transfer row; the strong experts each plan the paper's hall; the suite's
 the same generated halls) would each pay seconds to a minute for the same numbers.
 
 The key hashes the settings, the planning system and the start with a fingerprint of the code and
-the float path: every source file of the ``uavris`` package, the versions of numpy, scipy and
-numba, the CPU kind, and the environment that pins the libraries' kernels
-(:mod:`uavris.float_paths`). A change to any of them is another key, so a stored plan is always
-the one this code would make here. A file is plain numbers (``.npz`` read without pickle): a store
-someone else filled cannot run code; one that does not read as a plan is planned again.
+the float path, taken when this module is imported (the code the process runs, whatever happens
+to the files later): every source file of the ``uavris`` package, the Python, C library, numpy
+(and its BLAS and CPU features), scipy, numba and llvmlite versions, the CPU's model and flags, and
+the environment that chooses the libraries' kernels (:mod:`uavris.float_paths`). A
+change to any of them is another key. Only the project's own config classes are stored (a subclass
+may compute differently). A file is plain numbers (``.npz`` read without pickle) with an HMAC
+under this user's seal key (:func:`uavris.runs.seal.mac`): a store someone else filled or edited
+cannot run code and is not taken; a file that does not read as a plan is planned again.
 
 Off unless ``$UAVRIS_PLAN_STORE`` names a directory: a study keeps its workers' plans in its own
 ``plans/`` folder (:func:`kept_in`), the test suite one per run.
@@ -24,28 +27,37 @@ Off unless ``$UAVRIS_PLAN_STORE`` names a directory: a study keeps its workers' 
 
 from __future__ import annotations
 
-import functools
 import hashlib
+import hmac
 import io
 import os
 import platform
+import sys
+import warnings
 import zipfile
 from contextlib import contextmanager
 from importlib import metadata
 from pathlib import Path
-from typing import Iterator
+from typing import Any, Iterator
 
 import numpy as np
 
 from uavris.agents.oracle.planner import Plan, PlanSettings
 from uavris.config import SystemConfig
-from uavris.float_paths import PINNED
+from uavris.errors import UavrisError
 from uavris.io import atomic_write_bytes
+from uavris.runs.seal import mac
 
 STORE_ENV = "UAVRIS_PLAN_STORE"
-# the environment that chooses the libraries' kernels (uavris.float_paths) and numba's target
-_FLOAT_ENV = ("UAVRIS_NATIVE_FLOATS", "NPY_DISABLE_CPU_FEATURES", *PINNED, "NUMBA_CPU_NAME", "NUMBA_CPU_FEATURES")
+# the environment that chooses the libraries' kernels (uavris.float_paths). Not the thread counts: every
+# process of uavris runs one thread per pool (engine.jobs.configure_threads, set after this module may
+# have been imported), and the planner's kernels are serial (numba without parallel)
+_FLOAT_ENV_PREFIXES = ("NUMBA_", "MKL_", "OPENBLAS_", "NPY_", "ATEN_", "ONEDNN_", "OMP_", "UAVRIS_NATIVE_FLOATS")
+_NOT_NUMERICS = ("NUMBA_CACHE_DIR",)
 _MEMO_KEY_BYTES = 1 + 6 * 8  # a memo key: exact flag, then the pose (position, attitude) as float64
+_FIELDS = {"start": (np.float64, 1), "target": (np.float64, 1), "attitude": (np.float64, 1),
+           "numbers": (np.float64, 1), "counts": (np.int64, 1), "candidate_places": (np.float64, 2),
+           "candidate_values": (np.float64, 2), "memo_keys": (np.uint8, 2), "memo_values": (np.float64, 1)}
 
 
 @contextmanager
@@ -69,11 +81,29 @@ def directory() -> Path | None:
     return Path(named) if named else None
 
 
-@functools.lru_cache(maxsize=1)
-def fingerprint() -> str:
+def _cpu() -> str:
+    try:
+        with open("/proc/cpuinfo", encoding="utf-8") as f:
+            lines = [line for line in f if line.startswith(("model name", "flags"))]
+    except OSError:
+        return platform.processor()
+    return "".join(sorted(set(lines)))
+
+
+def _numpy_build() -> str:
+    config = getattr(getattr(np, "__config__", None), "CONFIG", {})
+    blas = config.get("Build Dependencies", {}).get("blas", {}) if isinstance(config, dict) else {}
+    try:  # numpy's own table of the CPU features its kernels use (numpy.core before numpy 2)
+        from numpy._core._multiarray_umath import __cpu_features__ as features
+    except ImportError:
+        from numpy.core._multiarray_umath import __cpu_features__ as features
+
+    return f"{sorted(blas.items())}{sorted(k for k, on in features.items() if on)}"
+
+
+def _fingerprint(package: Path) -> str:
     """A hash of the code and the float path a plan is computed with (module docstring)."""
     h = hashlib.sha256()
-    package = Path(__file__).resolve().parents[2]  # src/uavris
     for path in sorted(package.rglob("*.py")):
         h.update(str(path.relative_to(package)).encode() + b"\0" + path.read_bytes() + b"\0")
     for name in ("numpy", "scipy", "numba", "llvmlite"):
@@ -81,27 +111,40 @@ def fingerprint() -> str:
             h.update(f"{name}={metadata.version(name)}\0".encode())
         except metadata.PackageNotFoundError:
             h.update(f"{name}=-\0".encode())
-    h.update(f"{platform.machine()}\0{_cpu_kind()}\0".encode())
-    h.update(repr(sorted((k, os.environ.get(k)) for k in _FLOAT_ENV)).encode())
+    h.update(f"{sys.version}\0{platform.libc_ver()}\0{platform.machine()}\0{_cpu()}\0{_numpy_build()}\0".encode())
+    env = sorted((k, v) for k, v in os.environ.items() if k.startswith(_FLOAT_ENV_PREFIXES)
+                 and k not in _NOT_NUMERICS and not k.endswith("_NUM_THREADS"))
+    h.update(repr(env).encode())
     return h.hexdigest()
 
 
-def _cpu_kind() -> str:
-    try:
-        with open("/proc/cpuinfo", encoding="utf-8") as f:
-            return next((line.split(":", 1)[1].strip() for line in f if line.startswith("model name")), "")
-    except OSError:
-        return platform.processor()
+FINGERPRINT = _fingerprint(Path(__file__).resolve().parents[2])  # src/uavris: the code this process runs
 
 
-def key(settings: PlanSettings, system: SystemConfig, start: tuple[float, ...]) -> str:
-    """The file name a plan of ``settings`` in ``system`` from ``start`` is stored under."""
+def key(settings: PlanSettings, system: SystemConfig, start: tuple[float, ...]) -> str | None:
+    """The file name a plan of ``settings`` in ``system`` from ``start`` is stored under; None where it
+    is not stored (a subclass of the config classes, whose code the key does not cover)."""
+    if type(settings) is not PlanSettings or type(system) is not SystemConfig:
+        return None
     what = repr((settings, system, tuple(float(x) for x in start)))
-    return hashlib.sha256(f"{fingerprint()}\0{what}".encode()).hexdigest()
+    return hashlib.sha256(f"{FINGERPRINT}\0{what}".encode()).hexdigest()
+
+
+def _mark(arrays: dict[str, np.ndarray], name: str) -> str:
+    """The HMAC of a plan file's arrays and its name (a file copied under another key is not taken)."""
+    h = hashlib.sha256(name.encode())
+    for field in sorted(arrays):
+        a = np.ascontiguousarray(arrays[field])
+        h.update(f"{field}{a.dtype.str}{a.shape}".encode() + a.tobytes())
+    return mac(h.digest())
+
+
+_WARNED: set[str] = set()
 
 
 def save(key_: str, plan: Plan, memo: dict[bytes, float]) -> None:
-    """Store ``plan`` and the poses it valued (atomically: a reader sees all of it or nothing)."""
+    """Store ``plan`` and the poses it valued (atomically: a reader sees all of it or nothing). A store
+    that cannot be written (a full disk, a read-only folder) is a warning, once: the plan is made."""
     folder = directory()
     if folder is None:
         return
@@ -116,35 +159,50 @@ def save(key_: str, plan: Plan, memo: dict[bytes, float]) -> None:
         "memo_keys": np.frombuffer(b"".join(memo), dtype=np.uint8).reshape(len(memo), _MEMO_KEY_BYTES),
         "memo_values": np.fromiter(memo.values(), dtype=np.float64, count=len(memo)),
     }
-    buffer = io.BytesIO()
-    np.savez(buffer, **arrays)
-    atomic_write_bytes(folder / f"{key_}.npz", buffer.getvalue())
+    try:
+        buffer = io.BytesIO()
+        np.savez(buffer, **arrays, seal=np.frombuffer(_mark(arrays, key_).encode(), dtype=np.uint8))
+        atomic_write_bytes(folder / f"{key_}.npz", buffer.getvalue())
+    except (OSError, UavrisError) as e:  # UavrisError: the seal key cannot be made or read
+        if str(folder) not in _WARNED:
+            _WARNED.add(str(folder))
+            warnings.warn(f"uavris: plans are not kept in {folder} ({e}); each process plans for itself",
+                          stacklevel=2)
 
 
-def load(key_: str) -> tuple[Plan, dict[bytes, float]] | None:
-    """The plan stored under ``key_`` and the poses it valued; None where there is none (or the store is
-    off, or the file does not read as a plan: it is then planned again)."""
+def _read(path: Path, key_: str) -> dict[str, np.ndarray] | None:
+    with np.load(path, allow_pickle=False) as f:
+        arrays = {name: f[name] for name in f.files}
+    seal = arrays.pop("seal", None)
+    if set(arrays) != set(_FIELDS) or any(arrays[k].dtype != np.dtype(t) or arrays[k].ndim != n
+                                          for k, (t, n) in _FIELDS.items()):
+        return None
+    if seal is None or not hmac.compare_digest(seal.tobytes(), _mark(arrays, key_).encode()):
+        return None
+    return arrays
+
+
+def load(key_: str, start: tuple[float, ...], settings: PlanSettings) -> tuple[Plan, dict[bytes, float]] | None:
+    """The plan from ``start`` stored under ``key_`` and the poses it valued; None where there is none
+    (or the store is off, or the file is not this user's plan: it is then planned again)."""
     folder = directory()
     if folder is None:
         return None
     try:
-        with np.load(folder / f"{key_}.npz", allow_pickle=False) as f:
-            a = {name: f[name] for name in f.files}
-        rate, start_rate, value, rate_se, margin = (float(x) for x in a["numbers"])
-        travel, valued = (int(x) for x in a["counts"])
-        keys = a["memo_keys"]
-        if keys.ndim != 2 or keys.shape[1] != _MEMO_KEY_BYTES or len(keys) != len(a["memo_values"]):
-            return None
-        plan = Plan(
-            start=tuple(float(x) for x in a["start"]), target=a["target"].astype(np.float64),
-            attitude=a["attitude"].astype(np.float64), rate=rate, start_rate=start_rate, travel_slots=travel,
-            value=value, poses_valued=valued,
-            candidates=tuple((tuple(float(x) for x in p), float(r), float(v))
-                             for p, (r, v) in zip(a["candidate_places"], a["candidate_values"])),
-            rate_se=rate_se, front_margin_deg=None if np.isnan(margin) else margin)
-        memo = {bytes(k): float(v) for k, v in zip(keys, a["memo_values"])}
-    except (OSError, ValueError, KeyError, TypeError, EOFError, zipfile.BadZipFile):
+        a: Any = _read(folder / f"{key_}.npz", key_)
+    except (OSError, ValueError, KeyError, TypeError, EOFError, zipfile.BadZipFile, UavrisError):
         return None
-    if plan.target.shape != (3,) or plan.attitude.shape != (3,):
+    if (a is None or a["memo_keys"].shape[1:] != (_MEMO_KEY_BYTES,) or len(a["memo_keys"]) != len(a["memo_values"])
+            or a["candidate_places"].shape[1:] != (3,) or a["candidate_values"].shape[1:] != (2,)
+            or len(a["candidate_places"]) != len(a["candidate_values"]) or a["target"].shape != (3,)
+            or a["attitude"].shape != (3,) or a["numbers"].shape != (5,) or a["counts"].shape != (2,)
+            or tuple(float(x) for x in a["start"]) != tuple(float(x) for x in start)):
         return None
-    return plan, memo
+    rate, start_rate, value, rate_se, _ = (float(x) for x in a["numbers"])
+    travel, valued = (int(x) for x in a["counts"])
+    plan = Plan(start=tuple(float(x) for x in start), target=a["target"], attitude=a["attitude"], rate=rate,
+                start_rate=start_rate, travel_slots=travel, value=value, poses_valued=valued,
+                candidates=tuple((tuple(float(x) for x in p), float(r), float(v))
+                                 for p, (r, v) in zip(a["candidate_places"], a["candidate_values"])),
+                rate_se=rate_se, front_margin_deg=settings.front_margin_deg)  # the margin the plan keeps
+    return plan, {bytes(k): float(v) for k, v in zip(a["memo_keys"], a["memo_values"])}
