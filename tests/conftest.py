@@ -28,6 +28,7 @@ os.environ.setdefault("UAVRIS_SEAL_KEY", "5eed" * 16)
 # One plan store for the run (uavris.agents.oracle.store), made by the first process (xdist's controller,
 # before it starts its workers) and inherited by every process the tests start: a hall that several
 # files' studies and tests plan is planned once. Fresh each run, so every plan is made by this code.
+_RUN_STORE = None
 if "PYTEST_XDIST_WORKER" not in os.environ and STORE_ENV not in os.environ:
     os.environ[STORE_ENV] = _RUN_STORE = tempfile.mkdtemp(prefix="uavris-test-plans-")
 
@@ -51,9 +52,8 @@ STUDIES_FIRST = ("test_reproduce.py", "test_deployment_track.py")
 
 
 def pytest_unconfigure(config: pytest.Config) -> None:
-    store = globals().get("_RUN_STORE")
-    if store and "PYTEST_XDIST_WORKER" not in os.environ:
-        shutil.rmtree(store, ignore_errors=True)
+    if _RUN_STORE is not None:  # the process that made it
+        shutil.rmtree(_RUN_STORE, ignore_errors=True)
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:

@@ -214,24 +214,23 @@ class PlanningOracle:
             planning = self._planning(config)
             memo = self._memo.setdefault(planning, {})
             shared = (self.settings, planning, tuple(float(x) for x in start))
-            # made from nothing by another oracle: of this process, or of another one (on disk, where on)
-            stored = store.key(*shared) if not memo and store.directory() else None
-            kept = (None if memo else _FRESH_PLANS.get(shared)) or (store.load(stored, shared[2], self.settings)
-                                                                     if stored else None)
-            if kept is not None:
-                plan, valued = kept
-                memo.update(valued)
-                if shared in _FRESH_PLANS:
-                    _FRESH_PLANS.move_to_end(shared)
-                else:
-                    self._share(shared, plan, memo)
-            else:
-                fresh = not memo
+            if memo:  # it valued poses of this system: it plans itself
                 plan = plan_target(config, start, self.settings, memo)
-                if fresh:
-                    self._share(shared, plan, memo)
+            elif shared in _FRESH_PLANS:  # made from nothing by another oracle of this process
+                plan, valued = _FRESH_PLANS[shared]
+                _FRESH_PLANS.move_to_end(shared)
+                memo.update(valued)
+            else:  # made from nothing by another process (the store, where on), or here
+                stored = store.key(*shared) if store.directory() else None
+                kept = store.load(stored, shared[2], self.settings) if stored else None
+                if kept is None:
+                    plan = plan_target(config, start, self.settings, memo)
                     if stored:
                         store.save(stored, plan, memo)
+                else:
+                    plan, valued = kept
+                    memo.update(valued)
+                self._share(shared, plan, memo)
             self.plans[key] = plan
         return self.plans[key]
 

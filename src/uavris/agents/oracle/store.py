@@ -38,7 +38,7 @@ import zipfile
 from contextlib import contextmanager
 from importlib import metadata
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Iterator
 
 import numpy as np
 
@@ -55,9 +55,11 @@ STORE_ENV = "UAVRIS_PLAN_STORE"
 _FLOAT_ENV_PREFIXES = ("NUMBA_", "MKL_", "OPENBLAS_", "NPY_", "ATEN_", "ONEDNN_", "OMP_", "UAVRIS_NATIVE_FLOATS")
 _NOT_NUMERICS = ("NUMBA_CACHE_DIR",)
 _MEMO_KEY_BYTES = 1 + 6 * 8  # a memo key: exact flag, then the pose (position, attitude) as float64
-_FIELDS = {"start": (np.float64, 1), "target": (np.float64, 1), "attitude": (np.float64, 1),
-           "numbers": (np.float64, 1), "counts": (np.int64, 1), "candidate_places": (np.float64, 2),
-           "candidate_values": (np.float64, 2), "memo_keys": (np.uint8, 2), "memo_values": (np.float64, 1)}
+# a plan file's arrays: dtype and shape (None: any length; "C", "M": the candidates', the memo's count)
+_FIELDS = {"start": (np.float64, (3,)), "target": (np.float64, (3,)), "attitude": (np.float64, (3,)),
+           "numbers": (np.float64, (5,)), "counts": (np.int64, (2,)), "candidate_places": (np.float64, ("C", 3)),
+           "candidate_values": (np.float64, ("C", 2)), "memo_keys": (np.uint8, ("M", _MEMO_KEY_BYTES)),
+           "memo_values": (np.float64, ("M",))}
 
 
 @contextmanager
@@ -171,12 +173,21 @@ def save(key_: str, plan: Plan, memo: dict[bytes, float]) -> None:
 
 
 def _read(path: Path, key_: str) -> dict[str, np.ndarray] | None:
+    """The arrays of the plan file at ``path``, where each is of its dtype and shape (:data:`_FIELDS`)
+    and the file carries this user's mark for ``key_``; None otherwise."""
     with np.load(path, allow_pickle=False) as f:
         arrays = {name: f[name] for name in f.files}
     seal = arrays.pop("seal", None)
-    if set(arrays) != set(_FIELDS) or any(arrays[k].dtype != np.dtype(t) or arrays[k].ndim != n
-                                          for k, (t, n) in _FIELDS.items()):
+    if set(arrays) != set(_FIELDS):
         return None
+    counts: dict[str, int] = {}
+    for name, (dtype, shape) in _FIELDS.items():
+        a = arrays[name]
+        if a.dtype != np.dtype(dtype) or a.ndim != len(shape):
+            return None
+        for size, want in zip(a.shape, shape):
+            if size != (counts.setdefault(want, size) if isinstance(want, str) else want):
+                return None
     if seal is None or not hmac.compare_digest(seal.tobytes(), _mark(arrays, key_).encode()):
         return None
     return arrays
@@ -189,14 +200,10 @@ def load(key_: str, start: tuple[float, ...], settings: PlanSettings) -> tuple[P
     if folder is None:
         return None
     try:
-        a: Any = _read(folder / f"{key_}.npz", key_)
+        a = _read(folder / f"{key_}.npz", key_)
     except (OSError, ValueError, KeyError, TypeError, EOFError, zipfile.BadZipFile, UavrisError):
         return None
-    if (a is None or a["memo_keys"].shape[1:] != (_MEMO_KEY_BYTES,) or len(a["memo_keys"]) != len(a["memo_values"])
-            or a["candidate_places"].shape[1:] != (3,) or a["candidate_values"].shape[1:] != (2,)
-            or len(a["candidate_places"]) != len(a["candidate_values"]) or a["target"].shape != (3,)
-            or a["attitude"].shape != (3,) or a["numbers"].shape != (5,) or a["counts"].shape != (2,)
-            or tuple(float(x) for x in a["start"]) != tuple(float(x) for x in start)):
+    if a is None or tuple(float(x) for x in a["start"]) != tuple(float(x) for x in start):
         return None
     rate, start_rate, value, rate_se, _ = (float(x) for x in a["numbers"])
     travel, valued = (int(x) for x in a["counts"])
