@@ -4,11 +4,10 @@ Lives here: :data:`PRESETS`, :func:`check_preset` and the budgets of the ``smoke
 (seconds, for tests), ``quick`` (the laptop study) and ``paper`` (sized like the paper)
 presets, one table per config class: expert training (:data:`TRAIN`), the DT's pre-training
 and fine-tuning (:data:`PRETRAIN`, :data:`FINETUNE`), the study (:data:`STUDY`), and the
-strong track's experts;
-the experts' hyperparameter tables (:data:`HYPERPARAMS`, :data:`ALGO_HYPERPARAMS`); and the
-seed bases (:data:`EVAL_SEED`, ...) that keep evaluation, collection, fine-tuning and
-imitation episodes apart. Not here: what the numbers mean and why (the module that uses a
-table explains its values; :mod:`uavris.agents.experts.hyperparams` for the hyperparameters).
+strong track's experts; and the seed bases (:data:`EVAL_SEED`, ...) that keep evaluation,
+collection, fine-tuning and imitation episodes apart. Not here: what the numbers mean and why (the module that uses a
+table explains its values) and the experts' hyperparameters, kept with their reasons in
+:mod:`uavris.agents.experts.hyperparams`.
 """
 
 from __future__ import annotations
@@ -32,7 +31,7 @@ VALUE_SEED = 5_000_000  # the learned value's labelled poses and their draws
 # Expert training (uavris.experiments.training.train_expert.TrainConfig): env steps, the
 # periodic evaluation (interval, episodes) and the checkpoint interval. smoke exercises the
 # code; quick is 500 episodes per run; paper matches the paper's ~25,000 training episodes.
-# The hyperparameters' tables are below (HYPERPARAMS).
+# The hyperparameters: uavris.agents.experts.hyperparams.
 TRAIN: dict[str, dict[str, Any]] = {
     "smoke": dict(total_steps=640, eval_every=320, eval_episodes=8, checkpoint_every=320),
     "quick": dict(total_steps=50_000, eval_every=10_000, eval_episodes=32, checkpoint_every=10_000),
@@ -154,23 +153,3 @@ def check_preset(preset: str) -> None:
 
     if preset not in PRESETS:
         raise ConfigError(f"unknown preset {preset!r}; choose one of {', '.join(PRESETS)}")
-
-# Algorithm hyperparameters (uavris.agents.experts.hyperparams, which gives the reasons):
-# each algorithm's own defaults, then the preset's overrides for off-policy algorithms and
-# for PPO. The paper preset is Hyperparams' defaults.
-ALGO_HYPERPARAMS: dict[str, dict[str, Any]] = {
-    "ddpg": {}, "td3": {}, "sac": dict(learning_rate=3e-4),
-    "ppo": dict(learning_rate=3e-4, n_envs=16, batch_size=256),
-}
-_SMOKE_HP = dict(net_arch=(32, 32), batch_size=32, buffer_size=10_000, learning_starts=100, n_envs=4,
-                 gradient_steps=4, n_steps=32, n_epochs=2)
-HYPERPARAMS: dict[str, dict[str, dict[str, Any]]] = {
-    "paper": {"off_policy": {}, "ppo": {}},
-    "quick": {
-        "off_policy": dict(net_arch=(64, 64), batch_size=128, buffer_size=200_000, learning_starts=1_000, n_envs=4,
-                           gradient_steps=4),
-        "ppo": dict(net_arch=(64, 64), batch_size=256, buffer_size=200_000, learning_starts=1_000, n_envs=16,
-                    gradient_steps=4, n_steps=128),
-    },
-    "smoke": {"off_policy": _SMOKE_HP, "ppo": _SMOKE_HP},
-}

@@ -1,36 +1,14 @@
-"""Hyperparameters of the DRL experts (DDPG, PPO, SAC, TD3), validated, with their reasons.
+"""Hyperparameters of the DRL experts (DDPG, PPO, SAC, TD3): their values and their reasons, in one place.
 
-Lives here: :class:`Hyperparams`, the algorithms' names (:data:`ALGORITHMS`,
-:data:`OFF_POLICY`, :func:`check_algorithm`), which hyperparameters each uses
-(:func:`hyperparams_for`) and a preset's defaults (:func:`default_hyperparams`). Not here:
-the per-preset values (tables in :mod:`uavris.presets`) and building and running the SB3
-models (:mod:`.sb3`).
+Lives here: :class:`Hyperparams` (each field's default and why), what an algorithm and a preset
+change from those defaults (:data:`ALGORITHM_CHANGES`, :data:`PRESET_CHANGES`, with their
+reasons), the algorithms' names (:data:`ALGORITHMS`, :data:`OFF_POLICY`,
+:func:`check_algorithm`), which hyperparameters each uses (:func:`hyperparams_for`) and a
+preset's values (:func:`default_hyperparams`). Not here: the presets' budgets
+(:mod:`uavris.presets`) and building and running the SB3 models (:mod:`.sb3`).
 
-The paper gives no hyperparameters. Ours, with their reasons:
-
-- Networks: two hidden layers (``net_arch``) for actor and critic; 256 units in ``paper``
-  (the common continuous-control size), 64 in ``quick`` because a DDPG gradient step costs
-  ~12 ms on one CPU core at 256 units and ~3 ms at 64, and the quick study trains 20 such
-  runs on a laptop's two cores (its time: docs/timings.md).
-- ``gamma`` = 0.95: a slot's reward depends on that slot's phases and pose; moving pays off
-  within ~10-20 slots (5-10 s at up to 5 m/s), so a 20-slot effective horizon suffices and
-  keeps Q-values small.
-- ``reward_scale`` = 0.1: sum rates are 5-40 bps/Hz per slot; scaled rewards keep critic
-  targets of order 10.
-- Off-policy: ``n_envs`` parallel systems (8 paper, 4 quick/smoke), one update every
-  vector step with ``gradient_steps`` = ``n_envs``: one gradient step per env step. We
-  measured that at one gradient step per 4 env steps DDPG did not improve in 16,000 steps
-  (average sum rate 2-8 bps/Hz, actions saturated at +-1), while at 1:1 it climbed from
-  6.6 to 9.0 bps/Hz over the same steps. Replay 1e6 (paper) or 2e5 (quick); batch
-  256/128; learning rate 1e-3 (DDPG, TD3) and 3e-4 (SAC, its usual); exploration:
-  Gaussian noise sigma = 0.1 on DDPG/TD3 actions, SAC's automatic entropy.
-- PPO (``paper`` and ``quick``): 16 parallel systems x 256 steps per rollout (128 in
-  ``quick``), 10 epochs of minibatch 256, lr 3e-4, GAE 0.95, clip 0.2: the standard
-  continuous-control settings.
-
-The values are :class:`Hyperparams`' defaults overlaid by :data:`uavris.presets.ALGO_HYPERPARAMS`
-(per algorithm) and :data:`uavris.presets.HYPERPARAMS` (per preset: ``smoke`` is far smaller);
-``uavris train --algo ALGO --preset PRESET --help`` shows them.
+The paper gives no hyperparameters. The defaults below are the ``paper`` preset's for DDPG and
+TD3; ``uavris train --algo ALGO --preset PRESET --help`` shows any algorithm's and preset's.
 """
 
 from __future__ import annotations
@@ -41,7 +19,7 @@ from typing import Any, Literal, get_args
 
 from uavris.config import DictConfig
 from uavris.errors import ConfigError
-from uavris.presets import ALGO_HYPERPARAMS, HYPERPARAMS, check_preset
+from uavris.presets import check_preset
 
 Algorithm = Literal["ddpg", "ppo", "sac", "td3"]  # what --algo accepts (tyro lists and checks them)
 ALGORITHMS: tuple[str, ...] = get_args(Algorithm)
@@ -52,26 +30,52 @@ OFF_POLICY: tuple[str, ...] = ("ddpg", "sac", "td3")
 class Hyperparams(DictConfig):
     """Hyperparameters of one algorithm (fields not used by an algorithm are ignored)."""
 
+    # Each default's reason above it: the paper preset's values for DDPG and TD3.
+    # 256 units: the common continuous-control size.
     net_arch: tuple[int, ...] = (256, 256)
+    """hidden units per layer, actor and critic alike"""
+    # DDPG's and TD3's usual.
     learning_rate: float = 1e-3
+    """Adam's step size"""
+    # A slot's reward depends on that slot's phases and pose, and moving pays off within 10-20 slots
+    # (5-10 s at up to 5 m/s): a 20-slot effective horizon suffices and keeps Q-values small.
     gamma: float = 0.95
+    """discount factor"""
+    # Sum rates are 5-40 bps/Hz per slot: scaled, the critic's targets stay of order 10.
     reward_scale: float = 0.1
+    """reward = reward_scale x the slot's sum rate"""
     n_envs: int = 8
+    """parallel systems stepped as one vector"""
     batch_size: int = 256
+    """samples per gradient step"""
     # off-policy
     buffer_size: int = 1_000_000
+    """replay buffer size (transitions)"""
     learning_starts: int = 2_000
+    """env steps of random actions before the first update"""
     tau: float = 0.005
+    """soft-update rate of the target networks"""
+    # n_envs, so one gradient step per env step: at one per 4 env steps DDPG did not improve in 16,000 steps
+    # (average sum rate 2-8 bps/Hz, actions saturated at +-1); at 1:1 it climbed from 6.6 to 9.0 bps/Hz.
     gradient_steps: int = 8
-    action_noise: float = 0.1  # DDPG/TD3 Gaussian exploration sigma (actions in [-1, 1])
-    policy_delay: int = 2  # TD3
-    target_policy_noise: float = 0.2  # TD3
-    ent_coef: str = "auto"  # SAC
-    # on-policy (PPO)
+    """gradient steps per vector step"""
+    action_noise: float = 0.1
+    """DDPG, TD3: sigma of the Gaussian exploration noise (actions in [-1, 1])"""
+    policy_delay: int = 2  # TD3's own, as the next
+    """TD3: critic updates per actor update"""
+    target_policy_noise: float = 0.2
+    """TD3: sigma of the smoothing noise on the target action"""
+    ent_coef: str = "auto"
+    """SAC: entropy coefficient, a number or auto (tuned automatically)"""
+    # on-policy (PPO): the standard continuous-control settings
     n_steps: int = 256
+    """PPO: steps per system per rollout"""
     n_epochs: int = 10
+    """PPO: passes over each rollout"""
     gae_lambda: float = 0.95
+    """PPO: lambda of the generalised advantage estimate"""
     clip_range: float = 0.2
+    """PPO: clip of the probability ratio"""
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "net_arch", tuple(int(x) for x in self.net_arch))
@@ -128,12 +132,36 @@ def _is_float(x: str) -> bool:
     return True
 
 
+# What an algorithm changes from the defaults, in every preset.
+ALGORITHM_CHANGES: dict[str, dict[str, Any]] = {
+    "ddpg": {},
+    "td3": {},
+    "sac": dict(learning_rate=3e-4),  # SAC's usual
+    "ppo": dict(learning_rate=3e-4, n_envs=16, batch_size=256),  # 16 systems x n_steps per rollout, minibatch 256
+}
+# What a preset changes on top, for the off-policy algorithms and for PPO (fields an algorithm does not use are
+# ignored by it, and kept so that a run's config.yaml and its stage's key stay as they are).
+# quick: 64 units, because a DDPG gradient step costs ~12 ms on one CPU core at 256 units and ~3 ms at 64, and the
+# quick study trains 20 such runs on a laptop's two cores (docs/timings.md); a replay to match its 50,000 steps.
+_QUICK = dict(net_arch=(64, 64), buffer_size=200_000, learning_starts=1_000, gradient_steps=4)
+# smoke: the code paths only, in seconds.
+_SMOKE = dict(net_arch=(32, 32), batch_size=32, buffer_size=10_000, learning_starts=100, n_envs=4, gradient_steps=4,
+              n_steps=32, n_epochs=2)
+PRESET_CHANGES: dict[str, dict[str, dict[str, Any]]] = {
+    "paper": {"off_policy": {}, "ppo": {}},
+    "quick": {"off_policy": dict(_QUICK, batch_size=128, n_envs=4),  # 4 systems: gradient_steps = n_envs
+              "ppo": dict(_QUICK, batch_size=256, n_envs=16, n_steps=128)},
+    "smoke": {"off_policy": _SMOKE, "ppo": _SMOKE},
+}
+
+
 def default_hyperparams(algo: str, preset: str) -> Hyperparams:
-    """The documented defaults of ``algo`` for a preset (:data:`uavris.presets.HYPERPARAMS`)."""
+    """The hyperparameters of ``algo`` in a preset: the defaults, changed by the algorithm's
+    :data:`ALGORITHM_CHANGES`, then by the preset's :data:`PRESET_CHANGES`."""
     check_algorithm(algo)
     check_preset(preset)
     kind = "ppo" if algo == "ppo" else "off_policy"
-    return Hyperparams(**{**ALGO_HYPERPARAMS[algo], **HYPERPARAMS[preset][kind]})
+    return Hyperparams(**{**ALGORITHM_CHANGES[algo], **PRESET_CHANGES[preset][kind]})
 
 
 def check_algorithm(algo: str) -> None:
