@@ -9,14 +9,6 @@ from types import SimpleNamespace
 import pytest
 
 from uavris.experiments.engine import costs
-from uavris.experiments.engine.costs import (
-    dataset_cost,
-    demonstration_cost,
-    evaluate_cost,
-    finetune_cost,
-    pretrain_cost,
-    train_cost,
-)
 
 
 def _train(**over):
@@ -29,21 +21,21 @@ def _train(**over):
 def test_an_expert_run_costs_its_env_steps_and_its_evaluations():
     sac = costs.SB3_STEP_S["quick"]["sac"]
     # 10,000 steps; evaluations at 0, 2,500, 5,000, 7,500 and 10,000: 5 x 4 episodes x 50 slots
-    assert train_cost(_train()) == pytest.approx(10_000 * sac + 5 * 4 * 50 * costs.SLOT_S["agent"])
+    assert costs.train_cost(_train()) == pytest.approx(10_000 * sac + 5 * 4 * 50 * costs.SLOT_S["agent"])
     # the smoke preset is priced at quick's rates; the paper preset at its bigger networks'
-    assert train_cost(_train(preset="smoke")) == train_cost(_train())
-    assert train_cost(_train(preset="paper")) > train_cost(_train())
+    assert costs.train_cost(_train(preset="smoke")) == costs.train_cost(_train())
+    assert costs.train_cost(_train(preset="paper")) > costs.train_cost(_train())
     # imitation of the oracle: a plan, then per round its episodes of labelled slots
     imitation = SimpleNamespace(rounds=3, episodes=2, evaluate_rounds=False)
     extra = costs.PLAN_S + 3 * 2 * 50 * costs.IMITATION_SLOT_S
-    assert train_cost(_train(imitation=imitation)) - train_cost(_train()) == pytest.approx(extra)
+    assert costs.train_cost(_train(imitation=imitation)) - costs.train_cost(_train()) == pytest.approx(extra)
     # evaluated after every round: 3 more evaluations of 4 episodes
     curve = SimpleNamespace(rounds=3, episodes=2, evaluate_rounds=True)
-    assert train_cost(_train(imitation=curve)) - train_cost(_train(imitation=imitation)) == pytest.approx(
+    assert costs.train_cost(_train(imitation=curve)) - costs.train_cost(_train(imitation=imitation)) == pytest.approx(
         3 * 4 * 50 * costs.SLOT_S["agent"])
     # the optimiser's phases make every evaluation slot dearer, nothing else
     diff = 5 * 4 * 50 * (costs.SLOT_S["optimizer"] - costs.SLOT_S["agent"])
-    assert train_cost(_train(phase_control="optimizer")) - train_cost(_train()) == pytest.approx(diff)
+    assert costs.train_cost(_train(phase_control="optimizer")) - costs.train_cost(_train()) == pytest.approx(diff)
 
 
 def test_the_algorithms_are_priced_in_the_order_the_comparison_measured():
@@ -57,11 +49,11 @@ def test_the_algorithms_are_priced_in_the_order_the_comparison_measured():
 def test_data_costs_are_their_slots_and_plans():
     slot = costs.SLOT_S["optimizer"]
     # a collected slot: its share of an evaluated one (one batch, no slot records)
-    assert dataset_cost(10, 50, "optimizer") == pytest.approx(10 * 50 * slot * costs.COLLECT_SHARE["optimizer"])
+    assert costs.dataset_cost(10, 50, "optimizer") == pytest.approx(10 * 50 * slot * costs.COLLECT_SHARE["optimizer"])
     # 64 halls, 2 episodes each of 100 slots: a plan per hall and 128 episodes with the optimiser
-    assert demonstration_cost(64, 2, 100, exact_plans=True) == pytest.approx(64 * costs.PLAN_S + 128 * 100 * slot)
+    assert costs.demonstration_cost(64, 2, 100, exact_plans=True) == pytest.approx(64 * costs.PLAN_S + 128 * 100 * slot)
     # the planner's cheap ranking: the same episodes, each plan 7.7x cheaper
-    assert demonstration_cost(64, 2, 100) == pytest.approx(64 * costs.PLAN_S / 7.7 + 128 * 100 * slot)
+    assert costs.demonstration_cost(64, 2, 100) == pytest.approx(64 * costs.PLAN_S / 7.7 + 128 * 100 * slot)
 
 
 def _pretrain(**over):
@@ -73,12 +65,12 @@ def _pretrain(**over):
 def test_a_dt_step_is_an_overhead_plus_its_matrix_products():
     overhead, reference = costs.DT_STEP_OVERHEAD_S, costs.DT_STEP_S
     # the reference size (batch 64 x 20 slots, width 128, 3 layers) costs DT_STEP_S a step
-    assert pretrain_cost(_pretrain()) == pytest.approx(1_000 * (overhead + reference))
+    assert costs.pretrain_cost(_pretrain()) == pytest.approx(1_000 * (overhead + reference))
     # half the width: a quarter of the products; half the context: half; two layers of three
-    assert pretrain_cost(_pretrain(width=64)) == pytest.approx(1_000 * (overhead + reference / 4))
-    assert pretrain_cost(_pretrain(context=10, depth=2)) == pytest.approx(1_000 * (overhead + reference / 3))
+    assert costs.pretrain_cost(_pretrain(width=64)) == pytest.approx(1_000 * (overhead + reference / 4))
+    assert costs.pretrain_cost(_pretrain(context=10, depth=2)) == pytest.approx(1_000 * (overhead + reference / 3))
     # the device-set encoder reads every state of the batch once more
-    devices = pretrain_cost(_pretrain(state_encoder="devices")) - pretrain_cost(_pretrain())
+    devices = costs.pretrain_cost(_pretrain(state_encoder="devices")) - costs.pretrain_cost(_pretrain())
     assert devices == pytest.approx(1_000 * 64 * 20 * costs.DEVICE_ENCODER_STATE_S)
 
 
@@ -92,12 +84,12 @@ def test_finetuning_and_evaluation_worked_by_hand():
     per_round = 14 * 50 * (slot + act) + 2 * 3 * step
     expected = 4 * 50 * slot + 2 * per_round
     model = SimpleNamespace(context=context, width=width, depth=depth)
-    assert finetune_cost(ft, horizon, "optimizer", model) == pytest.approx(expected)
+    assert costs.finetune_cost(ft, horizon, "optimizer", model) == pytest.approx(expected)
     # evaluation: the learned policies' episodes, and the references (a plan; hovering and the
     # oracle with the optimiser)
-    assert evaluate_cost(3, 8, 50, "agent") == pytest.approx(
+    assert costs.evaluate_cost(3, 8, 50, "agent") == pytest.approx(
         3 * 8 * 50 * costs.SLOT_S["agent"] + costs.PLAN_S + 2 * 8 * 50 * slot)
     # a generated hall of 8 devices: twice the optimiser's pairs, the oracle's global stage with and
     # without the safety layer, and the transferred plan's hall planned
-    assert evaluate_cost(3, 8, 50, "optimizer", 8, 2, True, 1) == pytest.approx(
+    assert costs.evaluate_cost(3, 8, 50, "optimizer", 8, 2, True, 1) == pytest.approx(
         3 * 8 * 50 * slot * 2 + 2 * costs.ORACLE_PLAN_S[8] + costs.PLAN_S + 2 * 8 * 50 * slot * 2)

@@ -281,18 +281,27 @@ def _start(args: list[str], err: Path):
                                 preexec_fn=_default_signals)
 
 
-def test_workers_end_when_their_command_is_killed(tmp_path: Path):
-    """A command killed by SIGKILL (or the OOM killer) stops nothing itself; its workers, which
-    went on with their jobs into an output whose lock the kill had freed, now end themselves."""
-    import signal
+def _start_hanging(tmp_path: Path, driver: str, **fields: object):
+    """The program ``driver`` (its ``{jobs}``: the two ``HANG`` jobs, ``{pids}``: where they record
+    their pids) started with :func:`_start`: the pids folder, the stderr file and the process."""
     import sys
 
     pids = tmp_path / "pids"
     pids.mkdir()
-    driver = ("from pathlib import Path\nfrom uavris.experiments.engine.jobs import Job, JobRunner\n"
-              f"with JobRunner(2) as runner:\n    runner.run({_hang_jobs(pids)})\n")
     err = tmp_path / "stderr"
-    proc, workers = _start([sys.executable, "-c", driver], err), []
+    script = driver.format(jobs=_hang_jobs(pids), pids=str(pids), **fields)
+    return pids, err, _start([sys.executable, "-c", script], err)
+
+
+def test_workers_end_when_their_command_is_killed(tmp_path: Path):
+    """A command killed by SIGKILL (or the OOM killer) stops nothing itself; its workers, which
+    went on with their jobs into an output whose lock the kill had freed, now end themselves."""
+    import signal
+
+    driver = ("from pathlib import Path\nfrom uavris.experiments.engine.jobs import Job, JobRunner\n"
+              "with JobRunner(2) as runner:\n    runner.run({jobs})\n")
+    pids, err, proc = _start_hanging(tmp_path, driver)
+    workers = []
     try:
         workers = _workers(pids, proc, err)
         os.kill(proc.pid, signal.SIGKILL)
@@ -413,13 +422,9 @@ def test_ctrl_c_in_a_program_that_runs_a_study_stops_its_workers(tmp_path: Path,
     workers (they ignore SIGINT themselves) instead of waiting for their jobs to end; with one
     worker, the job its stage's thread runs in the program itself."""
     import signal
-    import sys
 
-    pids = tmp_path / "pids"
-    pids.mkdir()
-    err = tmp_path / "stderr"
-    script = LIBRARY_STUDY.format(jobs=_hang_jobs(pids), out=str(tmp_path), workers=workers)
-    proc, seen = _start([sys.executable, "-c", script], err), []
+    pids, err, proc = _start_hanging(tmp_path, LIBRARY_STUDY, out=str(tmp_path), workers=workers)
+    seen = []
     try:
         seen = _workers(pids, proc, err, n=workers)
         workers = [p for p in seen if p != proc.pid]
@@ -499,13 +504,9 @@ def test_a_signal_stops_the_workers_of_jobs_a_stage_thread_waits_for(tmp_path: P
     signal does not reach: it is stopped there too (before, `uavris reproduce --workers 1` ran
     its job to the end, minutes, after SIGTERM)."""
     import signal
-    import sys
 
-    pids = tmp_path / "pids"
-    pids.mkdir()
-    err = tmp_path / "stderr"
-    script = STUDY.format(jobs=_hang_jobs(pids), pids=str(pids), workers=workers)
-    proc, workers_seen = _start([sys.executable, "-c", script], err), []
+    pids, err, proc = _start_hanging(tmp_path, STUDY, workers=workers)
+    workers_seen = []
     try:
         workers_seen = _workers(pids, proc, err, n=workers)
         if workers == 1:

@@ -38,16 +38,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from uavris import physics as ph
-from uavris.agents.oracle.objective import (
-    ASSESS_SEED,
-    episode_value,
-    expected_optimised_rate,
-    feasible,
-    feasible_grid,
-    rate_batches,
-    top_apart,
-    trip_slots,
-)
+from uavris.agents.oracle import objective
 from uavris.agents.oracle.planner import Plan, held, pattern_search
 from uavris.config import SystemConfig
 
@@ -86,27 +77,28 @@ def exhaustive_plan(config: SystemConfig, start: tuple[float, float, float],
     count = 0
 
     def default(q: NDArray, att: NDArray) -> NDArray[np.float64]:
-        return expected_optimised_rate(c, q, att, draws=s.draws, seed=s.seed)
+        return objective.expected_optimised_rate(c, q, att, draws=s.draws, seed=s.seed)
 
     rate_of = valuer or default
 
     def value(q: NDArray, att: NDArray) -> NDArray[np.float64]:
         nonlocal count
         count += len(q)
-        return episode_value(c.horizon, trip_slots(c, start_q, np.atleast_2d(q)), r_start, rate_of(q, att))
+        trip = objective.trip_slots(c, start_q, np.atleast_2d(q))
+        return objective.episode_value(c.horizon, trip, r_start, rate_of(q, att))
 
     start_q = np.asarray(start, dtype=np.float64)
     level = np.zeros(3)
     r_start = float(rate_of(start_q[None], level[None])[0])
-    places, ok = feasible_grid(c, s.grid_step, s.z_step)
+    places, ok = objective.feasible_grid(c, s.grid_step, s.z_step)
     grid = np.concatenate([start_q[None], places[ok]])
     v = value(grid, np.zeros_like(grid))
     ticks = np.arange(-s.fine_reach, s.fine_reach + 1e-9, s.fine_step)
     offsets = np.stack(np.meshgrid(ticks, ticks, ticks, indexing="ij"), -1).reshape(-1, 3)
-    near = np.concatenate([grid[i] + offsets for i in top_apart(v, grid, s.fine_places, s.grid_step - 1e-9)])
-    near = near[feasible(c, near)]
+    near = np.concatenate([grid[i] + offsets for i in objective.top_apart(v, grid, s.fine_places, s.grid_step - 1e-9)])
+    near = near[objective.feasible(c, near)]
     grid, v = np.concatenate([grid, near]), np.concatenate([v, value(near, np.zeros_like(near))])
-    chosen = top_apart(v, grid, s.top, s.grid_step - 1e-9)  # the best, at least a grid step apart
+    chosen = objective.top_apart(v, grid, s.top, s.grid_step - 1e-9)  # the best, at least a grid step apart
     angles = np.radians(np.array(list(itertools.product(s.attitudes_deg, repeat=3))))
     poses = [(grid[i], a) for i in chosen for a in angles]
     q_all = np.array([p for p, _ in poses])
@@ -143,8 +135,8 @@ def plan_gap(config: SystemConfig, start: tuple[float, float, float], plan: Plan
     start_q = np.asarray(start, dtype=np.float64)
     q = np.stack([start_q, plan.target, found.target])
     att = np.stack([np.zeros(3), plan.attitude, found.attitude])
-    r = rate_batches(config, q, att, batches, seed + ASSESS_SEED + 5_000)  # (3, B)
-    v = episode_value(config.horizon, trip_slots(config, start_q, q)[:, None], r[0], r)
+    r = objective.rate_batches(config, q, att, batches, seed + objective.ASSESS_SEED + 5_000)  # (3, B)
+    v = objective.episode_value(config.horizon, objective.trip_slots(config, start_q, q)[:, None], r[0], r)
     d = v[2] - v[1]
     return Gap(float(v[1].mean()), float(v[2].mean()), float(v[0].mean()), float(d.mean()),
                float(d.std(ddof=1) / math.sqrt(batches)))

@@ -41,7 +41,6 @@ import numpy as np
 from uavris import runs
 from uavris.agents.evaluation import EpisodeResults, evaluate
 from uavris.agents.experts import (
-    ALGORITHMS,
     OFF_POLICY,
     Algorithm,
     Hyperparams,
@@ -66,7 +65,7 @@ from uavris.env.wrappers import PhaseControl, check_phase_control
 from uavris.errors import CheckpointError, ConfigError, UavrisError
 from uavris.experiments.display.progress import progress_bar
 from uavris.io import atomic_save, atomic_write_bytes, read_csv, read_rows, write_csv
-from uavris.presets import EVAL_SEED, PRESETS, TRAIN, Preset, check_preset
+from uavris.presets import EVAL_SEED, TRAIN, Preset, check_preset
 from uavris.runs.seal import TRUST_FLAG, check_sealed, seal
 
 EPISODE_HEADER = ("episode", "env_steps", "avg_sum_rate", "return", "length")
@@ -429,5 +428,4 @@ def final_model_path(run_dir: str | Path) -> Path:
     raise UavrisError(f"{run_dir} has no model yet (no model.zip and no checkpoint)")
 
 
-__all__ = ["ALGORITHMS", "PRESETS", "TrainConfig", "default_run_dir", "final_model_path", "load_model",
-           "load_run_config", "TrainConfig", "train"]
+__all__ = ["TrainConfig", "default_run_dir", "final_model_path", "load_model", "load_run_config", "train"]
