@@ -12,6 +12,16 @@ whole, and the worst family's factor (max of measured/expected and expected/meas
 
     .venv/bin/python benchmarks/findings/cost_model.py runs/quick          # the model the run used
     .venv/bin/python benchmarks/findings/cost_model.py runs/quick --now    # this version's model
+    .venv/bin/python benchmarks/findings/cost_model.py runs/quick --fit    # unit costs fitted to the run
+
+``--now`` and ``--fit`` build the run's study with the experts' algorithm its comparison chose
+(``--expert-algo``, default ppo: the quick study's choice), as the run itself did once the
+comparison had ended. ``--fit``: every expected cost is a sum of unit costs times amounts of work,
+so doubling one group of unit costs (the SB3 step, the simulated slot, the plans, the planner's
+poses, the DT's step, the value's step) and rebuilding the study gives each stage's part of it;
+the scale of each group that makes the stages' expected seconds closest to the measured ones in
+relative terms (non-negative least squares, each stage weighted by 1 / its measured seconds) is
+printed with the unit costs it gives.
 """
 
 from __future__ import annotations
@@ -36,12 +46,71 @@ def family(stage: str) -> str:
         name = shorter
 
 
-def _expected_now(run: Path) -> dict[str, float]:
-    """Each stage's expected seconds by this version's cost model (the run's own study, opened)."""
-    from uavris.experiments.study.finished import Study
+# the unit costs of uavris.experiments.engine.costs, in the groups --fit scales together
+GROUPS = {
+    "SB3 env step": ("SB3_STEP_S",),
+    "simulated slot": ("SLOT_S", "IMITATION_SLOT_S"),
+    "plan of a hall": ("PLAN_S", "PLAN_FAST_S", "ORACLE_PLAN_S"),
+    "planner's pose": ("POSE_S",),
+    "DT step": ("DT_STEP_S", "DT_STEP_OVERHEAD_S", "DEVICE_ENCODER_STATE_S"),
+    "value step": ("VALUE_STEP_S",),
+}
 
-    stages = Study.open(run).pipeline.stages
+
+def _scaled(value, factor: float):
+    if isinstance(value, dict):
+        return {k: _scaled(v, factor) for k, v in value.items()}
+    return value * factor
+
+
+def _expected_now(run: Path, expert_algo: str = "ppo") -> dict[str, float]:
+    """Each stage's expected seconds by this version's cost model (the run's own study, with the
+    experts' algorithm the comparison chose)."""
+    import dataclasses
+
+    from uavris.experiments.engine.scheduling import StudyContext
+    from uavris.experiments.study.finished import Study
+    from uavris.experiments.study.pipeline import build_pipeline
+
+    rc = Study.open(run).config
+    if rc.expert_algo == "auto":
+        rc = dataclasses.replace(rc, expert_algo=expert_algo)
+    stages = build_pipeline(rc, run, StudyContext(1, "local", None)).stages
     return {name: (st.progress_s if st.progress_s is not None else sum(st.costs)) for name, st in stages.items()}
+
+
+def fit(run: Path, measured: dict[str, float], expert_algo: str) -> None:
+    """Print the scale of each group of unit costs (:data:`GROUPS`) that fits ``measured`` (seconds per stage)."""
+    import numpy as np
+    from scipy.optimize import nnls
+
+    from uavris.experiments.engine import costs
+
+    names = sorted(measured)
+    base = _expected_now(run, expert_algo)
+    parts = []
+    for group in GROUPS.values():
+        kept = {name: getattr(costs, name) for name in group}
+        try:
+            for name, value in kept.items():
+                setattr(costs, name, _scaled(value, 2.0))
+            doubled = _expected_now(run, expert_algo)
+        finally:
+            for name, value in kept.items():
+                setattr(costs, name, value)
+        parts.append([doubled.get(n, 0.0) - base.get(n, 0.0) for n in names])
+    a = np.array(parts).T  # (stages, groups): each group's seconds in each stage
+    rest = np.array([base.get(n, 0.0) for n in names]) - a.sum(axis=1)
+    y = np.array([measured[n] for n in names])
+    w = 1.0 / np.maximum(y, 1.0)
+    scale, _ = nnls(a * w[:, None], (y - rest) * w)
+    print("\n| group of unit costs | expected core-min in this run | scale fitted |\n|---|---:|---:|")
+    for (group, units), col, s in zip(GROUPS.items(), a.T, scale):
+        print(f"| {group} ({', '.join(units)}) | {col.sum() / 60:.1f} | {s:.2f} |")
+    print("\nunit costs they give:")
+    for units, s in zip(GROUPS.values(), scale):
+        for name in units:
+            print(f"  {name} = {_scaled(getattr(costs, name), float(s))!r}")
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -49,9 +118,12 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("run", type=Path, help="the output folder of a finished reproduce run")
     ap.add_argument("--now", action="store_true",
                     help="expected by this version's cost model, not the one the run recorded (a recalibration)")
+    ap.add_argument("--fit", action="store_true", help="fit the groups of unit costs to the run's stage times")
+    ap.add_argument("--expert-algo", default="ppo",
+                    help="with --now or --fit: the experts' algorithm the run's comparison chose (default ppo)")
     args = ap.parse_args(argv)
     sched = json.loads((args.run / "schedule.json").read_text())
-    now = _expected_now(args.run) if args.now else None
+    now = _expected_now(args.run, args.expert_algo) if args.now else None
     fams: dict[str, dict[str, float]] = {}
     for j in sched["jobs"]:
         f = fams.setdefault(family(j["stage"]), {"jobs": 0, "expected": 0.0, "measured": 0.0})
@@ -78,6 +150,11 @@ def main(argv: list[str] | None = None) -> None:
     expected = sum(f["expected"] for f in fams.values())
     print(f"| all | {len(sched['jobs'])} | {expected / 60:.1f} | {total / 60:.1f} | {total / expected:.2f} | 100% |")
     print(f"\nworst family: {worst[1]}, off by {worst[0]:.2f}x")
+    if args.fit:
+        measured: dict[str, float] = {}
+        for j in sched["jobs"]:
+            measured[j["stage"]] = measured.get(j["stage"], 0.0) + j["end"] - j["start"]
+        fit(args.run, measured, args.expert_algo)
 
 
 if __name__ == "__main__":

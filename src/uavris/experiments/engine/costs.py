@@ -6,15 +6,17 @@ expected cost of each kind of job (:func:`train_cost`, :func:`dataset_cost`,
 them, the order in which the job runner starts jobs (:mod:`.jobs`, :mod:`.stages`: the
 longest chain first) and the progress bar of ``reproduce`` (each job weighs its cost).
 
-The unit costs were measured on the project machine (2-core AMD EPYC, one job per core,
-quick preset), recalibrated from the job times of a whole quick study on a fresh clone (its
-``schedule.json``, read by ``benchmarks/findings/cost_model.py``; docs/timings.md): an SB3 env
-step with the quick networks (64 x 64), from the comparison's jobs; the paper preset's
-256 x 256 networks from ``benchmarks/paper_wallclock.py`` (an earlier measurement); a
-simulated slot with a learned policy, with and without the per-slot phase optimiser; the exact
-planner's plan and the oracle's (with its global stage) by the number of devices; a DT
-gradient step at the DT paper's size (batch 64 windows of 20 slots, width 128, 3 layers),
-scaled by the tokens it reads. They order and weigh jobs; nothing depends on them being
+The unit costs are those of the project machine (2-core AMD EPYC, Zen 5, one job per core,
+quick preset): each group of them (the SB3 env step, the simulated slot, the plans, the
+planner's poses, the DT's step, the value's step) scaled to fit the stage times of a whole quick
+study on a fresh clone (its ``schedule.json``, read by ``benchmarks/findings/cost_model.py
+--fit``; docs/timings.md). The shapes inside a group come from earlier measurements: an SB3 env
+step per algorithm with the quick networks (64 x 64), and with the paper preset's 256 x 256 from
+``benchmarks/paper_wallclock.py``; a simulated slot with a learned policy, with and without the
+per-slot phase optimiser; the exact planner's plan and the oracle's (with its global stage) by the
+number of devices; a DT gradient step at the DT paper's size (batch 64 windows of 20 slots, width
+128, 3 layers), scaled by the tokens it reads. They order and weigh jobs and start the ETA, which
+then scales them by this run's own job times (:mod:`.forecast`); nothing depends on them being
 exact, only on their ratios being about right.
 """
 
@@ -24,28 +26,28 @@ from typing import Any
 
 # SB3 training, seconds per env step (networks of the preset; smoke uses quick's rates).
 SB3_STEP_S: dict[str, dict[str, float]] = {
-    "quick": {"ddpg": 5.2e-3, "td3": 5.3e-3, "sac": 9.7e-3, "ppo": 0.22e-3},
-    "paper": {"ddpg": 10.3e-3, "td3": 11.4e-3, "sac": 17.8e-3, "ppo": 0.34e-3},
+    "quick": {"ddpg": 1.8e-3, "td3": 1.8e-3, "sac": 3.4e-3, "ppo": 0.076e-3},
+    "paper": {"ddpg": 3.6e-3, "td3": 3.9e-3, "sac": 6.2e-3, "ppo": 0.12e-3},
 }
 # A simulated slot of one episode with a learned policy, by who sets the phases, and with the
 # planning oracle as the teacher of imitation (its motion only, no phases).
-SLOT_S = {"agent": 0.46e-3, "optimizer": 1.2e-3}
+SLOT_S = {"agent": 0.16e-3, "optimizer": 0.41e-3}
 # a collected slot costs this share of an evaluated one (one batch, no slot records)
 COLLECT_SHARE = {"agent": 0.3, "optimizer": 0.55}
-IMITATION_SLOT_S = 1.64e-3  # a DAgger slot: the rollout, the oracle's label and its share of the fitting
-PLAN_S = 2.5  # the exact planner's plan of one hall without the global stage (the teacher of the demonstrations)
+IMITATION_SLOT_S = 0.56e-3  # a DAgger slot: the rollout, the oracle's label and its share of the fitting
+PLAN_S = 1.4  # the exact planner's plan of one hall without the global stage (the teacher of the demonstrations)
 # The oracle's plan (the yardstick, with its global stage: docs/model.md section 19) by the number of devices
-ORACLE_PLAN_S = {3: 0.3, 4: 12.0, 5: 20.0, 6: 30.0, 7: 40.0, 8: 50.0}
+ORACLE_PLAN_S = {3: 0.17, 4: 6.8, 5: 11.3, 6: 17.0, 7: 22.6, 8: 28.3}
 PLAN_FAST_S = PLAN_S / 7.7  # the same with the planner's cheap ranking (PlanSettings(exact=False), measured 7.7-11x)
 # A DT gradient step at the DT paper's size: batch 64 windows of 20 slots, width 128, 3 layers;
 # other sizes scale with the slots read times width^2 times depth (the matrix products).
-DT_STEP_S = 0.28
+DT_STEP_S = 0.149
 DT_REFERENCE = 64 * 20 * 128 * 128 * 3
 # What a gradient step costs whatever the model's size (the sampling of windows, the optimiser,
 # the autograd bookkeeping): small models are dominated by it. And the device-set encoder's
 # per-device and pair networks, per state it reads (docs/study.md, section 2).
-DT_STEP_OVERHEAD_S = 0.021
-DEVICE_ENCODER_STATE_S = 3.5e-5
+DT_STEP_OVERHEAD_S = 0.0112
+DEVICE_ENCODER_STATE_S = 1.86e-5
 
 
 def _dt_step(batch: int, context: int, width: int, depth: int) -> float:
@@ -100,8 +102,8 @@ def finetune_cost(cfg: Any, horizon: int, phase_control: str, model: Any) -> flo
 
 # The planner's R of one pose (its pairings x 2 NLoS draws, optimised), by the number of devices:
 # K = 3 has one pair at most (the closed form); more pairs, more optimiser per slot.
-POSE_S = {3: 1.5e-4, 4: 0.022, 5: 0.021, 6: 0.040, 7: 0.068, 8: 0.095}
-VALUE_STEP_S = 0.03  # a gradient step of the learned value at width 64, batch 256 (scales with width^2)
+POSE_S = {3: 0.72e-4, 4: 0.0105, 5: 0.0101, 6: 0.0192, 7: 0.0326, 8: 0.0455}
+VALUE_STEP_S = 0.0155  # a gradient step of the learned value at width 64, batch 256 (scales with width^2)
 
 
 def value_labels_cost(count: int, halls: int, poses: int) -> float:
