@@ -47,6 +47,7 @@ from typing import Any, Callable, Sequence
 from uavris import runs
 from uavris.agents.dt.dataset import DATASET_FORMAT_VERSION
 from uavris.agents.experts import ALGORITHMS
+from uavris.agents.oracle.planner import ORACLE_VERSION
 from uavris.experiments.engine.costs import (
     dataset_cost,
     demonstration_cost,
@@ -216,7 +217,7 @@ class TrackStages(PlaceStages):
                 cfgs = {d.name: strong_expert_config(d.name, self.rc.seed, self.rc.preset, self.rc.eval_episodes,
                                                      d.system, d.start, curve=name == "experts-unseen") for d in where}
                 stages.append(Stage(self.t(name), {"runs": {s: c.to_dict() for s, c in cfgs.items()},
-                                                   "format": EXPERT_FORMAT},
+                                                   "format": EXPERT_FORMAT, "oracle": ORACLE_VERSION},
                                     partial(self._run_experts, self.t(name), cfgs),
                                     costs=tuple(train_cost(c) for c in cfgs.values())))
             else:
@@ -313,8 +314,9 @@ class TrackStages(PlaceStages):
     def _demonstrations_stage(self, name: str, cfg: DemonstrationConfig) -> Stage:
         costs = tuple(demonstration_cost(n, cfg.episodes * len(cfg.behaviours), self.horizon, cfg.exact_plans)
                       for _, n in self._chunks(cfg))
-        # the dataset format is part of the key: a stage of another format is not read, it is made again
-        return Stage(self.t(name), {**cfg.to_dict(), "format": DATASET_FORMAT_VERSION},
+        # the dataset format and the planner's version are part of the key: a stage of another format, or
+        # flown by another planner, is not read, it is made again
+        return Stage(self.t(name), {**cfg.to_dict(), "format": DATASET_FORMAT_VERSION, "oracle": ORACLE_VERSION},
                      partial(self._run_demonstrations, name, cfg, costs), (), costs)
 
     def _run_demonstrations(self, name: str, cfg: DemonstrationConfig, costs: tuple[float, ...], d: Path,
@@ -371,8 +373,8 @@ class TrackStages(PlaceStages):
         # the hall it reads (its devices, room and start), not only its name: a changed generator or
         # layout is evaluated again instead of read back from an older run
         config = {"episodes": self.rc.eval_episodes, "seed": EVAL_SEED, "track": self.track.name,
-                  "format": RESULTS_FORMAT, "hall": {"system": where.system.to_dict(),
-                                                     "start": list(where.scenario.start)},
+                  "format": RESULTS_FORMAT, "oracle": ORACLE_VERSION,
+                  "hall": {"system": where.system.to_dict(), "start": list(where.scenario.start)},
                   "rows": [r.key for r in rows], "transfer_from": [s for s, _ in sources],
                   **({"front_margin_deg": self.track.front_margin_deg} if self.track.front_margin_deg else {})}
         return Stage(self.t(evaluation_stage(where.name)), config,
