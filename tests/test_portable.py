@@ -129,3 +129,22 @@ def test_a_process_that_loaded_numpy_first_and_its_workers_take_one_path(tmp_pat
     assert json.loads(out.stdout.strip().splitlines()[-1]) == "None"  # the worker kept the native path, as its parent
     if "avx2" in Path("/proc/cpuinfo").read_text() and not os.environ.get("UAVRIS_NATIVE_FLOATS"):
         assert os.environ.get("NPY_DISABLE_CPU_FEATURES")  # this process: pinned, like the workers it starts
+
+
+def test_a_report_names_the_cpu_and_the_float_path_it_ran(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The machine line of a report (uavris.experiments.engine.jobs.machine) tells apart two CPUs of one
+    name (an AMD EPYC of family 25 and one of family 26 both call themselves "AMD EPYC") by their family and
+    model numbers, and says whether the libraries ran the pinned AVX2 path or their native kernels."""
+    from uavris.experiments.engine.jobs import machine
+
+    info = Path("/proc/cpuinfo").read_text(encoding="utf-8") if Path("/proc/cpuinfo").exists() else ""
+    first = dict(line.split(":", 1) for line in info.split("\n\n")[0].splitlines() if ":" in line)
+    first = {k.strip(): v.strip() for k, v in first.items()}
+    line = machine()
+    if "cpu family" in first:
+        assert f"(family {first['cpu family']}, model {first['model']})" in line
+    if os.uname().machine == "x86_64" and _cpu_has("avx2"):  # this process imported uavris first (conftest)
+        assert "the AVX2 path" in line
+        assert ("AVX-512 switched off" in line) == _cpu_has("avx512f")
+        monkeypatch.setenv("UAVRIS_NATIVE_FLOATS", "1")
+        assert "native kernels" in machine()

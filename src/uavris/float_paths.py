@@ -59,6 +59,17 @@ def _has_flag(flag: str) -> bool:
         return False
 
 
+def float_path() -> str:
+    """The kernels this process's libraries run, in words (a report's machine line): on x86-64, the
+    pinned AVX2 path (saying so where the CPU's AVX-512 is switched off) or the native kernels."""
+    if platform.machine().lower() not in ("x86_64", "amd64"):
+        return "the libraries' own kernels"
+    avx512 = _has_flag("avx512f")
+    if os.environ.get("UAVRIS_NATIVE_FLOATS") or os.environ.get("OPENBLAS_CORETYPE") != PINNED["OPENBLAS_CORETYPE"]:
+        return "native kernels" + (" (AVX-512)" if avx512 else "")
+    return "the AVX2 path" + (" (its AVX-512 switched off)" if avx512 else "")
+
+
 def pin_float_paths() -> dict[str, str]:
     """Set the environment that pins every library to the AVX2 path (module docstring), where it
     applies: an x86-64 CPU with AVX2, numpy and torch not yet loaded, no ``UAVRIS_NATIVE_FLOATS``.

@@ -114,27 +114,35 @@ def configure_threads(torch_now: bool = True) -> None:
 
 
 def machine() -> str:
-    """The machine a study or benchmark ran on, for its report: CPU model, CPUs, Python, numpy
-    and torch versions (a verdict that flips with the CPU is not a finding: docs/study.md
-    section 3)."""
+    """The machine a study or benchmark ran on, for its report: CPU model (with its family and
+    model numbers: two CPUs of one name may differ), CPUs, the float path its libraries ran
+    (:func:`uavris.float_paths.float_path`), Python, numpy and torch versions (a verdict that
+    flips with the CPU is not a finding: docs/study.md section 3)."""
     import os
     import platform
 
-    cpu = platform.processor() or "unknown CPU"
+    from uavris.float_paths import float_path
+
+    found: dict[str, str] = {}
     try:
         with open("/proc/cpuinfo", encoding="utf-8") as info:
             for line in info:
                 key, _, value = line.partition(":")
-                if key.strip() in ("model name", "Hardware", "Processor") and value.strip():
-                    cpu = value.strip()
+                if key.strip() in ("model name", "Hardware", "Processor", "cpu family", "model") and value.strip():
+                    found.setdefault(key.strip(), value.strip())
+                if not line.strip() and found:  # the first CPU's block is enough
                     break
     except OSError:
         pass
+    cpu = next((found[k] for k in ("model name", "Hardware", "Processor") if k in found),
+               platform.processor() or "unknown CPU")
+    if "cpu family" in found and "model" in found:
+        cpu += f" (family {found['cpu family']}, model {found['model']})"
     import numpy
     import torch
 
-    return (f"{cpu}, {os.cpu_count()} CPUs, Python {platform.python_version()}, numpy {numpy.__version__}, "
-            f"torch {torch.__version__}")
+    return (f"{cpu}, {os.cpu_count()} CPUs, {float_path()}, Python {platform.python_version()}, "
+            f"numpy {numpy.__version__}, torch {torch.__version__}")
 
 
 def _run_logged(job: Job, in_command: bool = False) -> JobResult:
