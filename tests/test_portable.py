@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from uavris.float_paths import PINNED
+from uavris.float_paths import PINNED, _has_flag
 
 SCRIPT = """
 import sys
@@ -66,16 +66,12 @@ from numpy._core._multiarray_umath import __cpu_dispatch__ as targets, __cpu_fea
 blas = sorted({i.get("architecture") for i in threadpoolctl.threadpool_info() if i.get("internal_api") == "openblas"})
 # the kernels numpy may dispatch to on this CPU: its dispatch targets still enabled (a CPU feature that is no
 # target, such as numpy 2.4's AVX512VNNI beside its X86_V4 level, is reported as the CPU's and chooses no kernel)
+from uavris.float_paths import float_path
 print(json.dumps({"avx512": sorted(k for k in targets if features.get(k) and ("AVX512" in k or k == "X86_V4")),
-                  "blas": blas, "torch": torch.backends.cpu.get_cpu_capability(),
+                  "blas": blas, "torch": torch.backends.cpu.get_cpu_capability(), "path": float_path(),
                   "set": {k: os.environ.get(k) for k in ("NPY_DISABLE_CPU_FEATURES", "OPENBLAS_CORETYPE",
                                                         "MKL_CBWR")}}))
 """
-
-
-def _cpu_has(flag: str) -> bool:
-    with open("/proc/cpuinfo", encoding="utf-8") as f:
-        return any(line.startswith("flags") and flag in line.split(":", 1)[-1].split() for line in f)
 
 
 def _paths(env: dict[str, str]) -> dict:
@@ -97,12 +93,16 @@ def test_import_uavris_pins_every_library_to_the_avx2_path() -> None:
     pinned = _paths({})
     assert pinned["avx512"] == [] and pinned["blas"] == ["Haswell"] and pinned["torch"] in ("AVX2", "DEFAULT")
     assert pinned["set"]["OPENBLAS_CORETYPE"] == "Haswell" and pinned["set"]["MKL_CBWR"] == "AVX2"
+    # what a report's machine line says of it (uavris.float_paths.float_path), read from the libraries
+    assert pinned["path"] == "the AVX2 path" + (" (its AVX-512 switched off)" if _has_flag("avx512f") else "")
     assert {"X86_V4", "AVX512F"} & set(pinned["set"]["NPY_DISABLE_CPU_FEATURES"].split())
     native = _paths({"UAVRIS_NATIVE_FLOATS": "1"})
     assert native["set"] == {"NPY_DISABLE_CPU_FEATURES": None, "OPENBLAS_CORETYPE": None, "MKL_CBWR": None}
-    if _cpu_has("avx512f"):  # the check above sees AVX-512 kernels where they are not switched off
-        assert native["avx512"] != []
-    assert _paths({"OPENBLAS_CORETYPE": "Nehalem"})["blas"] == ["Nehalem"]  # the user's choice is kept
+    if _has_flag("avx512f"):  # the checks above see AVX-512 kernels where they are not switched off
+        assert native["avx512"] != [] and native["path"].startswith("native kernels (numpy AVX-512")
+    nehalem = _paths({"OPENBLAS_CORETYPE": "Nehalem"})
+    assert nehalem["blas"] == ["Nehalem"]  # the user's choice is kept, and said
+    assert nehalem["path"].startswith("native kernels (") and "OpenBLAS Nehalem" in nehalem["path"]
 
 
 @pytest.mark.skipif(os.uname().machine != "x86_64", reason="the pinned path is x86-64's AVX2")
@@ -131,11 +131,12 @@ def test_a_process_that_loaded_numpy_first_and_its_workers_take_one_path(tmp_pat
         assert os.environ.get("NPY_DISABLE_CPU_FEATURES")  # this process: pinned, like the workers it starts
 
 
-def test_a_report_names_the_cpu_and_the_float_path_it_ran(monkeypatch: pytest.MonkeyPatch) -> None:
+def test_a_report_names_the_cpu_and_the_float_path_it_ran() -> None:
     """The machine line of a report (uavris.experiments.engine.jobs.machine) tells apart two CPUs of one
     name (an AMD EPYC of family 25 and one of family 26 both call themselves "AMD EPYC") by their family and
     model numbers, and says whether the libraries ran the pinned AVX2 path or their native kernels."""
     from uavris.experiments.engine.jobs import machine
+    from uavris.float_paths import float_path
 
     info = Path("/proc/cpuinfo").read_text(encoding="utf-8") if Path("/proc/cpuinfo").exists() else ""
     first = dict(line.split(":", 1) for line in info.split("\n\n")[0].splitlines() if ":" in line)
@@ -143,8 +144,4 @@ def test_a_report_names_the_cpu_and_the_float_path_it_ran(monkeypatch: pytest.Mo
     line = machine()
     if "cpu family" in first:
         assert f"(family {first['cpu family']}, model {first['model']})" in line
-    if os.uname().machine == "x86_64" and _cpu_has("avx2"):  # this process imported uavris first (conftest)
-        assert "the AVX2 path" in line
-        assert ("AVX-512 switched off" in line) == _cpu_has("avx512f")
-        monkeypatch.setenv("UAVRIS_NATIVE_FLOATS", "1")
-        assert "native kernels" in machine()
+    assert float_path() in line  # the path itself: test_import_uavris_pins_every_library_to_the_avx2_path

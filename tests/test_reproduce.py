@@ -211,18 +211,18 @@ def test_changed_parameter_invalidates_exactly_its_dependents(tmp_path):
 def test_a_new_oracle_reruns_what_follows_from_its_plans_and_flights(tmp_path, monkeypatch):
     """The oracle's version (uavris.agents.oracle.planner.ORACLE_VERSION) is in the keys of the stages
     whose results follow from its plans and flights: the strong experts imitate its flight, the
-    demonstrations fly the planner's plans, the evaluations score it; and so in every stage that learns
-    from them. (A study once kept strong experts imitating the oracle of before its margin, their key
-    unchanged.) The paper track's experts and DT, the comparison and the learned value's labels stay."""
-    from uavris.experiments.study import pipeline
+    demonstrations fly the planner's plans, the evaluations score it, the learned value's labels are its
+    screen and its rate of poses; and so in every stage that learns from them. The paper track's experts
+    and DT and the comparison stay."""
+    from uavris.agents.oracle import planner
 
     ctx = StudyContext(1, "local", None)
     base = build_pipeline(ABLATION, tmp_path, ctx)
-    monkeypatch.setattr(pipeline, "ORACLE_VERSION", pipeline.ORACLE_VERSION + 1)
+    monkeypatch.setattr(planner, "ORACLE_VERSION", planner.ORACLE_VERSION + 1)
     other = build_pipeline(ABLATION, tmp_path, ctx)
     kept = {n for n in base.stages if base.stages[n].key == other.stages[n].key}
     assert kept == {"compare", "experts-train", "experts-unseen", "dataset", "pretrain", "bc", "finetune-unseen1",
-                    "finetune-unseen2", "deploy-value-labels"}
+                    "finetune-unseen2"}
 
 
 def test_an_evaluation_reruns_when_its_hall_changes_under_the_same_name(tmp_path, monkeypatch):

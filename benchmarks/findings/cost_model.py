@@ -15,8 +15,8 @@ whole, and the worst family's factor (max of measured/expected and expected/meas
     .venv/bin/python benchmarks/findings/cost_model.py runs/quick --fit    # unit costs fitted to the run
 
 ``--now`` and ``--fit`` build the run's study with the experts' algorithm its comparison chose
-(``--expert-algo``, default ppo: the quick study's choice), as the run itself did once the
-comparison had ended. ``--fit``: every expected cost is a sum of unit costs times amounts of work,
+(read from the comparison's ``summary.json``; ``--expert-algo`` overrides it), as the run itself
+did once the comparison had ended. ``--fit``: every expected cost is a sum of unit costs times amounts of work,
 so doubling one group of unit costs (the SB3 step, the simulated slot, the plans, the planner's
 poses, the DT's step, the value's step) and rebuilding the study gives each stage's part of it;
 the scale of each group that makes the stages' expected seconds closest to the measured ones in
@@ -63,9 +63,9 @@ def _scaled(value, factor: float):
     return value * factor
 
 
-def _expected_now(run: Path, expert_algo: str = "ppo") -> dict[str, float]:
+def _expected_now(run: Path, expert_algo: str | None = None) -> dict[str, float]:
     """Each stage's expected seconds by this version's cost model (the run's own study, with the
-    experts' algorithm the comparison chose)."""
+    experts' algorithm the comparison chose, or ``expert_algo``)."""
     import dataclasses
 
     from uavris.experiments.engine.scheduling import StudyContext
@@ -74,12 +74,15 @@ def _expected_now(run: Path, expert_algo: str = "ppo") -> dict[str, float]:
 
     rc = Study.open(run).config
     if rc.expert_algo == "auto":
-        rc = dataclasses.replace(rc, expert_algo=expert_algo)
+        chosen = [json.loads(f.read_text())["expert"] for f in sorted((run / "stages").glob("compare-*/summary.json"))]
+        if expert_algo is None and len(set(chosen)) != 1:
+            raise SystemExit(f"{run}: no finished comparison says which algorithm the experts are; pass --expert-algo")
+        rc = dataclasses.replace(rc, expert_algo=expert_algo or chosen[0])
     stages = build_pipeline(rc, run, StudyContext(1, "local", None)).stages
     return {name: (st.progress_s if st.progress_s is not None else sum(st.costs)) for name, st in stages.items()}
 
 
-def fit(run: Path, measured: dict[str, float], expert_algo: str) -> None:
+def fit(run: Path, measured: dict[str, float], expert_algo: str | None) -> None:
     """Print the scale of each group of unit costs (:data:`GROUPS`) that fits ``measured`` (seconds per stage)."""
     import numpy as np
     from scipy.optimize import nnls
@@ -119,8 +122,8 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--now", action="store_true",
                     help="expected by this version's cost model, not the one the run recorded (a recalibration)")
     ap.add_argument("--fit", action="store_true", help="fit the groups of unit costs to the run's stage times")
-    ap.add_argument("--expert-algo", default="ppo",
-                    help="with --now or --fit: the experts' algorithm the run's comparison chose (default ppo)")
+    ap.add_argument("--expert-algo", default=None,
+                    help="with --now or --fit: the experts' algorithm (default: the one the run's comparison chose)")
     args = ap.parse_args(argv)
     sched = json.loads((args.run / "schedule.json").read_text())
     now = _expected_now(args.run, args.expert_algo) if args.now else None

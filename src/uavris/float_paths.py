@@ -60,14 +60,32 @@ def _has_flag(flag: str) -> bool:
 
 
 def float_path() -> str:
-    """The kernels this process's libraries run, in words (a report's machine line): on x86-64, the
-    pinned AVX2 path (saying so where the CPU's AVX-512 is switched off) or the native kernels."""
+    """The kernels this process's libraries run, in words (a report's machine line), read from the
+    libraries as loaded, not from the environment: numpy's dispatch targets, OpenBLAS's kernels
+    (threadpoolctl) and torch's capability where torch is loaded. On x86-64: the AVX2 path (saying
+    where the CPU's AVX-512 is switched off), or native kernels, each library's named."""
     if platform.machine().lower() not in ("x86_64", "amd64"):
         return "the libraries' own kernels"
-    avx512 = _has_flag("avx512f")
-    if os.environ.get("UAVRIS_NATIVE_FLOATS") or os.environ.get("OPENBLAS_CORETYPE") != PINNED["OPENBLAS_CORETYPE"]:
-        return "native kernels" + (" (AVX-512)" if avx512 else "")
-    return "the AVX2 path" + (" (its AVX-512 switched off)" if avx512 else "")
+    try:
+        from numpy._core._multiarray_umath import __cpu_dispatch__ as targets
+        from numpy._core._multiarray_umath import __cpu_features__ as features
+    except ImportError:  # numpy before 2.0
+        from numpy.core._multiarray_umath import __cpu_dispatch__ as targets
+        from numpy.core._multiarray_umath import __cpu_features__ as features
+    numpy_avx512 = any(features.get(k) for k in targets if "AVX512" in k or k == "X86_V4")
+    try:
+        from threadpoolctl import threadpool_info
+
+        blas = sorted({str(i.get("architecture")) for i in threadpool_info() if i.get("internal_api") == "openblas"})
+    except ImportError:
+        blas = []
+    torch = sys.modules.get("torch")
+    capability = torch.backends.cpu.get_cpu_capability() if torch is not None else None
+    if not numpy_avx512 and blas in ([], [PINNED["OPENBLAS_CORETYPE"]]) and capability in (None, "AVX2", "DEFAULT"):
+        return "the AVX2 path" + (" (its AVX-512 switched off)" if _has_flag("avx512f") else "")
+    kernels = [f"numpy {'AVX-512' if numpy_avx512 else 'AVX2'}", *(f"OpenBLAS {b}" for b in blas),
+               *([f"torch {capability}"] if capability else [])]
+    return f"native kernels ({', '.join(kernels)})"
 
 
 def pin_float_paths() -> dict[str, str]:

@@ -74,9 +74,10 @@ from uavris.config import SystemConfig
 SAFE_MARGIN_DEG = 1.0
 # What the oracle's plans and flights are, as a version: raised with every change of code that moves them.
 # A study's stages whose results follow from them carry it in their keys (the strong experts, who imitate
-# the oracle's flight; the demonstrations, the planner's plans flown; the evaluations, which score the
-# oracle), so that a study made before a change is run again instead of read back. 1: the global stage
-# (docs/model.md section 19); 2: every device kept 1 degree in front of the RIS in the plan and its flight.
+# the oracle's flight; the demonstrations, the planner's plans flown; the learned value's labels, its screen
+# and rate of poses; the evaluations, which score the oracle), so that a study made before a change is run
+# again instead of read back. 1: the global stage (docs/model.md section 19); 2: every device kept 1 degree
+# in front of the RIS in the plan and its flight.
 ORACLE_VERSION = 2
 
 

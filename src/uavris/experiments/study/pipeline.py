@@ -47,7 +47,7 @@ from typing import Any, Callable, Sequence
 from uavris import runs
 from uavris.agents.dt.dataset import DATASET_FORMAT_VERSION
 from uavris.agents.experts import ALGORITHMS
-from uavris.agents.oracle.planner import ORACLE_VERSION
+from uavris.agents.oracle import planner as oracle_planner
 from uavris.experiments.engine.costs import (
     dataset_cost,
     demonstration_cost,
@@ -216,8 +216,9 @@ class TrackStages(PlaceStages):
             if self.track.phase_control == "optimizer":  # the strong recipe: imitation of the planning oracle
                 cfgs = {d.name: strong_expert_config(d.name, self.rc.seed, self.rc.preset, self.rc.eval_episodes,
                                                      d.system, d.start, curve=name == "experts-unseen") for d in where}
-                stages.append(Stage(self.t(name), {"runs": {s: c.to_dict() for s, c in cfgs.items()},
-                                                   "format": EXPERT_FORMAT, "oracle": ORACLE_VERSION},
+                config = {"runs": {s: c.to_dict() for s, c in cfgs.items()}, "format": EXPERT_FORMAT,
+                          "oracle": oracle_planner.ORACLE_VERSION}
+                stages.append(Stage(self.t(name), config,
                                     partial(self._run_experts, self.t(name), cfgs),
                                     costs=tuple(train_cost(c) for c in cfgs.values())))
             else:
@@ -316,8 +317,8 @@ class TrackStages(PlaceStages):
                       for _, n in self._chunks(cfg))
         # the dataset format and the planner's version are part of the key: a stage of another format, or
         # flown by another planner, is not read, it is made again
-        return Stage(self.t(name), {**cfg.to_dict(), "format": DATASET_FORMAT_VERSION, "oracle": ORACLE_VERSION},
-                     partial(self._run_demonstrations, name, cfg, costs), (), costs)
+        config = {**cfg.to_dict(), "format": DATASET_FORMAT_VERSION, "oracle": oracle_planner.ORACLE_VERSION}
+        return Stage(self.t(name), config, partial(self._run_demonstrations, name, cfg, costs), (), costs)
 
     def _run_demonstrations(self, name: str, cfg: DemonstrationConfig, costs: tuple[float, ...], d: Path,
                             deps: dict[str, Path]) -> dict[str, Any]:
@@ -373,7 +374,7 @@ class TrackStages(PlaceStages):
         # the hall it reads (its devices, room and start), not only its name: a changed generator or
         # layout is evaluated again instead of read back from an older run
         config = {"episodes": self.rc.eval_episodes, "seed": EVAL_SEED, "track": self.track.name,
-                  "format": RESULTS_FORMAT, "oracle": ORACLE_VERSION,
+                  "format": RESULTS_FORMAT, "oracle": oracle_planner.ORACLE_VERSION,
                   "hall": {"system": where.system.to_dict(), "start": list(where.scenario.start)},
                   "rows": [r.key for r in rows], "transfer_from": [s for s, _ in sources],
                   **({"front_margin_deg": self.track.front_margin_deg} if self.track.front_margin_deg else {})}

@@ -17,6 +17,7 @@ from functools import partial
 from pathlib import Path
 from typing import Any, Callable
 
+from uavris.agents.oracle import planner as oracle_planner
 from uavris.experiments.engine.costs import finetune_cost, value_fit_cost, value_labels_cost
 from uavris.experiments.engine.jobs import Job
 from uavris.experiments.engine.scheduling import StudyContext
@@ -61,7 +62,9 @@ class PlaceStages:
                                    layout_seed=self.rc.layout_seed, system=self.rc.system.replace(observe_devices=True))
         costs = tuple(value_labels_cost(k, n, labels.poses) for k, _, n in _chunks(labels))
         fit = ValueFitConfig(preset=self.rc.preset, seed=self.rc.seed)
-        return [Stage(self.t("value-labels"), labels.to_dict(), partial(self._run_labels, labels, costs), (), costs),
+        # the labels are the planner's screen and rate of poses: a new oracle labels them again
+        return [Stage(self.t("value-labels"), {**labels.to_dict(), "oracle": oracle_planner.ORACLE_VERSION},
+                      partial(self._run_labels, labels, costs), (), costs),
                 Stage(self.t("value"), fit.to_dict(), partial(self._run_fit, fit),
                       (self.t("value-labels"), self.t("dataset")), (value_fit_cost(fit.steps, fit.width),))]
 
