@@ -51,12 +51,32 @@ def _numpy_names() -> str:
     return _NUMPY_AVX512["levels" if (major, minor) >= (2, 4) else "features"]
 
 
-def _has_flag(flag: str) -> bool:
+def cpu_info() -> dict[str, str]:
+    """The first CPU's fields of ``/proc/cpuinfo`` (``model name``, ``cpu family``, ``model``,
+    ``flags``, ...); empty where there is none (not Linux)."""
     try:
         with open("/proc/cpuinfo", encoding="utf-8") as f:
-            return any(line.startswith("flags") and f" {flag} " in f" {line.split(':', 1)[-1].strip()} " for line in f)
+            first = f.read().split("\n\n", 1)[0]
     except OSError:
-        return False
+        return {}
+    fields = (line.partition(":") for line in first.splitlines())
+    return {key.strip(): value.strip() for key, sep, value in fields if sep}
+
+
+def _has_flag(flag: str) -> bool:
+    return flag in cpu_info().get("flags", "").split()
+
+
+def numpy_cpu_tables() -> tuple[list[str], dict[str, bool]]:
+    """numpy's dispatch targets and the CPU features it found (its private tables; ``numpy.core``
+    before numpy 2): the kernels numpy may choose from are the targets whose feature is on."""
+    try:
+        from numpy._core._multiarray_umath import __cpu_dispatch__ as targets
+        from numpy._core._multiarray_umath import __cpu_features__ as features
+    except ImportError:
+        from numpy.core._multiarray_umath import __cpu_dispatch__ as targets
+        from numpy.core._multiarray_umath import __cpu_features__ as features
+    return list(targets), dict(features)
 
 
 def float_path() -> str:
@@ -66,12 +86,7 @@ def float_path() -> str:
     where the CPU's AVX-512 is switched off), or native kernels, each library's named."""
     if platform.machine().lower() not in ("x86_64", "amd64"):
         return "the libraries' own kernels"
-    try:
-        from numpy._core._multiarray_umath import __cpu_dispatch__ as targets
-        from numpy._core._multiarray_umath import __cpu_features__ as features
-    except ImportError:  # numpy before 2.0
-        from numpy.core._multiarray_umath import __cpu_dispatch__ as targets
-        from numpy.core._multiarray_umath import __cpu_features__ as features
+    targets, features = numpy_cpu_tables()
     numpy_avx512 = any(features.get(k) for k in targets if "AVX512" in k or k == "X86_V4")
     try:
         from threadpoolctl import threadpool_info

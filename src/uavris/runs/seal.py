@@ -66,11 +66,11 @@ def _key() -> bytes:
 
 
 def _digest(path: Path) -> str:
-    mac = hmac.new(_key(), digestmod=hashlib.sha256)
+    digest = hmac.new(_key(), digestmod=hashlib.sha256)
     with open(path, "rb") as f:
         for block in iter(lambda: f.read(1 << 20), b""):
-            mac.update(block)
-    return mac.hexdigest()
+            digest.update(block)
+    return digest.hexdigest()
 
 
 def mac(data: bytes) -> str:

@@ -45,6 +45,7 @@ import numpy as np
 from uavris.agents.oracle.planner import Plan, PlanSettings
 from uavris.config import SystemConfig
 from uavris.errors import UavrisError
+from uavris.float_paths import cpu_info, numpy_cpu_tables
 from uavris.io import atomic_write_bytes
 from uavris.runs.seal import mac
 
@@ -84,22 +85,14 @@ def directory() -> Path | None:
 
 
 def _cpu() -> str:
-    try:
-        with open("/proc/cpuinfo", encoding="utf-8") as f:
-            lines = [line for line in f if line.startswith(("model name", "flags"))]
-    except OSError:
-        return platform.processor()
-    return "".join(sorted(set(lines)))
+    info = cpu_info()
+    return f"{info.get('model name', platform.processor())}\0{info.get('flags', '')}"
 
 
 def _numpy_build() -> str:
     config = getattr(getattr(np, "__config__", None), "CONFIG", {})
     blas = config.get("Build Dependencies", {}).get("blas", {}) if isinstance(config, dict) else {}
-    try:  # numpy's own table of the CPU features its kernels use (numpy.core before numpy 2)
-        from numpy._core._multiarray_umath import __cpu_features__ as features
-    except ImportError:
-        from numpy.core._multiarray_umath import __cpu_features__ as features
-
+    _, features = numpy_cpu_tables()  # the CPU features numpy's kernels use
     return f"{sorted(blas.items())}{sorted(k for k, on in features.items() if on)}"
 
 

@@ -121,19 +121,9 @@ def machine() -> str:
     import os
     import platform
 
-    from uavris.float_paths import float_path
+    from uavris.float_paths import cpu_info, float_path
 
-    found: dict[str, str] = {}
-    try:
-        with open("/proc/cpuinfo", encoding="utf-8") as info:
-            for line in info:
-                key, _, value = line.partition(":")
-                if key.strip() in ("model name", "Hardware", "Processor", "cpu family", "model") and value.strip():
-                    found.setdefault(key.strip(), value.strip())
-                if not line.strip() and found:  # the first CPU's block is enough
-                    break
-    except OSError:
-        pass
+    found = cpu_info()
     cpu = next((found[k] for k in ("model name", "Hardware", "Processor") if k in found),
                platform.processor() or "unknown CPU")
     if "cpu family" in found and "model" in found:
