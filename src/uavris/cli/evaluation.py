@@ -92,31 +92,28 @@ def evaluate_command(args: list[str]) -> None:
     evaluates it, here or in a hall of your own (default OUT runs/rows/ROW).
     """
     from uavris.agents.torch_device import resolve_device
-    from uavris.cli.options import check_hall_flags, layout_defaults
+    from uavris.cli.options import check_hall_flags, in_hall
     from uavris.experiments.tools.evaluate import evaluate_target, results_dir
     from uavris.experiments.tools.targets import resolve_target
 
-    doc = evaluate_command.__doc__ or ""
     check_hall_flags(args, SystemConfig(), "uavris evaluate")  # before the flags are read into the paper's system
-    # Two passes: the first finds the target, whose own system is the default the flags change.
-    first = parse(EvaluateArgs, args, "uavris evaluate", doc)
-    check_one_start(first.scenario, first.layout)
-    if first.row is not None:
-        return _evaluate_row(first, args, doc)
-    if first.track is not None:
+    a = parse(EvaluateArgs, args, "uavris evaluate", evaluate_command.__doc__ or "")
+    check_one_start(a.scenario, a.layout)
+    if a.row is not None:
+        return _evaluate_row(a, args)
+    if a.track is not None:
         raise UsageError("--track chooses the track of --row; give --row KEY (and TARGET the study's output directory)")
-    target = resolve_target(first.target, first.trust_pickle)
-    own = target.own_system()
-    if first.scenario is not None and first.layout is None:  # a named scenario is a start in the paper's hall
+    target = resolve_target(a.target, a.trust_pickle)
+    own = target.own_system()  # the system the --system.* flags change
+    if a.scenario is not None and a.layout is None:  # a named scenario is a start in the paper's hall
         own = paper_hall(own)
-    system, _ = layout_defaults(args, own, "uavris evaluate")
-    a = parse(EvaluateArgs, args, "uavris evaluate", doc, default=EvaluateArgs(first.target, system=system))
+    system, _ = in_hall(a.layout, own, a.system, args)
     episodes = DEFAULT_EPISODES if a.episodes is None else a.episodes
     with writing(a.out or results_dir(target)) as out:
         # the layout again (resolving it in its own hall changes nothing): the result records it
         summary, path = evaluate_target(target, scenario=a.scenario, layout=a.layout, episodes=episodes,
                                         seed=a.seed, out=out, phase_control=a.phase_control,
-                                        device=resolve_device(a.device), progress=a.progress, system=a.system,
+                                        device=resolve_device(a.device), progress=a.progress, system=system,
                                         trajectory=a.trajectory, references=a.references)
     _print_evaluation(a.target, summary, path)
 
@@ -148,25 +145,24 @@ def paper_hall(system: SystemConfig) -> SystemConfig:
     return resolve_layout("paper", system).resolve(system)[0]
 
 
-def _evaluate_row(first: EvaluateArgs, args: list[str], doc: str) -> None:
+def _evaluate_row(a: EvaluateArgs, args: list[str]) -> None:
     """``uavris evaluate OUT --row KEY``: a row of the study in OUT, in the site the flags name."""
     from uavris.agents.torch_device import resolve_device
-    from uavris.cli.options import layout_defaults, seed_note
+    from uavris.cli.options import in_hall, seed_note
     from uavris.experiments.study.finished import Study
     from uavris.experiments.study.tracks import TRACK_SPECS
     from uavris.experiments.tools.evaluate import evaluate_target, results_dir
     from uavris.layouts import Site
 
-    study = Study.open(first.target)
+    study = Study.open(a.target)
     rc = study.config
     ran = [t.name for t in rc.tracks]
-    track = first.track or ("deployment" if "deployment" in ran else ran[-1])
+    track = a.track or ("deployment" if "deployment" in ran else ran[-1])
     base = rc.system.replace(observe_devices=True) if TRACK_SPECS[track].layouts else rc.system
-    system, hall = layout_defaults(args, base, "uavris evaluate")
-    a = parse(EvaluateArgs, args, "uavris evaluate", doc, default=EvaluateArgs(first.target, system=system))
+    system, hall = in_hall(a.layout, base, a.system, args)
     if hall is None and a.scenario is None:
         raise UsageError("--row: name where to evaluate it: --layout HALL (its devices and start) or --scenario NAME")
-    site = Site(a.scenario or hall.name, a.system, None if a.scenario else hall.start)
+    site = Site(a.scenario or hall.name, system, None if a.scenario else hall.start)
     site.scenario.validate_for(site.system)
     row = study.row(str(a.row), track, site)
     print(seed_note(row, study.seeds(row, track, site)), end="", file=sys.stderr)

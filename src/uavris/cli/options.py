@@ -103,12 +103,17 @@ def check_hall_flags(args: list[str], system: SystemConfig, prog: str = "uavris"
     """The layout ``--layout`` names (None: none), refused in one line beside a flag that gives
     what it gives: ``--system.users`` (the devices), ``--system.room`` where the layout sets its
     room. Read before any other flag, whose values may only fit the layout's hall."""
+    named = read_first(_LayoutFlag, args, prog).layout
+    _check_given_beside_layout(named, given_flags(args), system)
+    return named
+
+
+def _check_given_beside_layout(named: str | None, given: set[str], system: SystemConfig) -> None:
+    """``check_hall_flags``' rule for a layout already read: one line where a flag gives what it gives."""
     from uavris.layouts import resolve_layout
 
-    named = read_first(_LayoutFlag, args, prog).layout
     if named is None:
-        return None
-    given = given_flags(args)
+        return
     if "--system.users" in given:
         raise UsageError("--layout and --system.users both give the device positions; pass one of them")
     if "--system.room" in given:
@@ -118,7 +123,26 @@ def check_hall_flags(args: list[str], system: SystemConfig, prog: str = "uavris"
             sets_room = False
         if sets_room:
             raise UsageError(f"--layout {named} sets the room; drop --system.room or the file's room")
-    return named
+
+
+def in_hall(layout: str | None, base: SystemConfig, parsed: SystemConfig,
+            args: list[str]) -> tuple[SystemConfig, Scenario | None]:
+    """The system of a command parsed once: ``base`` (the target's, the study's, the paper's) with
+    the ``--system.*`` flags written in ``args`` (their values read from ``parsed``, the command's
+    parsed system, so a flag given at its default value still counts), in the hall ``layout``
+    names, and that layout's start; without a layout, ``base`` with the flags and None.
+    :func:`layout_defaults`' rules: the flags change the base before the layout resolves, and a
+    flag that gives what the layout gives is one line."""
+    from uavris.layouts import resolve_layout
+
+    given = given_flags(args)
+    _check_given_beside_layout(layout, given, base)
+    changes = {f.name: getattr(parsed, f.name) for f in fields(SystemConfig)
+               if f"--system.{f.name.replace('_', '-')}" in given}
+    if layout is None:
+        return base.replace(**changes), None
+    loose = _DevicesLater(**{**{f.name: getattr(base, f.name) for f in fields(SystemConfig)}, **changes})
+    return resolve_layout(layout, loose).resolve(loose)
 
 
 def layout_defaults(args: list[str], system: SystemConfig,
