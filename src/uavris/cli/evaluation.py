@@ -248,27 +248,23 @@ def benchmark_command(args: list[str]) -> None:
     each cell's per-episode CSVs.
     """
     from uavris.agents.torch_device import resolve_device
-    from uavris.cli.options import check_hall_flags
+    from uavris.cli.options import check_hall_flags, in_hall
     from uavris.experiments.tools.benchmark import benchmark, default_benchmark_dir
     from uavris.experiments.tools.targets import resolve_target
 
-    doc = benchmark_command.__doc__ or ""
     check_hall_flags(args, SystemConfig(), "uavris benchmark")  # before the flags are read into the paper's system
-    first = parse(BenchmarkArgs, args, "uavris benchmark", doc)
-    if first.layout is not None and first.cells != "all":
-        raise UsageError(f"--cells {first.cells} chooses among the protocol's cells and --layout is a cell of its own; "
+    a = parse(BenchmarkArgs, args, "uavris benchmark", benchmark_command.__doc__ or "")
+    if a.layout is not None and a.cells != "all":
+        raise UsageError(f"--cells {a.cells} chooses among the protocol's cells and --layout is a cell of its own; "
                          "pass one of them")
-    with writing(first.out or default_benchmark_dir(first.target if first.row is None else first.row)) as out:
-        if first.row is not None:  # the study's row as a controller of its own, kept beside the results
+    with writing(a.out or default_benchmark_dir(a.target if a.row is None else a.row)) as out:
+        if a.row is not None:  # the study's row as a controller of its own, kept beside the results
             from dataclasses import replace
 
-            controller = _row_controller(first.target, first.row, first.track, out / "controller")
-            args = [str(controller) if x == first.target else x for x in args]
-            first = replace(first, target=str(controller))
-        default = BenchmarkArgs(first.target, system=resolve_target(first.target).own_system())
-        a = parse(BenchmarkArgs, args, "uavris benchmark", doc, default=default)
+            a = replace(a, target=str(_row_controller(a.target, a.row, a.track, out / "controller")))
+        system, _ = in_hall(None, resolve_target(a.target).own_system(), a.system, args)  # its layout: a cell
         rows, md = benchmark(a.target, a.preset, a.cells, out, resolve_device(a.device), progress=a.progress,
-                             system=a.system, phase_control=a.phase_control, layout=a.layout,
+                             system=system, phase_control=a.phase_control, layout=a.layout,
                              trust_pickle=a.trust_pickle)
     for warning in dict.fromkeys(r["warning"] for r in rows if r.get("warning")):  # each once
         print(f"uavris: warning: {warning}", file=sys.stderr)
@@ -323,11 +319,12 @@ def sweep_command(args: list[str]) -> None:
     """
     import hashlib
 
-    from uavris.cli.options import layout_defaults
+    from uavris.cli.options import LOOSE_SYSTEM, check_hall_flags, in_hall
     from uavris.experiments.tools.sweep import parse_axis, sweep
 
-    system, hall = layout_defaults(args, SystemConfig(), "uavris sweep")
-    a = parse(SweepArgs, args, "uavris sweep", sweep_command.__doc__ or "", default=SweepArgs((), system=system))
+    check_hall_flags(args, SystemConfig(), "uavris sweep")  # a room given twice: one line, before the values are read
+    a = parse(SweepArgs, args, "uavris sweep", sweep_command.__doc__ or "", default=SweepArgs((), system=LOOSE_SYSTEM))
+    system, hall = in_hall(a.layout, SystemConfig(), a.system, args)
     row_of = None
     if a.row is not None:
         if len(a.targets) != 1:
@@ -345,7 +342,7 @@ def sweep_command(args: list[str]) -> None:
         raise UsageError(f"--param system.devices sweeps generated halls of each count, --layout {a.layout} is one "
                          "hall; pass one of them")
     if a.out is None:
-        whole = repr((a.targets, a.param, a.scenario, a.layout, a.episodes, a.halls, a.system.to_dict())).encode()
+        whole = repr((a.targets, a.param, a.scenario, a.layout, a.episodes, a.halls, system.to_dict())).encode()
         name = "-".join(ax.name for ax in axes) + "-" + hashlib.sha256(whole).hexdigest()[:8]
         out = Path("runs/sweeps") / name
     else:
@@ -356,7 +353,7 @@ def sweep_command(args: list[str]) -> None:
 
         with writing(out):  # sweep() holds the lock for the sweep itself
             a = replace(a, targets=(str(_row_controller(row_of, a.row, a.track, out / "controller")),))
-    paths = sweep(a.targets, axes, out, base=a.system, scenario=a.scenario or hall, episodes=a.episodes, halls=a.halls,
+    paths = sweep(a.targets, axes, out, base=system, scenario=a.scenario or hall, episodes=a.episodes, halls=a.halls,
                   workers=a.workers, backend=a.backend, progress=a.progress, trust_pickle=a.trust_pickle,
                   warn=lambda w: print(f"uavris: warning: {w}", file=sys.stderr), layout=a.layout)
     print("wrote " + ", ".join(str(p) for p in paths))

@@ -80,6 +80,12 @@ class _DevicesLater(SystemConfig):
         return SystemConfig(**{**{f.name: getattr(self, f.name) for f in fields(SystemConfig)}, **changes})
 
 
+# The default system of a command parsed once whose --layout may give the devices (a flag's room need
+# not fit the paper's devices): tyro keeps the default's class, so the parse checks every field but them,
+# and in_hall builds the checked system.
+LOOSE_SYSTEM = _DevicesLater()
+
+
 @dataclass(frozen=True)
 class _HallFlags:
     """The flags that make a command's hall: ``--layout`` and the system it changes."""

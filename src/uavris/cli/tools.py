@@ -173,12 +173,13 @@ class DemoArgs:
 
 def demo_command(args: list[str]) -> None:
     """Roll out the zero action, random actions and a co-phasing hover, and print their average sum rate."""
-    from uavris.cli.options import layout_defaults
+    from uavris.cli.options import LOOSE_SYSTEM, check_hall_flags, in_hall
     from uavris.experiments.tools.demo import run_demo
 
-    system, hall = layout_defaults(args, SystemConfig(), "uavris demo")
-    a = parse(DemoArgs, args, "uavris demo", demo_command.__doc__ or "", default=DemoArgs(system=system))
-    run_demo(a.episodes, a.seed, a.scenario or hall or "fig2", a.system)
+    check_hall_flags(args, SystemConfig(), "uavris demo")  # a room given twice: one line, before the values are read
+    a = parse(DemoArgs, args, "uavris demo", demo_command.__doc__ or "", default=DemoArgs(system=LOOSE_SYSTEM))
+    system, hall = in_hall(a.layout, SystemConfig(), a.system, args)
+    run_demo(a.episodes, a.seed, a.scenario or hall or "fig2", system)
 
 
 # -------------------------------------------------------------------------------------------- plot

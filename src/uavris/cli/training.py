@@ -17,7 +17,15 @@ import tyro
 
 from uavris.agents.experts import Algorithm
 from uavris.agents.torch_device import Device
-from uavris.cli.options import LAYOUT_HELP, RunOptions, check_run_options, layout_defaults
+from uavris.cli.options import (
+    LAYOUT_HELP,
+    LOOSE_SYSTEM,
+    RunOptions,
+    check_hall_flags,
+    check_run_options,
+    in_hall,
+    layout_defaults,
+)
 from uavris.cli.parsing import Unset, UsageError, load_overrides, output_dir, parse, read_first, writing
 from uavris.config import ScenarioName, SystemConfig
 from uavris.experiments.engine.jobs import Backend
@@ -150,8 +158,8 @@ class CompareArgs:
     """output directory (default: runs/compare-PRESET)"""
     algos: tuple[Algorithm, ...] = ("ddpg", "ppo", "sac", "td3")
     """algorithms to compare"""
-    scenario: ScenarioName | str = "fig2"
-    """scenario (the paper's Fig. 2: fig2, [15, 20, 4.5]; with --layout: the layout's start by default)"""
+    scenario: Unset[ScenarioName | str] = None
+    """scenario (default: the paper's Fig. 2, fig2, [15, 20, 4.5]; with --layout: the layout's start)"""
     eval_episodes: Unset[int] = None
     """final evaluation episodes per run (default: 32 smoke/quick, 100 paper)"""
     eval_every: Unset[int] = None
@@ -179,16 +187,18 @@ def compare_command(args: list[str]) -> None:
     from uavris.agents.torch_device import resolve_device
     from uavris.experiments.training.compare import compare_algorithms, default_compare_dir
 
-    system, hall = layout_defaults(args, SystemConfig())
+    check_hall_flags(args, SystemConfig(), "uavris compare-algorithms")  # a room given twice: one line, first
     a = parse(CompareArgs, args, "uavris compare-algorithms", compare_command.__doc__ or "",
-              default=CompareArgs(system=system, scenario="fig2" if hall is None else hall.name))
-    start = hall.start if hall is not None and a.scenario == hall.name else None
+              default=CompareArgs(system=LOOSE_SYSTEM))
+    system, hall = in_hall(a.layout, SystemConfig(), a.system, args)
+    scenario = a.scenario or ("fig2" if hall is None else hall.name)
+    start = hall.start if hall is not None and scenario == hall.name else None
     seeds = STUDY[a.preset]["compare_seeds"] if a.seeds is None else a.seeds
     steps = STUDY[a.preset]["compare_steps"] if a.steps is None else a.steps
     with writing(a.out or default_compare_dir(a.preset)) as out:
         report = compare_algorithms(preset=a.preset, seeds=seeds, workers=a.workers, out=out, algos=a.algos,
-                                    scenario=a.scenario, eval_episodes=a.eval_episodes, backend=a.backend,
-                                    ray_address=a.ray_address, device=resolve_device(a.device), system=a.system,
+                                    scenario=scenario, eval_episodes=a.eval_episodes, backend=a.backend,
+                                    ray_address=a.ray_address, device=resolve_device(a.device), system=system,
                                     start=start, steps=steps, eval_every=a.eval_every, progress=a.progress)
     print(f"report: {report}")
 
