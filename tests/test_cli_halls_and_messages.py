@@ -14,7 +14,7 @@ import pytest
 from uavris.agents.evaluation import evaluate
 from uavris.agents.references import reference_policy
 from uavris.cli import main
-from uavris.config import PAPER_USERS, SCENARIOS, SystemConfig
+from uavris.config import PAPER_USERS, SCENARIOS, PropulsionParams, SystemConfig
 from uavris.layouts import LayoutGenerator
 from uavris.presets import EVAL_SEED
 
@@ -339,3 +339,23 @@ def test_the_demo_names_a_layout_as_a_hall_and_counts_one_episode(capsys: pytest
     assert main(["demo", "--episodes", "1", "--scenario", "unseen1"]) == 0
     first = capsys.readouterr().out.splitlines()[0]
     assert first.startswith("uavris demo: scenario unseen1 [") and ", 1 episode, " in first, first
+
+
+def test_every_kind_of_system_flag_written_on_the_line_changes_the_targets_system():
+    """A command parsed once applies exactly the --system.* flags written on the line to the base
+    system (a target's own): a value, a boolean's --system.no-NAME, a field of the nested
+    propulsion parameters (the base's others kept), and a flag written at its default value; the
+    fields not written stay the base's, whatever the parse's defaults say."""
+    from uavris.cli.evaluation import EvaluateArgs
+    from uavris.cli.options import in_hall
+    from uavris.cli.parsing import parse
+
+    base = SystemConfig(horizon=30, learn_amplitudes=True, observe_devices=True,
+                        propulsion=PropulsionParams(induced_w=90.0))
+    args = ["zero-action", "--system.no-angle-dependent-reflection", "--system.propulsion.tip-speed", "110",
+            "--system.v-max=3", "--system.nx", str(SystemConfig().nx)]
+    got, hall = in_hall(None, base, parse(EvaluateArgs, args, "uavris evaluate", "").system, args)
+    assert hall is None
+    assert got == base.replace(angle_dependent_reflection=False, v_max=3.0,
+                               propulsion=PropulsionParams(induced_w=90.0, tip_speed=110.0))
+    assert got.horizon == 30 and got.learn_amplitudes and got.observe_devices and got.propulsion.induced_w == 90.0

@@ -9,7 +9,7 @@ directory itself (:mod:`uavris.runs`), layouts (:mod:`uavris.layouts`).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, fields, is_dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -100,8 +100,8 @@ class _LayoutFlag:
 
 
 def given_flags(args: list[str]) -> set[str]:
-    """The flags written on the command line (``--system.room``, also as ``--system.room=...``
-    or ``--system_room``): a flag given with its default value is still given."""
+    """The flags written on the command line (``--system.room``, also as ``--system.room=...``; a
+    name's underscores as dashes): a flag given with its default value is still given."""
     return {a.split("=", 1)[0].replace("_", "-") for a in args if a.startswith("--")}
 
 
@@ -131,6 +131,22 @@ def _check_given_beside_layout(named: str | None, given: set[str], system: Syste
             raise UsageError(f"--layout {named} sets the room; drop --system.room or the file's room")
 
 
+def _given_fields(base: Any, parsed: Any, given: set[str], prefix: str) -> dict[str, Any]:
+    """The fields of the dataclass ``parsed`` whose flag (``PREFIX.NAME``, a boolean's ``PREFIX.no-NAME``) was
+    written, by name; a nested dataclass (the propulsion parameters) as ``base``'s with its own written ones."""
+    out: dict[str, Any] = {}
+    for f in fields(parsed):
+        flag = f"{prefix}.{f.name.replace('_', '-')}"
+        value = getattr(parsed, f.name)
+        if is_dataclass(value):
+            inner = _given_fields(getattr(base, f.name), value, given, flag)
+            if inner:
+                out[f.name] = replace(getattr(base, f.name), **inner)
+        elif flag in given or f"{prefix}.no-{f.name.replace('_', '-')}" in given:
+            out[f.name] = value
+    return out
+
+
 def in_hall(layout: str | None, base: SystemConfig, parsed: SystemConfig,
             args: list[str]) -> tuple[SystemConfig, Scenario | None]:
     """The system of a command parsed once: ``base`` (the target's, the study's, the paper's) with
@@ -143,8 +159,7 @@ def in_hall(layout: str | None, base: SystemConfig, parsed: SystemConfig,
 
     given = given_flags(args)
     _check_given_beside_layout(layout, given, base)
-    changes = {f.name: getattr(parsed, f.name) for f in fields(SystemConfig)
-               if f"--system.{f.name.replace('_', '-')}" in given}
+    changes = _given_fields(base, parsed, given, "--system")
     if layout is None:
         return base.replace(**changes), None
     loose = _DevicesLater(**{**{f.name: getattr(base, f.name) for f in fields(SystemConfig)}, **changes})
