@@ -561,3 +561,24 @@ def test_the_fine_tuning_claims_judge_the_papers_dt_in_every_hall(deployment_run
         if len(per) == 2:
             gains.append(float(np.mean(per["dt-finetuned-safe"] - per["dt-zero-shot-safe"])))
     assert cells["finetuned"].n == len(gains) and cells["finetuned"].mean == pytest.approx(np.mean(gains))
+
+
+def test_the_claims_page_names_its_machine_and_keeps_its_evidence_beside_it(deployment_run, tmp_path):
+    """`uavris claims` writes, beside claims.md and claims.json, each study's report and the
+    from-scratch curves (what a reader checks the cells against without the studies), names the
+    machine and float path it judged on, and says what the goal-conditioned cells hold fixed; two
+    studies of one directory name, whose reports would share a file, are refused in one line."""
+    from uavris.experiments.engine.jobs import machine
+    from uavris.experiments.study.claims import EVIDENCE, write_claims
+
+    out, _ = deployment_run
+    page = write_claims([out], tmp_path / "c").read_text()
+    assert f"Judged by `uavris claims` on {machine()}." in page
+    assert "one fit of the learned value of a pose (`deploy-value`" in page
+    assert (tmp_path / "c" / EVIDENCE / f"{out.name}.md").read_text() == (out / "report.md").read_text()
+    assert {j["track"] for j in read_json(tmp_path / "c" / "claims.json")["judgements"]} == {"deployment"}
+    twin = tmp_path / "twin" / out.name
+    shutil.copytree(out, twin, ignore=shutil.ignore_patterns("plans"))
+    with pytest.raises(UavrisError, match="share a directory name"):
+        write_claims([out, twin], tmp_path / "d")
+    assert not (tmp_path / "d" / "claims.md").exists()

@@ -129,10 +129,14 @@ def machine() -> str:
     if "cpu family" in found and "model" in found:
         cpu += f" (family {found['cpu family']}, model {found['model']})"
     import numpy
-    import torch
 
-    return (f"{cpu}, {os.cpu_count()} CPUs, {float_path()}, Python {platform.python_version()}, "
-            f"numpy {numpy.__version__}, torch {torch.__version__}")
+    try:
+        import torch
+    except ModuleNotFoundError:  # a light install (no [train] extra): a report or the claims of studies made elsewhere
+        libraries = f"numpy {numpy.__version__}, no torch"
+    else:
+        libraries = f"numpy {numpy.__version__}, torch {torch.__version__}"
+    return f"{cpu}, {os.cpu_count()} CPUs, {float_path()}, Python {platform.python_version()}, {libraries}"
 
 
 def _run_logged(job: Job, in_command: bool = False) -> JobResult:

@@ -23,6 +23,7 @@ from typing import Any, Sequence
 
 from uavris.errors import UavrisError
 from uavris.experiments.display.tables import markdown_table
+from uavris.experiments.engine.jobs import machine
 from uavris.experiments.study.claims_comparison import (
     budget_figure,
     budget_table,
@@ -39,6 +40,12 @@ from uavris.io import atomic_write_text, other_inputs, read_json, write_json
 from uavris.stats import HOLDS, MIN_UNITS, NOT_RESOLVED, REFUTED, holm
 
 ALPHA = 0.05  # the family-wise error rate of the claims table (Holm)
+# How far the float path moves what the table judges (docs/timings.md, "The float path"; measured there).
+FLOAT_PATHS = ("Every number of a study is of the float path it ran: uavris pins numpy, OpenBLAS and torch to "
+               "their AVX2 kernels (`uavris.float_paths`), and on that path an AMD EPYC of Zen 3 and one of Zen 5 "
+               "(with AVX-512) gave the same bits for the whole quick study, its references on an Intel Xeon too. "
+               "On another path (`UAVRIS_NATIVE_FLOATS=1`) the learned rows are another random draw: two verdicts "
+               "of an earlier version's table read differently on an Intel Xeon and an AMD EPYC, natively.")
 
 CLAIMS: dict[str, str] = {
     "ddpg-best": "DDPG trains the best expert of DDPG, PPO, SAC and TD3 (Fig. 2, Sec. V)",
@@ -185,6 +192,10 @@ def rests_on(studies: Sequence[Study]) -> list[str]:
         "safety layer and the safety distance; the paper's DT observes neither.",
     ]
     deployment = next((st for st in studies if TRACK_SPECS["deployment"] in st.config.tracks), None)
+    if deployment is not None and deployment.done("deploy-value") is not None:
+        lines.append("- The goal-conditioned DT's cells read one fit of the learned value of a pose (`deploy-value`, "
+                     "one seed, shared by the three pre-training seeds): their intervals over halls hold that fit "
+                     "fixed and leave out how the rows would move with another fit of it.")
     for count, diff in dt_against_hovering(deployment) if deployment is not None else []:
         cell = judgement("dt-over-hover", "deployment", diff, "", "halls", "")
         lines.append(f"- With {count} devices the return-conditioned DT against hovering with optimised phases, "
@@ -203,10 +214,11 @@ def write_claims(outs: Sequence[Path], dest: Path, budgets: Sequence[tuple[Path,
         raise UavrisError(f"{dest} holds the claims of other studies ({', '.join(old.get('studies', []))}); give "
                           "this one another --out (nothing there is replaced)")
     studies = [Study.open(o) for o in outs]
+    check_evidence(studies)  # before anything is judged or written
     halls = _from_scratch_halls(from_scratch, studies) if from_scratch is not None else ()
     judgements = holm_corrected(judge_studies(studies, budgets, halls))
     judged = sum(math.isfinite(j.p_holm) for j in judgements)
-    lines = ["# The paper's claims, judged", "",
+    lines = ["# The paper's claims, judged", "", f"Judged by `uavris claims` on {machine()}. {FLOAT_PATHS}", "",
              "\n".join(claims_table(judgements)), "",
              "Each cell: the verdict, the mean paired difference over the units and its 95% CI (Student's t; "
              "Welch's for the comparison). A claim **holds** where the CI excludes zero the claimed way, is "
@@ -231,7 +243,50 @@ def write_claims(outs: Sequence[Path], dest: Path, budgets: Sequence[tuple[Path,
                   *budget_table(budgets[0][0], [b for _, b in budgets], zero)]
     lines += ["", f"Studies: {', '.join(str(o) for o in outs)}" + (f"; comparison {budgets[0][0]}" if budgets else "")
               + (f"; from scratch: {from_scratch}" if from_scratch else "") + ".", ""]
+    lines += [f"The evidence beside this page (`{EVIDENCE}/`): each study's report, the from-scratch curves and "
+              "`claims.json` (every cell's interval and p-values), from which the table can be checked.", ""]
     path = Path(dest) / "claims.md"
+    write_evidence(studies, Path(dest) / EVIDENCE, from_scratch)
     atomic_write_text(path, "\n".join(lines))
     write_json(Path(dest) / "claims.json", {"inputs": inputs, "judgements": [asdict(j) for j in judgements]})
     return path
+
+
+EVIDENCE = "claims-evidence"  # the folder beside claims.md with what its cells are read from
+
+
+def check_evidence(studies: Sequence[Study]) -> None:
+    """Each study's report exists and has a file name of its own in the evidence folder."""
+    names = [st.out.resolve().name for st in studies]
+    if len(set(names)) != len(names):
+        raise UavrisError(f"two studies judged here share a directory name ({', '.join(names)}): their reports "
+                          "would be written to one file; give each its own name")
+    for st in studies:
+        if not (st.out / "report.md").is_file():
+            raise UavrisError(f"{st.out}: no report.md (run `uavris reproduce --report-only --out {st.out}`)")
+
+
+def write_evidence(studies: Sequence[Study], folder: Path, from_scratch: Path | None) -> None:
+    """Each study's report (``NAME.md``, its directory's name; small text files, its figures left
+    out) and a copy of the from-scratch curves, as the folder ``folder`` (made beside it and put in
+    its place whole, so it never mixes two invocations' evidence): what a reader checks the cells
+    against without the studies' gigabytes."""
+    import shutil
+    import tempfile
+
+    folder.parent.mkdir(parents=True, exist_ok=True)
+    made = Path(tempfile.mkdtemp(prefix=f".{folder.name}.", dir=folder.parent))
+    try:
+        for st in studies:
+            atomic_write_text(made / f"{st.out.resolve().name}.md", (st.out / "report.md").read_text())
+        if from_scratch is not None:
+            atomic_write_text(made / "from-scratch.json", Path(from_scratch).read_text())
+        made.chmod(0o755)
+        old = folder.with_name(f".{folder.name}.old")
+        if folder.exists():
+            shutil.rmtree(old, ignore_errors=True)
+            folder.rename(old)
+        made.rename(folder)
+        shutil.rmtree(old, ignore_errors=True)
+    finally:
+        shutil.rmtree(made, ignore_errors=True)
