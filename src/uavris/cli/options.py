@@ -2,8 +2,9 @@
 
 Lives here: :class:`RunOptions` (where a training run goes and whether it resumes) and
 :func:`check_run_options`, the one place that says what ``--resume`` and ``--force`` mean
-on the command line; :data:`LAYOUT_HELP` and :func:`layout_defaults`, the one place that
-says what ``--layout`` does to a command's system and scenario. Not here: the run
+on the command line; :data:`LAYOUT_HELP` and :func:`in_hall`, the one place that says what
+``--layout`` and the ``--system.*`` flags do to a command's system and start (:func:`layout_defaults`
+reads them first, for the commands whose ``--help`` shows a preset's defaults). Not here: the run
 directory itself (:mod:`uavris.runs`), layouts (:mod:`uavris.layouts`).
 """
 
@@ -175,14 +176,11 @@ def layout_defaults(args: list[str], system: SystemConfig,
     and, a layout file may, the room: ``--layout`` with ``--system.users``, or a file with a
     room with ``--system.room``, gives them twice, which is one error line whatever the values
     (the paper's room given beside a file's room is no less a contradiction)."""
-    from uavris.layouts import resolve_layout
-
     named = check_hall_flags(args, system, prog)
     if named is None:
         return system, None
-    loose = _DevicesLater(**{f.name: getattr(system, f.name) for f in fields(SystemConfig)})
-    first = read_first(_HallFlags, args, prog, default=_HallFlags(loose))
-    return resolve_layout(named, first.system).resolve(first.system)
+    loose = _DevicesLater(**{f.name: getattr(system, f.name) for f in fields(SystemConfig)})  # the base's own limits
+    return in_hall(named, system, read_first(_HallFlags, args, prog, default=_HallFlags(loose)).system, args)
 
 
 def seed_note(row: Any, seeds: list[int]) -> str:

@@ -8,10 +8,13 @@ themselves (:mod:`.training`, :mod:`.evaluation`).
 
 Why :func:`read_first`: tyro takes one default per field, fixed before it parses. A few
 flags choose the defaults of many others: a preset (``--preset``) every budget, a config
-file (``--config``) every field, a model (``--model``) or a target its system, a hall
-(``--layout``) the devices and the start. Those flags are read first, by tyro (a small
-dataclass of them, the rest of the line left alone), then the whole command with the
-defaults they choose.
+file (``--config``) every field, a model (``--model``) its system. In the commands that take
+them (train, pretrain-dt, finetune-dt, reproduce) those flags are read first, by tyro (a small
+dataclass of them, the rest of the line left alone), then the whole command with the defaults
+they choose, so that ``--help`` shows them. The commands whose only such choice is the system
+(evaluate, benchmark, sweep, demo, compare-algorithms) parse once and apply the ``--system.*``
+flags written on the line to the target's or the hall's system afterwards
+(:func:`uavris.cli.options.in_hall`).
 """
 
 from __future__ import annotations
