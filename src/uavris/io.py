@@ -56,6 +56,18 @@ def atomic_write_text(path: str | Path, text: str) -> None:
     atomic_write_bytes(path, text.encode("utf-8"))
 
 
+def replace_folder(made: Path, dest: Path, aside: Path) -> None:
+    """Put the finished folder ``made`` in the place of ``dest`` whole (the old one moved to
+    ``aside`` first, then removed): a reader sees the old folder or the new one, never a mix."""
+    import shutil
+
+    shutil.rmtree(aside, ignore_errors=True)
+    if dest.exists():
+        dest.rename(aside)
+    made.rename(dest)
+    shutil.rmtree(aside, ignore_errors=True)
+
+
 def atomic_save(path: str | Path, save: Callable[[Path], Any]) -> None:
     """A file another library writes (SB3's archive, its replay buffer) made atomic: ``save(tmp)``
     writes a temporary file beside ``path`` (of the same suffix, which such libraries read),

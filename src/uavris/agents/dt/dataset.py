@@ -49,7 +49,7 @@ from uavris.env import ENV_ID
 from uavris.env.simulator import layout_as_lists, observation_bounds, stored_system
 from uavris.env.wrappers import PHASE_CONTROLS, action_dim_for
 from uavris.errors import ConfigError, DatasetError
-from uavris.io import contents
+from uavris.io import contents, replace_folder
 
 DATASET_FORMAT_VERSION = 2  # 2: the environment spec and the phase control always recorded
 DATASET_NAMESPACE = "uavris"
@@ -184,12 +184,7 @@ def write_dataset(path: str | Path, trajectories: Sequence[Trajectory], system: 
         storage.update_episode_metadata([_episode_metadata(tr) for tr in trajectories])
         # the data folder swapped, not the directory: the directory keeps its writer's lock (uavris.io.contents)
         path.mkdir(parents=True, exist_ok=True)
-        old = path.parent / f".{path.name}.old"
-        shutil.rmtree(old, ignore_errors=True)
-        if (path / "data").exists():
-            (path / "data").rename(old)
-        (tmp / "data").rename(path / "data")
-        shutil.rmtree(old, ignore_errors=True)
+        replace_folder(tmp / "data", path / "data", path.parent / f".{path.name}.old")
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
     return given

@@ -36,7 +36,7 @@ from uavris.experiments.study.config import AUTO
 from uavris.experiments.study.finished import Study
 from uavris.experiments.study.judgement import NOT_TESTED, Judgement, judgement
 from uavris.experiments.study.tracks import TRACK_SPECS, TRACKS
-from uavris.io import atomic_write_text, other_inputs, read_json, write_json
+from uavris.io import atomic_write_text, other_inputs, read_json, replace_folder, write_json
 from uavris.stats import HOLDS, MIN_UNITS, NOT_RESOLVED, REFUTED, holm
 
 ALPHA = 0.05  # the family-wise error rate of the claims table (Holm)
@@ -282,11 +282,6 @@ def write_evidence(studies: Sequence[Study], folder: Path, from_scratch: Path | 
         if from_scratch is not None:
             atomic_write_text(made / "from-scratch.json", Path(from_scratch).read_text())
         made.chmod(0o755)
-        old = folder.with_name(f".{folder.name}.old")
-        if folder.exists():
-            shutil.rmtree(old, ignore_errors=True)
-            folder.rename(old)
-        made.rename(folder)
-        shutil.rmtree(old, ignore_errors=True)
+        replace_folder(made, folder, folder.with_name(f".{folder.name}.old"))
     finally:
         shutil.rmtree(made, ignore_errors=True)
