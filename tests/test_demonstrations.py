@@ -85,3 +85,45 @@ def test_an_existing_dataset_is_not_overwritten_without_force(mixed_dataset):
     with pytest.raises(DatasetError):
         collect_demonstrations(MIXED, mixed_dataset, progress=False)
     assert len(load_dataset(mixed_dataset).trajectories) == 24  # still whole
+
+
+@pytest.mark.slow
+def test_the_teacher_plans_within_half_a_percent_of_its_search_with_r():
+    """The demonstrations' teacher ranks the candidates with ``R`` and searches around the best
+    on the cheap estimate; against the same planner searching with ``R`` (the earlier teacher)
+    in 8 training halls, its candidates are valued the same (the same poses, draws and
+    optimiser), and its plans, valued by an independent assessment on fresh draws, are worth
+    within 0.5% of the exact search's on average and within 2% in every hall."""
+    from uavris.agents.oracle.objective import assessed_rate, episode_value, trip_slots
+    from uavris.agents.oracle.planner import EXACT_TEACHER, TEACHER, plan_target
+
+    def worth(system, start, plan):  # the episode value of the trip, on the assessment's fresh draws
+        poses = np.array([start, plan.target])
+        rates, _ = assessed_rate(system, poses, np.array([np.zeros(3), plan.attitude]))
+        return episode_value(system.horizon, trip_slots(system, np.array(start), poses[1:]), rates[0], rates[1:])[0]
+
+    cfg = DemonstrationConfig(halls=8)
+    losses = []
+    for hall in cfg.layouts():
+        system, where = hall.resolve(cfg.system)
+        exact, teacher = plan_target(system, where.start, EXACT_TEACHER), plan_target(system, where.start, TEACHER)
+        assert teacher.candidates == exact.candidates
+        losses.append(1 - worth(system, where.start, teacher) / worth(system, where.start, exact))
+    assert np.mean(losses) < 0.005 and max(losses) < 0.02
+
+
+def test_the_value_labels_are_the_level_poses_the_teacher_valued_with_r():
+    """The labels beside a demonstration: level poses of the hall (the start among them), each
+    with ``R`` there computed again here on the planner's draws."""
+    from uavris.agents.oracle.objective import expected_optimised_rate
+    from uavris.experiments.training.demonstrations import demonstrate
+
+    cfg = DemonstrationConfig(halls=1, episodes=1, value_labels=True, system=SHORT_SEEN)
+    labels: dict = {}
+    demonstrate(cfg, labels=labels)
+    system, where = cfg.layouts()[0].resolve(cfg.system)
+    position, rate = np.concatenate(labels["position"]), np.concatenate(labels["rate"])
+    assert len(rate) >= 2 and any(np.array_equal(p, where.start) for p in position)
+    assert np.all(np.concatenate(labels["hall"]) == "layout-train-0")
+    want = expected_optimised_rate(system, position, np.zeros(3), draws=2, seed=0)
+    np.testing.assert_allclose(rate, want, rtol=1e-12)

@@ -38,7 +38,7 @@ IMITATION_SLOT_S = 0.56e-3  # a DAgger slot: the rollout, the oracle's label and
 PLAN_S = 1.4  # the exact planner's plan of one hall without the global stage (the teacher of the demonstrations)
 # The oracle's plan (the yardstick, with its global stage: docs/model.md section 19) by the number of devices
 ORACLE_PLAN_S = {3: 0.17, 4: 6.8, 5: 11.3, 6: 17.0, 7: 22.6, 8: 28.3}
-PLAN_FAST_S = PLAN_S / 7.7  # the same with the planner's cheap ranking (PlanSettings(exact=False), measured 7.7-11x)
+TEACHER_PLAN_S = PLAN_S / 4.1  # the demonstrations' teacher (its pattern search on the cheap estimate), measured 4.1x
 # A DT gradient step at the DT paper's size: batch 64 windows of 20 slots, width 128, 3 layers;
 # other sizes scale with the slots read times width^2 times depth (the matrix products).
 DT_STEP_S = 0.149
@@ -75,10 +75,10 @@ def dataset_cost(episodes: int, horizon: int, phase_control: str) -> float:
 
 
 def demonstration_cost(halls: int, episodes_per_hall: int, horizon: int, exact_plans: bool = False) -> float:
-    """The planning oracle's demonstrations in ``halls`` halls: a plan each (the reference
-    planner's or its cheap ranking's), and the episodes (all behaviours of a hall) with the
-    optimiser's phases."""
-    return halls * ((PLAN_S if exact_plans else PLAN_FAST_S) + episodes_per_hall * horizon * SLOT_S["optimizer"])
+    """The planning oracle's demonstrations in ``halls`` halls: a plan each (the teacher's, or
+    its search with ``R``), and the episodes (all behaviours of a hall) with the optimiser's
+    phases."""
+    return halls * ((PLAN_S if exact_plans else TEACHER_PLAN_S) + episodes_per_hall * horizon * SLOT_S["optimizer"])
 
 
 def pretrain_cost(cfg: Any) -> float:

@@ -291,10 +291,9 @@ class TrackStages(PlaceStages):
             return [Stage(t("dataset"), config, partial(self._run_collect, episodes, cost), (t("experts-train"),),
                           (cost,))]
         system = self.rc.system.replace(observe_devices=True)
-        # a track that learns places learns from the reference planner's plans (the teacher is the judge)
-        # and fits its value to the poses those plans valued
+        # a track that learns places fits its value to the level poses the teacher's plans valued with R
         oracle = DemonstrationConfig(halls=len(self.train), episodes=episodes, layout_seed=self.rc.layout_seed,
-                                     system=system, exact_plans=self.track.places)
+                                     system=system, value_labels=self.track.places)
         stages = [self._demonstrations_stage("dataset", oracle)]
         if self.track.ablation and self.rc.ablation:
             stages.append(self._demonstrations_stage("dataset-mixed", dataclasses.replace(
@@ -315,9 +314,10 @@ class TrackStages(PlaceStages):
     def _demonstrations_stage(self, name: str, cfg: DemonstrationConfig) -> Stage:
         costs = tuple(demonstration_cost(n, cfg.episodes * len(cfg.behaviours), self.horizon, cfg.exact_plans)
                       for _, n in self._chunks(cfg))
-        # the dataset format and the planner's version are part of the key: a stage of another format, or
-        # flown by another planner, is not read, it is made again
-        config = {**cfg.to_dict(), "format": DATASET_FORMAT_VERSION, "oracle": oracle_planner.ORACLE_VERSION}
+        # the dataset format, the planner's version and the teacher's settings are part of the key: a stage
+        # of another format, or flown by another planner, is not read, it is made again
+        config = {**cfg.to_dict(), "format": DATASET_FORMAT_VERSION, "oracle": oracle_planner.ORACLE_VERSION,
+                  "teacher": dataclasses.asdict(cfg.teacher)}
         return Stage(self.t(name), config, partial(self._run_demonstrations, name, cfg, costs), (), costs)
 
     def _run_demonstrations(self, name: str, cfg: DemonstrationConfig, costs: tuple[float, ...], d: Path,

@@ -40,7 +40,7 @@ def demonstrations_job(cfg_dict: dict[str, Any], first: int, count: int, out: st
     from uavris.experiments.training.demonstrations import DemonstrationConfig, collect_demonstrations, demonstrate
 
     cfg = DemonstrationConfig.from_dict(cfg_dict)
-    labels: dict[str, list[Any]] | None = {} if cfg.exact_plans else None
+    labels: dict[str, list[Any]] | None = {} if cfg.value_labels else None
     queries: dict[str, int] = {}
     trajectories = demonstrate(cfg, first, count, labels=labels, queries=queries)
     if labels:  # the plans' valued poses: labels of the learned value (a part beside the dataset's)

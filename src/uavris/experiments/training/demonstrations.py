@@ -22,12 +22,19 @@ Quality (``DemonstrationConfig.quality``):
   the start, and the oracle's motion with Gaussian noise (``noise`` on every motion entry),
   each with its true returns: the dataset on which return conditioning can matter.
 
-Plans: the teacher (``TEACHER``: the planner without the global stage that makes the yardstick, and
-without the front margin the yardstick keeps) in
-its cheap ranking (``exact=False``) chooses each hall's
-target, 11x cheaper than the reference planner for plans worth 0.23% less on average (1.2%
-in the worst of 27 halls and scenarios measured): a demonstration is training data, not a
-reference, and the plan was most of a demonstration's cost (``exact_plans`` restores it).
+Plans: the teacher (:data:`~uavris.agents.oracle.planner.TEACHER`: the planner without the
+global stage that makes the yardstick and without the front margin the yardstick keeps; its
+candidates ranked with ``R``, its pattern search on the cheap estimate) chooses each hall's
+target, 4.1x cheaper than the same planner searching with ``R`` for plans worth 0.19% less on
+average, 1.26% in the worst of 96 halls (docs/timings.md): a demonstration is training data,
+not a reference, and the plan was most of a demonstration's cost (``exact_plans`` restores the
+search with ``R``, the teacher of earlier versions,
+:data:`~uavris.agents.oracle.planner.EXACT_TEACHER`).
+
+Value labels (``value_labels``, the deployment track's): the level poses each hall's plan
+valued with ``R`` itself (the start and the screened candidates, and with exact plans the
+level poses of the pattern search): places near the hall's best ones, where a learned value
+of a pose must rank well (:mod:`uavris.agents.place`), at no cost beyond the plan.
 
 Episode seeds: hall ``j``'s episodes are ``seed + j * episodes + i`` (``seed`` the collection
 base, never an evaluation seed), the same for every behaviour of a hall.
@@ -45,7 +52,7 @@ from numpy.typing import NDArray
 
 from uavris.agents.dt.dataset import DATASET_NAMESPACE, check_dataset_target, write_dataset
 from uavris.agents.dt.trajectories import Trajectory, record_episodes
-from uavris.agents.oracle.planner import TEACHER
+from uavris.agents.oracle.planner import EXACT_TEACHER, TEACHER, PlanSettings
 from uavris.agents.oracle.policy import PlannedFlight, PlanningOracle
 from uavris.agents.policy import Privileged
 from uavris.config import DictConfig, SystemConfig
@@ -70,7 +77,8 @@ class DemonstrationConfig(DictConfig):
     episodes: int = 2  # episodes per hall (and per behaviour)
     quality: Quality = "oracle"  # oracle, or mixed (oracle, another hall's plan, hovering, noisy oracle)
     noise: float = 0.3  # std of the noise on the noisy oracle's motion entries (in [-1, 1] units)
-    exact_plans: bool = False  # the reference planner; False: its cheap ranking (PlanSettings.exact), 11x cheaper
+    exact_plans: bool = False  # the teacher's pattern search with R (EXACT_TEACHER); False: TEACHER, 4.1x cheaper
+    value_labels: bool = False  # the level poses the plans valued with R, beside each part (module docstring)
     layout_seed: int = 0  # seed of the layout generator
     seed: int = COLLECT_SEED  # first episode seed
     system: SystemConfig = dataclasses.field(default_factory=lambda: SystemConfig(observe_devices=True))
@@ -95,6 +103,11 @@ class DemonstrationConfig(DictConfig):
     def behaviours(self) -> tuple[str, ...]:
         return BEHAVIOURS[self.quality]
 
+    @property
+    def teacher(self) -> PlanSettings:
+        """The planner's settings of its plans (module docstring)."""
+        return EXACT_TEACHER if self.exact_plans else TEACHER
+
     def layouts(self, first: int = 0, count: int | None = None) -> list[Layout]:
         """Training halls ``first .. first + count - 1`` (default: to the last)."""
         count = self.halls - first if count is None else count
@@ -114,13 +127,12 @@ def demonstrate(cfg: DemonstrationConfig, first: int = 0, count: int | None = No
                 queries: dict[str, int] | None = None) -> list[Trajectory]:
     """The demonstrations of halls ``first .. first + count - 1`` (module docstring), hall by
     hall, behaviour by behaviour; ``on_hall()`` is called after each hall (progress). With
-    ``labels`` (a dict of lists) and the reference planner (``exact_plans``), every level pose its
-    plan of each hall valued with ``R`` is added to it (users, position, rate, hall): the
-    learned value's labels near each hall's best poses, at no cost beyond the plan. ``queries``
-    gets ``poses_valued``: the model queries behind the plans (poses valued with the optimiser),
-    which the claims count beside the environment interactions."""
+    ``labels`` (a dict of lists), the level poses its plan of each hall valued with ``R`` are
+    added to it (users, position, rate, hall). ``queries`` gets ``poses_valued``: the model
+    queries behind the plans (poses valued with the optimiser), which the claims count beside
+    the environment interactions."""
     layouts = cfg.layouts(first, count)
-    oracle = PlanningOracle(settings=dataclasses.replace(TEACHER, exact=cfg.exact_plans))
+    oracle = PlanningOracle(settings=cfg.teacher)
     resolved = [layout.resolve(cfg.system) for layout in layouts]
     out: list[Trajectory] = []
     for i, (system, where) in enumerate(resolved):
