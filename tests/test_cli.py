@@ -334,6 +334,10 @@ def test_help_shows_the_defaults_the_lines_choices_make(capsys: pytest.CaptureFi
     assert re.search(r"--steps INT\s+gradient steps \(default: 20\)", out)  # the smoke preset's
     assert main(["train", "--help"]) == 0
     assert f"(default: {TRAIN['quick']['total_steps']})" in capsys.readouterr().out
+    assert main(["finetune-dt", "--help"]) == 0  # neither a scenario nor a layout to adapt to: both asked for
+    out = capsys.readouterr().out
+    flat = re.sub(r"[\u2502\s]+", " ", out)  # the help's lines joined, its box drawn away
+    assert "run or model directory (required)" in flat and "(or a layout's name, with start) (required)" in flat
 
 
 def test_device_flag(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

@@ -157,14 +157,14 @@ def parse_built(cls: type[T], args: list[str], prog: str, description: str, defa
     config its choices make, the flags written on top; the module docstring says why). With
     ``--help``, the line without it is parsed (``placeholder``: ``default`` with its required
     flags filled, so that a help needs none) and built first, and the help shows what that
-    build gives (``help_default`` of it marks the flags still required), the command's own
-    defaults where the line does not parse or build."""
+    build gives (``help_default`` marks the flags still required), the command's own defaults
+    where the line does not parse or build."""
     if any(a in HELP for a in args):
         shown = default
         with contextlib.suppress(UavrisError):
-            shown = help_default(build(parse(cls, [a for a in args if a not in HELP], prog, description,
-                                             default=default if placeholder is None else placeholder)))
-        parse(cls, args, prog, description, default=shown)  # prints the help and exits
+            shown = build(parse(cls, [a for a in args if a not in HELP], prog, description,
+                                default=default if placeholder is None else placeholder))
+        parse(cls, args, prog, description, default=help_default(shown))  # prints the help and exits
     return build(parse(cls, args, prog, description, default=default))
 
 
