@@ -47,3 +47,12 @@ def test_the_findings_name_the_page_each_feeds_and_make_bench_runs_the_rest():
     bench = (ROOT / "Makefile").read_text().split("\nbench:", 1)[1].split("\n\n", 1)[0]
     ran = set(re.findall(r"benchmarks/(\w+)\.py", bench))
     assert ran == {p.stem for p in SCRIPTS if p.parent.name == "benchmarks"}  # every throughput script, no other
+
+
+def test_the_cost_models_fit_names_unit_costs_the_model_has(monkeypatch):
+    """``cost_model.py --fit`` scales groups of unit costs by name: each name is one of the cost model's."""
+    from uavris.experiments.engine import costs
+
+    module = _load(ROOT / "benchmarks" / "findings" / "cost_model.py", monkeypatch)
+    missing = [name for group in module.GROUPS.values() for name in group if not hasattr(costs, name)]
+    assert not missing, missing

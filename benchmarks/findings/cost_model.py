@@ -50,7 +50,7 @@ def family(stage: str) -> str:
 GROUPS = {
     "SB3 env step": ("SB3_STEP_S",),
     "simulated slot": ("SLOT_S", "IMITATION_SLOT_S"),
-    "plan of a hall": ("PLAN_S", "PLAN_FAST_S", "ORACLE_PLAN_S"),
+    "plan of a hall": ("PLAN_S", "TEACHER_PLAN_S", "ORACLE_PLAN_S"),
     "planner's pose": ("POSE_S",),
     "DT step": ("DT_STEP_S", "DT_STEP_OVERHEAD_S", "DEVICE_ENCODER_STATE_S"),
     "value step": ("VALUE_STEP_S",),
