@@ -158,6 +158,8 @@ class Plan:
 # (a tilt of the RIS the exact search finds and this one does not, or an equally good place
 # elsewhere). Above the 0.5% the references can afford, so the oracle of every report plans
 # exactly; the estimate is an option for what does not need the reference.
+# They shape the demonstrations' teacher's refinement too (TEACHER): a change to them, or to
+# FINALIST_CANDIDATES, changes plans, and goes with a new ORACLE_VERSION (every stage key of a plan).
 RANK_DRAWS = 1
 RANK_OPTIMISER = dict(restarts=0, noise_levels=(1e3, 1.0), iterations=20)
 

@@ -249,8 +249,8 @@ class PlanningOracle:
 
     def valued_poses(self, config: SystemConfig) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """The poses ``(P, 6)`` (position, attitude) its plans of ``config`` valued with ``R``
-        itself (the reference planner's, not the cheap ranking's), and ``R`` at each: what a
-        learned value of a pose can be fitted to, at no cost beyond the plans."""
+        itself (not those valued with the cheap estimate), and ``R`` at each: what a learned
+        value of a pose can be fitted to, at no cost beyond the plans."""
         memo = self._memo.get(self._planning(config), {})
         exact = [(np.frombuffer(key[1:], dtype=np.float64), value) for key, value in memo.items() if key[:1] == b"\x01"]
         if not exact:

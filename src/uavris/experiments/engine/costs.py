@@ -35,7 +35,7 @@ SLOT_S = {"agent": 0.16e-3, "optimizer": 0.41e-3}
 # a collected slot costs this share of an evaluated one (one batch, no slot records)
 COLLECT_SHARE = {"agent": 0.3, "optimizer": 0.55}
 IMITATION_SLOT_S = 0.56e-3  # a DAgger slot: the rollout, the oracle's label and its share of the fitting
-PLAN_S = 1.4  # the exact planner's plan of one hall without the global stage (the teacher of the demonstrations)
+PLAN_S = 1.4  # the planner's plan of one hall without the global stage, refining with R (EXACT_TEACHER)
 # The oracle's plan (the yardstick, with its global stage: docs/model.md section 19) by the number of devices
 ORACLE_PLAN_S = {3: 0.17, 4: 6.8, 5: 11.3, 6: 17.0, 7: 22.6, 8: 28.3}
 TEACHER_PLAN_S = PLAN_S / 4.1  # the demonstrations' teacher (its pattern search on the cheap estimate), measured 4.1x
