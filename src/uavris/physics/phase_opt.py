@@ -130,9 +130,10 @@ from uavris.config import SystemConfig
 from uavris.physics import streams
 from uavris.physics.phase_kernel import solve_slots
 
-# The first compile of the kernel on one core (measured: docs/timings.md); numba caches it beside the
-# module (or in NUMBA_CACHE_DIR) and every later process loads it in well under a second.
-COMPILE_S = 25
+# The first compile of the kernel on one core (measured, docs/timings.md: 13 s on the AMD EPYC of family 26,
+# 24 s on one of family 25 with the other core busy); numba caches it beside the module (or in
+# NUMBA_CACHE_DIR) and every later process loads it in well under a second.
+COMPILE_S = "10-25"
 
 
 class CompileNotice(UserWarning):
@@ -149,9 +150,9 @@ def kernel_ready() -> bool:
 
 def announce_compile() -> None:
     """One notice (:class:`CompileNotice`, shown once) before the first use compiles the kernel: a
-    first run that waits half a minute says why."""
+    first run that waits for it says why."""
     if not kernel_ready():
-        warnings.warn(f"compiling the phase optimiser, once: about {COMPILE_S} s (later runs load it from numba's "
+        warnings.warn(f"compiling the phase optimiser, once: {COMPILE_S} s (later runs load it from numba's "
                       "cache)", CompileNotice, stacklevel=3)
 
 
