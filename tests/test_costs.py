@@ -92,3 +92,8 @@ def test_finetuning_and_evaluation_worked_by_hand():
     # without the safety layer, and the transferred plan's hall planned
     assert costs.evaluate_cost(3, 8, 50, "optimizer", 8, 2, True, 1) == pytest.approx(
         3 * 8 * 50 * slot * 2 + 2 * costs.ORACLE_PLAN_S[8] + costs.PLAN_S + 2 * 8 * 50 * slot * 2)
+    # two DT rows of the DT paper's size read their 20-slot window every slot: a quarter of a
+    # one-window gradient step each (the DT step's reference is a batch of 64 such windows)
+    paper = SimpleNamespace(context=20, width=128, depth=3)
+    assert costs.evaluate_cost(3, 8, 50, "agent", dt_forwards=2, model=paper) == pytest.approx(
+        costs.evaluate_cost(3, 8, 50, "agent") + 2 * 8 * 50 * costs.DT_STEP_S / 64 / 4)

@@ -32,8 +32,9 @@ SB3_STEP_S: dict[str, dict[str, float]] = {
 # A simulated slot of one episode with a learned policy, by who sets the phases, and with the
 # planning oracle as the teacher of imitation (its motion only, no phases).
 SLOT_S = {"agent": 0.16e-3, "optimizer": 0.41e-3}
-# a collected slot costs this share of an evaluated one (one batch, no slot records)
-COLLECT_SHARE = {"agent": 0.3, "optimizer": 0.55}
+# a collected slot costs this share of an evaluated one (one batch, no slot records; the optimiser's measured
+# on this version's make run, docs/timings.md)
+COLLECT_SHARE = {"agent": 0.3, "optimizer": 0.79}
 IMITATION_SLOT_S = 0.56e-3  # a DAgger slot: the rollout, the oracle's label and its share of the fitting
 PLAN_S = 1.4  # the planner's plan of one hall without the global stage, refining with R (EXACT_TEACHER)
 # The oracle's plan (the yardstick, with its global stage: docs/model.md section 19) by the number of devices
@@ -117,14 +118,19 @@ def value_fit_cost(steps: int, width: int) -> float:
 
 
 def evaluate_cost(policies: int, episodes: int, horizon: int, phase_control: str, devices: int = 4,
-                  oracle_plans: int = 1, generated: bool = False, teacher_plans: int = 0) -> float:
+                  oracle_plans: int = 1, generated: bool = False, teacher_plans: int = 0,
+                  dt_forwards: int = 0, model: Any = None) -> float:
     """Evaluating ``policies`` learned policies and the references (zero action, hover with the
     optimiser's phases, the planning oracle) on ``episodes`` episodes in a hall of ``devices``
-    devices: the optimiser's slots grow with its pairs; the oracle plans ``oracle_plans`` times
-    (with and without a safety layer), in a ``generated`` hall with its global stage
+    devices: the optimiser's slots grow with its pairs; ``dt_forwards`` DT models of ``model``'s
+    size (a DT or behaviour-cloning row one, an ensemble its members) read their window every
+    slot, as fine-tuning's rollouts do; the oracle plans ``oracle_plans`` times (with and
+    without a safety layer), in a ``generated`` hall with its global stage
     (:data:`ORACLE_PLAN_S`), and ``teacher_plans`` other halls are planned (a transferred plan's)."""
     pairs = max(1.0, devices / 4)
     learned = policies * episodes * horizon * SLOT_S[phase_control] * (pairs if phase_control == "optimizer" else 1.0)
+    if dt_forwards and model is not None:
+        learned += dt_forwards * episodes * horizon * _dt_step(1, model.context, model.width, model.depth) / 4
     plan = ORACLE_PLAN_S.get(devices, ORACLE_PLAN_S[8] * devices / 8) if generated else PLAN_S
     references = oracle_plans * plan + teacher_plans * PLAN_S + 2 * episodes * horizon * SLOT_S["optimizer"] * pairs
     return learned + references

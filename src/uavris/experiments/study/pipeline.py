@@ -83,7 +83,7 @@ from uavris.experiments.study.workers import (
     merge_demonstrations,
     pretrain_job,
 )
-from uavris.experiments.tools.targets import Row
+from uavris.experiments.tools.targets import DTModel, Row
 from uavris.experiments.training.demonstrations import DemonstrationConfig
 from uavris.experiments.training.finetune import FinetuneConfig
 from uavris.experiments.training.pretrain import PretrainConfig
@@ -368,9 +368,10 @@ class TrackStages(PlaceStages):
         sources = transfer_sources(self.track, where, self.train)
         keys = [*self.inputs, *self.finetunes(where)]
         rows = self._rows(where, sources, {k: Path() for k in keys})
+        dt_forwards = sum(isinstance(r.target, DTModel) + len(r.members) for r in rows)
         cost = evaluate_cost(len(rows) - len(REFERENCE_ROWS), self.rc.eval_episodes, self.horizon, self.control,
                              where.devices, 1 + (self.track.front_margin_deg is not None), self.track.layouts,
-                             int(self.track.demonstrations))
+                             int(self.track.demonstrations), dt_forwards, self.model)
         # the hall it reads (its devices, room and start), not only its name: a changed generator or
         # layout is evaluated again instead of read back from an older run
         config = {"episodes": self.rc.eval_episodes, "seed": EVAL_SEED, "track": self.track.name,
