@@ -283,19 +283,92 @@ def test_config_file_unknown_field(tmp_path: Path, capsys: pytest.CaptureFixture
 
 def test_config_file_then_flags(tmp_path: Path) -> None:
     """A partial YAML fills from the preset; flags override the file; the result is validated."""
-    from uavris.cli.parsing import parse
-    from uavris.cli.training import TrainArgs, train_defaults
+    from uavris.cli.training import parse_train
     from uavris.experiments.training.train_expert import TrainConfig
 
     cfg = tmp_path / "c.yaml"
     cfg.write_text("algo: ppo\npreset: smoke\ntotal_steps: 320\nhyperparams:\n  learning_rate: 0.001\n"
                    "system:\n  noise_dbm: -90\n")
     args = ["--config", str(cfg), "--seed", "3"]
-    got = parse(TrainArgs, args, "uavris train", "", default=TrainArgs(train_defaults(args))).run
+    got = parse_train(args).run
     want = TrainConfig(algo="ppo", scenario="fig2", seed=3, preset="smoke")
     assert got.total_steps == 320 and got.seed == 3 and got.hyperparams.learning_rate == 0.001
     assert got.system.noise_dbm == -90 and got.system.v_max == want.system.v_max
     assert got.hyperparams.n_steps == want.hyperparams.n_steps
+
+
+def test_a_flag_written_at_the_parses_default_value_is_still_given(tmp_path: Path) -> None:
+    """Each command parses its line once, with its own defaults (the quick preset's), then builds
+    its config from the choices (a file's smoke preset, --preset smoke): a flag written with the
+    value the parse would have defaulted to is the user's, not the default, and wins."""
+    from uavris.cli.training import parse_pretrain, parse_reproduce, parse_train
+    from uavris.presets import STUDY, TRAIN
+
+    quick, smoke = TRAIN["quick"]["total_steps"], TRAIN["smoke"]["total_steps"]
+    cfg = tmp_path / "c.yaml"
+    cfg.write_text(f"preset: smoke\ntotal_steps: {smoke}\n")
+    assert parse_train(["--config", str(cfg), "--total-steps", str(quick)]).run.total_steps == quick
+    assert parse_train(["--config", str(cfg)]).run.total_steps == smoke
+    assert parse_train(["--preset", "smoke", "--eval-every", "10000"]).run.eval_every == 10000
+    assert parse_train(["--preset", "smoke"]).run.eval_every == TRAIN["smoke"]["eval_every"]
+    assert parse_train(["--algo", "ppo"]).run.hyperparams.n_steps > 0  # PPO's, not the parse's DDPG
+    episodes = STUDY["quick"]["eval_episodes"]
+    assert parse_reproduce(["--preset", "smoke", "--eval-episodes", str(episodes)]).study.eval_episodes == episodes
+    assert parse_reproduce(["--preset", "smoke"]).study.eval_episodes == STUDY["smoke"]["eval_episodes"]
+    steps = parse_pretrain(["--dataset", "d", "--preset", "smoke"]).run.steps
+    assert steps != parse_pretrain(["--dataset", "d"]).run.steps
+    assert parse_pretrain(["--dataset", "d", "--preset", "smoke", "--steps", "1500"]).run.steps == 1500
+
+
+def test_the_one_parse_checks_nothing_against_its_own_defaults(tmp_path: Path, monkeypatch) -> None:
+    """The parse takes the line's values as they are (the parse's defaults are another preset's budgets,
+    a placeholder scenario, the paper's hall); the config built from the line's choices is what is
+    checked: lines valid for their preset, hall or file build, and an invalid one is still refused."""
+    import yaml
+
+    import uavris.agents.dt.checkpoint as checkpoint
+    from uavris.agents.experts.imitation import ImitationConfig
+    from uavris.cli.training import parse_finetune, parse_reproduce, parse_train
+    from uavris.errors import ConfigError
+    from uavris.experiments.training.train_expert import TrainConfig
+
+    assert parse_reproduce(["--preset", "smoke", "--train-layouts", "3"]).study.train_layouts == 3
+    hall = tmp_path / "hall.yaml"  # no room of its own: the flag's, narrower than the paper's
+    hall.write_text("devices:\n  - [5, 5, 1]\n  - [20, 8, 1]\n  - [25, 12, 0.5]\n  - [10, 14, 1]\nstart: [15, 8, 4]\n")
+    run = parse_train(["--layout", str(hall), "--system.room", "30", "16", "8", "--preset", "smoke"]).run
+    assert run.system.room == (30.0, 16.0, 8.0) and run.start == (15.0, 8.0, 4.0)
+    imitation = tmp_path / "imitation.yaml"
+    imitation.write_text(yaml.safe_dump(TrainConfig(algo="ppo", phase_control="optimizer", preset="smoke",
+                                                    imitation=ImitationConfig(rounds=3)).to_dict()))
+    assert parse_train(["--config", str(imitation), "--imitation.rounds", "2"]).run.imitation.rounds == 2
+    assert parse_train(["--config", str(imitation), "--total-steps", "0"]).run.total_steps == 0  # imitation alone
+    with pytest.raises(ConfigError, match="total_steps"):
+        parse_train(["--preset", "smoke", "--total-steps", "0"])
+    monkeypatch.setattr(checkpoint, "dt_system", lambda model: TrainConfig().system)  # a model of the paper's hall
+    ft = parse_finetune(["--model", "m", "--scenario", "unseen1", "--preset", "smoke", "--candidates", "4"]).run
+    assert (ft.candidates, ft.elites) == (4, 2)  # the smoke preset's elites, not the parse's (quick's 50)
+    with pytest.raises(ConfigError, match="elites"):
+        parse_finetune(["--model", "m", "--scenario", "unseen1", "--candidates", "4"])
+
+
+def test_help_shows_the_defaults_the_lines_choices_make(capsys: pytest.CaptureFixture[str]) -> None:
+    """``--help`` builds the line without it first: the paper preset's budgets under --preset
+    paper, a required flag the line leaves out still "required"."""
+    from uavris.presets import TRAIN
+
+    assert main(["train", "--preset", "paper", "--help"]) == 0
+    out = capsys.readouterr().out
+    assert f"(default: {TRAIN['paper']['total_steps']})" in out
+    assert main(["pretrain-dt", "--preset", "smoke", "--help"]) == 0
+    out = capsys.readouterr().out
+    assert re.search(r"--dataset STR[^-]*\(required\)", out)
+    assert re.search(r"--steps INT\s+gradient steps \(default: 20\)", out)  # the smoke preset's
+    assert main(["train", "--help"]) == 0
+    assert f"(default: {TRAIN['quick']['total_steps']})" in capsys.readouterr().out
+    assert main(["finetune-dt", "--help"]) == 0  # neither a scenario nor a layout to adapt to: both asked for
+    out = capsys.readouterr().out
+    flat = re.sub(r"[\u2502\s]+", " ", out)  # the help's lines joined, its box drawn away
+    assert "run or model directory (required)" in flat and "(or a layout's name, with start) (required)" in flat
 
 
 def test_device_flag(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

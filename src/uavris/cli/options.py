@@ -3,8 +3,9 @@
 Lives here: :class:`RunOptions` (where a training run goes and whether it resumes) and
 :func:`check_run_options`, the one place that says what ``--resume`` and ``--force`` mean
 on the command line; :data:`LAYOUT_HELP` and :func:`in_hall`, the one place that says what
-``--layout`` and the ``--system.*`` flags do to a command's system and start (:func:`layout_defaults`
-reads them first, for the commands whose ``--help`` shows a preset's defaults). Not here: the run
+``--layout`` and the ``--system.*`` flags do to a command's system and start; :func:`with_flags`,
+the one place that says which fields a command line gives (a command parses its line once, then
+builds its config: the defaults its choices make, the flags written on top). Not here: the run
 directory itself (:mod:`uavris.runs`), layouts (:mod:`uavris.layouts`).
 """
 
@@ -12,13 +13,15 @@ from __future__ import annotations
 
 from dataclasses import dataclass, fields, is_dataclass, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 from uavris.agents.torch_device import Device, resolve_device
 from uavris.cli.parsing import Unset, UsageError, output_dir, read_first
 from uavris.config import Scenario, SystemConfig
 from uavris.errors import ConfigError
 from uavris.runs import CONFIG_FILE, config_path
+
+T = TypeVar("T")
 
 
 @dataclass(frozen=True)
@@ -66,11 +69,11 @@ LAYOUT_HELP = ("the hall: paper (the paper's devices), layout-train-N / layout-u
 
 
 class _DevicesLater(SystemConfig):
-    """A system whose devices are checked once a layout has given them, for the first pass of
-    a command with ``--layout`` (:func:`uavris.cli.parsing.read_first`): the ``--system.*``
-    flags change the base system before ``--layout`` resolves (a generated hall is drawn in
-    the room of ``--system.room``, the paper's devices fit a room the flag enlarges), and the
-    base's own devices need not fit the changed room. Every other field is checked as always;
+    """A system whose devices are checked once a layout has given them: the parse default of a
+    command with ``--layout`` (:data:`LOOSE_SYSTEM`). The ``--system.*`` flags change the base
+    system before ``--layout`` resolves (a generated hall is drawn in the room of
+    ``--system.room``, the paper's devices fit a room the flag enlarges), and the base's own
+    devices need not fit the changed room. Every other field is checked as always;
     :meth:`replace`, which is how a layout makes its system, gives a fully checked
     :class:`SystemConfig`."""
 
@@ -85,14 +88,6 @@ class _DevicesLater(SystemConfig):
 # not fit the paper's devices): tyro keeps the default's class, so the parse checks every field but them,
 # and in_hall builds the checked system.
 LOOSE_SYSTEM = _DevicesLater()
-
-
-@dataclass(frozen=True)
-class _HallFlags:
-    """The flags that make a command's hall: ``--layout`` and the system it changes."""
-
-    system: _DevicesLater
-    layout: Unset[str] = None
 
 
 @dataclass(frozen=True)
@@ -133,19 +128,50 @@ def _check_given_beside_layout(named: str | None, given: set[str], system: Syste
 
 
 def _given_fields(base: Any, parsed: Any, given: set[str], prefix: str) -> dict[str, Any]:
-    """The fields of the dataclass ``parsed`` whose flag (``PREFIX.NAME``, a boolean's ``PREFIX.no-NAME``) was
-    written, by name; a nested dataclass (the propulsion parameters) as ``base``'s with its own written ones."""
+    """The fields of the dataclass ``parsed`` whose flag (``PREFIX.NAME``, a boolean's ``PREFIX.no-NAME``; ``--NAME``
+    without a prefix) was written, by name; a nested dataclass (the propulsion parameters) as ``base``'s with its own
+    written ones."""
     out: dict[str, Any] = {}
     for f in fields(parsed):
-        flag = f"{prefix}.{f.name.replace('_', '-')}"
-        value = getattr(parsed, f.name)
-        if is_dataclass(value):
-            inner = _given_fields(getattr(base, f.name), value, given, flag)
+        name = f.name.replace("_", "-")
+        flag, negated = (f"{prefix}.{name}", f"{prefix}.no-{name}") if prefix else (f"--{name}", f"--no-{name}")
+        value, under = getattr(parsed, f.name), getattr(base, f.name)
+        if is_dataclass(value) and is_dataclass(under):
+            inner = _given_fields(under, value, given, flag)
             if inner:
-                out[f.name] = replace(getattr(base, f.name), **inner)
-        elif flag in given or f"{prefix}.no-{f.name.replace('_', '-')}" in given:
+                out[f.name] = replace(under, **inner)
+        elif is_dataclass(value) and any(g.startswith(f"{flag}.") for g in given):
+            out[f.name] = value  # a nested config the base has none of (an expert's imitation), asked for by its flags
+        elif flag in given or negated in given:
             out[f.name] = value
     return out
+
+
+_LOOSE: dict[type, type] = {}
+
+
+def unchecked(config: T) -> T:
+    """``config`` as the one parse's default of a command that builds its config afterwards: the same
+    fields, in a subclass whose ``__post_init__`` judges nothing. tyro keeps the default's class, so
+    the parse takes the line's values without checking them against the parse's own defaults (another
+    preset's budgets, a placeholder scenario, the paper's hall); the command's build makes the real
+    config, every check run there (:func:`with_flags`)."""
+    cls = type(config)
+    loose = _LOOSE.setdefault(cls, type(cls.__name__, (cls,), {"__post_init__": lambda self: None,
+                                                               "__doc__": cls.__doc__, "__module__": cls.__module__}))
+    out = object.__new__(loose)
+    for f in fields(config):
+        object.__setattr__(out, f.name, getattr(config, f.name))
+    return out
+
+
+def with_flags(base: Any, parsed: Any, args: list[str], skip: tuple[str, ...] = ()) -> Any:
+    """The config ``base`` (the defaults a command's choices make: its preset, a file, a model, a
+    hall) with every field whose flag is written in ``args`` taken from ``parsed``, the command's one
+    parse of its flattened config (a flag given at its default value still counts; a nested
+    config's flags change that config's fields); the fields in ``skip`` stay ``base``'s."""
+    changes = _given_fields(base, parsed, given_flags(args), "")
+    return replace(base, **{k: v for k, v in changes.items() if k not in skip})
 
 
 def in_hall(layout: str | None, base: SystemConfig, parsed: SystemConfig,
@@ -154,8 +180,12 @@ def in_hall(layout: str | None, base: SystemConfig, parsed: SystemConfig,
     the ``--system.*`` flags written in ``args`` (their values read from ``parsed``, the command's
     parsed system, so a flag given at its default value still counts), in the hall ``layout``
     names, and that layout's start; without a layout, ``base`` with the flags and None.
-    :func:`layout_defaults`' rules: the flags change the base before the layout resolves, and a
-    flag that gives what the layout gives is one line."""
+
+    The flags apply to the base system before the layout resolves (a generated hall is drawn
+    in the room of ``--system.room``). A layout gives the devices and, a layout file may, the
+    room: ``--layout`` with ``--system.users``, or a file with a room with ``--system.room``,
+    gives them twice, which is one error line whatever the values (the paper's room given
+    beside a file's room is no less a contradiction)."""
     from uavris.layouts import resolve_layout
 
     given = given_flags(args)
@@ -165,22 +195,6 @@ def in_hall(layout: str | None, base: SystemConfig, parsed: SystemConfig,
         return base.replace(**changes), None
     loose = _DevicesLater(**{**{f.name: getattr(base, f.name) for f in fields(SystemConfig)}, **changes})
     return resolve_layout(layout, loose).resolve(loose)
-
-
-def layout_defaults(args: list[str], system: SystemConfig,
-                    prog: str = "uavris") -> tuple[SystemConfig, Scenario | None]:
-    """``system`` with the ``--system.*`` flags of ``args`` applied, in the hall ``--layout``
-    names, and that layout's start; ``system`` unchanged (and None) without ``--layout``.
-
-    The flags apply to the base system before the layout resolves. A layout gives the devices
-    and, a layout file may, the room: ``--layout`` with ``--system.users``, or a file with a
-    room with ``--system.room``, gives them twice, which is one error line whatever the values
-    (the paper's room given beside a file's room is no less a contradiction)."""
-    named = check_hall_flags(args, system, prog)
-    if named is None:
-        return system, None
-    loose = _DevicesLater(**{f.name: getattr(system, f.name) for f in fields(SystemConfig)})  # the base's own limits
-    return in_hall(named, system, read_first(_HallFlags, args, prog, default=_HallFlags(loose)).system, args)
 
 
 def seed_note(row: Any, seeds: list[int]) -> str:

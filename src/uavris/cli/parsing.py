@@ -2,19 +2,22 @@
 
 Lives here: :func:`parse` (tyro over a command's dataclass, its defaults given; a rejected
 command line becomes one :class:`UsageError` line, built from tyro's parse-error event),
-:func:`read_first` (the one adapter, see below), the registry's rule for lists of points
+:func:`parse_built` (a command line parsed once and built into its config), :func:`read_first`
+(a few flags read before the rest, for a check), the registry's rule for lists of points
 (``--system.users``) and the checks of paths every command shares. Not here: the commands
 themselves (:mod:`.training`, :mod:`.evaluation`).
 
-Why :func:`read_first`: tyro takes one default per field, fixed before it parses. A few
-flags choose the defaults of many others: a preset (``--preset``) every budget, a config
-file (``--config``) every field, a model (``--model``) its system. In the commands that take
-them (train, pretrain-dt, finetune-dt, reproduce) those flags are read first, by tyro (a small
-dataclass of them, the rest of the line left alone), then the whole command with the defaults
-they choose, so that ``--help`` shows them. The commands whose only such choice is the system
-(evaluate, benchmark, sweep, demo, compare-algorithms) parse once and apply the ``--system.*``
-flags written on the line to the target's or the hall's system afterwards
-(:func:`uavris.cli.options.in_hall`).
+Why :func:`parse_built`: tyro takes one default per field, fixed before it parses, while a few
+flags choose the defaults of many others: a preset (``--preset``) every budget, a config file
+(``--config``) every field, a model (``--model``) its system, a layout (``--layout``) the hall.
+A command parses its line once, with its own defaults in a form of its config that checks
+nothing (:func:`uavris.cli.options.unchecked`: tyro builds the config while it parses, and the
+parse's defaults are not the line's), and then builds its config: the defaults its choices
+make, with every field whose flag is written on the line taken from the parse
+(:func:`uavris.cli.options.with_flags`, :func:`uavris.cli.options.in_hall`), so that a flag
+given at its default value is known to be given; every check runs on the built config. Only ``--help`` looks twice: it shows
+the defaults the line's choices make (``uavris train --preset paper --help`` the paper
+preset's), so the line without it is parsed and built first.
 """
 
 from __future__ import annotations
@@ -24,7 +27,7 @@ import inspect
 import io
 import sys
 from pathlib import Path
-from typing import Annotated, Any, Iterator, Literal, Optional, TypeVar, get_args, get_origin
+from typing import Annotated, Any, Callable, Iterator, Literal, Optional, TypeVar, get_args, get_origin
 
 import tyro
 from tyro.constructors import ConstructorRegistry, PrimitiveConstructorSpec, PrimitiveTypeInfo
@@ -143,10 +146,28 @@ def parse(cls: type[T], args: list[str], prog: str, description: str, default: T
 
 
 def read_first(cls: type[T], args: list[str], prog: str, default: T | None = None) -> T:
-    """The flags of ``cls`` (a small dataclass of the flags that choose the defaults) among
-    ``args``, the rest of the line left alone: the first of a command's two passes (the module
-    docstring says why). ``--help`` is the command's own, not answered here."""
+    """The flags of ``cls`` (a small dataclass of a few flags) among ``args``, the rest of the line
+    left alone: what a check reads before the command parses (``--layout``, beside the flags it
+    contradicts). ``--help`` is the command's own, not answered here."""
     return parse(cls, [a for a in args if a not in HELP], prog, "", default=default, known_only=True)
+
+
+def parse_built(cls: type[T], args: list[str], prog: str, description: str, default: T,
+                build: Callable[[T], T], placeholder: T | None = None,
+                help_default: Callable[[T], T] = lambda built: built) -> T:
+    """``args`` parsed once into ``cls`` (its defaults ``default``) and built (``build``: the
+    config its choices make, the flags written on top; the module docstring says why). With
+    ``--help``, the line without it is parsed (``placeholder``: ``default`` with its required
+    flags filled, so that a help needs none) and built first, and the help shows what that
+    build gives (``help_default`` marks the flags still required), the command's own defaults
+    where the line does not parse or build."""
+    if any(a in HELP for a in args):
+        shown = default
+        with contextlib.suppress(UavrisError):
+            shown = build(parse(cls, [a for a in args if a not in HELP], prog, description,
+                                default=default if placeholder is None else placeholder))
+        parse(cls, args, prog, description, default=help_default(shown))  # prints the help and exits
+    return build(parse(cls, args, prog, description, default=default))
 
 
 NAME_MAX = 255  # bytes in one file or folder name (Linux, macOS); results add their own names inside

@@ -50,7 +50,7 @@ def plan_command(args: list[str]) -> None:
     over the hall at the target's altitude, with the devices, their safety balls, the start
     and the target).
     """
-    from uavris.cli.options import check_hall_flags, layout_defaults
+    from uavris.cli.options import check_hall_flags
     from uavris.experiments.tools.plan import check_devices, check_grid, plan_hall, planning_seconds
     from uavris.layouts import PAPER_LAYOUT, Layout, default_start, resolve_layout
 
@@ -72,7 +72,7 @@ def plan_command(args: list[str]) -> None:
         layout = PAPER_LAYOUT if a.system.users == PAPER_LAYOUT.users else Layout(
             "custom", a.system.users, default_start(a.system))
     else:
-        layout_defaults(["--layout", a.layout, *args], a.system)  # --system.users beside a layout: one line
+        check_hall_flags(["--layout", a.layout, *args], a.system, "uavris plan")  # --system.users beside it: one line
         layout = resolve_layout(a.layout, a.system)
     hall = layout.system(a.system)
     check_grid(hall, a.grid_step)  # before anything is written

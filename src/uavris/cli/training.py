@@ -9,13 +9,14 @@ Not here: what the commands do (:mod:`uavris.experiments`).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Annotated, Any, Callable
 
 import tyro
 
 from uavris.agents.experts import Algorithm
+from uavris.agents.experts.imitation import ImitationConfig
 from uavris.agents.torch_device import Device
 from uavris.cli.options import (
     LAYOUT_HELP,
@@ -23,10 +24,12 @@ from uavris.cli.options import (
     RunOptions,
     check_hall_flags,
     check_run_options,
+    given_flags,
     in_hall,
-    layout_defaults,
+    unchecked,
+    with_flags,
 )
-from uavris.cli.parsing import Unset, UsageError, load_overrides, output_dir, parse, read_first, writing
+from uavris.cli.parsing import Unset, UsageError, load_overrides, output_dir, parse, parse_built, writing
 from uavris.config import ScenarioName, SystemConfig
 from uavris.experiments.engine.jobs import Backend
 from uavris.experiments.study.config import ReproduceConfig
@@ -38,24 +41,20 @@ from uavris.presets import STUDY, Preset
 Flat = tyro.conf.arg(name="")  # the config's fields become the command's own flags
 
 
-def _required(config: Any, field: str) -> Any:
-    """``config`` (the defaults of a command's second pass) with ``field`` required: the
-    placeholder its other defaults were computed with is no default a user can rely on, so
-    tyro asks for the flag (and --help says "required")."""
-    object.__setattr__(config, field, tyro.MISSING)
+def _required(config: Any, *names: str) -> Any:
+    """``config`` (a command's defaults) with the fields ``names`` required: the placeholder it
+    was made with is no default a user can rely on, so tyro asks for the flag (and --help says
+    "required")."""
+    for name in names:
+        object.__setattr__(config, name, tyro.MISSING)
     return config
 
 
-@dataclass(frozen=True)
-class _Preset:
-    """The flag that chooses the budgets of every other (cli.parsing.read_first)."""
-
-    preset: Unset[Preset] = None
-
-
-def _given(**flags: Any) -> dict[str, Any]:
-    """The flags the first pass found, so that a config's own defaults stay its own."""
-    return {k: v for k, v in flags.items() if v is not None}
+def _still_required(built: Any, args: list[str], *names: str) -> Any:
+    """A command's built defaults shown by ``--help`` (``built.run``) with the fields ``names`` whose
+    flags the line does not give still required."""
+    _required(built.run, *(n for n in names if f"--{n}" not in given_flags(args)))
+    return built
 
 
 # ------------------------------------------------------------------------------------------ train
@@ -84,38 +83,33 @@ def _nested_update(base: dict[str, Any], changes: dict[str, Any], where: str) ->
     return out
 
 
-@dataclass(frozen=True)
-class _TrainChoices:
-    """The flags of ``uavris train`` that choose the defaults of the others: the algorithm and
-    preset (budgets, hyperparameters), the scenario, a configuration file (or the run to resume)."""
-
-    algo: Unset[Algorithm] = None
-    preset: Unset[Preset] = None
-    scenario: Unset[str] = None
-    config: Unset[Path] = None
-    out: Unset[Path] = None
-    resume: bool = False
-
-
-def train_defaults(args: list[str]) -> TrainConfig:
-    """The defaults of ``uavris train``'s flags: the algorithm and preset chosen on the command line
-    (or in ``--config``), with the file's fields on top, in the hall of ``--layout``. ``--resume``
-    without ``--config`` continues with the run's own ``OUT/config.yaml``."""
-    from uavris.experiments.training.train_expert import TrainConfig
-
-    c = read_first(_TrainChoices, args, "uavris train")
-    file = c.config
-    if file is None and c.resume and c.out is not None and (c.out / "config.yaml").is_file():
-        file = c.out / "config.yaml"  # the resumed run's configuration, not the preset's defaults
+def train_config(a: TrainArgs, args: list[str]) -> TrainConfig:
+    """The run ``uavris train``'s line asks for: the algorithm, preset and scenario it chooses (or
+    ``--config`` does), the file's fields on top, in the hall of ``--layout``, and every flag
+    written on the line over them. ``--resume`` without ``--config`` continues with the run's
+    own ``OUT/config.yaml``."""
+    given = given_flags(args)
+    file, out = a.config, a.options.out
+    if file is None and a.options.resume and out is not None and (out / "config.yaml").is_file():
+        file = out / "config.yaml"  # the resumed run's configuration, not the preset's defaults
     data = load_overrides(file, "TrainConfig") if file else {}
-    system, hall = layout_defaults(args, TrainConfig().system, "uavris train")
-    named = hall is None or c.scenario is not None  # a named scenario's start, in the layout's hall
-    where = {} if hall is None else {"system": system, "start": None if named else hall.start}
-    chosen = _given(algo=c.algo, preset=c.preset, scenario=c.scenario if named else hall.name)
-    base = TrainConfig(**{**{k: data[k] for k in ("algo", "preset", "scenario") if k in data}, **chosen, **where})
-    if not data:
-        return base
-    return TrainConfig.from_dict({**_nested_update(base.to_dict(), data, f"--config {file}"), **chosen})
+    chosen = {k: getattr(a.run, k) for k in ("algo", "preset", "scenario") if f"--{k}" in given}
+    base = TrainConfig(**{**{k: data[k] for k in ("algo", "preset", "scenario") if k in data}, **chosen})
+    if data:
+        base = TrainConfig.from_dict({**_nested_update(base.to_dict(), data, f"--config {file}"), **chosen})
+    system, hall = in_hall(a.layout, base.system, a.run.system, args)
+    # a layout's own start, unless a named scenario starts in its hall
+    where = {} if hall is None or "--scenario" in given else {"scenario": hall.name, "start": hall.start}
+    return with_flags(replace(base, system=system, **where), a.run, args, skip=("system",))
+
+
+def parse_train(args: list[str]) -> TrainArgs:
+    """``uavris train``'s line, parsed once and built (:func:`train_config`)."""
+    check_hall_flags(args, SystemConfig(), "uavris train")  # a room given twice: one line, first
+    default = unchecked(TrainConfig(system=LOOSE_SYSTEM))
+    object.__setattr__(default, "imitation", ImitationConfig())  # its flags on the line; taken where written
+    return parse_built(TrainArgs, args, "uavris train", train_command.__doc__ or "", default=TrainArgs(default),
+                       build=lambda parsed: replace(parsed, run=train_config(parsed, args)))
 
 
 def train_command(args: list[str]) -> None:
@@ -129,8 +123,7 @@ def train_command(args: list[str]) -> None:
     from uavris.experiments.training.train_expert import default_run_dir, train
     from uavris.runs import read_done
 
-    a = parse(TrainArgs, args, "uavris train", train_command.__doc__ or "",
-              default=TrainArgs(train_defaults(args)))
+    a = parse_train(args)
     run_dir = a.options.out or default_run_dir(a.run)
     device = check_run_options(a.options, run_dir)
     with writing(run_dir):
@@ -218,6 +211,18 @@ class PretrainArgs:
     options: Annotated[RunOptions, Flat] = RunOptions()
 
 
+def parse_pretrain(args: list[str]) -> PretrainArgs:
+    """``uavris pretrain-dt``'s line, parsed once and built: the preset's run, the flags written on top."""
+    def build(parsed: PretrainArgs) -> PretrainArgs:
+        run = PretrainConfig(dataset=parsed.run.dataset, preset=parsed.run.preset)
+        return replace(parsed, run=with_flags(run, parsed.run, args))
+
+    return parse_built(PretrainArgs, args, "uavris pretrain-dt", pretrain_command.__doc__ or "",
+                       default=PretrainArgs(_required(unchecked(PretrainConfig(dataset="")), "dataset")), build=build,
+                       placeholder=PretrainArgs(unchecked(PretrainConfig(dataset=""))),
+                       help_default=lambda built: _still_required(built, args, "dataset"))
+
+
 def pretrain_command(args: list[str]) -> None:
     """Pre-train a Decision Transformer offline on an expert dataset (paper Algorithm 1, stage 1).
 
@@ -226,12 +231,10 @@ def pretrain_command(args: list[str]) -> None:
     logs (tb/), checkpoints/ and model/ (model.safetensors + model.json), which `uavris
     evaluate` and `uavris finetune-dt --model` accept.
     """
-    from uavris.experiments.training.pretrain import PretrainConfig, default_pretrain_dir, pretrain
+    from uavris.experiments.training.pretrain import default_pretrain_dir, pretrain
     from uavris.runs import read_done
 
-    c = read_first(_Preset, args, "uavris pretrain-dt")
-    default = PretrainArgs(_required(PretrainConfig(dataset="", **_given(preset=c.preset)), "dataset"))
-    a = parse(PretrainArgs, args, "uavris pretrain-dt", pretrain_command.__doc__ or "", default=default)
+    a = parse_pretrain(args)
     run_dir = _run_dt(pretrain, a.run, a.options, default_pretrain_dir)
     done = read_done(run_dir)
     print(f"pre-trained {run_dir}: {done['gradient_steps']} steps, final action loss {done['final_loss']:.4f}, "
@@ -240,20 +243,39 @@ def pretrain_command(args: list[str]) -> None:
 
 # ------------------------------------------------------------------------------------- finetune-dt
 @dataclass(frozen=True)
-class _FinetuneChoices:
-    """The flags of ``uavris finetune-dt`` that choose the defaults of the others: the model (its
-    system), the scenario and the preset."""
-
-    model: Unset[str] = None
-    scenario: Unset[str] = None
-    preset: Unset[Preset] = None
-
-
-@dataclass(frozen=True)
 class FinetuneArgs:
     run: Annotated[FinetuneConfig, Flat]
     options: Annotated[RunOptions, Flat] = RunOptions()
     layout: Annotated[Unset[str], tyro.conf.arg(help=LAYOUT_HELP)] = None
+
+
+def parse_finetune(args: list[str]) -> FinetuneArgs:
+    """``uavris finetune-dt``'s line, parsed once and built."""
+    from uavris.agents.dt.checkpoint import dt_system
+
+    def build(parsed: FinetuneArgs) -> FinetuneArgs:
+        """The preset's fine-tuning of the model in its own system (in the hall of --layout, with its
+        start unless a scenario is named there), the flags written on top."""
+        given, run = given_flags(args), parsed.run
+        system, hall = in_hall(parsed.layout, dt_system(run.model) if run.model else SystemConfig(), run.system, args)
+        if hall is None and "--scenario" not in given:
+            raise UsageError("missing required argument --scenario (or a --layout to adapt to) "
+                             "(see uavris finetune-dt --help)")
+        where = {} if hall is None or "--scenario" in given else {"scenario": hall.name, "start": hall.start}
+        cfg = FinetuneConfig(**{"model": run.model, "scenario": run.scenario, "preset": run.preset, **where},
+                             system=system)
+        return replace(parsed, run=with_flags(cfg, run, args, skip=("system",)))
+
+    check_hall_flags(args, SystemConfig(), "uavris finetune-dt")  # a room given twice: one line, first
+    # the placeholders (no model, the paper's unseen1) make the parse's other defaults; tyro asks for --model
+    def placeholders() -> FinetuneConfig:
+        return unchecked(FinetuneConfig(model="", scenario="unseen1", system=LOOSE_SYSTEM))
+
+    return parse_built(FinetuneArgs, args, "uavris finetune-dt", finetune_command.__doc__ or "",
+                       default=FinetuneArgs(_required(placeholders(), "model")),
+                       placeholder=FinetuneArgs(placeholders()), build=build,
+                       help_default=lambda built: _still_required(
+                           built, args, "model", *(() if "--layout" in given_flags(args) else ("scenario",))))
 
 
 def finetune_command(args: list[str]) -> None:
@@ -266,21 +288,10 @@ def finetune_command(args: list[str]) -> None:
     finetune.csv (with the environment interactions used), TensorBoard logs, checkpoints/
     and model/.
     """
-    from uavris.agents.dt.checkpoint import dt_system
-    from uavris.experiments.training.finetune import FinetuneConfig, default_finetune_dir, finetune
+    from uavris.experiments.training.finetune import default_finetune_dir, finetune
     from uavris.runs import read_done
 
-    c = read_first(_FinetuneChoices, args, "uavris finetune-dt")
-    system, hall = layout_defaults(args, SystemConfig() if c.model is None else dt_system(c.model),
-                                   "uavris finetune-dt")
-    start = hall.start if hall is not None and c.scenario is None else None
-    scenario = c.scenario or (hall.name if hall is not None else None)
-    # the placeholders (the paper's unseen1, no model) compute the other defaults; tyro asks for the flags
-    cfg = FinetuneConfig(model="", scenario=scenario or "unseen1", system=system, start=start,
-                         **_given(preset=c.preset))
-    cfg = _required(cfg, "model") if c.model is None else cfg
-    default = FinetuneArgs(_required(cfg, "scenario") if scenario is None else cfg)
-    a = parse(FinetuneArgs, args, "uavris finetune-dt", finetune_command.__doc__ or "", default=default)
+    a = parse_finetune(args)
     run_dir = _run_dt(finetune, a.run, a.options, default_finetune_dir)
     done = read_done(run_dir)
     z, f = done["zero_shot_eval"], done["final_eval"]
@@ -320,6 +331,19 @@ class ReproduceArgs:
     uavris.experiments.engine.costs, measured on a 2-core AMD EPYC)"""
 
 
+def parse_reproduce(args: list[str]) -> ReproduceArgs:
+    """``uavris reproduce``'s line, parsed once and built: the preset's study in the hall, the flags written on top."""
+    def build(parsed: ReproduceArgs) -> ReproduceArgs:
+        system, _ = in_hall(parsed.layout, SystemConfig(), parsed.study.system, args)
+        study = with_flags(ReproduceConfig(system=system, preset=parsed.study.preset), parsed.study, args,
+                           skip=("system",))
+        return replace(parsed, study=study)
+
+    check_hall_flags(args, SystemConfig(), "uavris reproduce")  # a room given twice: one line, first
+    return parse_built(ReproduceArgs, args, "uavris reproduce", reproduce_command.__doc__ or "",
+                       default=ReproduceArgs(unchecked(ReproduceConfig(system=LOOSE_SYSTEM))), build=build)
+
+
 def reproduce_command(args: list[str]) -> None:
     """Reproduce the paper's study end to end, in three tracks, and write the report.
 
@@ -344,10 +368,7 @@ def reproduce_command(args: list[str]) -> None:
     from uavris.agents.torch_device import resolve_device
     from uavris.experiments.study.reproduce import estimate, reproduce
 
-    system, _ = layout_defaults(args, SystemConfig(), "uavris reproduce")
-    c = read_first(_Preset, args, "uavris reproduce")
-    a = parse(ReproduceArgs, args, "uavris reproduce", reproduce_command.__doc__ or "",
-              default=ReproduceArgs(ReproduceConfig(system=system, **_given(preset=c.preset))))
+    a = parse_reproduce(args)
     out = a.out or Path("runs") / a.study.preset
     if a.report_only and (a.estimate or a.force):
         raise UsageError("--report-only runs nothing: it takes neither --estimate nor --force")
