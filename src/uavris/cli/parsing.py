@@ -15,9 +15,9 @@ nothing (:func:`uavris.cli.options.unchecked`: tyro builds the config while it p
 parse's defaults are not the line's), and then builds its config: the defaults its choices
 make, with every field whose flag is written on the line taken from the parse
 (:func:`uavris.cli.options.with_flags`, :func:`uavris.cli.options.in_hall`), so that a flag
-given at its default value is known to be given; every check runs on the built config. Only ``--help`` looks twice: it shows
-the defaults the line's choices make (``uavris train --preset paper --help`` the paper
-preset's), so the line without it is parsed and built first.
+given at its default value is known to be given; every check runs on the built config. Only
+``--help`` looks twice: it shows the defaults the line's choices make (``uavris train --preset
+paper --help`` the paper preset's), so the line without it is parsed and built first.
 """
 
 from __future__ import annotations
