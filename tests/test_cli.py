@@ -344,6 +344,13 @@ def test_the_one_parse_checks_nothing_against_its_own_defaults(tmp_path: Path, m
     assert parse_train(["--config", str(imitation), "--total-steps", "0"]).run.total_steps == 0  # imitation alone
     with pytest.raises(ConfigError, match="total_steps"):
         parse_train(["--preset", "smoke", "--total-steps", "0"])
+    # nested configs too: the smoke preset's batch of 32 under a buffer of 64; a file's 12 m ceiling
+    assert parse_train(["--preset", "smoke", "--hyperparams.buffer-size", "64"]).run.hyperparams.buffer_size == 64
+    with pytest.raises(ConfigError, match="buffer_size"):
+        parse_train(["--preset", "smoke", "--hyperparams.buffer-size", "16"])
+    high = tmp_path / "high.yaml"
+    high.write_text("system:\n  room: [40, 40, 12]\n")
+    assert parse_train(["--config", str(high), "--system.z-max", "11"]).run.system.z_max == 11.0
     monkeypatch.setattr(checkpoint, "dt_system", lambda model: TrainConfig().system)  # a model of the paper's hall
     ft = parse_finetune(["--model", "m", "--scenario", "unseen1", "--preset", "smoke", "--candidates", "4"]).run
     assert (ft.candidates, ft.elites) == (4, 2)  # the smoke preset's elites, not the parse's (quick's 50)

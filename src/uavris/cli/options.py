@@ -141,28 +141,42 @@ def _given_fields(base: Any, parsed: Any, given: set[str], prefix: str) -> dict[
             if inner:
                 out[f.name] = replace(under, **inner)
         elif is_dataclass(value) and any(g.startswith(f"{flag}.") for g in given):
-            out[f.name] = value  # a nested config the base has none of (an expert's imitation), asked for by its flags
+            out[f.name] = _checked(value)  # a nested config the base has none of (an expert's imitation), asked for
         elif flag in given or negated in given:
-            out[f.name] = value
+            out[f.name] = _checked(value)
     return out
 
 
-_LOOSE: dict[type, type] = {}
+_LOOSE: dict[type, type] = {}  # a config class -> its form that checks nothing
+_REAL: dict[type, type] = {}  # and back
 
 
 def unchecked(config: T) -> T:
     """``config`` as the one parse's default of a command that builds its config afterwards: the same
-    fields, in a subclass whose ``__post_init__`` judges nothing. tyro keeps the default's class, so
-    the parse takes the line's values without checking them against the parse's own defaults (another
-    preset's budgets, a placeholder scenario, the paper's hall); the command's build makes the real
-    config, every check run there (:func:`with_flags`)."""
+    fields, nested configs included, in subclasses whose ``__post_init__`` judges nothing. tyro keeps
+    the default's classes, so the parse takes the line's values without checking them against the
+    parse's own defaults (another preset's budgets and hyperparameters, a placeholder scenario, the
+    paper's hall); the command's build makes the real config, every check run there
+    (:func:`with_flags`, :func:`in_hall`)."""
     cls = type(config)
-    loose = _LOOSE.setdefault(cls, type(cls.__name__, (cls,), {"__post_init__": lambda self: None,
-                                                               "__doc__": cls.__doc__, "__module__": cls.__module__}))
-    out = object.__new__(loose)
+    if cls not in _LOOSE:
+        public = next(c for c in cls.__mro__ if not c.__name__.startswith("_"))  # its help is the public class's
+        loose = type(public.__name__, (cls,), {"__post_init__": lambda self: None, "__doc__": public.__doc__,
+                                               "__module__": public.__module__})
+        _LOOSE[cls], _REAL[loose] = loose, cls
+    out = object.__new__(_LOOSE[cls])
     for f in fields(config):
-        object.__setattr__(out, f.name, getattr(config, f.name))
+        value = getattr(config, f.name)
+        object.__setattr__(out, f.name, unchecked(value) if is_dataclass(value) else value)
     return out
+
+
+def _checked(value: Any) -> Any:
+    """The real, checked config of a parsed one (:func:`unchecked`); any other value as it is."""
+    real = _REAL.get(type(value))
+    if real is None:
+        return value
+    return real(**{f.name: _checked(getattr(value, f.name)) for f in fields(value) if f.init})
 
 
 def with_flags(base: Any, parsed: Any, args: list[str], skip: tuple[str, ...] = ()) -> Any:
