@@ -351,6 +351,10 @@ def test_the_one_parse_checks_nothing_against_its_own_defaults(tmp_path: Path, m
     high = tmp_path / "high.yaml"
     high.write_text("system:\n  room: [40, 40, 12]\n")
     assert parse_train(["--config", str(high), "--system.z-max", "11"]).run.system.z_max == 11.0
+    high.write_text(hall.read_text() + "room: [40, 40, 12]\n")  # a layout's hall: its room, its devices
+    assert parse_train(["--layout", str(high), "--system.z-max", "11", "--preset", "smoke"]).run.system.z_max == 11.0
+    pairs = parse_train(["--layout", "layout-train-0-k8", "--system.max-active-pairs", "3", "--preset", "smoke"])
+    assert pairs.run.system.max_active_pairs == 3 and pairs.run.system.num_users == 8
     monkeypatch.setattr(checkpoint, "dt_system", lambda model: TrainConfig().system)  # a model of the paper's hall
     ft = parse_finetune(["--model", "m", "--scenario", "unseen1", "--preset", "smoke", "--candidates", "4"]).run
     assert (ft.candidates, ft.elites) == (4, 2)  # the smoke preset's elites, not the parse's (quick's 50)

@@ -256,17 +256,14 @@ class SystemConfig(DictConfig):
         _check(self.front_margin_deg is None or (_finite(self.front_margin_deg) and 0 <= self.front_margin_deg < 90),
                o, "front_margin_deg", "None (no attitude safety layer) or an angle in [0, 90) degrees",
                self.front_margin_deg)
+        self._check_hall()
+
+    def _check_hall(self) -> None:
+        """What the hall decides: the UAV's heights under its ceiling, every device inside the room,
+        below the UAV's floor and apart from the others, and the pairs its devices can make."""
+        o = "SystemConfig"
         _check(_finite(self.z_min) and _finite(self.z_max) and 0 <= self.z_min < self.z_max <= self.room[2],
                o, "z_min/z_max", f"0 <= z_min < z_max <= room height {self.room[2]}", (self.z_min, self.z_max))
-        self._check_devices()
-        kmax = self.num_users // 2
-        if self.max_active_pairs is not None:
-            v = self.max_active_pairs
-            _check(isinstance(v, int) and 1 <= v <= kmax, o, "max_active_pairs", f"an integer in [1, {kmax}]", v)
-
-    def _check_devices(self) -> None:
-        """Every device inside the room, below the UAV's floor, and apart from the others."""
-        o = "SystemConfig"
         for k, u in enumerate(self.users):
             _check(len(u) == 3, o, _device(k), "a point [x, y, z] (m)", list(u))
             inside = all(_finite(c) and 0.0 <= c <= r for c, r in zip(u, self.room))
@@ -284,6 +281,10 @@ class SystemConfig(DictConfig):
                        f"at least min_device_spacing = {self.min_device_spacing:g} m (horizontally) from every other "
                        f"device, but it is {gap:.2f} m from device D{i + 1} = {list(self.users[i])}",
                        list(self.users[j]))
+        kmax = self.num_users // 2
+        if self.max_active_pairs is not None:
+            v = self.max_active_pairs
+            _check(isinstance(v, int) and 1 <= v <= kmax, o, "max_active_pairs", f"an integer in [1, {kmax}]", v)
 
     @property
     def num_users(self) -> int:

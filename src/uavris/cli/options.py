@@ -69,15 +69,16 @@ LAYOUT_HELP = ("the hall: paper (the paper's devices), layout-train-N / layout-u
 
 
 class _DevicesLater(SystemConfig):
-    """A system whose devices are checked once a layout has given them: the parse default of a
-    command with ``--layout`` (:data:`LOOSE_SYSTEM`). The ``--system.*`` flags change the base
-    system before ``--layout`` resolves (a generated hall is drawn in the room of
+    """A system whose hall (its room's height against the UAV's ceiling, its devices, the pairs they
+    make) is checked once a layout has given it: the parse default of a command with ``--layout``
+    (:data:`LOOSE_SYSTEM`) and the base a layout resolves in. The ``--system.*`` flags change the
+    base system before ``--layout`` resolves (a generated hall is drawn in the room of
     ``--system.room``, the paper's devices fit a room the flag enlarges), and the base's own
     devices need not fit the changed room. Every other field is checked as always;
     :meth:`replace`, which is how a layout makes its system, gives a fully checked
     :class:`SystemConfig`."""
 
-    def _check_devices(self) -> None:
+    def _check_hall(self) -> None:
         pass
 
     def replace(self, **changes: Any) -> SystemConfig:
@@ -158,12 +159,12 @@ def unchecked(config: T) -> T:
     parse's own defaults (another preset's budgets and hyperparameters, a placeholder scenario, the
     paper's hall); the command's build makes the real config, every check run there
     (:func:`with_flags`, :func:`in_hall`)."""
-    cls = type(config)
+    cls = _REAL.get(type(config), type(config))  # a form that checks nothing already: its real class's
     if cls not in _LOOSE:
         public = next(c for c in cls.__mro__ if not c.__name__.startswith("_"))  # its help is the public class's
         loose = type(public.__name__, (cls,), {"__post_init__": lambda self: None, "__doc__": public.__doc__,
                                                "__module__": public.__module__})
-        _LOOSE[cls], _REAL[loose] = loose, cls
+        _LOOSE[cls], _REAL[loose] = loose, public
     out = object.__new__(_LOOSE[cls])
     for f in fields(config):
         value = getattr(config, f.name)

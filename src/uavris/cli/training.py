@@ -107,7 +107,7 @@ def parse_train(args: list[str]) -> TrainArgs:
     """``uavris train``'s line, parsed once and built (:func:`train_config`)."""
     check_hall_flags(args, SystemConfig(), "uavris train")  # a room given twice: one line, first
     default = unchecked(TrainConfig(system=LOOSE_SYSTEM))
-    object.__setattr__(default, "imitation", ImitationConfig())  # its flags on the line; taken where written
+    object.__setattr__(default, "imitation", unchecked(ImitationConfig()))  # its flags on the line; taken where written
     return parse_built(TrainArgs, args, "uavris train", train_command.__doc__ or "", default=TrainArgs(default),
                        build=lambda parsed: replace(parsed, run=train_config(parsed, args)))
 
