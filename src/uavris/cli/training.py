@@ -105,8 +105,7 @@ def train_config(a: TrainArgs, args: list[str]) -> TrainConfig:
 
 def parse_train(args: list[str]) -> TrainArgs:
     """``uavris train``'s line, parsed once and built (:func:`train_config`)."""
-    check_hall_flags(args, SystemConfig(), "uavris train")  # a room given twice: one line, first
-    default = unchecked(TrainConfig(system=LOOSE_SYSTEM))
+    default = unchecked(TrainConfig())
     object.__setattr__(default, "imitation", unchecked(ImitationConfig()))  # its flags on the line; taken where written
     return parse_built(TrainArgs, args, "uavris train", train_command.__doc__ or "", default=TrainArgs(default),
                        build=lambda parsed: replace(parsed, run=train_config(parsed, args)))
@@ -266,10 +265,9 @@ def parse_finetune(args: list[str]) -> FinetuneArgs:
                              system=system)
         return replace(parsed, run=with_flags(cfg, run, args, skip=("system",)))
 
-    check_hall_flags(args, SystemConfig(), "uavris finetune-dt")  # a room given twice: one line, first
     # the placeholders (no model, the paper's unseen1) make the parse's other defaults; tyro asks for --model
     def placeholders() -> FinetuneConfig:
-        return unchecked(FinetuneConfig(model="", scenario="unseen1", system=LOOSE_SYSTEM))
+        return unchecked(FinetuneConfig(model="", scenario="unseen1", system=SystemConfig()))
 
     return parse_built(FinetuneArgs, args, "uavris finetune-dt", finetune_command.__doc__ or "",
                        default=FinetuneArgs(_required(placeholders(), "model")),
@@ -339,9 +337,8 @@ def parse_reproduce(args: list[str]) -> ReproduceArgs:
                            skip=("system",))
         return replace(parsed, study=study)
 
-    check_hall_flags(args, SystemConfig(), "uavris reproduce")  # a room given twice: one line, first
     return parse_built(ReproduceArgs, args, "uavris reproduce", reproduce_command.__doc__ or "",
-                       default=ReproduceArgs(unchecked(ReproduceConfig(system=LOOSE_SYSTEM))), build=build)
+                       default=ReproduceArgs(unchecked(ReproduceConfig())), build=build)
 
 
 def reproduce_command(args: list[str]) -> None:
