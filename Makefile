@@ -7,7 +7,7 @@ STAMP := $(VENV)/.installed
 # The docs builds are strict and not --quiet: --quiet would hide the warnings --strict fails on.
 export NO_MKDOCS_2_WARNING := 1
 
-.PHONY: run test test-lowest demo docs bench clean
+.PHONY: run test test-lowest demo docs pages bench clean
 
 # constraints.txt: the exact versions that reproduce the study (pyproject.toml holds the ranges)
 $(STAMP): pyproject.toml constraints.txt
@@ -19,6 +19,10 @@ $(STAMP): pyproject.toml constraints.txt
 
 run: $(STAMP)
 	$(VENV)/bin/uavris reproduce --preset quick --out runs/quick
+
+# Every results page of docs/results from this version (resumable: a rerun continues; uavris pages --list)
+pages: $(STAMP)
+	$(VENV)/bin/uavris pages --jobs 2 --workers 1
 
 demo: $(STAMP)
 	$(VENV)/bin/uavris demo

@@ -91,9 +91,11 @@ def test_a_comparison_cell_short_of_seeds_is_not_measured(monkeypatch):
     import uavris.experiments.study.claims_comparison as cc
 
     monkeypatch.setattr(cc, "comparison_scores", lambda cdir, steps=None: {"ddpg": list(high), "ppo": [low[0]]})
-    lines = cc.budget_table(Path("."), [25_000], 5.0)
+    lines = cc.budget_table([(Path("."), [25_000])], {"mean": 5.0, "ci_low": 4.0, "ci_high": 6.0})
     rows = [[c.strip() for c in line.strip("|").split("|")] for line in lines if line.startswith("| 25,000")]
-    assert {cells[1]: cells[-1] for cells in rows} == {"DDPG": HOLDS, "PPO": NOT_MEASURED}
+    # descriptive, no verdict words: "above" only where the interval over 3 or more seeds excludes the mean
+    assert {cells[1]: cells[-1] for cells in rows} == {"DDPG": "above", "PPO": "-"}
+    assert not any(word in " ".join(lines) for word in (HOLDS, REFUTED))
 
 
 def test_a_comparison_is_scored_at_a_budget_by_its_first_evaluation_there(tmp_path):
@@ -193,8 +195,9 @@ def test_a_cell_of_fewer_than_three_units_prints_no_verdict():
     assert three.cell == f"**holds**: +3.10 [{ci.low:+.2f}, {ci.high:+.2f}] (3 seeds)"
 
 
-def _pair(diff: float, low: bool = False, high: bool = False) -> dict:
-    return {"fewer": {"difference": diff, "low_bound": low, "high_bound": high}, "pretraining": 1_000.0}
+def _pair(diff: float, low: bool = False, high: bool = False, there: bool = False) -> dict:
+    return {"fewer": {"difference": diff, "low_bound": low, "high_bound": high, "zero_shot_there": there},
+            "pretraining": 1_000.0}
 
 
 def test_fewer_over_seeds_carries_each_scenarios_bound_to_its_seed():
@@ -202,15 +205,32 @@ def test_fewer_over_seeds_carries_each_scenarios_bound_to_its_seed():
     of its scenarios' is (the expert censored there), and then it cannot make "refuted"."""
     seeds = [0, 0, 1, 1, 2, 2]
     pairs = [_pair(-5_000), _pair(-5_200), _pair(-4_800), _pair(-5_100, low=True), _pair(-5_050), _pair(-4_900)]
-    fewer, total = _fewer("paper", seeds, pairs, "3 seeds")
+    fewer, _, total = _fewer("paper", seeds, pairs, "3 seeds")
     assert fewer.n == 3 and fewer.mean == pytest.approx(np.mean([-5_100, -4_950, -4_975]))
     low, high = sps.ttest_1samp([-5_100, -4_950, -4_975], 0.0).confidence_interval(0.95)
     assert high < 0 and fewer.verdict == NOT_RESOLVED  # refuted by its interval, but seed 1's is a lower bound
     assert "never reached the level in 1 and fine-tuning in 0 of 6" in fewer.text
     assert total.mean == pytest.approx(fewer.mean - 1_000.0) and total.verdict == NOT_RESOLVED
     clean = [_pair(p["fewer"]["difference"]) for p in pairs]
-    refuted, _ = _fewer("paper", seeds, clean, "3 seeds")
+    refuted, _, _ = _fewer("paper", seeds, clean, "3 seeds")
     assert refuted.verdict == REFUTED and "never reached" not in refuted.text
+    assert refuted.p < 0.05 and fewer.p == 1.0 and total.p == 1.0  # a censored cell is no evidence in Holm's order
+
+
+def test_fewer_says_how_much_is_the_zero_shot_dts_and_judges_fine_tunings_own_part_apart():
+    """Where the zero-shot DT already starts at the level, fine-tuning is charged nothing: the cell
+    says in how many runs, and "fewer-finetuning" is judged over the seeds with a run where it
+    was not (each the mean of those runs); with every run already there it is not tested."""
+    seeds = [0, 0, 1, 1, 2, 2, 3, 3]
+    pairs = [_pair(12_000, there=True), _pair(12_400, there=True), _pair(12_100, there=True), _pair(5_000),
+             _pair(12_300, there=True), _pair(4_000), _pair(12_200, there=True), _pair(6_000)]
+    fewer, own, _ = _fewer("strong", seeds, pairs, "4 seeds")
+    assert "already at the level in 5 of 8 scenario runs" in fewer.text
+    assert own.claim == "fewer-finetuning" and own.n == 3 and own.mean == pytest.approx(5_000.0)
+    assert "3 of 8 scenario runs" in own.text
+    every = [_pair(p["fewer"]["difference"], there=True) for p in pairs]
+    _, none, _ = _fewer("strong", seeds, every, "4 seeds")
+    assert none.verdict == "not tested"
 
 
 def test_a_seed_is_one_unit_per_track():

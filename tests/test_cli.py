@@ -20,7 +20,7 @@ from uavris.cli import claims as cli_claims
 from uavris.cli import evaluation as cli_evaluation
 from uavris.cli import tools as cli_tools
 from uavris.cli import training as cli_training
-from uavris.cli.claims import ClaimsArgs, FromScratchArgs
+from uavris.cli.claims import ClaimsArgs, FromScratchArgs, PagesArgs
 from uavris.cli.evaluation import BenchmarkArgs, EvaluateArgs, SweepArgs
 from uavris.cli.tools import CollectArgs, DemoArgs, ExportArgs, PlanArgs, PlotArgs
 from uavris.cli.training import CompareArgs, FinetuneArgs, PretrainArgs, ReproduceArgs, TrainArgs
@@ -41,11 +41,12 @@ BASE = {
     "plot": ["plot"],
     "sweep": ["sweep", "zero-action", "--param", "system.nx", "2,4"],
     "from-scratch": ["from-scratch", "no-study-here"],
+    "pages": ["pages", "--list"],
 }
 ARGS = {"train": TrainArgs, "evaluate": EvaluateArgs, "compare-algorithms": CompareArgs, "collect": CollectArgs,
         "pretrain-dt": PretrainArgs, "finetune-dt": FinetuneArgs, "reproduce": ReproduceArgs, "demo": DemoArgs,
         "plan": PlanArgs, "benchmark": BenchmarkArgs, "plot": PlotArgs, "sweep": SweepArgs, "claims": ClaimsArgs,
-        "from-scratch": FromScratchArgs, "export": ExportArgs}
+        "from-scratch": FromScratchArgs, "pages": PagesArgs, "export": ExportArgs}
 BAD_INT = ["-1", "abc", "1.5"]
 BAD_FLOAT = ["nan", "inf", "-inf", "abc"]
 # Float fields for which a negative value is meaningful (so only nan/inf/text are wrong).

@@ -231,3 +231,22 @@ def test_plan_refuses_a_hall_beyond_its_device_limit_in_one_line(tmp_path, capsy
     err = capsys.readouterr().err.strip()
     assert err.count("\n") == 0 and f"at most {MAX_PLAN_DEVICES} devices" in err and "min" in err, err
     assert not list(tmp_path.glob("p*"))
+
+
+def test_the_ceiling_over_the_oracle_is_read_by_each_rows_interval_not_its_mean():
+    """"Above 100.5% of the oracle" names a row only where its 95% CI over halls lies above it; a
+    row whose mean is above but whose CI reaches below is "not resolved", one below is neither."""
+    from uavris.experiments.study.report.decomposition import counts_section
+
+    def hall(plan: float, semi: float) -> dict:
+        row = {"kind": "learned", "seed": None, "training_halls": None, "plan_of": None}
+        return {"oracle": {**row, "kind": "reference", "variant": "oracle", "label": "oracle", "mean": 40.0},
+                "plan-learned": {**row, "variant": "plan-learned", "label": "learned place", "mean": plan},
+                "plan-semi": {**row, "variant": "plan-semi", "label": "semi place", "mean": semi}}
+
+    clear = {f"h{i}": hall(40.0 * 1.03 + 0.01 * i, 40.0 * (1.0 + 0.02 * (-1) ** i)) for i in range(4)}
+    below = {f"k{i}": hall(39.0 + 0.1 * i, 39.5) for i in range(4)}
+    lines = "\n".join(counts_section({(4, False): clear, (8, False): below}, {}))
+    assert "by their 95% CI over halls (a ceiling that gives way): learned place with 4 devices (103.0%" in lines
+    assert "Not resolved (the CI reaches above 100.5%): semi place with 4 devices (100.0% [" in lines
+    assert "8 devices (9" not in lines.split("a ceiling that gives way")[1]  # below it: named nowhere

@@ -60,3 +60,49 @@ def test_the_search_allows_only_the_poses_the_oracle_may_plan():
     d = kept.target - users  # eq. (11): from each device to the RIS, against its normal
     assert (d @ rot[:, 2] / np.linalg.norm(d, axis=1)).min() >= np.sin(np.radians(1.0)) - 1e-12
     assert kept.value < free.value
+
+
+def test_seeded_with_the_oracles_poses_the_search_never_returns_less_than_them():
+    """A made-up R with a narrow tilted peak between the grids' points (the grids and their attitude
+    grid miss it): without seeds the search returns less than that pose is worth; seeded with it (as
+    the oracle's plan's pose, :func:`plan_seeds`) it returns at least its value: a superset."""
+    from uavris.agents.oracle.planner import Plan
+    from uavris.agents.oracle.search import plan_seeds
+
+    cfg = SystemConfig()
+    peak_q, peak_a = np.array([21.3, 15.7, 3.3]), np.radians([7.0, 14.0, -9.0])
+
+    def valuer(q, att):
+        off = np.sum((q - peak_q) ** 2, axis=-1) + 50.0 * np.sum((att - peak_a) ** 2, axis=-1)
+        return 30.0 + 20.0 * np.exp(-off / 0.05)  # a narrow peak on a flat 30
+
+    settings = SearchSettings(grid_step=4.0, top=4, refine=2, fine_places=2)
+    start = (5.0, 5.0, 4.5)
+    alone = exhaustive_plan(cfg, start, settings, valuer)
+    plan = Plan(start=start, target=peak_q, attitude=peak_a, rate=50.0, start_rate=30.0, travel_slots=0, value=0.0,
+                poses_valued=0, candidates=(((10.0, 10.0, 3.0), 30.0, 30.0),))
+    seeded = exhaustive_plan(cfg, start, settings, valuer, seeds=plan_seeds(plan))
+    at_peak = float(episode_value(cfg.horizon, trip_slots(cfg, np.array(start), peak_q[None]), 30.0,
+                                  valuer(peak_q[None], peak_a[None]))[0])
+    assert alone.value < at_peak - 5.0  # the grids alone miss it
+    assert seeded.value >= at_peak - 1e-9
+
+
+def test_the_fine_grid_reaches_as_far_as_the_learned_planners():
+    from uavris.agents.place.planner import PlaceSettings
+
+    assert SearchSettings().fine_reach >= PlaceSettings().grid_step  # the learned planner's fine reach
+
+
+def test_the_oracle_gap_page_is_stamped_and_states_each_halls_numbers(tmp_path):
+    from uavris.experiments.study.oracle_gap import write_page
+    from uavris.experiments.study.stamp import read_stamp, stale
+
+    hall = {"devices": 6, "split": "unseen", "oracle": 44.0, "search": 44.5, "stay": 30.0, "teacher": 42.0,
+            "search_minus_oracle": 0.5, "search_minus_oracle_se": 0.2, "oracle_s": 10.0, "teacher_s": 1.0,
+            "search_s": 200.0}
+    done = {f"layout-unseen-{j}-k6": {**hall, "oracle": 44.0 - j} for j in range(3)}
+    text = write_page(done, tmp_path / "oracle-gap.md", tmp_path / "runs", "python -m x").read_text()
+    stamp = read_stamp(text)
+    assert stamp.page == "oracle-gap" and stale(stamp) == [] and stamp.extra["halls"] == list(done)
+    assert "| layout-unseen-2-k6 | 6 | 42.00 | 44.50 |" in text and "| 6 devices | 3 | 96.6% [" in text

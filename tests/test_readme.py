@@ -100,8 +100,13 @@ def test_readme_results_are_the_reports() -> None:
         assert not _misplaced(section, report), page.name
 
 
-QUOTE = re.compile(r"<!-- quotes (results/[\w.-]+\.md) -->(.*?)<!-- /quotes -->", re.S)
+QUOTE = re.compile(r"<!-- quotes (results/[\w./-]+\.md)(?: \(historical\))? -->(.*?)<!-- /quotes -->", re.S)
 QUOTING = ("halls.md", "study.md", "places.md")  # pages that quote the committed report in their prose
+# The prose pages whose every score quotes a results page (or says why it does not): the check that a
+# number they state is the number its source page states.
+PROSE = (README, DOCS / "results.md", DOCS / "places.md", DOCS / "study.md", DOCS / "halls.md")
+UNQUOTED = re.compile(r"<!-- unquoted: ([^>]+?) -->(.*?)<!-- /unquoted -->", re.S)
+SCORE = re.compile(r"(?<![\w.+-])[+-]?\d+\.\d\d(?![\d.])|(?<![\w.])\d+\.\d%")  # 2-decimal rates, 1-decimal shares
 
 
 def test_docs_quotes_are_the_reports() -> None:
@@ -120,6 +125,32 @@ def test_docs_quotes_are_the_reports() -> None:
     for name in QUOTING:
         assert QUOTE.search((DOCS / name).read_text(encoding="utf-8")), f"{name} quotes the report unmarked"
     assert quotes >= len(QUOTING)
+
+
+def unsourced(text: str) -> list[str]:
+    """The scores of a prose page that no marked passage holds: outside code blocks, every
+    2-decimal number and 1-decimal percentage must lie in a quote of a results page (checked
+    against it above) or in a passage that says why it quotes none (``<!-- unquoted: WHY -->``
+    ... ``<!-- /unquoted -->``: a measurement no results page holds, named there)."""
+    rest = re.sub(r"^```.*?^```", "", text, flags=re.S | re.M)
+    rest = re.sub(r"Python \d+\.\d+", "", QUOTE.sub("", UNQUOTED.sub("", rest)))  # a version, not a score
+    return [line.strip()[:100] for line in rest.splitlines() if SCORE.search(line)]
+
+
+@pytest.mark.parametrize("page", PROSE, ids=[p.name for p in PROSE])
+def test_every_score_of_a_prose_page_quotes_a_results_page_or_says_why_not(page: Path) -> None:
+    text = page.read_text(encoding="utf-8")
+    assert not unsourced(text), unsourced(text)[:10]
+    for m in UNQUOTED.finditer(text):
+        assert len(m.group(1).split()) >= 3, f"{page.name}: say where the numbers come from: {m.group(0)[:80]}"
+
+
+def test_an_unmarked_or_retyped_score_of_a_prose_page_is_caught() -> None:
+    assert unsourced("The DT scores 98.5% of the oracle.") == ["The DT scores 98.5% of the oracle."]
+    assert not unsourced("<!-- quotes results/quick-report.md -->98.5%<!-- /quotes --> and Python 3.11.7 in\n"
+                         "```\n1.23\n```")
+    assert not unsourced("<!-- unquoted: measured by benchmarks/x.py -->1.23<!-- /unquoted -->")
+    assert unsourced("Python 3.11.7, 2026-11-28, 512 halls, Python 3.11 or later") == []
 
 
 def test_a_retyped_quote_is_caught() -> None:

@@ -133,6 +133,53 @@ def test_deployment_numbers_and_verdicts_come_from_evaluation_files(smoke_run):
 
 
 @pytest.mark.slow
+def test_the_claims_of_every_track_compute_again_from_their_evidence_and_the_pages_are_stamped(
+        smoke_run, tmp_path, monkeypatch):
+    """The claims page of the smoke study: every judged cell of the comparison, the paper and strong
+    tracks and the deployment track computed again from the evidence beside it (tests/claims_recompute.py,
+    no uavris judging code), an edited episode caught. The report, its copy as the quick run's page
+    and the budget page are stamped with this code's versions and what made them."""
+    import json
+
+    from claims_recompute import expected_cells, mismatches
+
+    from uavris.experiments.study import claims_comparison
+    from uavris.experiments.study.claims import EVIDENCE, UNITS, write_claims
+    from uavris.experiments.study.report import page_copy
+    from uavris.experiments.study.stamp import read_stamp, stale
+
+    out, report, _ = smoke_run
+    write_claims([out], tmp_path / "c")
+    claims, units = read_json(tmp_path / "c" / "claims.json"), read_json(tmp_path / "c" / EVIDENCE / UNITS)
+    assert not mismatches(claims, units)
+    cells = expected_cells(units)
+    assert {("paper", "ddpg-best"), ("paper", "zero-shot"), ("strong", "fewer"), ("deployment", "zero-shot")} <= set(
+        cells)
+    edited = json.loads(json.dumps(units))
+    edited["scenario"]["strong"][0]["rows"]["dt-zero-shot"][0] -= 1.0
+    assert any("('strong', 'zero-shot')" in m for m in mismatches(claims, edited))
+    stamp = read_stamp(report.read_text())
+    assert stamp.page == "report" and stale(stamp) == [] and stamp.studies == (str(out),) and stamp.preset == "smoke"
+    (tmp_path / "docs" / "figures").mkdir(parents=True)
+    (tmp_path / "docs" / "figures" / "quick_fig2_learning_curves.png").write_bytes(b"old")
+    written = page_copy(out, tmp_path / "docs" / "results" / "quick-report.md", "quick-report", "uavris reproduce x")
+    page = read_stamp(written[0].read_text())
+    assert page.page == "quick-report" and page.command == "uavris reproduce x" and stale(page) == []
+    assert written[0].read_text().split("-->\n", 1)[1] == report.read_text().split("-->\n", 1)[1]
+    kept = tmp_path / "docs" / "figures" / "quick_fig2_learning_curves.png"  # the figure the docs keep, refreshed
+    assert kept in written and kept.read_bytes() == (out / "figures" / "fig2_learning_curves.png").read_bytes()
+    fixed = {"mean": 12.0, "ci_low": 11.5, "ci_high": 12.5}
+    monkeypatch.setattr(claims_comparison, "fig2_zero_action", lambda: fixed)
+    monkeypatch.setattr(claims_comparison, "fig2_references", lambda: {"hover-optimizer": fixed, "oracle": fixed})
+    cdir = next((out / "stages").glob("compare-*"))
+    [budget, *figures] = claims_comparison.write_budget_page([(cdir, (RC.compare_steps,))], tmp_path / "budget.md",
+                                                             "smoke", ["uavris compare-algorithms ..."])
+    text = budget.read_text()
+    assert read_stamp(text).page == "budget" and f"| {RC.compare_steps:,} | PPO |" in text
+    assert all(f.is_file() for f in figures) and "holds" not in text and "refuted" not in text
+
+
+@pytest.mark.slow
 def test_paper_and_strong_verdicts_come_from_evaluation_files(smoke_run):
     out, report, _ = smoke_run
     stages = {("strong" if s.name.startswith("strong-") else "paper", s.name.split("-")[-2]): s

@@ -181,10 +181,11 @@ def judged_censored(differences: ArrayLike, low_bounds: ArrayLike, high_bounds: 
     """:func:`judged` of per-unit differences some of which are censored: a difference that is
     only a lower bound (the true one is at least it: ``low_bounds``) or only an upper bound
     (``high_bounds``). A verdict stands only if it stands for every value a censored unit may
-    take, and for a t interval none does: as one unit's value grows without limit the interval's
-    half-width grows faster than its mean (it grows as ``t * sqrt(n - 1) / n`` times the value,
-    the mean as ``1 / n`` times it, and ``t * sqrt(n - 1) > 1`` for every ``n`` at 95%), so the
-    interval comes to hold zero whichever way the unit is censored. A verdict resting on any
+    take, and for a t interval none does: as one unit's value moves without limit the interval's
+    half-width grows faster than its mean moves (per unit of that value's shift, the half-width
+    grows towards ``t / n``, since the sample's standard deviation tends to ``shift / sqrt(n)``,
+    while the mean moves by ``1 / n``; and ``t > 1`` for every ``n`` at 95%), so the interval
+    comes to hold zero whichever way the unit is censored. A verdict resting on any
     censored unit is therefore "not resolved" (its interval is still reported, computed at the
     bounds). Adds ``censored``, the number of censored units."""
     low, high = np.asarray(low_bounds, dtype=bool), np.asarray(high_bounds, dtype=bool)

@@ -11,6 +11,7 @@ Commands:
   reproduce           the whole study in three tracks, with figures and report
   claims              the paper's claims judged in every track of one or more studies
   from-scratch        fine-tuning against an expert trained from scratch in a study's new halls
+  pages               every results page from one version: the studies they read, run, and the pages stamped
   export              a row of a study as one controller directory that every command takes
   plot                learning curves of one or more runs (PNG and PDF)
   plan                where the UAV should go in a hall: the oracle's plan and a rate map
@@ -62,6 +63,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "reproduce": ("training", "reproduce_command"),
     "claims": ("claims", "claims_command"),
     "from-scratch": ("claims", "from_scratch_command"),
+    "pages": ("claims", "pages_command"),
     "export": ("tools", "export_command"),
     "plot": ("tools", "plot_command"),
     "plan": ("tools", "plan_command"),

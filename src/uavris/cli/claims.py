@@ -1,8 +1,11 @@
-"""The commands that judge the paper's claims: ``uavris claims``, and ``uavris from-scratch`` (what it may read).
+"""The commands that judge the paper's claims and make the results pages: ``uavris claims``, ``uavris
+from-scratch`` (what it may read) and ``uavris pages`` (every results page from one version).
 
-Lives here: their flags (:class:`ClaimsArgs`, :class:`FromScratchArgs`), :func:`claims_command`
-and :func:`from_scratch_command`. Not here: the judging (:mod:`uavris.experiments.study.claims`),
-the measurement (:mod:`uavris.experiments.study.from_scratch`).
+Lives here: their flags (:class:`ClaimsArgs`, :class:`FromScratchArgs`, :class:`PagesArgs`),
+:func:`claims_command`, :func:`from_scratch_command` and :func:`pages_command`. Not here: the
+judging (:mod:`uavris.experiments.study.claims`), the measurement
+(:mod:`uavris.experiments.study.from_scratch`), the pages and their studies
+(:mod:`uavris.experiments.study.pages`).
 """
 
 from __future__ import annotations
@@ -13,8 +16,9 @@ from typing import Annotated
 
 import tyro
 
-from uavris.cli.parsing import Unset, UsageError, parse, writing
+from uavris.cli.parsing import Unset, UsageError, output_dir, parse, writing
 from uavris.experiments.study.from_scratch import FromScratchConfig
+from uavris.presets import Preset
 
 
 @dataclass(frozen=True)
@@ -90,3 +94,59 @@ def from_scratch_command(args: list[str]) -> None:
     with writing(a.out.parent, "--out's folder", files_only=True):
         from_scratch(a.study, a.config, a.out, report)
     print(f"wrote {a.out}")
+
+
+@dataclass(frozen=True)
+class PagesArgs:
+    pages: Annotated[tuple[str, ...], tyro.conf.Positional, tyro.conf.arg(metavar="PAGE")] = ()
+    """the pages to make (default: every page; --list names them)"""
+    runs: Path = Path("runs/pages")
+    """where the studies the pages read are run (each resumes: a rerun continues them)"""
+    dest: Path = Path("docs/results")
+    """where the pages are written"""
+    preset: Preset = "quick"
+    """the studies' preset (smoke: a minute's check of the whole chain)"""
+    seeds: int = 5
+    """training seeds of the paper and strong tracks on the claims page (at least 3)"""
+    jobs: int = 1
+    """studies run at a time (each pinned to a core of its own where the machine has one per job)"""
+    workers: int = 2
+    """job processes of each study"""
+    list: bool = False
+    """name every page, the studies it reads and their commands, and exit (nothing run or written)"""
+
+
+def pages_command(args: list[str]) -> None:
+    """Every results page from one version: run the studies the pages read, then write each page,
+    stamped with what made it (the results format, the oracle's version, the demonstrations'
+    teacher, the preset, the commit, the machine and float path, the date, the studies read).
+
+    Every study resumes (finished stages, runs and halls are kept), so a rerun continues where
+    it stopped; studies that start from another's finished stages have those linked in first.
+    Writes each page into --dest (DEST/FILE.md, stamped, with its figures; the claims page its
+    evidence beside it) and the studies under --runs; each study's progress goes to
+    RUNS/.pages/STUDY.log. Ctrl-C or SIGTERM stops the running studies.
+    """
+    from uavris.experiments.study.pages import PAGES, make_pages, studies
+
+    a = parse(PagesArgs, args, "uavris pages", pages_command.__doc__ or "")
+    if a.jobs < 1 or a.workers < 1:
+        raise UsageError(f"--jobs and --workers must be >= 1, got {a.jobs} and {a.workers}")
+    if a.seeds < 3:
+        raise UsageError(f"--seeds must be at least 3 (a claim over fewer units is not measured), got {a.seeds}")
+    unknown = [p for p in a.pages if p not in PAGES]
+    if unknown:
+        raise UsageError(f"no page {', '.join(unknown)}; the pages are {', '.join(PAGES)}")
+    names = list(a.pages or PAGES)
+    if a.list:
+        table = studies(a.preset, a.seeds)
+        for name in names:
+            page = PAGES[name]
+            print(f"{name} ({a.dest / page.file}): {page.about}")
+            for study in page.reads(a.seeds):
+                print(f"  {table[study].line(a.runs, a.preset)}")
+        return
+    output_dir(a.runs, "--runs")
+    with writing(a.dest, "--dest"):
+        for path in make_pages(names, a.runs, a.dest, a.preset, a.seeds, a.jobs, a.workers):
+            print(f"wrote {path}")

@@ -20,12 +20,31 @@ from typing import ClassVar
 import numpy as np
 from numpy.typing import NDArray
 
-from uavris.agents.oracle.objective import episode_value, feasible, feasible_grid, top_apart, travel_slots, trip_slots
-from uavris.agents.oracle.planner import Plan, PlanSettings, check_finalists
+from uavris.agents.oracle.objective import (
+    episode_value,
+    expected_optimised_rate,
+    feasible,
+    feasible_grid,
+    top_apart,
+    travel_slots,
+    trip_slots,
+)
+from uavris.agents.oracle.planner import (
+    RANK_DRAWS,
+    RANK_OPTIMISER,
+    SAFE_MARGIN_DEG,
+    Plan,
+    PlanSettings,
+    check_finalists,
+    facing_attitudes,
+    holding,
+    pattern_search,
+)
 from uavris.agents.oracle.policy import fly_to, motion_entries
 from uavris.agents.place.value import PoseValue, predict
 from uavris.config import SystemConfig
 from uavris.env.simulator import BatchedSimulator
+from uavris.physics import wrap_angle
 
 
 @dataclass(frozen=True)
@@ -140,3 +159,69 @@ class LearnedPlanner:
 
     def __call__(self, obs: NDArray[np.float32], sim: BatchedSimulator) -> NDArray[np.float32]:
         return motion_entries(sim.config, *fly_to(sim, self.plan(sim.config, sim.scenario.start)))
+
+
+@dataclass(frozen=True)
+class DecideSettings:
+    """How the deployed place is decided: ``V`` proposes, ``R`` disposes (:func:`decided_plan`)."""
+
+    proposals: int = 12  # V's best places (apart by ``separation``) valued by the cheap R, level and tilted
+    separation: float = 2.0  # m between proposals
+    refine_from: int = 1  # the best poses by the cheap R refined by a pattern search on it
+    max_refinements: int = 6  # batches of that pattern search
+    refine_step: float = 0.5  # m, its first step
+    runners_up: int = 2  # the next best poses by the cheap R among the finalists, unrefined
+    check_batches: int = 4  # fresh batches of R the finalists (and staying) are valued on
+    front_margin_deg: float | None = SAFE_MARGIN_DEG  # the oracle's: every device this far in front of the RIS
+
+
+def decided_plan(model: PoseValue, config: SystemConfig, start: tuple[float, float, float],
+                 settings: DecideSettings = DecideSettings(), place: PlaceSettings = PlaceSettings()) -> Plan:
+    """The deployed place (docs/places.md): ``V``'s best ``proposals`` places (its grids,
+    :func:`ranked_places`), each level and turned towards the devices where the UAV can hold it
+    (the oracle's global stage's tilt, :func:`~uavris.agents.oracle.planner.facing_attitudes`),
+    with the start, valued by the planner's cheap ``R`` and the travel-time rule; the best refined
+    by a short pattern search in position and attitude on the cheap ``R``; the refined, the
+    runners-up and staying valued by ``R`` on fresh batches and chosen as the oracle chooses
+    (a move only when it beats staying by more than a standard error,
+    :func:`~uavris.agents.oracle.planner.check_finalists`), every pose keeping the oracle's
+    front margin."""
+    s = settings
+    c = holding(config, s.front_margin_deg)
+    start_q = np.asarray(start, dtype=np.float64)
+    level = np.zeros(3)
+    places, values, _ = ranked_places(model, c, start_q, place)
+    chosen = places[top_apart(values, places, s.proposals, s.separation)]
+    memo: dict[bytes, float] = {}
+
+    def cheap(q: NDArray, att: NDArray) -> NDArray[np.float64]:
+        poses = np.concatenate([np.atleast_2d(q), np.broadcast_to(att, np.atleast_2d(q).shape)], axis=1)
+        keys = [p.tobytes() for p in poses]
+        new = [i for i, k in enumerate(keys) if k not in memo]
+        if new:
+            r = expected_optimised_rate(c, poses[new, :3], poses[new, 3:], draws=RANK_DRAWS, seed=0, **RANK_OPTIMISER)
+            memo.update(zip((keys[i] for i in new), r.tolist()))
+        return np.array([memo[k] for k in keys])
+
+    facing = facing_attitudes(c, chosen) if len(chosen) else np.zeros((0, 3))
+    tilted = np.any(facing != 0.0, axis=1)
+    pos = np.concatenate([start_q[None], chosen, chosen[tilted]])
+    att = np.concatenate([level[None], np.zeros_like(chosen), facing[tilted]])
+    r = cheap(pos, att)
+    vals = episode_value(c.horizon, trip_slots(c, start_q, pos), r[0], r)
+    order = [int(i) for i in np.argsort(-vals, kind="stable") if i != 0]
+
+    def episode(q: NDArray, a: NDArray) -> NDArray[np.float64]:
+        return episode_value(c.horizon, trip_slots(c, start_q, np.atleast_2d(q)), r[0], cheap(q, a))
+
+    refined = []
+    for i in order[:s.refine_from]:
+        q, a, _ = pattern_search(c, pos[i].copy(), att[i].copy(), float(vals[i]), episode, s.refine_step,
+                                 PlanSettings().min_step, tolerance=1e-6, max_batches=s.max_refinements,
+                                 settle=wrap_angle)
+        refined.append((q, a))
+    finalists = [(start_q, level), *refined, *((pos[i], att[i]) for i in order[s.refine_from:
+                                                                                  s.refine_from + s.runners_up])]
+    table = tuple((tuple(float(x) for x in p), float(rv), float(vv)) for p, rv, vv in zip(pos, r, vals))
+    checks = PlanSettings(check_batches=s.check_batches, front_margin_deg=s.front_margin_deg)
+    return check_finalists(c, checks, start_q, finalists, len(memo), table)

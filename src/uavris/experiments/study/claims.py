@@ -16,6 +16,7 @@ evaluation episodes. A cell with fewer than three units is "not measured".
 
 from __future__ import annotations
 
+import json
 import math
 from dataclasses import asdict, replace
 from pathlib import Path
@@ -31,12 +32,14 @@ from uavris.experiments.study.claims_comparison import (
     fig2_zero_action,
     judge_comparison,
 )
-from uavris.experiments.study.claims_tracks import LEVEL, WITHIN, judge_deployment, judge_scenario_track
+from uavris.experiments.study.claims_deployment import dt_against_hovering, judge_deployment
+from uavris.experiments.study.claims_tracks import LEVEL, WITHIN, judge_scenario_track
 from uavris.experiments.study.config import AUTO
 from uavris.experiments.study.finished import Study
 from uavris.experiments.study.judgement import NOT_TESTED, Judgement, judgement
+from uavris.experiments.study.stamp import make_stamp, stamped
 from uavris.experiments.study.tracks import TRACK_SPECS, TRACKS
-from uavris.io import atomic_write_text, other_inputs, read_json, replace_folder, write_json
+from uavris.io import atomic_write_text, other_inputs, read_json, replace_folder, to_plain, write_json
 from uavris.stats import HOLDS, MIN_UNITS, NOT_RESOLVED, REFUTED, holm
 
 ALPHA = 0.05  # the family-wise error rate of the claims table (Holm)
@@ -55,8 +58,9 @@ CLAIMS: dict[str, str] = {
                    "(Fig. 3, Sec. V)",
     "fluctuates": "the zero-shot DT and the transferred experts fluctuate more over episodes than the fine-tuned DT "
                   "and the expert (Sec. V)",
-    "fewer": f"fine-tuning reaches {LEVEL:.0%} of the expert's final level in fewer environment interactions than "
-             "the expert (abstract, Sec. VI)",
+    "fewer": f"the pre-trained DT, fine-tuned, reaches {LEVEL:.0%} of the expert's final level in fewer environment "
+             "interactions than the expert (abstract, Sec. VI; its zero-shot start counted: 0 where it is there)",
+    "fewer-finetuning": "the same, fine-tuning's own part: where the zero-shot DT is not already at that level",
     "fewer-total": "the same, counting the interactions of the experts and demonstrations the DT was pre-trained on "
                    "(charged whole to each hall or scenario and spread over those it serves: a verdict only where "
                    "both agree)",
@@ -72,24 +76,34 @@ NOT_MEASURED_CLAIMS = (
 
 
 def judge_studies(studies: Sequence[Study], budgets: Sequence[tuple[Path, int]] = (),
-                  from_scratch: Sequence[dict[str, Any]] = ()) -> list[Judgement]:
+                  from_scratch: Sequence[dict[str, Any]] = (),
+                  evidence: dict[str, Any] | None = None) -> list[Judgement]:
     """Every claim in every track the ``studies`` ran: the paper and strong tracks over
     every study that ran them (one seed each, the unit: run them with ``--seed 0`` to ``4``), the
     deployment track from the first study that ran it (its seeds are within it). ``budgets``:
     (comparison, environment steps): the comparison's runs judged at that budget too
     (``uavris compare-algorithms --steps N --eval-every B``), only where every algorithm has
-    its seeds there."""
+    its seeds there. What every cell read goes into ``evidence`` (``comparison``: each budget's
+    scores per algorithm; ``scenario``: each track's (seed, scenario) pairs; ``deployment``),
+    from which each cell can be computed again (the claims page's ``units.json``)."""
     check_seeds(studies)
+    ev: dict[str, Any] = evidence if evidence is not None else {}
+    ev.update({"comparison": [], "scenario": {}, "deployment": {}})
     out: list[Judgement] = []
     compare = next((d for s in studies if (d := s.done("compare"))), None)
     if any(TRACK_SPECS["paper"] in s.config.tracks for s in studies):
-        out.append(judge_comparison(comparison_scores(compare),
-                                    budget=f", final evaluation at {studies[0].config.compare_steps:,} steps")
-                   if compare else Judgement("ddpg-best", "paper", NOT_TESTED, text="no finished comparison"))
+        if compare:
+            scores = comparison_scores(compare)
+            ev["comparison"].append({"budget": "final", "steps": studies[0].config.compare_steps, "scores": scores})
+            out.append(judge_comparison(scores, budget=f", final evaluation at {studies[0].config.compare_steps:,} "
+                                                       "steps"))
+        else:
+            out.append(Judgement("ddpg-best", "paper", NOT_TESTED, text="no finished comparison"))
     for cdir, steps in budgets:
         scores = comparison_scores(Path(cdir), steps)
         if not scores:
             raise UavrisError(f"{cdir}: no run of the comparison was evaluated at {steps:,} steps")
+        ev["comparison"].append({"budget": "at", "steps": steps, "scores": scores})
         out.append(judge_comparison(scores, budget=f", first evaluation at or after {steps:,} steps of "
                                                    f"{Path(cdir).name}"))
     for name in TRACKS:
@@ -100,7 +114,10 @@ def judge_studies(studies: Sequence[Study], budgets: Sequence[tuple[Path, int]] 
         if name != "paper":
             out.append(Judgement("ddpg-best", name, NOT_TESTED,
                                  text="the track's experts are not trained by DRL (they imitate the oracle)"))
-        out += judge_deployment(ran[0], from_scratch) if track.layouts else judge_scenario_track(ran, track)
+        if track.layouts:
+            out += judge_deployment(ran[0], from_scratch, ev["deployment"])
+        else:
+            out += judge_scenario_track(ran, track, ev["scenario"].setdefault(name, []))
     return out
 
 
@@ -168,8 +185,6 @@ def rests_on(studies: Sequence[Study]) -> list[str]:
     paper that decide them, read from the studies where they are data (the comparison's choice,
     each track's preset), and the return-conditioned DT against hovering with optimised phases at
     each device count of a deployment study (:func:`dt_against_hovering`)."""
-    from uavris.experiments.study.claims_tracks import dt_against_hovering
-
     lines = []
     for st in studies:
         if (compare := st.done("compare")) is not None:
@@ -204,9 +219,11 @@ def rests_on(studies: Sequence[Study]) -> list[str]:
 
 
 def write_claims(outs: Sequence[Path], dest: Path, budgets: Sequence[tuple[Path, int]] = (),
-                 from_scratch: Path | None = None) -> Path:
-    """Judge (:func:`judge_studies`) and write ``dest/claims.md`` and ``dest/claims.json`` (its
-    inputs and judgements); the markdown's path. Claims of other inputs in ``dest``: one line."""
+                 from_scratch: Path | None = None, made_by: Sequence[str] = ()) -> Path:
+    """Judge (:func:`judge_studies`) and write ``dest/claims.md`` (stamped: :mod:`.stamp`),
+    ``dest/claims.json`` (its inputs and judgements) and the evidence beside them
+    (:func:`write_evidence`); the markdown's path. ``made_by``: the commands that made the
+    studies, listed on the page. Claims of other inputs in ``dest``: one line."""
     inputs = {"studies": [str(o) for o in outs], "budgets": [[str(d), b] for d, b in budgets],
               "from_scratch": str(from_scratch) if from_scratch else None}
     old = other_inputs(Path(dest) / "claims.json", inputs, "inputs")
@@ -216,16 +233,19 @@ def write_claims(outs: Sequence[Path], dest: Path, budgets: Sequence[tuple[Path,
     studies = [Study.open(o) for o in outs]
     check_evidence(studies)  # before anything is judged or written
     halls = _from_scratch_halls(from_scratch, studies) if from_scratch is not None else ()
-    judgements = holm_corrected(judge_studies(studies, budgets, halls))
+    evidence: dict[str, Any] = {}
+    judgements = holm_corrected(judge_studies(studies, budgets, halls, evidence))
     judged = sum(math.isfinite(j.p_holm) for j in judgements)
     lines = ["# The paper's claims, judged", "", f"Judged by `uavris claims` on {machine()}. {FLOAT_PATHS}", "",
+             *(["The studies, made by:", "", "```bash", *made_by, "```", ""] if made_by else []),
              "\n".join(claims_table(judgements)), "",
              "Each cell: the verdict, the mean paired difference over the units and its 95% CI (Student's t; "
              "Welch's for the comparison). A claim **holds** where the CI excludes zero the claimed way, is "
              "**refuted** where it excludes zero the other way, and is **not resolved** otherwise; then, for the "
              f"table's {judged} judged cells at once, a verdict stands only where Holm's step-down correction keeps "
-             "it (its p-value from its interval, the family-wise error at most 5%); one it does not keep reads **not "
-             "resolved** and says so below. The intervals are the unadjusted 95% CIs. What each cell compares:", ""]
+             "it (its p-value from its interval, the family-wise error at most 5%; a cell resting on a censored unit "
+             "counts as p = 1); one it does not keep reads **not resolved** and says so below. The intervals are the "
+             "unadjusted 95% CIs. What each cell compares:", ""]
     for j in judgements:
         if j.verdict != NOT_TESTED:
             lines.append(f"- {j.track}, {j.claim}: {j.text}; {j.count} ({j.unit}).")
@@ -238,16 +258,25 @@ def write_claims(outs: Sequence[Path], dest: Path, budgets: Sequence[tuple[Path,
     if budgets:
         zero = fig2_zero_action()
         # not "budget": docs/results/budget.md's own figure lives beside the committed claims page
-        figs = budget_figure(budgets[0][0], Path(dest) / "claims-budget", zero)
+        figs = budget_figure(budgets[0][0], Path(dest) / "claims-budget", zero["mean"])
         lines += ["", "## The comparison at each budget", "", f"![budget]({figs[0].name})", "",
-                  *budget_table(budgets[0][0], [b for _, b in budgets], zero)]
+                  *budget_table([(budgets[0][0], [b for _, b in budgets])], zero)]
     lines += ["", f"Studies: {', '.join(str(o) for o in outs)}" + (f"; comparison {budgets[0][0]}" if budgets else "")
               + (f"; from scratch: {from_scratch}" if from_scratch else "") + ".", ""]
-    lines += [f"The evidence beside this page (`{EVIDENCE}/`): each study's report, the from-scratch curves and "
-              "`claims.json` (every cell's interval and p-values), from which the table can be checked.", ""]
+    lines += [f"The evidence beside this page (`{EVIDENCE}/`): each study's report, the from-scratch curves, "
+              f"`{UNITS}` (what every cell read: each unit's per-episode rates, curves and scores) and `claims.json` "
+              "(every cell's interval and p-values), from which every cell can be computed again.", ""]
     path = Path(dest) / "claims.md"
-    write_evidence(studies, Path(dest) / EVIDENCE, from_scratch)
-    atomic_write_text(path, "\n".join(lines))
+    write_evidence(studies, Path(dest) / EVIDENCE, from_scratch, evidence)
+    presets = sorted({st.config.preset for st in studies})
+    command = " ".join(["uavris claims", *map(str, outs),
+                        *(["--budget-comparison", str(budgets[0][0]), "--budgets", *(str(b) for _, b in budgets)]
+                          if budgets else []),
+                        *(["--from-scratch", str(from_scratch)] if from_scratch else []), "--out", str(dest)])
+    stamp = make_stamp("claims", [*outs, *(d for d, _ in budgets[:1]), *([from_scratch] if from_scratch else [])],
+                       presets[0] if len(presets) == 1 else None, command,
+                       seeds=sorted({st.config.seed for st in studies}))
+    atomic_write_text(path, stamped(stamp, "\n".join(lines)))
     write_json(Path(dest) / "claims.json", {"inputs": inputs, "judgements": [asdict(j) for j in judgements]})
     return path
 
@@ -266,11 +295,13 @@ def check_evidence(studies: Sequence[Study]) -> None:
             raise UavrisError(f"{st.out}: no report.md (run `uavris reproduce --report-only --out {st.out}`)")
 
 
-def write_evidence(studies: Sequence[Study], folder: Path, from_scratch: Path | None) -> None:
+def write_evidence(studies: Sequence[Study], folder: Path, from_scratch: Path | None,
+                   units: dict[str, Any] | None = None) -> None:
     """Each study's report (``NAME.md``, its directory's name; small text files, its figures left
-    out) and a copy of the from-scratch curves, as the folder ``folder`` (made beside it and put in
-    its place whole, so it never mixes two invocations' evidence): what a reader checks the cells
-    against without the studies' gigabytes."""
+    out), a copy of the from-scratch curves and what every cell read (``units``, :data:`UNITS`:
+    :func:`judge_studies`'s evidence), as the folder ``folder`` (made beside it and put in its
+    place whole, so it never mixes two invocations' evidence): what a reader checks the cells
+    against, and computes them again from, without the studies' gigabytes."""
     import shutil
     import tempfile
 
@@ -281,7 +312,12 @@ def write_evidence(studies: Sequence[Study], folder: Path, from_scratch: Path | 
             atomic_write_text(made / f"{st.out.resolve().name}.md", (st.out / "report.md").read_text())
         if from_scratch is not None:
             atomic_write_text(made / "from-scratch.json", Path(from_scratch).read_text())
+        if units is not None:  # one line: per-episode lists of many halls would be tens of thousands of lines
+            atomic_write_text(made / UNITS, json.dumps(to_plain(units), separators=(",", ":")) + "\n")
         made.chmod(0o755)
         replace_folder(made, folder, folder.with_name(f".{folder.name}.old"))
     finally:
         shutil.rmtree(made, ignore_errors=True)
+
+
+UNITS = "units.json"  # in the evidence folder: what every cell of the claims page read, unit by unit

@@ -102,33 +102,45 @@ def eval_curves(cdir: Path) -> dict[str, list[tuple[np.ndarray, np.ndarray]]]:
     return runs
 
 
-def fig2_zero_action() -> float:
-    """The zero action's mean in ``fig2`` of the paper's system on the comparison's 32 episodes."""
+def fig2_zero_action() -> dict[str, float]:
+    """The zero action in ``fig2`` of the paper's system on the comparison's 32 episodes: its mean
+    and the Student-t 95% interval of that mean over the episodes (``ci_low``, ``ci_high``)."""
     from uavris.agents.evaluation import evaluate
     from uavris.agents.references import ZERO_ACTION, reference_policy
     from uavris.config import SystemConfig
     from uavris.presets import EVAL_SEED
+    from uavris.stats import over_units
 
-    return float(evaluate(reference_policy(ZERO_ACTION, SystemConfig()), SystemConfig(), "fig2", 32,
-                          EVAL_SEED).avg_sum_rate.mean())
+    return over_units(evaluate(reference_policy(ZERO_ACTION, SystemConfig()), SystemConfig(), "fig2", 32,
+                               EVAL_SEED).avg_sum_rate)
 
 
-def budget_table(cdir: Path, budgets: Sequence[int], zero: float) -> list[str]:
-    """Each algorithm of a comparison at each budget: its seeds' mean with the Student-t 95% CI,
-    and against doing nothing (``zero``, the zero action's mean on the same episodes): "above"
-    holds where the CI of the seeds' scores minus that mean excludes zero upwards; "not
-    measured" with fewer than :data:`MIN_UNITS` seeds (markdown lines)."""
+def budget_table(comparisons: Sequence[tuple[Path, Sequence[int]]], zero: dict[str, float]) -> list[str]:
+    """Each algorithm of each comparison at each of its budgets: its seeds' mean with the Student-t
+    95% CI over seeds, each seed's score, and its difference from doing nothing (``zero``, the zero
+    action's mean on the same episodes) with that CI (markdown lines). Descriptive, not a verdict:
+    the zero action's mean on these episodes is taken as fixed (its own interval over the episodes
+    is stated above the table, not in the column) and the cells are not among the claims' (not
+    corrected for their number), so the column reads "above" or "below" only where the interval
+    over seeds excludes it, "-" otherwise or with fewer than :data:`MIN_UNITS` seeds."""
     rows = []
-    for steps in budgets:
-        for algo, scores in comparison_scores(Path(cdir), steps).items():
-            d = paired_difference(scores, [zero] * len(scores))
-            ci = "" if math.isnan(d["ci_low"]) else f"[{d['ci_low'] + zero:.2f}, {d['ci_high'] + zero:.2f}]"
-            rows.append((f"{steps:,}", algo.upper(), len(scores), f"{np.mean(scores):.2f}", ci,
-                         " ".join(f"{x:.2f}" for x in scores),
-                         d["verdict"] if len(scores) >= MIN_UNITS else NOT_MEASURED))
-    return [f"The zero action (doing nothing) in `fig2`: {zero:.2f} bps/Hz on the same 32 episodes.", "",
+    for cdir, budgets in comparisons:
+        for steps in budgets:
+            for algo, scores in comparison_scores(Path(cdir), steps).items():
+                d = paired_difference(scores, [zero["mean"]] * len(scores))
+                ci = "" if math.isnan(d["ci_low"]) else f"[{d['ci_low'] + zero['mean']:.2f}, " \
+                                                          f"{d['ci_high'] + zero['mean']:.2f}]"
+                diff = f"{d['mean']:+.2f}" + ("" if math.isnan(d["ci_low"]) else
+                                               f" [{d['ci_low']:+.2f}, {d['ci_high']:+.2f}]")
+                side = {HOLDS: "above", REFUTED: "below"}.get(d["verdict"], "-") if len(scores) >= MIN_UNITS else "-"
+                rows.append((f"{steps:,}", algo.upper(), len(scores), f"{np.mean(scores):.2f}", ci,
+                             " ".join(f"{x:.2f}" for x in scores), diff, side))
+    return [f"The zero action (doing nothing) in `fig2`: {zero['mean']:.2f} bps/Hz on the same 32 episodes (95% CI "
+            f"over them [{zero['ci_low']:.2f}, {zero['ci_high']:.2f}]). The last two columns describe, they do not "
+            "judge: the zero action's mean is taken as fixed and the cells are not corrected for their number.", "",
             *markdown_table(("env steps", "algorithm", "seeds", "mean", "95% CI (t, over seeds)", "each seed",
-                             "above the zero action"), rows, "lrrrlll")]
+                             "minus the zero action [95% CI over seeds]", "CI beside the zero action's mean"),
+                            rows, "lrrrllll")]
 
 
 def budget_figure(cdir: Path, stem: Path, zero: float) -> list[Path]:
@@ -160,3 +172,62 @@ def budget_figure(cdir: Path, stem: Path, zero: float) -> list[Path]:
     ax.set_title("fig2: the periodic evaluations at every budget", fontsize=9)
     ax.legend(fontsize=6, frameon=False, loc="lower right")
     return save_figure(fig, stem)
+
+
+def fig2_references() -> dict[str, dict[str, float]]:
+    """Hovering with optimised phases and the oracle in ``fig2`` of the paper's system on the
+    comparison's 32 episodes: mean and 95% CI over the episodes, by reference name."""
+    from uavris.agents.evaluation import evaluate
+    from uavris.agents.references import HOVER_OPTIMIZER, ORACLE, reference_policy
+    from uavris.config import SystemConfig
+    from uavris.presets import EVAL_SEED
+    from uavris.stats import over_units
+
+    return {name: over_units(evaluate(reference_policy(name, SystemConfig()), SystemConfig(), "fig2", 32,
+                                      EVAL_SEED).avg_sum_rate) for name in (HOVER_OPTIMIZER, ORACLE)}
+
+
+def write_budget_page(comparisons: Sequence[tuple[Path, Sequence[int]]], page: Path, preset: str,
+                      made_by: Sequence[str] = ()) -> list[Path]:
+    """The budget page (``docs/results/budget.md``, stamped): each comparison's algorithms at
+    each of its budgets (:func:`budget_table`) beside the zero action, hovering with optimised
+    phases and the oracle on the same episodes, the first comparison's periodic evaluations
+    (:func:`budget_figure`) and DDPG against each algorithm at every budget where it ran, as
+    estimates (the claims page judges them, corrected with its other cells). ``made_by``: the
+    commands that made the comparisons. Returns the files written."""
+    from uavris.agents.references import HOVER_OPTIMIZER, ORACLE, REFERENCES
+    from uavris.experiments.study.stamp import make_stamp, stamped
+    from uavris.io import atomic_write_text
+
+    zero = fig2_zero_action()
+    refs = fig2_references()
+    figs = budget_figure(comparisons[-1][0], page.with_suffix(""), zero["mean"])
+    budgets = sorted({b for _, bs in comparisons for b in bs})
+    lines = ["# The training budget: Fig. 2 at " + ", ".join(f"{b:,}" for b in budgets) + " environment steps", "",
+             "Each algorithm of the paper's comparison trained in `fig2` for longer than the study's budget and "
+             "scored at each budget by its first periodic evaluation there (the study's 32 episodes; a run of N steps "
+             "evaluated at B < N is the run of budget B: every schedule of the preset is constant).", "",
+             *(["Made by:", "", "```bash", *made_by, "```", ""] if made_by else []),
+             f"![budget]({figs[0].name})", "", *budget_table(comparisons, zero), "",
+             "On the same episodes: " + "; ".join(
+                 f"{REFERENCES[k].label} {refs[k]['mean']:.2f} [{refs[k]['ci_low']:.2f}, {refs[k]['ci_high']:.2f}]"
+                 for k in (HOVER_OPTIMIZER, ORACLE)) + " bps/Hz (95% CI over the episodes).", "",
+             "DDPG minus each other algorithm (Welch's 95% CI over seeds; estimates: the claims page judges "
+             "\"DDPG trains the best expert\", corrected for its other cells):", ""]
+    for cdir, bs in comparisons:
+        for steps in bs:
+            scores = comparison_scores(Path(cdir), steps)
+            if "ddpg" not in scores:
+                continue
+            parts = []
+            for algo, s in sorted(scores.items()):
+                if algo == "ddpg":
+                    continue
+                d = welch_difference(scores["ddpg"], s)
+                ci = "" if math.isnan(d["ci_low"]) else f" [{d['ci_low']:+.2f}, {d['ci_high']:+.2f}]"
+                parts.append(f"{algo.upper()} {d['mean']:+.2f}{ci}")
+            seeds = ", ".join(f"{a.upper()} {len(v)}" for a, v in sorted(scores.items()))
+            lines.append(f"- {steps:,} steps ({Path(cdir).name}; seeds: {seeds}): " + "; ".join(parts) + ".")
+    stamp = make_stamp("budget", [str(c) for c, _ in comparisons], preset, " && ".join(made_by))
+    atomic_write_text(page, stamped(stamp, "\n".join(lines) + "\n"))
+    return [page, *figs]

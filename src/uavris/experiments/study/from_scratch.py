@@ -6,18 +6,21 @@ whose ``from-scratch.json`` ``uavris claims --from-scratch`` reads. Not here: th
 
 The paper's claim: the pre-trained DT, fine-tuned in an unseen scenario, reaches the expert's
 level "with fewer interactions". Here, in the deployment track of a finished study made with
-``--ablation``, in its first ``halls`` unseen halls of its own:
+``--ablation``, in its first ``halls`` unseen halls of its own, both sides are measured alike,
+on the study's evaluation episodes under the attitude safety layer:
 
-- fine-tuning: the goal-conditioned DT fine-tuned by trying places (the study's
-  ``deploy-finetune-places-LAYOUT`` stages, every pre-training seed): its level (the mean over
-  seeds of the study's score of ``dt-goal-finetuned-safe``; the zero-shot ``dt-goal-safe``
-  beside it), the interactions it used (the mean over seeds of its ``env_interactions``) and
-  those it took to first reach 95% of the expert's final evaluation (the claims' rule);
+- fine-tuning: the paper's DT fine-tuned in the hall by its Algorithm 1 (the study's
+  ``deploy-finetune-LAYOUT`` stage): the pre-trained model it started from and the model
+  after each round (its checkpoints), each evaluated on the study's episodes under the layer,
+  against the environment interactions fine-tuning had used (``finetune_curve``);
 - from scratch: hybrid PPO on the motion entries with the optimiser's phases (the strong
   track's learner, no imitation, the quick hyperparameters), trained in the hall from its
   start under the attitude safety layer, evaluated every ``eval_every`` environment steps on
-  the study's evaluation episodes, for ``steps`` steps: its whole learning curve, which the
-  claims read (both sides charged until they first reach 95% of its final evaluation).
+  the study's evaluation episodes, for ``steps`` steps (``expert_curve``).
+
+The claims read both curves (both sides charged until they first reach 95% of the expert's
+final evaluation). The file is rewritten after every hall, and a rerun of the same
+measurement of the same study keeps the halls it holds.
 """
 
 from __future__ import annotations
@@ -33,10 +36,10 @@ import numpy as np
 from uavris.agents.oracle.planner import SAFE_MARGIN_DEG
 from uavris.config import DictConfig
 from uavris.errors import ConfigError, UavrisError
-from uavris.experiments.study.claims_tracks import LEVEL, finetune_curve
+from uavris.experiments.study.claims_tracks import LEVEL
 from uavris.experiments.study.finished import Study
 from uavris.experiments.study.tracks import TRACK_SPECS, zero_shot_only
-from uavris.io import read_csv, write_json
+from uavris.io import read_csv, read_json, write_json
 from uavris.stats import interactions_to_level
 
 
@@ -54,10 +57,37 @@ class FromScratchConfig(DictConfig):
                 raise ConfigError(f"FromScratchConfig.{name} must be >= 1, got {getattr(self, name)}")
 
 
+def finetune_curve_alike(study: Study, where: Any, episodes: int) -> tuple[list[float], list[float]]:
+    """The paper's DT's fine-tuning in ``where`` as the expert's curve is measured: the
+    pre-trained model and each round's model evaluated on the study's ``episodes`` evaluation
+    episodes under the safety layer, against the interactions fine-tuning had used by then."""
+    from uavris.agents.evaluation import evaluate
+    from uavris.experiments.tools.targets import DTModel, Row
+    from uavris.presets import EVAL_SEED
+
+    track = TRACK_SPECS["deployment"]
+    fdir = study.finetuned(track, where.name)
+    pretrained = study.done(track.stage("pretrain"))
+    if fdir is None or pretrained is None:
+        raise UavrisError(f"{study.out}: the paper's DT was not fine-tuned in {where.name} (uavris reproduce --track "
+                          "deployment --ablation runs it)")
+    rounds = read_csv(fdir / "model" / "finetune.csv")
+    models = [pretrained / "model", *(fdir / "model" / "checkpoints" / f"round_{int(r['round'])}" for r in rounds[1:])]
+    x, y = [], []
+    for r, model in zip(rounds, models):
+        row = Row("dt-finetuned", "fine-tuned DT", DTModel.at(model), front_margin_deg=SAFE_MARGIN_DEG)
+        system = row.system(where.system)
+        res = evaluate(row.load(system).policy, system, where.scenario, episodes, EVAL_SEED)
+        x.append(float(r["env_interactions"]))
+        y.append(float(np.mean(res.avg_sum_rate)))
+    return x, y
+
+
 def from_scratch(out: str | Path, cfg: FromScratchConfig, dest: Path,
                  report: Callable[[dict[str, Any]], None] = lambda hall: None) -> dict[str, Any]:
     """Measure (module docstring) in the study ``out``; write ``dest`` (JSON) after every hall,
-    calling ``report`` with each hall's numbers; returns what it wrote."""
+    calling ``report`` with each hall's numbers; returns what it wrote. The halls ``dest``
+    already holds of the same measurement of the same study are kept, not measured again."""
     from uavris.experiments.engine.jobs import machine
     from uavris.experiments.training.train_expert import TrainConfig, train
 
@@ -69,17 +99,18 @@ def from_scratch(out: str | Path, cfg: FromScratchConfig, dest: Path,
     _, unseen = study.sites(track)
     demos = study.demonstrations(track)
     measured: dict[str, Any] = {"study": str(Path(out).resolve()), "cpu": machine(), "config": cfg.to_dict(),
-                                "demonstrations": demos, "halls": []}
+                                "format": FORMAT, "demonstrations": demos, "halls": []}
+    kept = _kept(dest, measured)
     for where in [w for w in unseen if not zero_shot_only(w, rc.system)][:cfg.halls]:
+        if where.name in kept:
+            measured["halls"].append(kept[where.name])
+            report(kept[where.name])
+            continue
         found = study.evaluation(track, where.name)
         if found is None:
             raise UavrisError(f"{out}: the evaluation in {where.name} has not finished")
         res = found[1]
-        fine = [v for v in res.values() if v["variant"] == "dt-goal-finetuned-safe"]
-        finetuned = float(np.mean([v["mean"] for v in fine]))
-        tried = [study.places_tried(track, where.name, v["seed"] or 0) for v in fine]
-        places = [t[0] for t in tried if t is not None]
-        used = [t[1]["env_interactions"] for t in tried if t is not None]
+        fx, fy = finetune_curve_alike(study, where, rc.eval_episodes)
         expert = TrainConfig(algo="ppo", scenario=where.name, start=where.scenario.start, seed=0, preset="quick",
                              total_steps=cfg.steps, eval_every=cfg.eval_every, eval_episodes=rc.eval_episodes,
                              phase_control="optimizer", system=where.system.replace(front_margin_deg=SAFE_MARGIN_DEG))
@@ -90,17 +121,31 @@ def from_scratch(out: str | Path, cfg: FromScratchConfig, dest: Path,
             evals = read_csv(Path(tmp) / "run" / "evals.csv")
         x, y = np.array([float(r["env_steps"]) for r in evals]), np.array([float(r["mean"]) for r in evals])
         # the claims charge both sides until they first reach 95% of this expert's final evaluation
-        # (claims_tracks.interactions_needed): its whole curve is kept
+        # (claims_tracks.interactions_needed): both whole curves are kept
         to_level, censored = interactions_to_level(x, y, LEVEL * float(y[-1]))
-        finetune_to_level = float(np.mean([interactions_to_level(*finetune_curve(d / "model"), LEVEL * float(y[-1]))[0]
-                                           for d in places if d is not None]))
-        hall = {"hall": where.name, "finetuned": finetuned, "oracle": float(res["oracle-safe"]["mean"]),
-                "zero_shot": float(np.mean([v["mean"] for v in res.values() if v["variant"] == "dt-goal-safe"])),
-                "finetune_interactions": float(np.mean(used)), "finetune_to_level": finetune_to_level,
+        finetune_to_level, _ = interactions_to_level(fx, fy, LEVEL * float(y[-1]))
+        hall = {"hall": where.name, "finetuned": float(res["dt-finetuned-safe"]["mean"]),
+                "oracle": float(res["oracle-safe"]["mean"]), "zero_shot": fy[0],
+                "finetune_interactions": fx[-1], "finetune_to_level": finetune_to_level, "finetune_curve": [fx, fy],
                 "expert_best": float(y.max()),
                 "expert_final": float(y[-1]), "expert_to_level": to_level, "reached": not censored,
                 "expert_curve": [x.tolist(), y.tolist()], "expert_steps": cfg.steps, "expert_wall_s": wall}
         measured["halls"].append(hall)
         write_json(dest, measured)
         report(hall)
+    write_json(dest, measured)
     return measured
+
+
+# 2: fine-tuning is the paper's DT by its Algorithm 1, its curve on the study's episodes under the safety layer
+FORMAT = 2
+
+
+def _kept(dest: Path, measured: dict[str, Any]) -> dict[str, dict[str, Any]]:
+    """The halls an earlier run wrote to ``dest`` of this same measurement (study, settings,
+    format and demonstrations), by name; none where ``dest`` holds another's or none."""
+    if not Path(dest).is_file():
+        return {}
+    old = read_json(dest)
+    same = all(old.get(k) == measured[k] for k in ("study", "config", "format", "demonstrations"))
+    return {h["hall"]: h for h in old.get("halls", [])} if same else {}

@@ -56,10 +56,13 @@ class Judgement:
 
 
 def judgement(claim: str, track: str, diff: dict[str, Any], unit: str, units: str, text: str) -> Judgement:
-    """The cell of ``diff`` (:func:`uavris.stats.judged`'s): "not measured" below
-    :data:`MIN_UNITS` units, whatever its interval says."""
+    """The cell of ``diff`` (:func:`uavris.stats.judged`'s or :func:`uavris.stats.judged_censored`'s):
+    "not measured" below :data:`MIN_UNITS` units, whatever its interval says; its p-value 1 where a
+    unit is censored."""
     v = diff["verdict"] if diff["n"] >= MIN_UNITS else NOT_MEASURED
-    p = t_p_value(diff["mean"], diff["ci_low"], diff["ci_high"], diff["n"] - 1)
+    # a censored unit's value is only a bound: the interval and its p-value hold at the bounds alone, so the
+    # cell is no evidence for any verdict (p = 1: it must not take an early rank in Holm's order)
+    p = 1.0 if diff.get("censored") else t_p_value(diff["mean"], diff["ci_low"], diff["ci_high"], diff["n"] - 1)
     return Judgement(claim, track, v, diff["mean"], diff["ci_low"], diff["ci_high"], int(diff["n"]), unit, units, text,
                      p)
 

@@ -10,6 +10,7 @@ stage files it reads (written by
 from __future__ import annotations
 
 import math
+import re
 import shutil
 from pathlib import Path
 from typing import Any, Sequence
@@ -20,6 +21,7 @@ import yaml
 from uavris.agents.oracle.bound import episode_bounds
 from uavris.agents.references import HOVER_OPTIMIZER, ORACLE, ZERO_ACTION
 from uavris.config import UNSEEN_SCENARIOS, get_scenario
+from uavris.errors import UavrisError
 from uavris.experiments.display.tables import counted, fraction, interval, markdown_table, num
 from uavris.experiments.engine.jobs import machine
 from uavris.experiments.engine.stages import StageRecord
@@ -46,9 +48,10 @@ from uavris.experiments.study.report.deployment import (
 )
 from uavris.experiments.study.report.figures import fig3, interactions_figure, trajectory_figure
 from uavris.experiments.study.report.schedule import schedule_figure, stage_table
+from uavris.experiments.study.stamp import make_stamp, stamped
 from uavris.experiments.study.tracks import Track, evaluation_stage, zero_shot_only
 from uavris.experiments.training.compare import fig2_table
-from uavris.io import atomic_write_text, read_json
+from uavris.io import atomic_write_bytes, atomic_write_text, read_json
 from uavris.presets import EVAL_SEED
 from uavris.stats import versus
 
@@ -342,5 +345,33 @@ def write_report(study: Study, records: Sequence[StageRecord], wall_s: float, or
     if failed:
         rep.add("## Failures", "", *[f"- {r.name}: {r.error}" for r in failed])
     report = out / "report.md"
-    atomic_write_text(report, "\n".join(rep.lines) + "\n")
+    stamp = make_stamp("report", [out], rc.preset, seed=rc.seed, tracks=[t.name for t in rc.tracks])
+    atomic_write_text(report, stamped(stamp, "\n".join(rep.lines) + "\n"))
     return report
+
+
+FIGURE = re.compile(r"!\[[^\]]*\]\(figures/([^)]+)\)")
+
+
+def page_copy(study: Path, page: Path, name: str, command: str) -> list[Path]:
+    """A finished study's report as the results page ``page`` (``docs/results/FILE.md``), stamped
+    as the page ``name`` made by ``command``; the figures it shows that the docs keep
+    (``docs/figures/quick_NAME`` for the quick report, which the site's hooks link) are copied
+    from the study. Returns the files written."""
+    report = study / "report.md"
+    if not report.is_file():
+        raise UavrisError(f"{study}: no report.md (the study did not finish: rerun it)")
+    text = report.read_text(encoding="utf-8")
+    config = Study.open(study).config
+    written = []
+    if name == "quick-report":
+        figures = page.parent.parent / "figures"
+        for fig in FIGURE.findall(text):
+            kept = figures / f"quick_{fig}"
+            if kept.exists() and (study / "figures" / fig).is_file():
+                atomic_write_bytes(kept, (study / "figures" / fig).read_bytes())
+                written.append(kept)
+    stamp = make_stamp(name, [study], config.preset, command, seed=config.seed,
+                       tracks=[t.name for t in config.tracks])
+    atomic_write_text(page, stamped(stamp, text))
+    return [page, *written]
