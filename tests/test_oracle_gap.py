@@ -3,6 +3,8 @@ trip worked by hand, and the search finding a known optimum of a made-up R."""
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 import pytest
 
@@ -86,12 +88,44 @@ def test_seeded_with_the_oracles_poses_the_search_never_returns_less_than_them()
                                   valuer(peak_q[None], peak_a[None]))[0])
     assert alone.value < at_peak - 5.0  # the grids alone miss it
     assert seeded.value >= at_peak - 1e-9
+    # a seed 0.2 m off the peak is refined from, not only valued: the pattern search climbs to the peak
+    off_q = peak_q + np.array([0.2, 0.0, 0.0])
+    near = exhaustive_plan(cfg, start, settings, valuer, seeds=[(off_q, peak_a)])
+    at_seed = float(episode_value(cfg.horizon, trip_slots(cfg, np.array(start), off_q[None]), 30.0,
+                                  valuer(off_q[None], peak_a[None]))[0])
+    assert at_seed < at_peak - 5.0 and near.value > at_peak - 0.5
+    # each distinct seed is searched from once: the start twice over costs what it costs once
+    twice = exhaustive_plan(cfg, start, settings, valuer, seeds=[(peak_q, peak_a), (np.array(start), np.zeros(3)),
+                                                                (np.array(start), np.zeros(3))])
+    once = exhaustive_plan(cfg, start, settings, valuer, seeds=[(peak_q, peak_a), (np.array(start), np.zeros(3))])
+    assert twice.poses_valued == once.poses_valued and twice.value == once.value
 
 
 def test_the_fine_grid_reaches_as_far_as_the_learned_planners():
+    """The default fine grid values every place of its 0.5 m grid up to 2 m each way (the learned
+    planner's reach) from the best place: a made-up R peaked on a place of the coarse grid, the
+    search's other stages kept to one pose, and the positions it values level recorded."""
+    import dataclasses
+
+    from uavris.agents.oracle.objective import feasible
     from uavris.agents.place.planner import PlaceSettings
 
-    assert SearchSettings().fine_reach >= PlaceSettings().grid_step  # the learned planner's fine reach
+    reach = max(2.0, PlaceSettings().grid_step)  # the learned planner's fine grid reaches its coarse step
+    assert SearchSettings().fine_reach >= reach
+    cfg, place = SystemConfig(), np.array([24.0, 28.0, 5.0])  # on the 2 m x 2 m x 1 m grid, 4 m from any device
+    seen: set[tuple[float, ...]] = set()
+
+    def valuer(q, att):
+        seen.update(tuple(np.round(x, 6)) for x in q[np.all(att == 0.0, axis=1)])
+        return 50.0 - np.sum((q - place) ** 2, axis=-1)
+
+    settings = dataclasses.replace(SearchSettings(), fine_places=1, top=1, refine=1)
+    exhaustive_plan(cfg, tuple(place), settings, valuer)
+    ticks = np.arange(-reach, reach + 1e-9, SearchSettings().fine_step)
+    rim = np.array([o for o in itertools.product(ticks, repeat=3) if np.abs(o).max() > reach - 1e-9])
+    rim = place + rim[np.any(np.abs(rim) % 1.0 != 0.0, axis=1)]  # off the coarse grid: the fine grid's alone
+    assert len(rim) and feasible(cfg, rim).all()
+    assert all(tuple(np.round(x, 6)) in seen for x in rim)
 
 
 def test_the_oracle_gap_page_is_stamped_and_states_each_halls_numbers(tmp_path):

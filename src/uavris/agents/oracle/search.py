@@ -17,12 +17,13 @@ the pose (:func:`.objective.expected_optimised_rate`). The search:
    yaw, pitch and roll (``attitudes_deg`` each) that the UAV can hold (under the system's
    front margin: :func:`.planner.held`);
 4. a pattern search in position and attitude from each of the ``refine`` best and from every
-   pose of ``seeds`` (the oracle's plan and finalists, :func:`plan_seeds`), down to
+   distinct pose of ``seeds`` (the oracle's plan and candidates, :func:`plan_seeds`), down to
    ``min_step``, the planner's own (:func:`.planner.pattern_search`, its neighbours: the
    attitude safety layer's limit included where the system has one).
 
 Seeded with the oracle's own poses, the search is a superset of the oracle's: on its own
-objective it never returns a pose worth less than any of them, so a gap it measures is a gap
+objective it never returns a pose worth less than any of them (any the UAV may hold in the
+searched system, as all of the oracle's are in its own), so a gap it measures is a gap
 of the oracle's search and not the wider search's blind spot (without them the oracle beat it
 by 1-2 bps/Hz in two halls of 6 devices, where the oracle's tilted finalist lay between its
 grids).
@@ -46,7 +47,7 @@ from numpy.typing import NDArray
 
 from uavris import physics as ph
 from uavris.agents.oracle import objective
-from uavris.agents.oracle.planner import Plan, held, pattern_search
+from uavris.agents.oracle.planner import Plan, distinct, held, pattern_search
 from uavris.config import SystemConfig
 
 Valuer = Callable[[NDArray[np.float64], NDArray[np.float64]], NDArray[np.float64]]  # R of (P, 3) positions, attitudes
@@ -78,9 +79,18 @@ class Found:
 
 def plan_seeds(plan: Plan) -> list[tuple[NDArray[np.float64], NDArray[np.float64]]]:
     """The poses of a plan the search starts from too: its target with its attitude, and each
-    candidate it valued (level: the table holds positions)."""
+    candidate it valued, level (the table holds positions, not the tilt a candidate of the global
+    stage was valued at: :func:`.planner.global_poses`)."""
     return [(np.asarray(plan.target, dtype=np.float64), np.asarray(plan.attitude, dtype=np.float64)),
             *((np.asarray(p, dtype=np.float64), np.zeros(3)) for p, _, _ in plan.candidates)]
+
+
+def seed_poses(seeds: Sequence[tuple[NDArray, NDArray]]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """The positions and attitudes ``(S, 3)`` of ``seeds``, each distinct pose once, in their order:
+    a plan that stays has the start as its target and as its first candidate, and one pattern
+    search from a pose finds what two would."""
+    poses = distinct(np.array([np.concatenate([np.ravel(q), np.ravel(a)]) for q, a in seeds], dtype=np.float64))
+    return poses[:, :3], poses[:, 3:]
 
 
 def exhaustive_plan(config: SystemConfig, start: tuple[float, float, float],
@@ -124,9 +134,8 @@ def exhaustive_plan(config: SystemConfig, start: tuple[float, float, float],
     q_all, a_all = q_all[keep], a_all[keep]
     va = value(q_all, a_all)
     order = [int(i) for i in np.argsort(-va, kind="stable")[:s.refine]]
-    if seeds:
-        sq = np.array([q for q, _ in seeds], dtype=np.float64)
-        sa = np.array([a for _, a in seeds], dtype=np.float64)
+    if len(seeds):
+        sq, sa = seed_poses(seeds)
         ok = objective.feasible(c, sq) & held(c, sq, sa)
         q_all, a_all = np.concatenate([q_all, sq[ok]]), np.concatenate([a_all, sa[ok]])
         va = np.concatenate([va, value(sq[ok], sa[ok])])

@@ -56,7 +56,7 @@ def search(system: Any, start: tuple, oracle_s: float, seeds: list, path: Path) 
     seeded = [[np.asarray(q).tolist(), np.asarray(a).tolist()] for q, a in seeds]
     if path.exists():
         kept = read_json(path)
-        same = all(kept.get(k) == v for k, v in (("format", FORMAT), ("seeds", seeded),
+        same = all(kept.get(k) == v for k, v in (("format", FORMAT), ("seeds", seeded), ("base", str(SearchSettings())),
                                                   ("front_margin_deg", system.front_margin_deg)))
         if same and kept["search_s"] >= DEARER * oracle_s:
             return Found(np.array(kept["target"]), np.array(kept["attitude"]), kept["value"],
@@ -72,7 +72,8 @@ def search(system: Any, start: tuple, oracle_s: float, seeds: list, path: Path) 
                                        fine_step=settings.fine_step / 2)
     kept = {"target": found.target.tolist(), "attitude": found.attitude.tolist(), "value": found.value,
             "poses_valued": found.poses_valued, "search_s": seconds, "settings": dataclasses.asdict(settings),
-            "front_margin_deg": system.front_margin_deg, "seeds": seeded, "format": FORMAT}
+            "front_margin_deg": system.front_margin_deg, "seeds": seeded, "format": FORMAT,
+            "base": str(SearchSettings())}
     write_json(path, kept)
     return found, kept
 
@@ -109,8 +110,10 @@ def measure(split: str, j: int, k: int, out: Path) -> dict[str, Any]:
 def versions() -> dict[str, Any]:
     """What a hall's numbers were made by: a hall of another oracle, teacher or search is measured again."""
     from uavris.agents.oracle.planner import TEACHER, PlanSettings
+    from uavris.agents.oracle.search import SearchSettings
 
-    return {"oracle_settings": str(PlanSettings()), "teacher_settings": str(TEACHER), "format": FORMAT}
+    return {"oracle_settings": str(PlanSettings()), "teacher_settings": str(TEACHER),
+            "search_settings": str(SearchSettings()), "format": FORMAT}
 
 
 def summary_rows(done: dict[str, dict[str, Any]]) -> tuple[list[tuple[str, ...]], list[tuple[str, ...]]]:
