@@ -242,7 +242,7 @@ def test_the_ceiling_over_the_oracle_is_read_by_each_rows_interval_not_its_mean(
         row = {"kind": "learned", "seed": None, "training_halls": None, "plan_of": None}
         return {"oracle": {**row, "kind": "reference", "variant": "oracle", "label": "oracle", "mean": 40.0},
                 "plan-learned": {**row, "variant": "plan-learned", "label": "learned place", "mean": plan},
-                "plan-semi": {**row, "variant": "plan-semi", "label": "semi place", "mean": semi}}
+                "plan-deployed": {**row, "variant": "plan-deployed", "label": "semi place", "mean": semi}}
 
     clear = {f"h{i}": hall(40.0 * 1.03 + 0.01 * i, 40.0 * (1.0 + 0.02 * (-1) ** i)) for i in range(4)}
     below = {f"k{i}": hall(39.0 + 0.1 * i, 39.5) for i in range(4)}

@@ -26,7 +26,6 @@ from uavris.experiments.study.pipeline import build_pipeline
 from uavris.experiments.study.report.deployment import ZERO_SHOT_TARGET
 from uavris.experiments.study.reproduce import reproduce
 from uavris.experiments.study.tracks import (
-    SEMI_TOP_K,
     TRACK_SPECS,
     places_stage,
     track_rows,
@@ -101,7 +100,7 @@ def test_the_main_rows_are_the_controllers_under_the_safety_layer():
             "bc-safe@s1", "dt-goal-safe", "dt-goal-safe@s1", "dt-goal-finetuned-safe", "dt-goal-finetuned-safe@s1"}
     [transfer] = [k for k, r in main.items() if r.kind == "transfer"]
     refs = {"zero-action", "hover-optimizer", "oracle"}
-    planners = {"plan-learned", "plan-semi"}  # the learned planner's place flown by the oracle's controller
+    planners = {"plan-learned", "plan-deployed"}  # a learned place flown by the oracle's controller
     assert set(main) == safe | refs | planners | {"oracle-safe", transfer}
     assert set(full) == set(main) | plain | {"dt-zero-shot-level", "dt-zero-shot-level@s1", "dt-ensemble-level"}
     assert list(main)[-3:] == ["zero-action", "hover-optimizer", "oracle"]  # the references last
@@ -117,16 +116,16 @@ def test_the_main_rows_are_the_controllers_under_the_safety_layer():
     assert main[transfer].plan_of == {t.name: t for t in train}[main[transfer].facts()["plan_of"]]
     assert main[transfer].rank == 0 and {r.kind for k, r in main.items() if k in refs} == {"reference"}
     assert main["dt-zero-shot-safe@s1"].label_for() == "zero-shot DT, seed 1, safety layer"
-    # the goal-conditioned DT is told the semi-amortised place (never worse than staying); its fine-tuned
-    # form keeps its own
+    # the goal-conditioned DT is told the deployed place (V proposes, R disposes: never worse than staying); its
+    # fine-tuned form keeps its own
     value = Path("/models/value/value")
     assert main["dt-goal-safe@s1"].goal_from.path == value and main["dt-goal-safe@s1"].target.path == Path(
         "/models/goal-s1/model")
-    assert main["dt-goal-safe@s1"].goal_from.top_k == SEMI_TOP_K
-    assert main["dt-goal-safe@s1"].facts()["goal_from"].startswith("semi-amortised planner")
+    assert main["dt-goal-safe@s1"].goal_from.deployed and not main["dt-goal-safe@s1"].goal_from.top_k
+    assert main["dt-goal-safe@s1"].facts()["goal_from"].startswith("deployed place")
     assert main["dt-goal-finetuned-safe@s1"].goal_from is None
     assert main["dt-goal-finetuned-safe@s1"].target.path == Path("/models") / places_stage(where.name, 1) / "model"
-    assert main["plan-learned"].target.path == value and main["plan-semi"].target.top_k == SEMI_TOP_K
+    assert main["plan-learned"].target.path == value and main["plan-deployed"].target.deployed
 
 
 def test_demonstrations_cover_every_training_hall(deployment_run):
@@ -150,7 +149,7 @@ def test_the_nearest_training_halls_plan_is_the_one_at_the_smallest_distance(dep
             continue
         if r.name.endswith("-k3"):  # a hall of another device count: no training hall is "nearest", no fine-tuning
             assert not any(k.startswith(("transfer-", "dt-finetuned", "dt-goal-finetuned")) for k in r.result)
-            assert {"dt-goal-safe", "plan-learned", "plan-semi", "hover-optimizer", "oracle"} <= set(r.result)
+            assert {"dt-goal-safe", "plan-learned", "plan-deployed", "hover-optimizer", "oracle"} <= set(r.result)
             continue
         other = "-other-" in r.name  # the ablation's halls of another generator: zero-shot only
         unseen = gen.layout("other" if other else "unseen", int(r.name.rsplit("-", 1)[1]))
@@ -280,7 +279,7 @@ def test_the_rows_per_device_count_are_the_halls_numbers(deployment_run):
                 per_episode = [float(x) for x in re.findall(r"^\d+,([^,]+),", (p / f"{summary['policy']}.csv")
                                                            .read_text(), re.M)]
                 assert np.all(np.array(per_episode) <= b), (p.name, summary["policy"])
-            bounds.append(max(r[k]["mean"] for k in ("oracle", "plan-learned", "plan-semi")) / b.mean())
+            bounds.append(max(r[k]["mean"] for k in ("oracle", "plan-learned", "plan-deployed")) / b.mean())
         row = next(line for line in section.splitlines() if line.startswith("| best plan found / the bound"))
         assert row.split("|")[column + 1].strip() == f"{np.mean(bounds):.1%} (no CI: 2 units)"
         # halls where a seed's paired 95% CI over episodes lies below hovering: over 2 episodes, no verdict
@@ -453,11 +452,11 @@ def test_the_studys_controller_leaves_the_study_in_one_directory(deployment_run,
                  "--out", str(tmp_path / "s"), "--no-progress"]) == 0
     [cell] = [read_json(p) for p in (tmp_path / "s" / "cells").glob("*.json")]
     assert cell["mean"] == pytest.approx(want["mean"], abs=1e-12)
-    # plan --controller: the planner of its row (the semi-amortised one), as plan --learned --top-k with the
+    # plan --controller: the planner of its row (the deployed place), as plan --learned --deployed with the
     # study's value
     [value] = (out / "stages").glob("deploy-value-*/value")
     for name, flags in (("p-ctl", ["--controller", str(ctl)]),
-                        ("p-v", ["--learned", str(value), "--top-k", str(SEMI_TOP_K)])):
+                        ("p-v", ["--learned", str(value), "--deployed"])):
         assert main(["plan", "layout-unseen-0", *flags, "--system.observe-devices", "--out", str(tmp_path / name),
                      "--no-progress"]) == 0
     assert read_json(tmp_path / "p-ctl.json")["target"] == read_json(tmp_path / "p-v.json")["target"]

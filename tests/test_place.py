@@ -74,7 +74,7 @@ def value_model() -> PoseValue:
     users, positions, rates, halls = [], [], [], []
     for j in range(6):
         system, _ = GEN.layout("train", j).resolve(BASE)
-        q, r = hall_labels(system, 48, j)
+        q, _, r = hall_labels(system, 48, j)
         users.append(np.broadcast_to(np.asarray(system.users), (len(q), 4, 3)))
         positions.append(q)
         rates.append(r)
@@ -330,3 +330,72 @@ def test_the_learned_planners_top_places_never_beat_the_oracle_beyond_their_erro
     for place in places:
         gap = plan_gap(system, where.start, oracle, Found(place, np.zeros(3), float("nan"), 0))
         assert gap.difference <= 2.0 * gap.difference_se, (place, gap)  # the learned place minus the oracle's
+
+
+# ------------------------------------------------------------------------------ the deployed place
+def test_a_tilted_pose_is_read_as_the_level_pose_of_the_devices_seen_from_the_surface():
+    """R is the same for a tilted surface and for a level one whose devices are turned by the
+    inverse rotation about it (the physics sees the devices in the surface's frame), to the
+    optimiser's draws; V reads a tilted pose that way (in_ris_frame), and level poses as before,
+    bit for bit."""
+    import copy
+
+    from uavris.agents.place.value import in_ris_frame
+
+    system, _ = GEN.layout("unseen", 2).resolve(BASE)
+    q, att = np.array([[24.8, 24.1, 3.0]]), np.radians([[7.0, 15.0, -20.0]])
+    seen = in_ris_frame(system.users, q, att)[0]
+    level = copy.copy(system)
+    object.__setattr__(level, "users", tuple(map(tuple, seen)))  # devices where the surface sees them
+    tilted = expected_optimised_rate(system, q, att, seed=3)
+    assert expected_optimised_rate(level, q, np.zeros((1, 3)), seed=3) == pytest.approx(tilted, rel=2e-3)
+    torch.manual_seed(0)
+    model = PoseValue(ValueConfig(16)).eval()
+    users = np.asarray(system.users)
+    assert predict(model, users, q, att)[0] == predict(model, seen, q)[0]
+    assert predict(model, users, q, np.zeros((1, 3)))[0] == predict(model, users, q)[0]
+
+
+@pytest.fixture(scope="module")
+def tilted_value() -> PoseValue:
+    """V fitted on tilted labels of 12 training halls of 3 and of 8 devices (test scale)."""
+    users, positions, attitudes, rates = {}, {}, {}, {}
+    for k in (3, 8):
+        gen = LayoutGenerator(devices=k, seed=7)
+        parts = []
+        for j in range(12):
+            system, _ = gen.layout("train", j).resolve(BASE)
+            q, att, r = hall_labels(system, 24, 100 * k + j, tilted=True)
+            parts.append((np.broadcast_to(np.asarray(system.users), (len(q), k, 3)), q, att, r))
+        users[k], positions[k], attitudes[k], rates[k] = (np.concatenate(x) for x in zip(*parts))
+    labels = ValueLabels(users, positions, rates, {k: np.array(["h"] * len(r)) for k, r in rates.items()}, attitudes)
+    assert all(np.any(attitudes[k] != 0) for k in attitudes)  # tilted poses among the labels
+    return fit_value(labels, ValueConfig(32), steps=1500, seed=0)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("devices", [3, 8])
+def test_the_deployed_place_is_the_oracles_within_the_paired_error_and_never_below_staying(tilted_value, devices):
+    """In a generated hall of 3 and one of 8 devices (test scale), the deployed place (V proposes,
+    R disposes) is worth the oracle's plan within 3% (or twice the standard error of their paired
+    difference), and never less than staying, all valued on the same fresh draws (plan_gap); it
+    keeps the oracle's margin (every device 1 degree in front of the RIS). A V of this scale (12
+    halls a count) came within 0.8% and 1.9%; the quick study's V is measured against the 99%
+    target by benchmarks/findings/place_planner.py. An untrained V's decision stays (R disposes:
+    never below staying) and so is not within 3% of the oracle here: the check can fail."""
+    from uavris import physics as ph
+    from uavris.agents.oracle.planner import plan_target
+    from uavris.agents.oracle.search import Found, plan_gap
+    from uavris.agents.place.planner import decided_plan
+
+    system, where = LayoutGenerator(devices=devices, seed=7).layout("unseen", 1).resolve(BASE)
+    oracle = plan_target(system, where.start)
+    torch.manual_seed(3)
+    for model, near in ((tilted_value, True), (PoseValue(ValueConfig(32)).eval(), False)):
+        plan = decided_plan(model, system, where.start)
+        gap = plan_gap(system, where.start, oracle, Found(plan.target, plan.attitude, float("nan"), 0))
+        close = gap.difference >= -max(2.0 * gap.difference_se, 0.03 * gap.oracle_value)
+        assert close == near, (devices, near, gap)  # the untrained V's decision stays: well below the oracle
+        assert gap.search_value >= gap.stay_value - 2.0 * gap.difference_se, (devices, gap)
+        elevation = ph.worst_elevation(plan.attitude, plan.target, np.asarray(system.users))
+        assert elevation >= np.sin(np.radians(1.0)) - 1e-12

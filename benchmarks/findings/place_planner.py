@@ -38,6 +38,9 @@ for _variable in THREAD_VARIABLES:
 import argparse  # noqa: E402
 import time  # noqa: E402
 
+# isort: off
+import uavris  # noqa: E402, F401 - first: it pins the float path before numpy loads (uavris.float_paths)
+# isort: on
 import numpy as np  # noqa: E402
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1]))  # benchmarks/, for _machine.py

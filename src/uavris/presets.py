@@ -66,7 +66,7 @@ FINETUNE: dict[str, dict[str, Any]] = {
 # and the fit (ValueFitConfig: the network's width and its gradient steps).
 VALUE: dict[str, dict[str, Any]] = {
     "smoke": dict(counts=(3, 4), halls=2, poses=9, width=16, steps=40),
-    "quick": dict(counts=(3, 4, 5, 6, 7, 8), halls=32, poses=48, width=64, steps=3000),
+    "quick": dict(counts=(3, 4, 5, 6, 7, 8), halls=32, poses=48, width=64, steps=6000),
     "paper": dict(counts=(3, 4, 5, 6, 7, 8), halls=256, poses=96, width=128, steps=20_000),
 }
 # Fine-tuning that tries places (a goal-conditioned DT, docs/places.md): the start and this many of

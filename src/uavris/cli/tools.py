@@ -34,6 +34,9 @@ class PlanArgs:
     --track deployment`): plan with the argmax of V instead of the exact planner, and map V (milliseconds)"""
     top_k: int = 0
     """with --learned: value its best K places (1-5) and the start by the exact R (semi-amortised; seconds)"""
+    deployed: bool = False
+    """with --learned: the deployed place (V proposes, R disposes: V's best places valued level and tilted by R's
+    cheap estimate, the best refined, the finalists and staying valued by R; about a tenth of the oracle's time)"""
     controller: Unset[Path] = None
     """a controller directory (uavris export): plan with the learned planner its row is told its place by"""
     progress: bool = True
@@ -67,7 +70,7 @@ def plan_command(args: list[str]) -> None:
         told = read_controller(a.controller).goal_from
         if not isinstance(told, LearnedValue):
             raise UsageError(f"--controller {a.controller}: its row is told no learned place (no learned value)")
-        a = replace(a, learned=told.path, top_k=told.top_k)
+        a = replace(a, learned=told.path, top_k=told.top_k, deployed=told.deployed)
     if a.layout is None:
         layout = PAPER_LAYOUT if a.system.users == PAPER_LAYOUT.users else Layout(
             "custom", a.system.users, default_start(a.system))
@@ -76,8 +79,10 @@ def plan_command(args: list[str]) -> None:
         layout = resolve_layout(a.layout, a.system)
     hall = layout.system(a.system)
     check_grid(hall, a.grid_step)  # before anything is written
-    if a.learned is None or a.top_k:
+    if a.learned is None or a.top_k or a.deployed:
         check_devices(hall)
+    if a.deployed and (a.learned is None or a.top_k):
+        raise UsageError("--deployed needs --learned and no --top-k")
     if not 0 <= a.top_k <= 5 or (a.top_k and a.learned is None):
         raise UsageError(f"--top-k must be in 0-5 and needs --learned, got {a.top_k}"
                           + ("" if a.learned is not None else " without --learned"))
@@ -91,7 +96,7 @@ def plan_command(args: list[str]) -> None:
             seconds = planning_seconds(hall.num_users)
             print(f"planning a hall of {hall.num_users} devices: about {seconds:.0f} s on one core", flush=True)
         plan, paths = plan_hall(layout, a.system, out, a.grid_step, progress=a.progress, value=value,
-                                top_k=a.top_k, controller=a.controller)
+                                top_k=a.top_k, controller=a.controller, deployed=a.deployed)
     t = plan["target"]
     if plan["expected_sum_rate"] is None:  # the learned planner's V: no R was computed
         worth = (f"learned value V there {plan['learned_value']:.2f} bps/Hz (at the start "
@@ -215,7 +220,7 @@ class ExportArgs:
     """a study's output directory (uavris reproduce --out)"""
     row: str = "dt-goal-safe"
     """the row of the study's report to export (its key in the stage files): e.g. dt-goal-safe (the goal-conditioned
-    DT told the semi-amortised place, under the safety layer), dt-ensemble-safe, dt-zero-shot-safe@s1"""
+    DT told the deployed place, under the safety layer), dt-ensemble-safe, dt-zero-shot-safe@s1"""
     track: Literal["paper", "strong", "deployment"] = "deployment"
     """the row's track"""
     out: Unset[Path] = None

@@ -13,7 +13,10 @@ each outside the safety balls. ``R`` is the planner's own value
 (:func:`~uavris.agents.oracle.objective.expected_optimised_rate`: the pairings, 2 NLoS draws,
 the optimiser every slot, level), its common random numbers seeded per hall: a hall's
 labels are consistent among themselves, and the noise of different halls' is independent,
-so a network fitted over many halls averages it out.
+so a network fitted over many halls averages it out. With ``tilted``, every position whose
+surface can be turned towards the devices (the oracle's global stage's tilt,
+:func:`uavris.agents.oracle.planner.facing_attitudes`, under its front margin) is labelled a
+second time with that attitude: where the oracle gains from tilting, the value must know it.
 """
 
 from __future__ import annotations
@@ -22,7 +25,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from uavris.agents.oracle.objective import expected_optimised_rate, feasible
-from uavris.agents.oracle.planner import screen
+from uavris.agents.oracle.planner import SAFE_MARGIN_DEG, facing_attitudes, holding, screen
 from uavris.config import SystemConfig
 
 LOW_BAND = 1.5  # m above the region's floor: the low third of the poses
@@ -52,9 +55,17 @@ def label_poses(config: SystemConfig, count: int, rng: np.random.Generator) -> N
     return np.concatenate(out)
 
 
-def hall_labels(config: SystemConfig, count: int, seed: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """``count`` poses of ``config``'s hall (:func:`label_poses`) and ``R`` at each, level, the
-    poses and the common random numbers both from ``seed``."""
+def hall_labels(config: SystemConfig, count: int, seed: int, tilted: bool = False
+                ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """``count`` positions of ``config``'s hall (:func:`label_poses`), level, and with ``tilted``
+    each that the surface can be turned at again with that attitude (module docstring): the
+    positions, attitudes and ``R`` of every pose, the positions and the common random numbers
+    both from ``seed``."""
     rng = np.random.default_rng([seed, 1])
-    poses = label_poses(config, count, rng)
-    return poses, expected_optimised_rate(config, poses, np.zeros(3), seed=seed)
+    q = label_poses(config, count, rng)
+    att = np.zeros_like(q)
+    if tilted:
+        facing = facing_attitudes(holding(config, SAFE_MARGIN_DEG), q)
+        turned = np.any(facing != 0.0, axis=1)
+        q, att = np.concatenate([q, q[turned]]), np.concatenate([att, facing[turned]])
+    return q, att, expected_optimised_rate(config, q, att, seed=seed)

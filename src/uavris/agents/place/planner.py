@@ -72,33 +72,51 @@ def place_grid(config: SystemConfig, step: float) -> NDArray[np.float64]:
     return grid[ok]
 
 
-def place_values(model: PoseValue, config: SystemConfig, start: NDArray, places: NDArray
-                 ) -> tuple[NDArray[np.float64], float]:
+def place_values(model: PoseValue, config: SystemConfig, start: NDArray, places: NDArray, tilt: bool = False
+                 ) -> tuple[NDArray[np.float64], NDArray[np.float64], float]:
     """The episode value of flying to each of ``places`` and hovering there, by ``V`` and the
-    travel-time rule, and ``V`` at the start (the value of staying)."""
+    travel-time rule, with the attitude it is valued at (level; with ``tilt`` the better of
+    level and turned towards the devices where the UAV can hold it, :func:`facing_attitudes`),
+    and ``V`` at the start (the value of staying)."""
     users = np.asarray(config.users, dtype=np.float64)
     v = predict(model, users, places)
+    att = np.zeros_like(places)
+    if tilt and len(places):
+        facing = facing_attitudes(config, places)
+        turned = np.any(facing != 0.0, axis=1)
+        vt = v.copy()
+        vt[turned] = predict(model, users, places[turned], facing[turned])
+        att = np.where((vt > v)[:, None], facing, 0.0)
+        v = np.maximum(v, vt)
     v0 = float(predict(model, users, np.asarray(start, dtype=np.float64)[None])[0])
-    return episode_value(config.horizon, trip_slots(config, start, places), v0, v), v0
+    return episode_value(config.horizon, trip_slots(config, start, places), v0, v), att, v0
 
 
-def ranked_places(model: PoseValue, config: SystemConfig, start: NDArray, settings: PlaceSettings = PlaceSettings()
-                  ) -> tuple[NDArray[np.float64], NDArray[np.float64], float]:
+def ranked_poses(model: PoseValue, config: SystemConfig, start: NDArray, settings: PlaceSettings = PlaceSettings(),
+                 tilt: bool = False) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], float]:
     """Every place the learned planner reads (the coarse grid, and the finer grid around its
-    best places) with its episode value by ``V``, best first, and ``V`` at the start."""
+    best places) with the attitude and episode value ``V`` gives it (:func:`place_values`),
+    best first, and ``V`` at the start."""
     start_q = np.asarray(start, dtype=np.float64)
     coarse = place_grid(config, settings.grid_step)
-    values, v0 = place_values(model, config, start_q, coarse)
+    values, atts, v0 = place_values(model, config, start_q, coarse, tilt)
     # the finer grid around the coarse grid's best places (V is smooth: its argmax lies near them)
     step, reach = settings.fine_step, settings.grid_step
     offsets = np.stack(np.meshgrid(*[np.arange(-reach, reach + 1e-9, step)] * 3, indexing="ij"), -1).reshape(-1, 3)
     near = np.concatenate([coarse[i] + offsets for i in top_apart(values, coarse, settings.fine_places,
                                                                    settings.separation)])
     near = near[feasible(config, near)]
-    fine, _ = place_values(model, config, start_q, near)
-    places, values = np.concatenate([coarse, near]), np.concatenate([values, fine])
+    fine, fine_atts, _ = place_values(model, config, start_q, near, tilt)
+    places, atts, values = (np.concatenate(x) for x in ((coarse, near), (atts, fine_atts), (values, fine)))
     order = np.argsort(-values, kind="stable")
-    return places[order], values[order], v0
+    return places[order], atts[order], values[order], v0
+
+
+def ranked_places(model: PoseValue, config: SystemConfig, start: NDArray, settings: PlaceSettings = PlaceSettings()
+                  ) -> tuple[NDArray[np.float64], NDArray[np.float64], float]:
+    """:func:`ranked_poses` level: the places with their episode value by ``V``, best first, and ``V`` at the start."""
+    places, _, values, v0 = ranked_poses(model, config, start, settings)
+    return places, values, v0
 
 
 def learned_plan(model: PoseValue, config: SystemConfig, start: tuple[float, float, float],
@@ -143,14 +161,17 @@ class LearnedPlanner:
     privileged: ClassVar[bool] = True
     phase_control: ClassVar[str] = "optimizer"
 
-    def __init__(self, model: PoseValue, settings: PlaceSettings = PlaceSettings()) -> None:
-        self.model, self.settings = model, settings
+    def __init__(self, model: PoseValue, settings: PlaceSettings = PlaceSettings(), deployed: bool = False) -> None:
+        self.model, self.settings, self.deployed = model, settings, deployed
         self.plans: dict[tuple, Plan] = {}
 
     def plan(self, config: SystemConfig, start: tuple[float, float, float]) -> Plan:
+        """The plan from ``start``: the learned planner's, or with ``deployed`` the deployed place
+        (:func:`decided_plan`); made once per hall and start."""
         key = (config, tuple(start))
         if key not in self.plans:
-            self.plans[key] = learned_plan(self.model, config, start, self.settings)
+            self.plans[key] = (decided_plan(self.model, config, start) if self.deployed
+                               else learned_plan(self.model, config, start, self.settings))
         return self.plans[key]
 
     def target(self, config: SystemConfig, start: tuple[float, float, float]) -> NDArray[np.float64]:
@@ -161,24 +182,30 @@ class LearnedPlanner:
         return motion_entries(sim.config, *fly_to(sim, self.plan(sim.config, sim.scenario.start)))
 
 
+# The grids V is read on for the deployed place: coarser than the learned planner's (each place is valued
+# level and tilted), its proposals valued by the cheap R anyway (measured: docs/places.md)
+DEPLOYED_GRIDS = PlaceSettings(grid_step=3.0, fine_step=1.5, fine_places=6)
+
+
 @dataclass(frozen=True)
 class DecideSettings:
     """How the deployed place is decided: ``V`` proposes, ``R`` disposes (:func:`decided_plan`)."""
 
-    proposals: int = 12  # V's best places (apart by ``separation``) valued by the cheap R, level and tilted
+    proposals: int = 16  # V's best places (apart by ``separation``) valued by the cheap R, level and tilted
     separation: float = 2.0  # m between proposals
     refine_from: int = 1  # the best poses by the cheap R refined by a pattern search on it
     max_refinements: int = 6  # batches of that pattern search
     refine_step: float = 0.5  # m, its first step
-    runners_up: int = 2  # the next best poses by the cheap R among the finalists, unrefined
+    runners_up: int = 1  # the next best poses by the cheap R among the finalists, unrefined
     check_batches: int = 4  # fresh batches of R the finalists (and staying) are valued on
     front_margin_deg: float | None = SAFE_MARGIN_DEG  # the oracle's: every device this far in front of the RIS
 
 
 def decided_plan(model: PoseValue, config: SystemConfig, start: tuple[float, float, float],
-                 settings: DecideSettings = DecideSettings(), place: PlaceSettings = PlaceSettings()) -> Plan:
-    """The deployed place (docs/places.md): ``V``'s best ``proposals`` places (its grids,
-    :func:`ranked_places`), each level and turned towards the devices where the UAV can hold it
+                 settings: DecideSettings = DecideSettings(), place: PlaceSettings = DEPLOYED_GRIDS) -> Plan:
+    """The deployed place (docs/places.md): ``V``'s best ``proposals`` places (its grids, each
+    place valued level and turned, :func:`ranked_poses`), each level and turned towards the
+    devices where the UAV can hold it
     (the oracle's global stage's tilt, :func:`~uavris.agents.oracle.planner.facing_attitudes`),
     with the start, valued by the planner's cheap ``R`` and the travel-time rule; the best refined
     by a short pattern search in position and attitude on the cheap ``R``; the refined, the
@@ -190,7 +217,7 @@ def decided_plan(model: PoseValue, config: SystemConfig, start: tuple[float, flo
     c = holding(config, s.front_margin_deg)
     start_q = np.asarray(start, dtype=np.float64)
     level = np.zeros(3)
-    places, values, _ = ranked_places(model, c, start_q, place)
+    places, _, values, _ = ranked_poses(model, c, start_q, place, tilt=True)
     chosen = places[top_apart(values, places, s.proposals, s.separation)]
     memo: dict[bytes, float] = {}
 

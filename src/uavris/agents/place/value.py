@@ -1,4 +1,4 @@
-"""A learned value of a pose: ``V(devices, position)``, the planner's ``R`` without its optimiser.
+"""A learned value of a pose: ``V(devices, pose)``, the planner's ``R`` without its optimiser.
 
 Lives here: :class:`PoseValue` (the network), :func:`device_features` (what it reads of each
 device), :class:`ValueLabels` (poses, their halls and ``R``) and :func:`fit_value` (its
@@ -22,6 +22,12 @@ embeddings' mean, with ``1/K``, go through a head to ``R``. No weight's shape de
 the means sum in a sorted order (:func:`_ordered_mean`), so what is left is how the CPU's
 matrix kernels round a device's row at another place in the batch (bit for bit with
 AVX-512 kernels; within 2 float32 ulps with AVX2 ones, as on an AMD EPYC of Zen 2/3).
+
+A pose has an attitude: ``R`` of the RIS at ``q`` tilted by ``att`` is ``R`` of a level RIS at
+``q`` whose devices are turned by the inverse rotation about it (the channel and the phases
+see the devices only in the surface's frame: eq. (10)-(11); measured equal to 0.03% with the
+optimiser's draws), so ``V`` reads a tilted pose as a level one in the devices' places seen from
+the surface (:func:`in_ris_frame`), and learns the tilts from labels at tilted poses.
 """
 
 from __future__ import annotations
@@ -53,6 +59,19 @@ def device_features(users: NDArray | torch.Tensor, position: NDArray | torch.Ten
     k = torch.full_like(dist, 1.0 / u.shape[-2])
     return torch.cat([d / 10.0, torch.log(dist / 10.0), d[..., :2].norm(dim=-1, keepdim=True) / 10.0,
                       -d[..., 2:] / dist, k], dim=-1)
+
+
+def in_ris_frame(users: NDArray, position: NDArray, attitude: NDArray) -> NDArray[np.float64]:
+    """The devices ``(K, 3)`` (or ``(P, K, 3)``) as a level RIS at each position ``(P, 3)`` would
+    see them where the RIS is tilted by ``attitude`` ``(P, 3)``: ``q + R(att)^T (u - q)``
+    (eq. (10)'s rotation), ``(P, K, 3)``."""
+    from uavris import physics as ph
+
+    q = np.asarray(position, dtype=np.float64)
+    att = np.asarray(attitude, dtype=np.float64)
+    rot = ph.rotation_matrix(att[:, 0], att[:, 1], att[:, 2])  # (P, 3, 3): columns the RIS axes
+    d = np.broadcast_to(np.asarray(users, dtype=np.float64), (len(q), *np.shape(users)[-2:])) - q[:, None]
+    return q[:, None] + np.einsum("pkj,pji->pki", d, rot)
 
 
 def _mlp(sizes: Sequence[int]) -> nn.Sequential:
@@ -115,16 +134,28 @@ class PoseValue(nn.Module):
 @dataclass(frozen=True, eq=False)
 class ValueLabels:
     """Poses of halls and their ``R``: ``users`` ``(n, K, 3)`` per count ``K``, positions
-    ``(n, 3)``, ``rate`` ``(n,)`` and the hall (a name) each pose is in."""
+    ``(n, 3)``, ``rate`` ``(n,)``, the hall (a name) each pose is in and its ``attitude``
+    ``(n, 3)`` (level where not given)."""
 
     users: dict[int, NDArray[np.float64]]
     position: dict[int, NDArray[np.float64]]
     rate: dict[int, NDArray[np.float64]]
     hall: dict[int, NDArray[np.str_]]
+    attitude: dict[int, NDArray[np.float64]] | None = None
 
     @property
     def size(self) -> int:
         return sum(len(r) for r in self.rate.values())
+
+    def seen(self, k: int) -> NDArray[np.float64]:
+        """The devices of count ``k``'s poses in the RIS's frame (:func:`in_ris_frame`): what ``V`` reads."""
+        att = None if self.attitude is None else self.attitude.get(k)
+        if att is None or not np.any(att):
+            return self.users[k]
+        tilted = np.any(att != 0.0, axis=1)  # a level pose's devices as they are, bit for bit
+        out = np.array(self.users[k], dtype=np.float64)
+        out[tilted] = in_ris_frame(self.users[k][tilted], self.position[k][tilted], att[tilted])
+        return out
 
 
 def fit_value(labels: ValueLabels, cfg: ValueConfig = ValueConfig(), *, steps: int = 3000, batch: int = 256,
@@ -140,13 +171,14 @@ def fit_value(labels: ValueLabels, cfg: ValueConfig = ValueConfig(), *, steps: i
     opt = torch.optim.Adam(model.parameters(), lr=lr)
     schedule = torch.optim.lr_scheduler.CosineAnnealingLR(opt, steps)
     counts = sorted(labels.rate)
+    seen = {k: labels.seen(k) for k in counts}
     share = np.array([len(labels.rate[k]) for k in counts], dtype=np.float64)
     share /= share.sum()
     model.train()
     for step in range(1, steps + 1):
         k = counts[int(rng.choice(len(counts), p=share))]
         idx = rng.integers(0, len(labels.rate[k]), min(batch, len(labels.rate[k])))
-        pred = model(torch.as_tensor(labels.users[k][idx]), torch.as_tensor(labels.position[k][idx]))
+        pred = model(torch.as_tensor(seen[k][idx]), torch.as_tensor(labels.position[k][idx]))
         loss = torch.mean(((pred - torch.as_tensor(labels.rate[k][idx], dtype=torch.float32)) / RATE_SCALE) ** 2)
         opt.zero_grad(set_to_none=True)
         loss.backward()
@@ -157,12 +189,18 @@ def fit_value(labels: ValueLabels, cfg: ValueConfig = ValueConfig(), *, steps: i
     return model.eval()
 
 
-def predict(model: PoseValue, users: NDArray, positions: NDArray, chunk: int = 4096) -> NDArray[np.float64]:
-    """``V`` of ``positions`` ``(P, 3)`` in one hall of devices ``users`` ``(K, 3)``, ``(P,)``."""
+def predict(model: PoseValue, users: NDArray, positions: NDArray, attitudes: NDArray | None = None,
+            chunk: int = 1024) -> NDArray[np.float64]:
+    """``V`` of positions ``(P, 3)`` in one hall of devices ``users`` ``(K, 3)``, ``(P,)``: level,
+    or with the RIS tilted by ``attitudes`` ``(P, 3)`` (:func:`in_ris_frame`)."""
     out = []
+    tilted = attitudes is not None and bool(np.any(attitudes))
     u = torch.as_tensor(np.asarray(users, dtype=np.float32))
     with torch.inference_mode():
         for start in range(0, len(positions), chunk):
-            q = torch.as_tensor(np.asarray(positions[start:start + chunk], dtype=np.float32))
-            out.append(model(u.expand(len(q), *u.shape), q).double().numpy())
+            part = np.asarray(positions[start:start + chunk])
+            q = torch.as_tensor(np.asarray(part, dtype=np.float32))
+            seen = (torch.as_tensor(in_ris_frame(users, part, np.asarray(attitudes)[start:start + chunk])
+                                    .astype(np.float32)) if tilted else u.expand(len(q), *u.shape))
+            out.append(model(seen, q).double().numpy())
     return np.concatenate(out) if out else np.zeros(0)

@@ -37,7 +37,7 @@ from uavris.experiments.tools.targets import variant_key
 from uavris.stats import judged, judged_censored
 
 DEPLOYMENT_DT = variant_key("dt-zero-shot", safe=True)  # the paper's DT (return-conditioned) under the safety layer
-GOAL_DT = variant_key("dt-goal", safe=True)  # the goal-conditioned DT told the semi-amortised place
+GOAL_DT = variant_key("dt-goal", safe=True)  # the goal-conditioned DT told the deployed place
 # The fine-tuning claims are the paper's: its DT fine-tuned by its Algorithm 1 where every hall has it, else
 # uavris's goal-conditioned DT fine-tuned by trying places, named in each cell's text. Each: the fine-tuned
 # and the zero-shot rows as the paper runs them (no safety layer), the same under the layer, what it is.
@@ -129,7 +129,7 @@ def judge_deployment(study: Study, from_scratch: Sequence[dict[str, Any]] = (),
                 "bps/Hz", "")]
     goal = over_halls(lambda r, t: np.mean(r[GOAL_DT] - t) if GOAL_DT in r else None)
     if goal is not None:
-        out.append(cell("zero-shot", goal, "the same for the goal-conditioned DT told the semi-amortised place "
+        out.append(cell("zero-shot", goal, "the same for the goal-conditioned DT told the deployed place "
                         "(uavris's controller; the cell's second entry)", ""))
     out += _finetuning_cells(halls, unit)
     out.append(cell("fluctuates", [float(np.std(h["transfer"], ddof=1) - np.std(h["rows"][SAFE_ORACLE][0], ddof=1))

@@ -60,7 +60,7 @@ class PlaceStages:
         v = VALUE[self.rc.preset]
         labels = ValueLabelsConfig(counts=tuple(v["counts"]), halls=v["halls"], poses=v["poses"],
                                    layout_seed=self.rc.layout_seed, system=self.rc.system.replace(observe_devices=True))
-        costs = tuple(value_labels_cost(k, n, labels.poses) for k, _, n in _chunks(labels))
+        costs = tuple(value_labels_cost(k, n, labels.poses, labels.tilted) for k, _, n in _chunks(labels))
         fit = ValueFitConfig(preset=self.rc.preset, seed=self.rc.seed)
         # the labels are the planner's screen and rate of poses: a new oracle labels them again
         return [Stage(self.t("value-labels"), {**labels.to_dict(), "oracle": oracle_planner.ORACLE_VERSION},

@@ -50,7 +50,6 @@ from uavris.layouts import LayoutGenerator, Site, layout_distance
 from uavris.presets import STRONG_IMITATION
 
 TRANSFER_NEIGHBOURS = 2
-SEMI_TOP_K = 3  # the semi-amortised learned planner: its top places valued by R
 REFERENCE_ROWS = (ZERO_ACTION, HOVER_OPTIMIZER, ORACLE)  # every evaluation stage scores them beside its rows
 TRACKS: tuple[str, ...] = ("paper", "strong", "deployment")
 
@@ -196,11 +195,11 @@ def _learned_rows(track: Track, site: Site, sources: list[tuple[str, float]], di
     value = LearnedValue.at(dirs["value"] / "value") if "value" in dirs else None
     if train and site.devices != train[0].devices:  # a flat encoder's weights read its training halls' count only
         models = [m for m in models if dict(m.model).get("state_encoder") != "flat"]
-    # the headline controller is told the semi-amortised place (V's top places and staying, valued by R):
-    # never worse than staying, where V's argmax alone can be (docs/places.md)
-    semi = dataclasses.replace(value, top_k=SEMI_TOP_K) if value is not None else None
+    # the headline controller is told the deployed place (V proposes, R disposes: its places valued by R and
+    # refined, staying always a candidate, the oracle's margin; docs/places.md)
+    deployed = dataclasses.replace(value, deployed=True) if value is not None else None
     for m in models:
-        goal = {"goal_from": semi} if m.row == "dt-goal" else {}
+        goal = {"goal_from": deployed} if m.row == "dt-goal" else {}
         rows.append((Row(m.row, m.label, DTModel.at(dirs[m.stage] / "model"), seed=m.seed if seeded else None,
                          training_halls=m.halls, **goal), not m.ablation))
     for m in models:  # fine-tuned by trying places in this hall: it keeps the place it chose
@@ -211,8 +210,8 @@ def _learned_rows(track: Track, site: Site, sources: list[tuple[str, float]], di
     if value is not None:
         rows += [(Row("plan-learned", "learned planner's place (V's argmax), flown by the oracle's controller",
                       value), False),
-                 (Row("plan-semi", f"learned planner's top {SEMI_TOP_K} places valued by R, flown by the oracle's "
-                      "controller", semi), False)]
+                 (Row("plan-deployed", "the deployed place (V proposes, R disposes), flown by the oracle's "
+                      "controller", deployed), False)]
     dts = [DTModel.at(dirs[m.stage] / "model") for m in models if m.row == "dt-zero-shot"]
     if len(dts) > 1:
         rows.append((Row("dt-ensemble", f"zero-shot DT, ensemble of the {len(dts)} seeds' models (mean action)",
@@ -285,8 +284,7 @@ def trained_models(track: Track, train: Sequence[str], scaling: Sequence[int], s
                                   "conditioning)"))
     if track.places:  # told a goal rather than a return: each demonstration's own plan target in training
         kinds.append(TrainedModel("goal", "dataset", (), (("goal", True), ("condition_on_return", False)), "dt-goal",
-                                  f"goal-conditioned DT, told the semi-amortised place (V's top {SEMI_TOP_K} and "
-                                  "staying, valued by R)"))
+                                  "goal-conditioned DT, told the deployed place (V proposes, R disposes)"))
     if ablation and track.ablation:
         if track.layouts:
             kinds += [TrainedModel(f"pretrain-n{n}", "dataset", (("scenarios", tuple(train[:n])),), (),

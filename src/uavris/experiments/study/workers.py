@@ -111,9 +111,11 @@ def finetune_job(cfg_dict: dict[str, Any], out: str, device: str = "cpu") -> dic
 # The evaluation stages' results: 2 records each row's facts (uavris.experiments.tools.targets.Row.facts),
 # which the report and the claims read; 3 the planner a goal-conditioned row is told its place by (the
 # headline DT: the semi-amortised place, no longer V's argmax); 4 the oracle's plan and flight keeping every
-# device 1 degree in front of the RIS (PlanSettings.front_margin_deg). Part of the stages' keys, so that a
+# device 1 degree in front of the RIS (PlanSettings.front_margin_deg); 5 the goal-conditioned DT told the deployed
+# place (V proposes, R disposes) and its row flown by the oracle's controller (plan-deployed, for plan-semi). Part
+# of the stages' keys, so that a
 # study of an earlier format is evaluated again rather than read without them.
-RESULTS_FORMAT = 4
+RESULTS_FORMAT = 5
 
 
 def evaluate_job(out: str, site: Site, track: str, episodes: int, rows: Sequence[Row]) -> dict[str, Any]:

@@ -41,27 +41,32 @@ MAP_CHUNK = 64  # poses valued per call (the progress bar's step)
 
 
 def plan_layout(layout: Layout, system: SystemConfig, settings: PlanSettings | None = None,
-                value: PoseValue | None = None, top_k: int = 0) -> dict[str, Any]:
+                value: PoseValue | None = None, top_k: int = 0, deployed: bool = False) -> dict[str, Any]:
     """The plan for ``layout`` on ``system``: target pose, expected sum rate ``R`` there and at
     the start, travel time, the plan's expected episode average, and the seconds planning took.
     The planning oracle's by default; with a learned ``value``, the learned planner's: its
     numbers are ``V``'s, under their own keys (``learned_value``, ``learned_value_start``,
     ``learned_episode_value``; the ``R`` keys None: nothing was valued by ``R``), and with
-    ``top_k`` > 0 its top places valued by ``R`` (the ``R`` keys, with ``V`` at the target beside)."""
+    ``top_k`` > 0 its top places valued by ``R``, or with ``deployed`` the deployed place (V proposes,
+    R disposes: :func:`uavris.agents.place.planner.decided_plan`) (the ``R`` keys, with ``V`` at the
+    target beside)."""
     hall, scenario = layout.resolve(system)
     began = time.perf_counter()
     if value is None:
         plan, planner = plan_target(hall, scenario.start, settings or PlanSettings()), "exact"
     else:
-        from uavris.agents.place.planner import PlaceSettings, learned_plan
+        from uavris.agents.place.planner import PlaceSettings, decided_plan, learned_plan
 
-        plan = learned_plan(value, hall, scenario.start, PlaceSettings(top_k=top_k))
-        planner = f"learned, top {top_k} valued by R" if top_k else "learned"
+        if deployed:
+            plan, planner = decided_plan(value, hall, scenario.start), "deployed (V proposes, R disposes)"
+        else:
+            plan = learned_plan(value, hall, scenario.start, PlaceSettings(top_k=top_k))
+            planner = f"learned, top {top_k} valued by R" if top_k else "learned"
     seconds = time.perf_counter() - began
     out = {"layout": layout.to_dict(), "planner": planner, "target": [float(v) for v in plan.target],
            "attitude_deg": [float(v) for v in np.degrees(plan.attitude)], "travel_slots": plan.travel_slots,
            "travel_s": plan.travel_slots * hall.slot_s, "poses_valued": plan.poses_valued, "planning_s": seconds}
-    if value is not None and not top_k:  # V's numbers: no R was computed, and V has no sampling error to state
+    if value is not None and not top_k and not deployed:  # V alone: no R was computed, V has no sampling error
         return {**out, "expected_sum_rate": None, "expected_sum_rate_se": None, "start_sum_rate": None,
                 "expected_episode_average": None, "learned_value": plan.rate, "learned_value_start": plan.start_rate,
                 "learned_episode_value": plan.value}
@@ -228,17 +233,17 @@ def controller_flight(controller: Path, layout: Layout, seed: int = EVAL_SEED) -
 
 
 def plan_hall(layout: Layout, system: SystemConfig, out: Path, grid_step: float, progress: bool = True,
-              value: PoseValue | None = None, top_k: int = 0, controller: Path | None = None
-              ) -> tuple[dict[str, Any], list[Path]]:
+              value: PoseValue | None = None, top_k: int = 0, controller: Path | None = None,
+              deployed: bool = False) -> tuple[dict[str, Any], list[Path]]:
     """Plan, map and draw ``layout``: writes ``out.json``, ``out.png`` and ``out.pdf``; with a
     learned ``value``, its plan and its map (:func:`plan_layout`, :func:`rate_map`); with a
     ``controller`` told that place, where it flies (:func:`controller_flight`, under
     ``controller_flight``)."""
     hall, _ = layout.resolve(system)
     check_grid(hall, grid_step)
-    if value is None or top_k:  # the optimiser values poses (V alone takes milliseconds at any count)
+    if value is None or top_k or deployed:  # the optimiser values poses (V alone takes milliseconds at any count)
         check_devices(hall)
-    plan = plan_layout(layout, system, value=value, top_k=top_k)
+    plan = plan_layout(layout, system, value=value, top_k=top_k, deployed=deployed)
     if controller is not None:
         plan["controller_flight"] = controller_flight(controller, layout)
     xs, ys, rates = rate_map(hall, plan["target"][2], grid_step, progress, value)

@@ -254,10 +254,12 @@ class ModelDir(Target):
 @dataclass(frozen=True)
 class LearnedValue(ModelDir):
     """A learned value of a pose (``value.json``): the learned planner's place (``top_k`` 0: V's
-    argmax; else V's top places and staying, valued by ``R``), flown by the oracle's controller
-    (:class:`uavris.agents.place.planner.LearnedPlanner`)."""
+    argmax; else V's top places and staying, valued by ``R``), or the deployed place
+    (``deployed``: V proposes, R disposes, :func:`uavris.agents.place.planner.decided_plan`),
+    flown by the oracle's controller (:class:`uavris.agents.place.planner.LearnedPlanner`)."""
 
     top_k: int = 0
+    deployed: bool = False
     kind: ClassVar[str] = "value"
     marker: ClassVar[str] = "value.json"
     describes: ClassVar[str] = "a learned value"
@@ -271,7 +273,7 @@ class LearnedValue(ModelDir):
     def _planner(self) -> Any:
         from uavris.agents.place.planner import LearnedPlanner, PlaceSettings
 
-        return LearnedPlanner(self.planner_model(), PlaceSettings(top_k=self.top_k))
+        return LearnedPlanner(self.planner_model(), PlaceSettings(top_k=self.top_k), self.deployed)
 
     def load(self, system: SystemConfig | None = None, device: str = "cpu") -> Loaded:
         return Loaded(self._planner(), system or SystemConfig(), None, self.path)
@@ -280,11 +282,13 @@ class LearnedValue(ModelDir):
         return PlannedGoals(self._planner().target, f"learned planner ({self.name})")
 
     def planner(self) -> str:
+        if self.deployed:
+            return "deployed place (V proposes, R disposes)"
         return (f"semi-amortised planner (V's top {self.top_k} places and staying, valued by R)" if self.top_k
                 else "learned planner (V's argmax)")
 
     def exported(self, dest: Path) -> dict[str, Any]:
-        return {**super().exported(dest), "top_k": self.top_k}
+        return {**super().exported(dest), "top_k": self.top_k, "deployed": self.deployed}
 
 
 @dataclass(frozen=True)
@@ -568,7 +572,8 @@ def read_controller(path: Path) -> Row:
         folder = Path(path) / str(part["path"])
         if folder.resolve().parent != Path(path).resolve():  # the controller's own folders, nothing outside
             raise ConfigError(f"{path / CONTROLLER_FILE}: {part['path']!r} is not a folder of the controller")
-        chosen = {"top_k": int(part.get("top_k", 0))} if kind == LearnedValue.kind else {}
+        chosen = {"top_k": int(part.get("top_k", 0)), "deployed": bool(part.get("deployed", False))} \
+            if kind == LearnedValue.kind else {}
         return EXPORTED_KINDS[kind].at(folder, **chosen)
 
     try:

@@ -40,6 +40,7 @@ class ValueLabelsConfig(DictConfig):
     poses: int = 48  # labelled poses per hall
     layout_seed: int = 0  # the layout generator's seed (the study's)
     seed: int = VALUE_SEED  # the poses' and the labels' random numbers (hall j of count K: seed + 1000 K + j)
+    tilted: bool = True  # each position labelled again with the surface turned towards the devices
     system: SystemConfig = dataclasses.field(default_factory=lambda: SystemConfig(observe_devices=True))
 
     def __post_init__(self) -> None:
@@ -59,26 +60,29 @@ class ValueLabelsConfig(DictConfig):
 def make_labels(cfg: ValueLabelsConfig, count: int, first: int, n: int, out: str | Path) -> Path:
     """The labels of training halls ``first .. first + n - 1`` of ``count`` devices, written to
     ``out`` (an ``.npz`` part, atomically: a part on disk is a finished one)."""
-    users, positions, rates, halls = [], [], [], []
+    users, positions, attitudes, rates, halls = [], [], [], [], []
     for j in range(first, first + n):
         name, system = cfg.hall(count, j)
-        q, r = hall_labels(system, cfg.poses, cfg.seed + 1000 * count + j)
+        q, att, r = hall_labels(system, cfg.poses, cfg.seed + 1000 * count + j, cfg.tilted)
         users.append(np.broadcast_to(np.asarray(system.users), (len(q), count, 3)))
         positions.append(q)
+        attitudes.append(att)
         rates.append(r)
         halls += [name] * len(q)
     return write_label_part(out, users=np.concatenate(users), position=np.concatenate(positions),
-                            rate=np.concatenate(rates), hall=np.array(halls))
+                            rate=np.concatenate(rates), hall=np.array(halls), attitude=np.concatenate(attitudes))
 
 
 def write_label_part(out: str | Path, *, users: np.ndarray, position: np.ndarray, rate: np.ndarray,
-                     hall: np.ndarray) -> Path:
+                     hall: np.ndarray, attitude: np.ndarray | None = None) -> Path:
     """Labels of one count (devices ``(n, K, 3)``, positions ``(n, 3)``, ``R`` ``(n,)``, halls
-    ``(n,)``) as an ``.npz`` part, written atomically (a part on disk is a finished one)."""
+    ``(n,)``, attitudes ``(n, 3)``, level where not given) as an ``.npz`` part, written
+    atomically (a part on disk is a finished one)."""
     import io
 
     buf = io.BytesIO()
-    np.savez(buf, users=users, position=position, rate=rate, hall=hall)
+    np.savez(buf, users=users, position=position, rate=rate, hall=hall,
+             attitude=np.zeros_like(position) if attitude is None else attitude)
     atomic_write_bytes(Path(out), buf.getvalue())
     return Path(out)
 
@@ -91,11 +95,14 @@ def read_labels(parts: Sequence[str | Path]) -> ValueLabels:
             k = int(z["users"].shape[1])
             for key in ("users", "position", "rate", "hall"):
                 by.setdefault(k, {}).setdefault(key, []).append(z[key])
+            by[k].setdefault("attitude", []).append(z["attitude"] if "attitude" in z.files
+                                                    else np.zeros_like(z["position"]))
     cat = {k: {key: np.concatenate(v) for key, v in d.items()} for k, d in by.items()}
     def field(key: str) -> dict[int, np.ndarray]:
         return {k: d[key] for k, d in cat.items()}
 
-    return ValueLabels(users=field("users"), position=field("position"), rate=field("rate"), hall=field("hall"))
+    return ValueLabels(users=field("users"), position=field("position"), rate=field("rate"), hall=field("hall"),
+                       attitude=field("attitude"))
 
 
 @dataclass(frozen=True)

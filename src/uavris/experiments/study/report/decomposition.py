@@ -118,9 +118,10 @@ def value_section(results: dict[str, dict[str, Any]], labels: dict[str, str]) ->
                              "R at its argmax / oracle's, mean", "worst hall"), rows, "lrrrr")]
 
 
-COUNT_ROWS = ("dt-goal-safe", "plan-learned", "plan-semi", "dt-zero-shot-safe", "bc-safe", HOVER_OPTIMIZER, ZERO_ACTION)
-PLAN_ROWS = (ORACLE, "plan-learned", "plan-semi")  # the plans a hall's best plan found is the best of
-ABOVE_ORACLE = 1.005  # no learned or semi-amortised row above this fraction of the oracle by its CI (docs/places.md)
+COUNT_ROWS = ("dt-goal-safe", "plan-learned", "plan-deployed", "dt-zero-shot-safe", "bc-safe", HOVER_OPTIMIZER,
+              ZERO_ACTION)
+PLAN_ROWS = (ORACLE, "plan-learned", "plan-deployed")  # the plans a hall's best plan found is the best of
+ABOVE_ORACLE = 1.005  # no learned or deployed-place row above this fraction of the oracle by its CI (docs/places.md)
 
 
 def count_label(devices: int, other: bool) -> str:
@@ -198,7 +199,7 @@ def counts_section(groups: dict[tuple[int, bool], dict[str, dict[str, Any]]], bo
             "\"The bound\") is loose: the best plan's fraction of it says how much room any controller could "
             "have left, not how good the plan is.", "",
             *markdown_table(("policy", *scores), rows, "l" + "r" * len(scores)), "",
-            f"Learned or semi-amortised rows above {pct(ABOVE_ORACLE)} of the oracle by their 95% CI over halls (a "
+            f"Learned or deployed-place rows above {pct(ABOVE_ORACLE)} of the oracle by their 95% CI over halls (a "
             f"ceiling that gives way): {above}. Not resolved (the CI reaches above {pct(ABOVE_ORACLE)}): {reaching}."
             + (f" Over fewer than {MIN_UNITS} halls, not measured, above it on average: {few}." if len(measured)
                < len(cells) else "")]

@@ -32,12 +32,12 @@ from uavris.stats import HOLDS, MIN_UNITS, NOT_MEASURED, NOT_RESOLVED, REFUTED, 
 ZERO_SHOT_TARGET, FINETUNED_TARGET = 0.96, 0.98
 # Targets of the rows that choose a place (docs/places.md): (row, mean, worst hall, what it is)
 PLACE_TARGETS: tuple[tuple[str, float, float | None, str], ...] = (
-    ("dt-goal-safe", 0.97, 0.92, "zero-shot: the semi-amortised place, flown by the goal-conditioned DT"),
-    ("plan-semi", 0.99, None, "the semi-amortised planner's place (top places valued by R)"),
+    ("dt-goal-safe", 0.99, 0.97, "zero-shot: the deployed place, flown by the goal-conditioned DT"),
+    ("plan-deployed", 0.99, None, "the deployed place (V proposes, R disposes), flown by the oracle's controller"),
     ("dt-goal-finetuned-safe", 0.985, 0.95, "the goal-conditioned DT fine-tuned by trying places"))
-COUNT_TARGET = 0.98  # at every device count, the zero-shot place row (docs/places.md)
+COUNT_TARGET = 0.99  # at every device count, the zero-shot place row (docs/places.md)
 # the rows whose place the learned value V chooses (one fit for every pre-training seed)
-VALUE_ROWS = ("plan-learned", "plan-semi", "dt-goal", "dt-goal-safe", "dt-goal-finetuned", "dt-goal-finetuned-safe")
+VALUE_ROWS = ("plan-learned", "plan-deployed", "dt-goal", "dt-goal-safe", "dt-goal-finetuned", "dt-goal-finetuned-safe")
 # The transferred policies of a hall, summarised by the report: the nearest deployment's, their mean, their best.
 NEAREST, MEAN_TRANSFER, BEST_TRANSFER = "transfer-nearest", "transfer-mean", "transfer-best"
 TRANSFER_LABELS = {NEAREST: "expert of the nearest training layout", MEAN_TRANSFER: "transferred experts, mean",
@@ -202,7 +202,7 @@ def deployment_section(scores: dict[str, dict[str, float]], labels: dict[str, st
             for k, label in seeded])
     if any(k in VALUE_ROWS for k, _ in rows):
         lines += ["", "The learned value V that chooses the places of the rows told a place (the learned planner's, "
-                  "the semi-amortised one's) is one fit, shared by every pre-training seed: the intervals over halls "
+                  "the deployed one) is one fit, shared by every pre-training seed: the intervals over halls "
                   "hold it fixed and leave out how another fit of V would move those rows."]
     lines += ["", "Per layout (bps/Hz; in brackets the fraction of the oracle):", ""]
     lines += markdown_table(("layout", *(label for _, label in rows)), [
@@ -235,7 +235,7 @@ def _place_claims(summary: dict[str, dict[str, float]], diffs: dict[tuple[str, s
         own, hover = summary.get("dt-goal-safe"), diffs.get(("dt-goal-safe", HOVER_OPTIMIZER))
         if own is not None and hover is not None:
             judged = every(at_least(own, COUNT_TARGET), above(hover))
-            out.append(f"**the semi-amortised place flown by the goal-conditioned DT >= "
+            out.append(f"**the deployed place flown by the goal-conditioned DT >= "
                        f"{COUNT_TARGET:.0%} of the oracle and above hovering with optimised phases**: "
                        f"{judged} ({with_ci(own, pct)}; minus hovering "
                        f"{with_ci(hover, signed)} bps/Hz, {_excludes_zero(hover)}).")
