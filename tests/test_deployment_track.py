@@ -65,11 +65,18 @@ def deployment_run(tmp_path_factory):
 def test_the_trained_models_are_the_rows_over_seeds():
     track = TRACK_SPECS["deployment"]
     main = trained_models(track, ["a", "b", "c"], (1, 2), 3)
-    assert [m.stage for m in main] == [f"{m}{s}" for m in ("pretrain", "bc", "goal") for s in ("", "-s1", "-s2")]
-    assert main[-1].row == "dt-goal" and dict(main[-1].model) == {"goal": True, "condition_on_return": False}
+    assert [m.stage for m in main] == [f"{m}{s}" for m in ("pretrain", "bc", "goal", "goal-mlp", "bc-best")
+                                       for s in ("", "-s1", "-s2")]
+    by = {m.stage: m for m in main}
+    assert by["goal-s2"].row == "dt-goal" and dict(by["goal-s2"].model) == {"goal": True, "condition_on_return": False}
+    # the field's baselines: the same goal and inputs with a window of one slot; BC on the best demonstrations
+    assert dict(by["goal-mlp"].model) == {"goal": True, "condition_on_return": False, "context": 1}
+    assert by["bc-best-s1"].dataset == "dataset-best" and by["bc-best-s1"].row == "bc-best"
+    assert dict(by["bc-best"].model) == {"condition_on_return": False}
     assert [(m.row, m.seed) for m in main[:3]] == [("dt-zero-shot", 0), ("dt-zero-shot", 1), ("dt-zero-shot", 2)]
     models = {m.stage: m for m in trained_models(track, ["a", "b", "c"], (1, 2), 3, ablation=True)}
-    assert len(models) == (1 + 1 + 1 + 2 + 1 + 2) * 3  # DT, BC, goal DT, 2 curve points, flat, mixed DT, BC; 3 seeds
+    assert len(models) == (1 + 1 + 3 + 2 + 1 + 2) * 3  # DT, BC, goal DT/MLP/filtered BC, 2 curve points, flat,
+    # mixed DT, BC; 3 seeds
     track_fields = {"learning_rate": 3e-4, "model": {"width": 64}}
     assert models["pretrain-n2-s2"].pretrain_fields(track_fields) == {**track_fields, "scenarios": ("a", "b")}
     assert models["pretrain-n2-s2"].row == "dt-zero-shot-n2" and models["pretrain-n2-s2"].seed == 2
@@ -88,16 +95,19 @@ def test_the_main_rows_are_the_controllers_under_the_safety_layer():
     train, unseen = ReproduceConfig("smoke").sites(track)
     where = unseen[0]
     models = trained_models(track, [t.name for t in train], (1,), 2)
-    stages = ("pretrain", "pretrain-s1", "bc", "bc-s1", "goal", "goal-s1", "value", f"finetune-{where.name}",
+    stages = ("pretrain", "pretrain-s1", "bc", "bc-s1", "goal", "goal-s1", "goal-mlp", "goal-mlp-s1", "bc-best",
+              "bc-best-s1", "value", f"finetune-{where.name}",
               places_stage(where.name, 0), places_stage(where.name, 1))
     dirs = {k: Path("/models") / k for k in stages}
     sources = transfer_sources(track, where, train)
     main = {r.key: r for r in track_rows(track, where, sources, dirs, models, train)}
     full = {r.key: r for r in track_rows(track, where, sources, dirs, models, train, ablation=True)}
+    baselines = ("dt-goal-mlp", "dt-goal-mlp@s1", "bc-best", "bc-best@s1")
     plain = {"dt-zero-shot", "dt-zero-shot@s1", "dt-ensemble", "dt-finetuned", "bc", "bc@s1", "dt-goal", "dt-goal@s1",
-             "dt-goal-finetuned", "dt-goal-finetuned@s1"}
+             "dt-goal-finetuned", "dt-goal-finetuned@s1", *baselines}
     safe = {"dt-zero-shot-safe", "dt-zero-shot-safe@s1", "dt-ensemble-safe", "dt-finetuned-safe", "bc-safe",
-            "bc-safe@s1", "dt-goal-safe", "dt-goal-safe@s1", "dt-goal-finetuned-safe", "dt-goal-finetuned-safe@s1"}
+            "bc-safe@s1", "dt-goal-safe", "dt-goal-safe@s1", "dt-goal-finetuned-safe", "dt-goal-finetuned-safe@s1",
+            *(b.replace("@", "-safe@") if "@" in b else f"{b}-safe" for b in baselines)}
     [transfer] = [k for k, r in main.items() if r.kind == "transfer"]
     refs = {"zero-action", "hover-optimizer", "oracle"}
     planners = {"plan-learned", "plan-deployed"}  # a learned place flown by the oracle's controller
@@ -124,6 +134,9 @@ def test_the_main_rows_are_the_controllers_under_the_safety_layer():
     assert main["dt-goal-safe@s1"].goal_from.deployed and not main["dt-goal-safe@s1"].goal_from.top_k
     assert main["dt-goal-safe@s1"].facts()["goal_from"].startswith("deployed place")
     assert main["dt-goal-finetuned-safe@s1"].goal_from is None
+    # the goal-conditioned MLP is told the same place; filtered behaviour cloning chooses none
+    assert main["dt-goal-mlp-safe@s1"].goal_from.path == value and main["dt-goal-mlp-safe@s1"].goal_from.deployed
+    assert main["bc-best-safe"].goal_from is None and main["bc-best-safe"].target.path == Path("/models/bc-best/model")
     assert main["dt-goal-finetuned-safe@s1"].target.path == Path("/models") / places_stage(where.name, 1) / "model"
     assert main["plan-learned"].target.path == value and main["plan-deployed"].target.deployed
 
@@ -594,3 +607,36 @@ def test_the_claims_page_names_its_machine_and_keeps_its_evidence_beside_it(depl
     with pytest.raises(UavrisError, match="share a directory name"):
         write_claims([out, twin], tmp_path / "d")
     assert not (tmp_path / "d" / "claims.md").exists()
+
+
+def test_a_shipped_controller_knows_the_study_it_came_from(deployment_run, tmp_path):
+    """`uavris pages pretrained` ships a study's goal-conditioned DT with the stage keys it came
+    from: its card is current for the study that made it and stale for one whose demonstrations
+    moved; a study of another configuration is refused; the folder flies as any controller."""
+    from uavris.experiments.study.pretrained import CARD, ship, stale_card, write_card_page
+    from uavris.experiments.tools.evaluate import evaluate_target
+
+    out, _ = deployment_run
+    shipped = ship(out, tmp_path / "pretrained", made_by=RC)
+    assert stale_card(shipped, RC) == []
+    moved = dataclasses.replace(RC, layout_trajectories=RC.layout_trajectories + 1)
+    assert [line.split(":")[0] for line in stale_card(shipped, moved)] == ["deploy-dataset", "deploy-value",
+                                                                         "deploy-goal"]
+    with pytest.raises(UavrisError, match="is not this code's make run"):
+        ship(out, tmp_path / "other", made_by=moved)
+    card = read_json(shipped / CARD)
+    groups: dict[tuple[int, str], list[float]] = {}
+    for w in ReproduceConfig.sites(RC, TRACK_SPECS["deployment"])[1]:  # each hall's stage record, read directly
+        [stage] = [d for d in (out / "stages").iterdir() if d.name.rsplit("-", 1)[0] == f"deploy-evaluate-{w.name}"]
+        r = read_json(stage / "stage.json")["result"]
+        groups.setdefault((w.devices, w.split), []).append(r["dt-goal-safe"]["mean"] / r["oracle"]["mean"])
+    assert [(s["devices"], s["halls"], s["n"]) for s in card["scores"]] == [(*k, len(v))
+                                                                            for k, v in sorted(groups.items())]
+    for s, (_, v) in zip(card["scores"], sorted(groups.items())):
+        assert s["seed0"]["mean"] == pytest.approx(np.mean(v), rel=1e-12)
+    page = write_card_page(shipped, tmp_path / "pretrained.md", "uavris pages pretrained").read_text()
+    assert page.startswith("<!-- uavris-page") and f"| 4 devices | {len(groups[4, 'unseen'])} |" in page
+    # a hall of 5 devices, a count it never saw: it reads the devices as a set
+    summary, _ = evaluate_target(str(shipped), None, 2, EVAL_SEED, out=tmp_path / "e", references=False,
+                                 layout="layout-unseen-0-k5")
+    assert len(summary["system"]["users"]) == 5 and np.isfinite(summary["mean"]) and summary["mean"] > 0

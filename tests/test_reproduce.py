@@ -230,12 +230,12 @@ def test_changed_parameter_invalidates_exactly_its_dependents(tmp_path):
     dt = {"dataset", "pretrain", "bc", "finetune-unseen1", "finetune-unseen2", "evaluate-unseen1",
           "evaluate-unseen2"}
     deploy = {n for n in base.stages if n.startswith("deploy-")}
-    models = {"pretrain", "bc", "goal", "pretrain-n1", "flat", "mixed-dt", "mixed-bc"}  # each for 2 seeds at smoke
+    models = {"pretrain", "bc", "goal", "goal-mlp", "bc-best", "pretrain-n1", "flat", "mixed-dt", "mixed-bc"}  # 2 seeds
     evaluations = {f"deploy-evaluate-layout-{split}-{j}" for split in ("unseen", "other") for j in (0, 1)}
     places = {f"deploy-finetune-places-layout-unseen-{j}{s}" for j in (0, 1) for s in ("", "-s1")}
-    assert deploy == {"deploy-dataset", "deploy-dataset-mixed", "deploy-finetune-layout-unseen-0",
-                      "deploy-finetune-layout-unseen-1", "deploy-value-labels", "deploy-value"} | evaluations | \
-        places | {f"deploy-{m}{s}" for m in models for s in ("", "-s1")}
+    assert deploy == {"deploy-dataset", "deploy-dataset-best", "deploy-dataset-mixed",
+                      "deploy-finetune-layout-unseen-0", "deploy-finetune-layout-unseen-1", "deploy-value-labels",
+                      "deploy-value"} | evaluations | places | {f"deploy-{m}{s}" for m in models for s in ("", "-s1")}
     assert changed(trajectories=3) == dt | {f"strong-{n}" for n in dt}
     # the learned value's labels come from their own halls, its fit from them and the demonstrations' plans
     assert changed(layout_trajectories=3) == deploy - {"deploy-value-labels"}

@@ -31,14 +31,16 @@ class PlanArgs:
     """spacing of the rate map's grid, m (1.0 takes about four times as long)"""
     learned: Unset[Path] = None
     """a learned value of a pose: a study's OUT/stages/deploy-value-KEY/value folder (made by `uavris reproduce
-    --track deployment`): plan with the argmax of V instead of the exact planner, and map V (milliseconds)"""
+    --track deployment`), or `pretrained` (the one shipped, with its deployed place): plan with the argmax of V
+    instead of the exact planner, and map V (milliseconds)"""
     top_k: int = 0
     """with --learned: value its best K places (1-5) and the start by the exact R (semi-amortised; seconds)"""
     deployed: bool = False
     """with --learned: the deployed place (V proposes, R disposes: V's best places valued level and tilted by R's
     cheap estimate, the best refined, the finalists and staying valued by R; about a tenth of the oracle's time)"""
     controller: Unset[Path] = None
-    """a controller directory (uavris export): plan with the learned planner its row is told its place by"""
+    """a controller directory (uavris export), or `pretrained` (the one shipped): plan with the learned planner its
+    row is told its place by"""
     progress: bool = True
     """show a progress bar"""
     system: SystemConfig = SystemConfig()
@@ -60,6 +62,13 @@ def plan_command(args: list[str]) -> None:
     positional = ["--layout", args[0], *args[1:]] if args and not args[0].startswith("-") else args
     check_hall_flags(positional, SystemConfig(), "uavris plan")  # before the flags are read into the paper's system
     a = parse(PlanArgs, args, "uavris plan", plan_command.__doc__ or "")
+    for given in (a.learned, a.controller):  # `pretrained`: the shipped controller, its learned value and planner
+        if given is not None and str(given) == "pretrained" and not given.exists():
+            from dataclasses import replace
+
+            from uavris.experiments.tools.targets import PRETRAINED
+
+            a = replace(a, learned=None, controller=PRETRAINED)
     if a.controller is not None:
         if a.learned is not None:
             raise UsageError("--controller and --learned both name a learned value; pass one of them")

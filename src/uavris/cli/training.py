@@ -348,13 +348,15 @@ def reproduce_command(args: list[str]) -> None:
     evaluate-unseen1/2 (experts: the comparison's winner). Strong track (learned motion,
     optimised phases, experts imitating the oracle): the same stages prefixed strong-.
     Deployment track (the planning oracle's demonstrations in generated halls, docs/study.md
-    section 2): deploy-dataset, deploy-value-labels (the learned value's labels) and deploy-value (its
-    fit), deploy-pretrain, deploy-bc (behaviour cloning) and deploy-goal (the goal-conditioned
-    DT) for each pre-training seed, and deploy-evaluate-LAYOUT per unseen layout; with
+    section 2): deploy-dataset, deploy-dataset-best (its best 10% by return), deploy-value-labels
+    (the learned value's labels) and deploy-value (its fit), deploy-pretrain, deploy-bc (behaviour
+    cloning), deploy-goal (the goal-conditioned DT), deploy-goal-mlp (the same without attention over
+    time) and deploy-bc-best (filtered behaviour cloning) for each pre-training seed, and
+    deploy-evaluate-LAYOUT per unseen layout; with
     --ablation also fine-tuning that tries places (deploy-finetune-places-LAYOUT, per seed), the
     return-conditioned DT's fine-tuning (deploy-finetune-LAYOUT), the data curve
     (deploy-pretrain-nN), the flat encoder (deploy-flat) and the mixed-quality dataset
-    (deploy-dataset-mixed, deploy-mixed-dt, deploy-mixed-bc); with --device-counts 3 6 8 every
+    (deploy-dataset-mixed, deploy-mixed-dt, deploy-mixed-bc); with --device-counts 3 6 8 10 every
     row zero-shot in unseen halls of those counts too (deploy-evaluate-LAYOUT-kK, docs/places.md), and
     with --count-other-layouts N in N halls of another generator at each of them
     (deploy-evaluate-layout-other-J-kK).

@@ -34,13 +34,16 @@ DEARER = 10  # the search costs at least this many times the oracle's time
 FORMAT = 2  # 2: the search seeded with the oracle's poses, its fine grid 2 m each way
 
 
-def halls(counts: Sequence[int], per_count: int, other_counts: Sequence[int], other: int
-          ) -> list[tuple[str, str, int, int]]:
-    """(name, split, index, devices) of every hall measured."""
+def halls(counts: Sequence[int], per_count: int, other_counts: Sequence[int], other: int,
+          few_counts: Sequence[int] = (), few: int = 0) -> list[tuple[str, str, int, int]]:
+    """(name, split, index, devices) of every hall measured: ``per_count`` unseen halls of each of
+    ``counts``, ``few`` of each of ``few_counts`` and ``other`` of the other generator's at each of
+    ``other_counts``."""
     def name(split: str, j: int, k: int) -> str:
         return f"layout-{split}-{j}" + ("" if k == 4 else f"-k{k}")
 
     return ([(name("unseen", j, k), "unseen", j, k) for k in counts for j in range(per_count)]
+            + [(name("unseen", j, k), "unseen", j, k) for k in few_counts if k not in counts for j in range(few)]
             + [(name("other", j, k), "other", j, k) for k in other_counts for j in range(other)])
 
 
@@ -166,8 +169,10 @@ def write_page(done: dict[str, dict[str, Any]], page: Path, out: Path, command: 
              "attitude from the 6 best and from the oracle's own plan and finalists, so that the search is a "
              "superset of the oracle's), over the poses the oracle may plan (every device 1 degree in front of the "
              "RIS), on draws that are not the planner's; where that costs less than 10 times the oracle (3 "
-             "devices) its grids are halved until it does. The oracle's plan, the search's pose, staying at the "
-             "start and the demonstrations' teacher's plan (`TEACHER`) are valued on the same 8 fresh batches of "
+             "devices) its grids are halved until it does. The halls: the study's generator's unseen halls at "
+             "each count (10 devices: never trained on), and the other generator's. The oracle's plan, the "
+             "search's pose, staying at the start and the demonstrations' teacher's plan (`TEACHER`) are valued "
+             "on the same 8 fresh batches of "
              "draws; 'search - oracle' is their paired difference (bps/Hz) with its standard error. The times are "
              "one process's seconds on one core.", "", f"Made by `{command}`.", "",
              *markdown(per_count), "", *markdown(per_hall), ""]
@@ -185,6 +190,9 @@ def parser() -> argparse.ArgumentParser:
     parser.add_argument("--other-counts", type=int, nargs="*", default=[6, 8],
                         help="device counts of the other generator's halls (default 6 8)")
     parser.add_argument("--other", type=int, default=2, help="the other generator's halls per count (default 2)")
+    parser.add_argument("--few-counts", type=int, nargs="*", default=[10],
+                        help="device counts measured in fewer unseen halls (default 10: never trained on)")
+    parser.add_argument("--few", type=int, default=2, help="unseen halls per count of --few-counts (default 2)")
     parser.add_argument("--out", type=Path, default=Path("runs/oracle-gap"),
                         help="a folder of one JSON per hall, read back by a rerun (default runs/oracle-gap)")
     parser.add_argument("--page", type=Path, help="write this Markdown page (stamped) once every hall is done")
@@ -201,7 +209,7 @@ def main(argv: list[str] | None = None) -> int:
     args.out.mkdir(parents=True, exist_ok=True)
     compile_optimiser()  # before any clock starts: a cold cache would time numba's compilation as a plan's
     done: dict[str, dict[str, Any]] = {}
-    for name, split, j, k in halls(args.counts, args.halls, args.other_counts, args.other):
+    for name, split, j, k in halls(args.counts, args.halls, args.other_counts, args.other, args.few_counts, args.few):
         path = args.out / f"{name}.json"
         if not path.exists() or any(read_json(path).get(key) != v for key, v in versions().items()):
             write_json(path, {**measure(split, j, k, args.out), **versions(), "cpu": machine()})

@@ -76,7 +76,7 @@ def _from_scratch_flags(preset: str) -> tuple[str, ...]:
 def _oracle_gap_flags(preset: str) -> tuple[str, ...]:
     """The oracle-gap search's halls: its defaults (20 halls of 3-8 devices); at the smoke preset one
     hall of 3 devices."""
-    return ("--counts", "3", "--halls", "1", "--other-counts") if preset == "smoke" else ()
+    return ("--counts", "3", "--halls", "1", "--other-counts", "--few-counts") if preset == "smoke" else ()
 
 
 def studies(preset: str, seeds: int = SEEDS) -> dict[str, StudyRun]:
@@ -87,7 +87,8 @@ def studies(preset: str, seeds: int = SEEDS) -> dict[str, StudyRun]:
         StudyRun("ablation", ("reproduce", "--preset", "{preset}", "--ablation", "--out", "{runs}/ablation"),
                  "ablation", reuse=("quick",)),
         StudyRun("counts", ("reproduce", "--preset", "{preset}", "--track", "deployment", "--device-counts", "3", "6",
-                            "8", "--count-other-layouts", "4", "--out", "{runs}/counts"), "counts", reuse=("quick",)),
+                            "8", "10", "--count-other-layouts", "4", "--out", "{runs}/counts"), "counts",
+                 reuse=("quick",)),
         *(StudyRun(f"{track}-s{k}", ("reproduce", "--preset", "{preset}", "--track", track, "--seed", str(k), "--out",
                                      f"{{runs}}/{track}-s{k}"), f"{track}-s{k}", reuse=("quick",))
           for k in range(1, seeds) for track in ("paper", "strong")),
@@ -158,8 +159,19 @@ def _write_oracle_gap(runs: Path, dest: Path, preset: str, seeds: int) -> list[P
     run = studies(preset, seeds)["oracle-gap"]
     parsed = oracle_gap.parser().parse_args(run.command(runs, preset))
     done = {name: read_json(parsed.out / f"{name}.json")
-            for name, *_ in oracle_gap.halls(parsed.counts, parsed.halls, parsed.other_counts, parsed.other)}
+            for name, *_ in oracle_gap.halls(parsed.counts, parsed.halls, parsed.other_counts, parsed.other,
+                                             parsed.few_counts, parsed.few)}
     return [oracle_gap.write_page(done, dest / "oracle-gap.md", parsed.out, run.line(runs, preset))]
+
+
+def _write_pretrained(runs: Path, dest: Path, preset: str, seeds: int) -> list[Path]:
+    """Ship the make run's controller into the package and write its model card."""
+    from uavris.experiments.study.pretrained import ship, write_card_page
+    from uavris.experiments.tools.targets import PRETRAINED
+
+    shipped = ship(runs / "quick", PRETRAINED)
+    return [write_card_page(shipped, dest / "pretrained.md", studies(preset, seeds)["quick"].line(runs, preset)),
+            shipped]
 
 
 PAGES: dict[str, Page] = {p.name: p for p in (
@@ -167,12 +179,14 @@ PAGES: dict[str, Page] = {p.name: p for p in (
          "the make run's report: the three tracks, seed 0"),
     Page("device-counts", "deployment-device-counts.md", lambda seeds: ("counts",),
          _write_report_copy("counts", "device-counts"),
-         "the deployment track at 3, 4, 6 and 8 devices and in another generator's halls"),
+         "the deployment track at 3, 4, 6, 8 and 10 devices and in another generator's halls"),
     Page("claims", "claims.md", lambda seeds: ("ablation", *(f"{t}-s{k}" for k in range(1, seeds)
                                                              for t in ("paper", "strong")), "budget", "from-scratch"),
          _write_claims, "the paper's claims judged over the training seeds and the unseen halls, with its evidence"),
     Page("budget", "budget.md", lambda seeds: ("budget", "budget-ppo"), _write_budget,
          "Fig. 2 at the study's budget, four and sixteen times it"),
+    Page("pretrained", "pretrained.md", lambda seeds: ("quick",), _write_pretrained,
+         "the controller shipped with the package, shipped again, and its model card"),
     Page("oracle-gap", "oracle-gap.md", lambda seeds: ("oracle-gap",), _write_oracle_gap,
          "the oracle against a search at least ten times dearer, at 3 to 8 devices"),
 )}

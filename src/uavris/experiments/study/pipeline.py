@@ -76,6 +76,7 @@ from uavris.experiments.study.tracks import (
 )
 from uavris.experiments.study.workers import (
     RESULTS_FORMAT,
+    best_demonstrations_job,
     dataset_job,
     demonstrations_job,
     evaluate_job,
@@ -95,6 +96,7 @@ from uavris.presets import COLLECT_SEED, DEMONSTRATION_CHUNK, EVAL_SEED, TRACK_F
 # The experts' run directories: 2 holds the policy as safetensors + JSON (what the study's later stages
 # read; uavris 0.3's runs held SB3's pickled archive only). Part of the experts stages' keys.
 EXPERT_FORMAT = 2
+BEST_FRACTION = 0.1  # filtered behaviour cloning keeps the best tenth of the demonstrations by return
 
 
 @dataclass(frozen=True)
@@ -295,10 +297,20 @@ class TrackStages(PlaceStages):
         oracle = DemonstrationConfig(halls=len(self.train), episodes=episodes, layout_seed=self.rc.layout_seed,
                                      system=system, value_labels=self.track.places)
         stages = [self._demonstrations_stage("dataset", oracle)]
+        if self.track.places:  # filtered behaviour cloning's data: the best demonstrations by return
+            config = {"fraction": BEST_FRACTION, "format": DATASET_FORMAT_VERSION}
+            stages.append(Stage(self.t("dataset-best"), config, partial(self._run_best, oracle), (self.t("dataset"),),
+                                (2.0,)))
         if self.track.ablation and self.rc.ablation:
             stages.append(self._demonstrations_stage("dataset-mixed", dataclasses.replace(
                 oracle, halls=min(self.rc.mixed_layouts, len(self.train)), quality="mixed")))
         return stages
+
+    def _run_best(self, cfg: DemonstrationConfig, d: Path, deps: dict[str, Path]) -> dict[str, Any]:
+        source = deps[self.t("dataset")] / "dataset"
+        return self.ctx.run_one(self.t("dataset-best"), best_demonstrations_job,
+                                (cfg.to_dict(), str(source), BEST_FRACTION, str(d / "dataset")), d / "job.log", 2.0,
+                                reads=(source,), writes=(d / "dataset",))
 
     def _run_collect(self, episodes: int, cost: float, d: Path, deps: dict[str, Path]) -> dict[str, Any]:
         experts = [deps[self.t("experts-train")] / "runs" / w.name for w in self.train]

@@ -199,7 +199,7 @@ def _learned_rows(track: Track, site: Site, sources: list[tuple[str, float]], di
     # refined, staying always a candidate, the oracle's margin; docs/places.md)
     deployed = dataclasses.replace(value, deployed=True) if value is not None else None
     for m in models:
-        goal = {"goal_from": deployed} if m.row == "dt-goal" else {}
+        goal = {"goal_from": deployed} if m.row in ("dt-goal", "dt-goal-mlp") else {}
         rows.append((Row(m.row, m.label, DTModel.at(dirs[m.stage] / "model"), seed=m.seed if seeded else None,
                          training_halls=m.halls, **goal), not m.ablation))
     for m in models:  # fine-tuned by trying places in this hall: it keeps the place it chose
@@ -272,7 +272,10 @@ def trained_models(track: Track, train: Sequence[str], scaling: Sequence[int], s
     unsuffixed, seed K's ``-sK``).
 
     Every track: the DT (``pretrain``). With behaviour cloning: ``bc``, the same model without
-    return conditioning. With ``ablation``, where the track has one: over layouts, the DT on
+    return conditioning. A track that chooses places: the goal-conditioned DT (``goal``) and the
+    field's baselines beside it, a goal-conditioned MLP (``goal-mlp``: a window of one slot, no
+    attention over time) and filtered behaviour cloning (``bc-best``, on ``dataset-best``). With
+    ``ablation``, where the track has one: over layouts, the DT on
     the first ``n`` training halls for each ``n`` of ``scaling`` (``pretrain-nN``, the data
     curve), the flat encoder on the same data (``flat``), and the DT and BC on the
     mixed-quality dataset (``mixed-dt``, ``mixed-bc``).
@@ -283,8 +286,15 @@ def trained_models(track: Track, train: Sequence[str], scaling: Sequence[int], s
         kinds.append(TrainedModel("bc", "dataset", (), bc, "bc", "behaviour cloning (the DT without return "
                                   "conditioning)"))
     if track.places:  # told a goal rather than a return: each demonstration's own plan target in training
-        kinds.append(TrainedModel("goal", "dataset", (), (("goal", True), ("condition_on_return", False)), "dt-goal",
-                                  "goal-conditioned DT, told the deployed place (V proposes, R disposes)"))
+        goal = (("goal", True), ("condition_on_return", False))
+        kinds += [TrainedModel("goal", "dataset", (), goal, "dt-goal",
+                               "goal-conditioned DT, told the deployed place (V proposes, R disposes)"),
+                  # the field's baselines beside it: the same goal and inputs with no attention over time (a window of
+                  # one slot), and behaviour cloning on the best tenth of the demonstrations by return
+                  TrainedModel("goal-mlp", "dataset", (), (*goal, ("context", 1)), "dt-goal-mlp",
+                               "goal-conditioned MLP (no attention over time), told the deployed place"),
+                  TrainedModel("bc-best", "dataset-best", (), bc, "bc-best",
+                               "filtered behaviour cloning (the best 10% of the demonstrations by return)")]
     if ablation and track.ablation:
         if track.layouts:
             kinds += [TrainedModel(f"pretrain-n{n}", "dataset", (("scenarios", tuple(train[:n])),), (),

@@ -73,6 +73,24 @@ def merge_demonstrations(cfg_dict: dict[str, Any], parts: Sequence[str], out: st
            else {})}
 
 
+def best_demonstrations_job(cfg_dict: dict[str, Any], source: str, fraction: float, out: str) -> dict[str, Any]:
+    """The ``fraction`` of the demonstrations at ``source`` with the highest returns (filtered
+    behaviour cloning's data: the field's baseline), in their order, as one dataset at ``out``."""
+    from uavris.agents.dt.dataset import load_dataset
+    from uavris.experiments.training.collect import dataset_summary
+    from uavris.experiments.training.demonstrations import DemonstrationConfig, collect_demonstrations
+
+    trajectories = load_dataset(source).trajectories
+    keep = max(1, round(fraction * len(trajectories)))
+    best = set(np.argsort([-tr.episode_return for tr in trajectories], kind="stable")[:keep].tolist())
+    chosen = [tr for i, tr in enumerate(trajectories) if i in best]
+    cfg = DemonstrationConfig.from_dict(cfg_dict)
+    summary = dataset_summary(collect_demonstrations(cfg, out, force=True, progress=False, trajectories=chosen))
+    return {k: v for k, v in summary.items() if k != "scenarios"} | {
+        "halls": len(summary["scenarios"]), "of": len(trajectories),
+        "mean_return": float(np.mean([tr.episode_return for tr in chosen]))}
+
+
 def pretrain_job(cfg_dict: dict[str, Any], out: str, device: str = "cpu") -> dict[str, Any]:
     """Pre-train (or resume) a DT; returns its done.json."""
     from uavris.experiments.training.pretrain import PretrainConfig, pretrain

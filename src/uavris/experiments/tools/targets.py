@@ -52,6 +52,10 @@ from uavris.io import file_part, read_checkpoint_meta, write_json
 from uavris.layouts import Site
 
 CONTROLLER_FILE, CONTROLLER_KIND, CONTROLLER_FORMAT = "controller.json", "uavris-controller", 1
+# The controller shipped with the package: the make run's goal-conditioned DT (seed 0) told the deployed place by
+# its learned value (docs/pretrained.md); every command takes it by this name
+PRETRAINED_NAME = "pretrained"
+PRETRAINED = Path(__file__).resolve().parents[2] / "pretrained" / "deployment"
 # What a row of a report is: a learned controller or place (the DT family, behaviour cloning, the learned
 # planner), the expert trained where it is deployed, a policy transferred from a training deployment, a reference.
 RowKind = Literal["learned", "expert", "transfer", "reference"]
@@ -293,11 +297,20 @@ class LearnedValue(ModelDir):
 
 @dataclass(frozen=True)
 class Controller(ModelDir):
-    """A controller directory (``uavris export``): the row it holds, in its own system."""
+    """A controller directory (``uavris export``): the row it holds, in its own system. The name
+    ``pretrained`` is the controller shipped with the package (:data:`PRETRAINED`, docs/pretrained.md)."""
 
     kind: ClassVar[str] = "controller"
     marker: ClassVar[str] = CONTROLLER_FILE
     describes: ClassVar[str] = "uavris export"
+
+    @classmethod
+    def recognise(cls, name: str, trust_pickle: bool = False) -> Target | None:
+        if name == PRETRAINED_NAME and not Path(name).exists():
+            if not (PRETRAINED / CONTROLLER_FILE).is_file():
+                raise UavrisError(f"this install of uavris ships no pretrained controller ({PRETRAINED} is missing)")
+            return cls.at(PRETRAINED)
+        return super().recognise(name, trust_pickle)
 
     def as_row(self) -> Row:
         return read_controller(self.path)

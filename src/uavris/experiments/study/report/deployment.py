@@ -55,7 +55,8 @@ PAIRS: tuple[tuple[str, str], ...] = (("dt-zero-shot", HOVER_OPTIMIZER), ("dt-ze
                                       ("dt-finetuned", "dt-zero-shot"),
                                       ("dt-goal-safe", HOVER_OPTIMIZER), ("dt-goal-safe", NEAREST),
                                       ("dt-goal-safe", "dt-zero-shot-safe"), ("plan-learned", HOVER_OPTIMIZER),
-                                      ("dt-goal-finetuned-safe", "dt-goal-safe"))
+                                      ("dt-goal-finetuned-safe", "dt-goal-safe"), ("dt-goal-safe", "dt-goal-mlp-safe"),
+                                      ("dt-goal-safe", "bc-best-safe"))
 
 
 def row_facts(results: dict[str, dict[str, Any]]) -> dict[str, dict[str, Any]]:
@@ -294,7 +295,14 @@ def _claims(summary: dict[str, dict[str, float]], diffs: dict[tuple[str, str], d
                          (("dt-mixed", "bc-mixed"), "return conditioning on mixed-quality data (DT minus behaviour "
                                                     "cloning, both on the mixed dataset)"),
                          (("dt-zero-shot", "dt-flat"), "the device-set encoder (DT minus the flat encoder, same "
-                                                       "data)")):
+                                                       "data)"),
+                         (("dt-goal-safe", "dt-goal-mlp-safe"), "the transformer is needed (the goal-conditioned DT "
+                                                                "minus the goal-conditioned MLP told the same place, "
+                                                                "both under the layer: holds where the CI is above "
+                                                                "zero)"),
+                         (("dt-goal-safe", "bc-best-safe"), "the goal-conditioned DT above filtered behaviour cloning "
+                                                            "(the best 10% of the demonstrations by return), both "
+                                                            "under the layer")):
         d = diffs.get((a, b))
         if d is not None:
             out.append(f"**{what}**: {with_ci(d, signed)} bps/Hz per layout, {_excludes_zero(d)}.")
