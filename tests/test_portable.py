@@ -10,6 +10,7 @@ import json
 import os
 import subprocess
 import sys
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -129,6 +130,62 @@ def test_a_process_that_loaded_numpy_first_and_its_workers_take_one_path(tmp_pat
     assert json.loads(out.stdout.strip().splitlines()[-1]) == "None"  # the worker kept the native path, as its parent
     if "avx2" in Path("/proc/cpuinfo").read_text() and not os.environ.get("UAVRIS_NATIVE_FLOATS"):
         assert os.environ.get("NPY_DISABLE_CPU_FEATURES")  # this process: pinned, like the workers it starts
+
+
+@pytest.mark.skipif(os.uname().machine != "x86_64", reason="the pinned path is x86-64's AVX2")
+def test_importing_numpy_first_is_quiet_and_said_where_a_result_is_made_to_be_compared(tmp_path: Path) -> None:
+    """A Gymnasium user imports numpy before uavris: the import says nothing; status() names the
+    native path and why; a result meant for comparison (here the call reproduce, benchmark and
+    claims make first) warns once on a CPU with AVX-512, and on one without says nothing."""
+    script = ("import warnings\nwarnings.simplefilter('always')\nimport numpy\nimport uavris\n"
+              "from uavris import float_paths\nprint(float_paths.status())\n"
+              "float_paths.warn_if_unpinned('benchmark')\nfloat_paths.warn_if_unpinned('benchmark')\n")
+    clean = {k: v for k, v in os.environ.items()
+             if k not in ("NPY_DISABLE_CPU_FEATURES", "UAVRIS_NATIVE_FLOATS", *PINNED)}
+    out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, env=clean, check=True,
+                         timeout=120)
+    assert "imported before uavris" in out.stdout
+    warned = [line for line in out.stderr.splitlines() if "UserWarning" in line]
+    if _has_flag("avx512f"):
+        assert len(warned) == 1 and "uavris: benchmark runs on this CPU's AVX-512 kernels" in warned[0]
+        assert out.stderr.count("UserWarning") == 1
+    else:
+        assert out.stderr == ""
+    first = subprocess.run([sys.executable, "-c", script.replace("import numpy\nimport uavris", "import uavris\n"
+                                                                 "import numpy")],
+                           capture_output=True, text=True, env=clean, check=True, timeout=120)
+    assert first.stderr == "" and "imported before" not in first.stdout  # uavris first: pinned, quiet
+
+
+def test_the_warning_points_at_the_users_line_and_comes_once(monkeypatch, tmp_path: Path) -> None:
+    """In a process that is not pinned, on a CPU with AVX-512 (both made so here, whatever this CPU
+    is), reproduce called from a user's script warns once, at the user's line, not inside uavris;
+    a process the user pinned (the AVX2 path) is not warned."""
+    from uavris import float_paths
+    from uavris.errors import UavrisError
+    from uavris.experiments.study.config import ReproduceConfig
+    from uavris.experiments.study.reproduce import reproduce
+
+    monkeypatch.setattr(float_paths, "_LATE", True)
+    monkeypatch.setattr(float_paths, "_WARNED", set())
+    monkeypatch.setattr(float_paths, "_has_flag", lambda flag: True)
+    monkeypatch.setattr(float_paths, "float_path", lambda: "native kernels (numpy AVX-512)")
+    for time in range(2):
+        with warnings.catch_warnings(record=True) as caught, pytest.raises(UavrisError):
+            warnings.simplefilter("always")
+            reproduce(ReproduceConfig("smoke"), tmp_path, workers=0)  # warned, then refused
+        ours = [w for w in caught if "AVX-512" in str(w.message)]
+        if time == 0:
+            [w] = ours
+            assert w.filename == __file__ and "uavris: reproduce runs on this CPU's AVX-512 kernels" in str(w.message)
+        else:
+            assert ours == []  # once a process
+    assert "imported before uavris" in float_paths.status()
+    monkeypatch.setattr(float_paths, "_WARNED", set())
+    monkeypatch.setattr(float_paths, "float_path", lambda: "the AVX2 path (its AVX-512 switched off)")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        float_paths.warn_if_unpinned("reproduce")  # pinned by the user's environment: nothing to say
 
 
 def test_a_report_names_the_cpu_and_the_float_path_it_ran() -> None:

@@ -1,8 +1,11 @@
 """The README and the docs run: every Python block of README.md and of every docs page executes on its
-own, what they say about presets is the code's, and the quick run's results they quote are the report's."""
+own and quietly (an empty stderr, as a user runs it: with the CPU's own kernels and with numpy's
+AVX-512 kernels off), what they say about presets is the code's, and the quick run's results they
+quote are the report's."""
 
 from __future__ import annotations
 
+import os
 import re
 import subprocess
 import sys
@@ -44,16 +47,32 @@ def test_docs_have_python_blocks() -> None:
         assert _python_blocks(DOCS / name), name
 
 
+def _as_a_user_runs(avx512_off: bool) -> dict[str, str]:
+    """This environment without what ``import uavris`` (tests/conftest.py) set in it: a user's shell,
+    where a block that imports numpy first gets numpy's own kernels; ``avx512_off``: with numpy's
+    AVX-512 kernels forced off, as on a CPU without them."""
+    from uavris.float_paths import PINNED, _numpy_names
+
+    env = {k: v for k, v in os.environ.items() if k not in ("NPY_DISABLE_CPU_FEATURES", "UAVRIS_NATIVE_FLOATS",
+                                                            *PINNED)}
+    return env | ({"NPY_DISABLE_CPU_FEATURES": _numpy_names()} if avx512_off else {})
+
+
 @pytest.mark.parametrize("page, index", BLOCKS, ids=[f"{p.relative_to(ROOT)}-{i}" for p, i in BLOCKS])
 def test_python_block_runs_on_its_own(page: Path, index: int, tmp_path: Path) -> None:
-    """Each block in a fresh interpreter (no imports carried over from another block)."""
+    """Each block in a fresh interpreter (no imports carried over from another block), in a user's
+    environment, silent on stderr: on this CPU's kernels and again with numpy's AVX-512 kernels off."""
     block = _python_blocks(page)[index]
     if SKIP_MARK in block:
         pytest.skip("marked as too long for the test suite")
     script = tmp_path / f"block{index}.py"
     script.write_text(block, encoding="utf-8")
-    proc = subprocess.run([sys.executable, str(script)], cwd=tmp_path, capture_output=True, text=True, timeout=300)
-    assert proc.returncode == 0, f"{page.relative_to(ROOT)} block {index} failed:\n{block}\n{proc.stderr[-2000:]}"
+    for avx512_off in (False, True):
+        proc = subprocess.run([sys.executable, str(script)], cwd=tmp_path, capture_output=True, text=True,
+                              timeout=300, env=_as_a_user_runs(avx512_off))
+        where = f"{page.relative_to(ROOT)} block {index}" + (" (numpy's AVX-512 off)" if avx512_off else "")
+        assert proc.returncode == 0, f"{where} failed:\n{block}\n{proc.stderr[-2000:]}"
+        assert proc.stderr == "", f"{where} wrote to stderr:\n{proc.stderr[-2000:]}"
 
 
 PRESET_PAGE = DOCS / "experts.md"  # the presets' sentence (it was the README's)

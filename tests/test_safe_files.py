@@ -212,3 +212,65 @@ def test_a_seal_key_shorter_than_16_bytes_is_one_line(tmp_path, monkeypatch, giv
     (tmp_path / "config" / "uavris" / "seal.key").write_bytes(b"")
     with pytest.raises(CheckpointError, match="at least 16"):
         seal(blob)
+
+
+def _link_out(folder: Path, name: str, outside: Path) -> Path:
+    """``folder/name`` replaced by a link to a copy of it in ``outside`` (a file the user's folder does
+    not hold)."""
+    import shutil
+
+    outside.mkdir(parents=True, exist_ok=True)
+    shutil.copyfile(folder / name, outside / name)
+    (folder / name).unlink()
+    (folder / name).symlink_to(outside / name)
+    return folder / name
+
+
+def _refused(err: str, link: Path) -> None:
+    assert err.count("\n") == 0 and f"{link} is a link to" in err and "reads only its own files" in err, err
+
+
+def test_a_folder_of_every_kind_refuses_a_link_that_leaves_it(run, tmp_path, capsys):
+    """An expert's run, a DT model, a learned value and a controller (the shipped one, whose goal
+    folder is a learned value and whose model folder a DT's) each refuse, in one line naming it and
+    before it is opened, a link that resolves outside the folder; a link inside it is read."""
+    import shutil
+
+    from uavris.agents.dt.checkpoint import load_dt
+    from uavris.agents.place.checkpoint import load_value
+    from uavris.errors import CheckpointError
+    from uavris.experiments.tools.targets import PRETRAINED
+
+    for name in ("policy.json", "config.yaml"):  # its weights' description; its configuration, read first
+        expert = _copy(run, tmp_path / f"expert-{name}")
+        link = _link_out(expert, name, tmp_path / "elsewhere" / f"expert-{name}")
+        capsys.readouterr()
+        assert _evaluate(expert, tmp_path / "e") == 2
+        _refused(capsys.readouterr().err.strip(), link)
+    looped = _copy(run, tmp_path / "looped")
+    (looped / "a").symlink_to("b")
+    (looped / "b").symlink_to("a")
+    capsys.readouterr()
+    assert _evaluate(looped, tmp_path / "e") == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and "a loop of links" in err, err
+    for folder, name, load in (("model", "model.safetensors", load_dt), ("goal", "value.json", load_value)):
+        copy = shutil.copytree(PRETRAINED / folder, tmp_path / folder)
+        load(copy)  # as shipped: read
+        (copy / "inside").mkdir()
+        shutil.move(copy / name, copy / "inside" / name)
+        (copy / name).symlink_to(Path("inside") / name)
+        load(copy)  # a link that stays inside the folder: read
+        (copy / name).unlink()
+        shutil.move(copy / "inside" / name, copy / name)
+        link = _link_out(copy, name, tmp_path / "elsewhere" / folder)
+        with pytest.raises(CheckpointError) as e:
+            load(copy)
+        _refused(str(e.value), link)
+    controller = shutil.copytree(PRETRAINED, tmp_path / "controller")
+    link = _link_out(controller / "goal", "value.json", tmp_path / "elsewhere" / "controller")
+    capsys.readouterr()
+    assert main(["evaluate", str(controller), "--layout", "layout-unseen-0", "--episodes", "1", "--no-progress",
+                 "--no-references", "--out", str(tmp_path / "c")]) == 2
+    _refused(capsys.readouterr().err.strip(), link)
+    assert not (tmp_path / "c").exists() or not any((tmp_path / "c").rglob("*.json"))

@@ -14,12 +14,16 @@ worker it starts (they inherit the environment). The cost is the AVX-512 kernels
 CPUs that have them.
 
 What a user set is kept (the variables are set only where absent), and ``UAVRIS_NATIVE_FLOATS=1``
-leaves every library to choose. A process that imported numpy or torch before uavris keeps the
-paths they chose (a library cannot change them once loaded), so its workers are told to keep
-theirs too (``UAVRIS_NATIVE_FLOATS=1`` in the environment they inherit): a result made in the
-process and one made in a worker then agree, and on a CPU with AVX-512 a warning says that the
-numbers may differ from another CPU's in the last digits (import uavris first, or set
-:data:`PINNED` in the environment).
+leaves every library to choose. A process that imported numpy or torch before uavris (a
+Gymnasium or SB3 script, a notebook) keeps the paths they chose (a library cannot change them
+once loaded), so its workers are told to keep theirs too (``UAVRIS_NATIVE_FLOATS=1`` in the
+environment they inherit): a result made in the process and one made in a worker then agree.
+That is said where it matters, not at the import: using the simulator, an env or a policy is the
+same on either path to the last digits or so, and a user who did not choose the order of imports
+should not be told at once that their numbers are wrong. Where a result is written to be compared
+with another machine's (:func:`warn_if_unpinned`: ``reproduce``, ``benchmark`` and the claims
+run from Python), a CPU with AVX-512 gets one warning; :func:`status` says the path at any time,
+and every report's machine line names it (:func:`float_path`).
 """
 
 from __future__ import annotations
@@ -103,6 +107,46 @@ def float_path() -> str:
     return f"native kernels ({', '.join(kernels)})"
 
 
+_LATE = False  # numpy or torch was loaded before uavris: this process keeps their kernels (pin_float_paths)
+_WARNED: set[str] = set()
+
+
+def status() -> str:
+    """This process's float path in one line, and why: pinned by ``import uavris`` (or by the
+    user's environment), native by ``UAVRIS_NATIVE_FLOATS``, or native because numpy or torch was
+    imported before uavris."""
+    path = float_path()
+    if not path.startswith("native"):
+        return f"{path}: pinned before numpy and torch loaded" if path.startswith("the AVX2") else path
+    if _LATE:
+        return f"{path}: numpy or torch was imported before uavris, which pins the path only before they load"
+    if os.environ.get("UAVRIS_NATIVE_FLOATS"):
+        return f"{path}: UAVRIS_NATIVE_FLOATS is set"
+    return f"{path}: the environment chose them"
+
+
+def _caller_level() -> int:
+    """The ``stacklevel`` of the first frame outside uavris: a warning points at the user's line,
+    whichever of uavris's functions the user called."""
+    frame, level = sys._getframe(1), 1
+    package = os.path.dirname(os.path.abspath(__file__))
+    while frame is not None and os.path.abspath(frame.f_code.co_filename).startswith(package + os.sep):
+        frame, level = frame.f_back, level + 1
+    return level
+
+
+def warn_if_unpinned(what: str) -> None:
+    """One warning per process and ``what`` where a result meant to be compared with another
+    machine's is made on this CPU's AVX-512 kernels because numpy or torch was imported before
+    uavris (a script that sets ``UAVRIS_NATIVE_FLOATS`` chose its path and is not warned; one that
+    set the pinned environment itself runs the AVX2 path and is not either)."""
+    if _LATE and _has_flag("avx512f") and what not in _WARNED and float_path().startswith("native"):
+        _WARNED.add(what)
+        warnings.warn(f"uavris: {what} runs on this CPU's AVX-512 kernels because numpy or torch was imported "
+                      "before uavris: its numbers may differ from another CPU's in the last digits (import uavris "
+                      "first; uavris.float_paths.status())", stacklevel=_caller_level())
+
+
 def pin_float_paths() -> dict[str, str]:
     """Set the environment that pins every library to the AVX2 path (module docstring), where it
     applies: an x86-64 CPU with AVX2, numpy and torch not yet loaded, no ``UAVRIS_NATIVE_FLOATS``.
@@ -112,12 +156,11 @@ def pin_float_paths() -> dict[str, str]:
     if not _has_flag("avx2"):
         return {}
     if "numpy" in sys.modules or "torch" in sys.modules:
-        # Too late for this process; its workers follow it rather than take another path.
+        # Too late for this process; its workers follow it rather than take another path. Said where a
+        # result meant for comparison is made (warn_if_unpinned), not here.
+        global _LATE
+        _LATE = True
         os.environ["UAVRIS_NATIVE_FLOATS"] = "1"
-        if _has_flag("avx512f"):
-            warnings.warn("uavris: numpy or torch was imported before uavris, so this process and its workers use "
-                          "this CPU's AVX-512 kernels and the numbers may differ from another CPU's in the last digits "
-                          "(import uavris first)", stacklevel=3)
         return {"UAVRIS_NATIVE_FLOATS": "1"}
     wanted = {"NPY_DISABLE_CPU_FEATURES": _numpy_names(), **PINNED}
     done = {k: v for k, v in wanted.items() if k not in os.environ}

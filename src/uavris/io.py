@@ -197,14 +197,45 @@ def contents(directory: str | Path) -> list[Path]:
     return [p for p in Path(directory).iterdir() if p.name != LOCK_FILE]
 
 
+def link_out(directory: str | Path) -> tuple[Path, str] | None:
+    """The first link under ``directory`` (at any depth, to a file or a folder, links not
+    followed) that resolves outside it, with where it leads (or why it leads nowhere); None where
+    every link stays inside. The directory itself may be a link: it is what the user named."""
+    root = Path(directory).resolve()
+    for here, folders, files in os.walk(directory):
+        for name in sorted((*folders, *files)):
+            path = Path(here) / name
+            if path.is_symlink():
+                try:
+                    target = path.resolve()
+                except (OSError, RuntimeError):  # a loop of links
+                    return path, "nowhere (a loop of links)"
+                if not target.is_relative_to(root):
+                    return path, str(target)
+    return None
+
+
+def refuse_links_out(directory: str | Path, what: str) -> None:
+    """One :class:`~uavris.errors.CheckpointError` line where a link in ``directory`` (``what``: a
+    controller, a DT model, an expert's run, a learned value) leads outside it: such a folder reads
+    only its own files, and the link is refused before anything in the folder is opened."""
+    from uavris.errors import CheckpointError
+
+    if Path(directory).is_dir() and (out := link_out(directory)) is not None:
+        raise CheckpointError(f"{out[0]} is a link to {out[1]}, outside {directory}: {what} reads only its own "
+                              "files (copy it in)")
+
+
 def read_checkpoint_meta(directory: str | Path, meta_file: str, kind: str, version: int, what: str,
                          described: str) -> dict[str, Any]:
     """A checkpoint directory's JSON metadata (``meta_file``), checked for its ``kind`` and
     ``format_version``; one :class:`~uavris.errors.CheckpointError` line when it is missing
     (``directory`` is not ``what``), corrupt, of another kind (it does not describe
-    ``described``) or of another version."""
+    ``described``) or of another version, and before anything is opened when a link in it leads
+    outside it (a controller, model, run or value folder reads only its own files)."""
     from uavris.errors import CheckpointError
 
+    refuse_links_out(directory, what)
     path = Path(directory) / meta_file
     if not path.is_file():
         raise CheckpointError(f"{directory} is not {what} (no {meta_file})")

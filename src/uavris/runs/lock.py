@@ -80,7 +80,7 @@ def locked(directory: str | Path, what: str = "", links: bool = False) -> Iterat
     d.mkdir(parents=True, exist_ok=True)
     path = d / LOCK_FILE
     for _ in range(10):
-        fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+        fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW, 0o644)  # a planted link is not followed
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:

@@ -23,7 +23,7 @@ from uavris.agents.dt.model import DecisionTransformer
 from uavris.config import SystemConfig
 from uavris.env.simulator import stored_system
 from uavris.errors import CheckpointError, ConfigError, UavrisError
-from uavris.io import atomic_write_bytes, read_checkpoint_meta, write_json
+from uavris.io import atomic_write_bytes, read_checkpoint_meta, refuse_links_out, write_json
 
 PRETRAIN_KIND = "uavris-dt-pretrain"  # the "kind" of a DT run directory's config.yaml
 FINETUNE_KIND = "uavris-dt-finetune"
@@ -109,6 +109,7 @@ def dt_model_dir(path: str | Path) -> Path | None:
     path = Path(path)
     if (path / META_FILE).exists():
         return path
+    refuse_links_out(path, "a DT run")  # before its configuration is read
     saved = runs.read_config(path)
     if isinstance(saved, dict) and saved.get("kind") in (PRETRAIN_KIND, FINETUNE_KIND):
         latest = latest_checkpoint(path)

@@ -39,6 +39,7 @@ from uavris.experiments.study.finished import Study
 from uavris.experiments.study.judgement import NOT_TESTED, Judgement, judgement
 from uavris.experiments.study.stamp import make_stamp, stamped
 from uavris.experiments.study.tracks import TRACK_SPECS, TRACKS
+from uavris.float_paths import warn_if_unpinned
 from uavris.io import atomic_write_text, other_inputs, read_json, replace_folder, to_plain, write_json
 from uavris.stats import HOLDS, MIN_UNITS, NOT_RESOLVED, REFUTED, holm
 
@@ -224,6 +225,7 @@ def write_claims(outs: Sequence[Path], dest: Path, budgets: Sequence[tuple[Path,
     ``dest/claims.json`` (its inputs and judgements) and the evidence beside them
     (:func:`write_evidence`); the markdown's path. ``made_by``: the commands that made the
     studies, listed on the page. Claims of other inputs in ``dest``: one line."""
+    warn_if_unpinned("claims")  # a page meant to be compared with another machine's
     inputs = {"studies": [str(o) for o in outs], "budgets": [[str(d), b] for d, b in budgets],
               "from_scratch": str(from_scratch) if from_scratch else None}
     old = other_inputs(Path(dest) / "claims.json", inputs, "inputs")

@@ -24,6 +24,7 @@ from uavris.experiments.engine.scheduling import StudyContext
 from uavris.experiments.study.config import AUTO, ReproduceConfig
 from uavris.experiments.study.finished import STUDY_FILE, Study
 from uavris.experiments.study.pipeline import build_pipeline
+from uavris.float_paths import warn_if_unpinned
 from uavris.io import write_json, write_yaml
 from uavris.runs.lock import locked
 
@@ -78,6 +79,7 @@ def reproduce(rc: ReproduceConfig, out: str | Path, *, workers: int = 2, backend
     """
     if report_only:
         return _report_only(Path(out))
+    warn_if_unpinned("reproduce")  # a result meant to be compared with another machine's
     if backend not in BACKENDS:
         raise UavrisError(f"unknown backend {backend!r}; choose one of {', '.join(BACKENDS)}")
     if workers < 1:

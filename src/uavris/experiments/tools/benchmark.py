@@ -29,6 +29,7 @@ from uavris.experiments.display.progress import progress_bar
 from uavris.experiments.display.tables import counted, interval, markdown_table, num, pct, rate_interval, signed
 from uavris.experiments.tools.evaluate import evaluate_target, layout_origin
 from uavris.experiments.tools.targets import Target, as_row, resolve_target
+from uavris.float_paths import warn_if_unpinned
 from uavris.io import atomic_write_text, other_inputs, read_csv, write_csv, write_json
 from uavris.layouts import resolve_layout
 from uavris.presets import EVAL_SEED, STUDY, check_preset
@@ -86,6 +87,7 @@ def benchmark(target: str, preset: str = "quick", cells: Cells = "all", out: Pat
     writes them) and OUT/benchmark.{csv,json,md}. Returns the rows and the markdown path.
     ``layout`` (a hall :func:`~uavris.layouts.resolve_layout` reads) is the one cell instead.
     """
+    warn_if_unpinned("benchmark")  # a result meant to be compared with another machine's
     check_preset(preset)
     episodes = STUDY[preset]["eval_episodes"]
     resolved = resolve_target(target, trust_pickle)

@@ -48,12 +48,12 @@ from uavris.agents.references import REFERENCE_SEED, REFERENCES, reference_polic
 from uavris.config import Scenario, SystemConfig
 from uavris.errors import ConfigError, UavrisError
 from uavris.experiments.tools.user_policy import load_user_policy
-from uavris.io import file_part, read_checkpoint_meta, write_json
+from uavris.io import file_part, read_checkpoint_meta, refuse_links_out, write_json
 from uavris.layouts import Site
 
 CONTROLLER_FILE, CONTROLLER_KIND, CONTROLLER_FORMAT = "controller.json", "uavris-controller", 1
 # The controller shipped with the package: the make run's goal-conditioned DT (seed 0) told the deployed place by
-# its learned value (docs/pretrained.md); every command takes it by this name
+# its learned value (docs/results/pretrained.md); every command takes it by this name
 PRETRAINED_NAME = "pretrained"
 PRETRAINED = Path(__file__).resolve().parents[2] / "pretrained" / "deployment"
 # What a row of a report is: a learned controller or place (the DT family, behaviour cloning, the learned
@@ -298,7 +298,7 @@ class LearnedValue(ModelDir):
 @dataclass(frozen=True)
 class Controller(ModelDir):
     """A controller directory (``uavris export``): the row it holds, in its own system. The name
-    ``pretrained`` is the controller shipped with the package (:data:`PRETRAINED`, docs/pretrained.md)."""
+    ``pretrained`` is the controller shipped with the package (:data:`PRETRAINED`, docs/results/pretrained.md)."""
 
     kind: ClassVar[str] = "controller"
     marker: ClassVar[str] = CONTROLLER_FILE
@@ -409,6 +409,8 @@ def resolve_target(name: str | Path, trust_pickle: bool = False) -> Target:
     that holds no policy. ``trust_pickle``: an expert's run with SB3's pickled archive only may
     be loaded."""
     name = str(name)
+    # a folder reads only its own files: a link out of it is refused before any kind reads its configuration
+    refuse_links_out(name, "a run, model, value or controller folder")
     for kind in TARGET_KINDS:
         found = kind.recognise(name, trust_pickle=trust_pickle)
         if found is not None:

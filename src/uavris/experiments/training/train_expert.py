@@ -64,7 +64,7 @@ from uavris.config import (
 from uavris.env.wrappers import PhaseControl, check_phase_control
 from uavris.errors import CheckpointError, ConfigError, UavrisError
 from uavris.experiments.display.progress import progress_bar
-from uavris.io import atomic_save, atomic_write_bytes, read_csv, read_rows, write_csv
+from uavris.io import atomic_save, atomic_write_bytes, read_csv, read_rows, refuse_links_out, write_csv
 from uavris.presets import EVAL_SEED, TRAIN, Preset, check_preset
 from uavris.runs.seal import TRUST_FLAG, check_sealed, seal
 
@@ -239,6 +239,7 @@ def load_run_policy(run_dir: str | Path, device: str = "cpu", trust_pickle: bool
     SB3's archive only (uavris 0.3's, another tool's) is loaded from it with ``trust_pickle``
     only: unpickling it could run any code."""
     run_dir = Path(run_dir)
+    refuse_links_out(run_dir, "an expert's run")  # before its configuration is read
     cfg = load_run_config(run_dir)
     stem = final_policy_stem(run_dir)
     if stem is not None:
