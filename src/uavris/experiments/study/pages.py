@@ -170,7 +170,8 @@ def _write_pretrained(runs: Path, dest: Path, preset: str, seeds: int) -> list[P
     from uavris.experiments.tools.targets import PRETRAINED
 
     shipped = ship(runs / "quick", PRETRAINED)
-    return [write_card_page(shipped, dest / "pretrained.md", studies(preset, seeds)["quick"].line(runs, preset)),
+    return [write_card_page(shipped, dest / "pretrained.md", studies(preset, seeds)["quick"].line(runs, preset),
+                            [str(runs / "quick")]),
             shipped]
 
 

@@ -14,7 +14,7 @@ from __future__ import annotations
 import shutil
 import tempfile
 from pathlib import Path
-from typing import Any
+from typing import Any, Sequence
 
 import numpy as np
 
@@ -103,9 +103,10 @@ def stale_card(shipped: Path, made_by: ReproduceConfig | None = None) -> list[st
             for name, key in now.items() if card["stage_keys"].get(name) != key]
 
 
-def write_card_page(shipped: Path, page: Path, command: str) -> Path:
+def write_card_page(shipped: Path, page: Path, command: str, studies: Sequence[str] = ()) -> Path:
     """The model card (``docs/results/pretrained.md``, stamped): what the shipped controller is, the
-    data and halls it learned from, its scores at each device count with intervals, its stage keys."""
+    data and halls it learned from, its scores at each device count with intervals, its stage keys;
+    ``studies``: the study it was shipped from (the stamp's)."""
     from uavris.experiments.display.tables import markdown_table, pct, with_ci
     from uavris.experiments.study.stamp import make_stamp, stamped
 
@@ -129,6 +130,6 @@ def write_card_page(shipped: Path, page: Path, command: str) -> Path:
              "The stage keys it came from (a test fails when this code's make run makes others: the shipped "
              "model is then stale and shipped again):", "",
              *markdown_table(("stage", "key"), [(k, f"`{v}`") for k, v in card["stage_keys"].items()], "ll"), ""]
-    stamp = make_stamp("pretrained", [str(shipped)], card["preset"], command)
+    stamp = make_stamp("pretrained", list(studies) or [str(shipped)], card["preset"], command)
     atomic_write_text(page, stamped(stamp, "\n".join(lines)))
     return page

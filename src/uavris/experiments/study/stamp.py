@@ -66,16 +66,21 @@ def current_versions() -> dict[str, Any]:
             "teacher": dataclasses.asdict(TEACHER)}
 
 
+PAGES_WRITE = ("docs/results", "docs/figures", "src/uavris/pretrained")  # what `uavris pages` writes
+
+
 def commit() -> str | None:
     """The git commit of the code running (12 hex digits, "+dirty" with uncommitted changes to
-    tracked files), None outside a git checkout."""
+    tracked files other than what the pages write: the pages, their figures and the shipped
+    controller), None outside a git checkout."""
     where = Path(__file__).resolve().parent
     try:
         head = subprocess.run(["git", "-C", str(where), "rev-parse", "--short=12", "HEAD"], capture_output=True,
                               text=True, timeout=10)
         if head.returncode != 0:
             return None
-        dirty = subprocess.run(["git", "-C", str(where), "status", "--porcelain", "--untracked-files=no"],
+        dirty = subprocess.run(["git", "-C", str(where), "status", "--porcelain", "--untracked-files=no", "--",
+                                ":(top)", *(f":(top,exclude){made}" for made in PAGES_WRITE)],
                                capture_output=True, text=True, timeout=10)
     except (OSError, subprocess.SubprocessError):
         return None
