@@ -27,3 +27,15 @@ def test_the_shipped_controller_flies_a_hall_of_five_devices(tmp_path):
     paired = summary["paired"][ZERO_ACTION]
     assert paired["ci_low"] > 0 and summary["mean"] > 1.2 * refs[ZERO_ACTION]["mean"]  # by its paired CI
     assert 0.9 < summary["mean"] / refs[ORACLE]["mean"] <= 1.01 and np.isfinite(summary["mean"])
+
+
+def test_plan_takes_the_shipped_controllers_place_and_says_how_to_fly_it(tmp_path, capsys):
+    """`uavris plan HALL --learned pretrained`: the deployed place of the shipped value, and the
+    shipped controller flown there, named as the user named it."""
+    from uavris.cli import main
+
+    assert main(["plan", "layout-unseen-0-k5", "--learned", "pretrained", "--no-progress", "--out",
+                 str(tmp_path / "plan")]) == 0
+    printed = capsys.readouterr().out
+    assert "planned by the deployed (V proposes, R disposes) planner" in printed
+    assert "uavris evaluate pretrained --layout layout-unseen-0-k5" in printed

@@ -62,13 +62,14 @@ def plan_command(args: list[str]) -> None:
     positional = ["--layout", args[0], *args[1:]] if args and not args[0].startswith("-") else args
     check_hall_flags(positional, SystemConfig(), "uavris plan")  # before the flags are read into the paper's system
     a = parse(PlanArgs, args, "uavris plan", plan_command.__doc__ or "")
+    named = a.controller  # what the user typed, for the line that tells them how to fly it
     for given in (a.learned, a.controller):  # `pretrained`: the shipped controller, its learned value and planner
         if given is not None and str(given) == "pretrained" and not given.exists():
             from dataclasses import replace
 
             from uavris.experiments.tools.targets import PRETRAINED
 
-            a = replace(a, learned=None, controller=PRETRAINED)
+            a, named = replace(a, learned=None, controller=PRETRAINED), "pretrained"
     if a.controller is not None:
         if a.learned is not None:
             raise UsageError("--controller and --learned both name a learned value; pass one of them")
@@ -124,7 +125,7 @@ def plan_command(args: list[str]) -> None:
             print(f"uavris: warning: {flight['warning']}", file=sys.stderr)
         print(f"{flight['row']}, told this place, ends episode seed {flight['seed']} at "
               f"[{', '.join(f'{v:.2f}' for v in flight['end'])}] with an average sum rate of "
-              f"{flight['average_sum_rate']:.2f} bps/Hz (its whole flight: uavris evaluate {a.controller} "
+              f"{flight['average_sum_rate']:.2f} bps/Hz (its whole flight: uavris evaluate {named} "
               f"--layout {layout.name if a.layout is None else a.layout} --trajectory)")
 
 
