@@ -85,7 +85,7 @@ DEPLOYMENT_PAIRS = (("dt-zero-shot", "hover-optimizer"), ("dt-zero-shot", "neare
                     ("dt-zero-shot-safe", "bc-safe"), ("dt-goal-safe", "hover-optimizer"), ("dt-goal-safe", "nearest"),
                     ("dt-goal-safe", "dt-zero-shot-safe"), ("plan-learned", "hover-optimizer"),
                     ("dt-goal-finetuned-safe", "dt-goal-safe"), ("dt-goal-safe", "dt-goal-mlp-safe"),
-                    ("dt-goal-safe", "bc-best-safe"))
+                    ("dt-goal-safe", "bc-best-safe"), ("dt-zero-shot-safe", "bc-best-safe"))
 # the targets of the rows that choose a place: (row, mean, worst hall); in zero-shot-only halls, the count's
 PLACE_TARGETS = (("dt-goal-safe", 0.99, 0.97, "zero-shot: the deployed place, flown by the goal-conditioned DT"),
                  ("plan-deployed", 0.99, None, "the deployed place (V proposes, R disposes), flown by the oracle's"),
@@ -220,7 +220,7 @@ def _check_score_claims(claims: list[str], where: str, keys: list[str], stat: di
                        (("dt-zero-shot-safe", "bc-safe"), "**return conditioning under the attitude safety layer"),
                        (("dt-mixed", "bc-mixed"), "**return conditioning on mixed-quality data"),
                        (("dt-zero-shot", "dt-flat"), "**the device-set encoder"),
-                       (("dt-goal-safe", "dt-goal-mlp-safe"), "**the transformer is needed"),
+                       (("dt-goal-safe", "dt-goal-mlp-safe"), "**a history of slots is needed"),
                        (("dt-goal-safe", "bc-best-safe"), "**the goal-conditioned DT above filtered behaviour")):
         if pair in diffs:
             expected += 1

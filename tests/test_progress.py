@@ -55,8 +55,8 @@ def test_speeds_are_learned_per_family_of_stages():
     speeds.add("deploy-pretrain-s1", 100.0, 300.0)
     speeds.add("compare", 100.0, 60.0)
     assert speeds("deploy-pretrain-n128-s2") == pytest.approx(3.0)  # its family's
-    # a family none of whose jobs has finished: every job's slowdown (360 / 200 = 1.8) drawn towards 1 by
-    # the share of the 2 families it rests on, 2/3 of the way
+    # a family none of whose jobs has finished: every job's slowdown (360 / 200 = 1.8) with 2/3 of its
+    # excess over 1 kept, for the 2 families it rests on
     assert speeds("deploy-evaluate-layout-unseen-3") == pytest.approx(1.0 + 0.8 * 2 / 3)
     speeds.add("x", 1.0, 100.0)
     assert speeds("x") == 4.0  # bounded

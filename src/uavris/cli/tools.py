@@ -63,6 +63,8 @@ def plan_command(args: list[str]) -> None:
     check_hall_flags(positional, SystemConfig(), "uavris plan")  # before the flags are read into the paper's system
     a = parse(PlanArgs, args, "uavris plan", plan_command.__doc__ or "")
     named = a.controller  # what the user typed, for the line that tells them how to fly it
+    if a.learned is not None and a.controller is not None:
+        raise UsageError("--controller and --learned both name a learned value; pass one of them")
     for given in (a.learned, a.controller):  # `pretrained`: the shipped controller, its learned value and planner
         if given is not None and str(given) == "pretrained" and not given.exists():
             from dataclasses import replace
@@ -71,8 +73,6 @@ def plan_command(args: list[str]) -> None:
 
             a, named = replace(a, learned=None, controller=PRETRAINED), "pretrained"
     if a.controller is not None:
-        if a.learned is not None:
-            raise UsageError("--controller and --learned both name a learned value; pass one of them")
         from dataclasses import replace
 
         from uavris.experiments.tools.targets import LearnedValue, read_controller

@@ -113,8 +113,8 @@ class Speeds:
     """How much longer this run's jobs take than expected, from the finished ones: per stage
     family (the sum of wall clocks over the sum of expected costs) where a job of the family
     has finished; for a family none of whose jobs has finished, the slowdown over every finished
-    job drawn towards 1 by the share of families it rests on, ``k / (k + 1)`` of the way for ``k``
-    families (the comparison's first jobs alone, 1.66 times their cost on a Zen 4, put the whole
+    job with only ``k / (k + 1)`` of its excess over 1 kept, for the ``k`` families it rests on
+    (the comparison's first jobs alone, 1.66 times their cost on a Zen 4, put the whole
     study at 1.66 for five minutes where it ran at 1.3: docs/timings.md); 1 before any has
     finished. Bounded by :data:`SPEED_BOUNDS` (one short job can mislead)."""
 

@@ -165,11 +165,15 @@ def _write_oracle_gap(runs: Path, dest: Path, preset: str, seeds: int) -> list[P
 
 
 def _write_pretrained(runs: Path, dest: Path, preset: str, seeds: int) -> list[Path]:
-    """Ship the make run's controller into the package and write its model card."""
+    """Ship the make run's controller into the package and write its model card; at another preset
+    (the smoke check of the chain) or into another ``dest``, into ``dest/pretrained`` instead: only
+    the make run's pages replace the package's controller."""
+    from uavris.experiments.study.config import ReproduceConfig
     from uavris.experiments.study.pretrained import ship, write_card_page
     from uavris.experiments.tools.targets import PRETRAINED
 
-    shipped = ship(runs / "quick", PRETRAINED)
+    package = preset == "quick" and dest.resolve() == (PRETRAINED.parents[3] / "docs" / "results").resolve()
+    shipped = ship(runs / "quick", PRETRAINED if package else dest / "pretrained", made_by=ReproduceConfig(preset))
     return [write_card_page(shipped, dest / "pretrained.md", studies(preset, seeds)["quick"].line(runs, preset),
                             [str(runs / "quick")]),
             shipped]

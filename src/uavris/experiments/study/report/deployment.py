@@ -56,7 +56,7 @@ PAIRS: tuple[tuple[str, str], ...] = (("dt-zero-shot", HOVER_OPTIMIZER), ("dt-ze
                                       ("dt-goal-safe", HOVER_OPTIMIZER), ("dt-goal-safe", NEAREST),
                                       ("dt-goal-safe", "dt-zero-shot-safe"), ("plan-learned", HOVER_OPTIMIZER),
                                       ("dt-goal-finetuned-safe", "dt-goal-safe"), ("dt-goal-safe", "dt-goal-mlp-safe"),
-                                      ("dt-goal-safe", "bc-best-safe"))
+                                      ("dt-goal-safe", "bc-best-safe"), ("dt-zero-shot-safe", "bc-best-safe"))
 
 
 def row_facts(results: dict[str, dict[str, Any]]) -> dict[str, dict[str, Any]]:
@@ -296,10 +296,10 @@ def _claims(summary: dict[str, dict[str, float]], diffs: dict[tuple[str, str], d
                                                     "cloning, both on the mixed dataset)"),
                          (("dt-zero-shot", "dt-flat"), "the device-set encoder (DT minus the flat encoder, same "
                                                        "data)"),
-                         (("dt-goal-safe", "dt-goal-mlp-safe"), "the transformer is needed (the goal-conditioned DT "
-                                                                "minus the goal-conditioned MLP told the same place, "
-                                                                "both under the layer: holds where the CI is above "
-                                                                "zero)"),
+                         (("dt-goal-safe", "dt-goal-mlp-safe"), "a history of slots is needed (the goal-conditioned "
+                                                                "DT minus the goal-conditioned MLP, the same network "
+                                                                "on one slot trained for as many steps, told the same "
+                                                                "place, both under the layer)"),
                          (("dt-goal-safe", "bc-best-safe"), "the goal-conditioned DT above filtered behaviour cloning "
                                                             "(the best 10% of the demonstrations by return), both "
                                                             "under the layer")):
