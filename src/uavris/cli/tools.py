@@ -65,17 +65,14 @@ def plan_command(args: list[str]) -> None:
     named = a.controller  # what the user typed, for the line that tells them how to fly it
     if a.learned is not None and a.controller is not None:
         raise UsageError("--controller and --learned both name a learned value; pass one of them")
+    from dataclasses import replace
+
+    from uavris.experiments.tools.targets import LearnedValue, read_controller, shipped_controller
+
     for given in (a.learned, a.controller):  # `pretrained`: the shipped controller, its learned value and planner
-        if given is not None and str(given) == "pretrained" and not given.exists():
-            from dataclasses import replace
-
-            from uavris.experiments.tools.targets import PRETRAINED
-
-            a, named = replace(a, learned=None, controller=PRETRAINED), "pretrained"
+        if given is not None and (shipped := shipped_controller(given)) is not None:
+            a, named = replace(a, learned=None, controller=shipped), str(given)
     if a.controller is not None:
-        from dataclasses import replace
-
-        from uavris.experiments.tools.targets import LearnedValue, read_controller
 
         told = read_controller(a.controller).goal_from
         if not isinstance(told, LearnedValue):

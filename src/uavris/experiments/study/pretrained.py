@@ -78,10 +78,7 @@ def ship(study_dir: Path, dest: Path, made_by: ReproduceConfig | None = None) ->
     dest.parent.mkdir(parents=True, exist_ok=True)
     made = Path(tempfile.mkdtemp(prefix=f".{dest.name}.", dir=dest.parent))
     try:
-        write_controller(row, made / "controller")
-        for part in (made / "controller").iterdir():
-            shutil.move(str(part), made / part.name)
-        (made / "controller").rmdir()
+        write_controller(row, made)
         train = study.sites("deployment")[0]
         write_json(made / CARD, {"row": ROW, "seed": row.seed or 0, "preset": study.config.preset,
                                  "training_halls": len(train), "training_devices": sorted({w.devices for w in train}),

@@ -295,6 +295,16 @@ class LearnedValue(ModelDir):
         return {**super().exported(dest), "top_k": self.top_k, "deployed": self.deployed}
 
 
+def shipped_controller(name: str | Path) -> Path | None:
+    """:data:`PRETRAINED` where ``name`` is :data:`PRETRAINED_NAME` and no path of that name exists
+    (a folder of the user's called so is theirs); one line where this install ships none."""
+    if str(name) != PRETRAINED_NAME or Path(name).exists():
+        return None
+    if not (PRETRAINED / CONTROLLER_FILE).is_file():
+        raise UavrisError(f"this install of uavris ships no pretrained controller ({PRETRAINED} is missing)")
+    return PRETRAINED
+
+
 @dataclass(frozen=True)
 class Controller(ModelDir):
     """A controller directory (``uavris export``): the row it holds, in its own system. The name
@@ -306,11 +316,8 @@ class Controller(ModelDir):
 
     @classmethod
     def recognise(cls, name: str, trust_pickle: bool = False) -> Target | None:
-        if name == PRETRAINED_NAME and not Path(name).exists():
-            if not (PRETRAINED / CONTROLLER_FILE).is_file():
-                raise UavrisError(f"this install of uavris ships no pretrained controller ({PRETRAINED} is missing)")
-            return cls.at(PRETRAINED)
-        return super().recognise(name, trust_pickle)
+        shipped = shipped_controller(name)
+        return cls.at(shipped) if shipped is not None else super().recognise(name, trust_pickle)
 
     def as_row(self) -> Row:
         return read_controller(self.path)
