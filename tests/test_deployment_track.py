@@ -96,7 +96,7 @@ def test_the_main_rows_are_the_controllers_under_the_safety_layer():
     where = unseen[0]
     models = trained_models(track, [t.name for t in train], (1,), 2)
     stages = ("pretrain", "pretrain-s1", "bc", "bc-s1", "goal", "goal-s1", "goal-mlp", "goal-mlp-s1", "bc-best",
-              "bc-best-s1", "value", f"finetune-{where.name}",
+              "bc-best-s1", "value", "value-s1", f"finetune-{where.name}",
               places_stage(where.name, 0), places_stage(where.name, 1))
     dirs = {k: Path("/models") / k for k in stages}
     sources = transfer_sources(track, where, train)
@@ -110,7 +110,8 @@ def test_the_main_rows_are_the_controllers_under_the_safety_layer():
             *(b.replace("@", "-safe@") if "@" in b else f"{b}-safe" for b in baselines)}
     [transfer] = [k for k, r in main.items() if r.kind == "transfer"]
     refs = {"zero-action", "hover-optimizer", "oracle"}
-    planners = {"plan-learned", "plan-deployed"}  # a learned place flown by the oracle's controller
+    # a learned place flown by the oracle's controller, one per pre-training seed's own fit of V
+    planners = {"plan-learned", "plan-deployed", "plan-learned@s1", "plan-deployed@s1"}
     assert set(main) == safe | refs | planners | {"oracle-safe", transfer}
     assert set(full) == set(main) | plain | {"dt-zero-shot-level", "dt-zero-shot-level@s1", "dt-ensemble-level"}
     assert list(main)[-3:] == ["zero-action", "hover-optimizer", "oracle"]  # the references last
@@ -128,17 +129,19 @@ def test_the_main_rows_are_the_controllers_under_the_safety_layer():
     assert main["dt-zero-shot-safe@s1"].label_for() == "zero-shot DT, seed 1, safety layer"
     # the goal-conditioned DT is told the deployed place (V proposes, R disposes: never worse than staying); its
     # fine-tuned form keeps its own
-    value = Path("/models/value/value")
-    assert main["dt-goal-safe@s1"].goal_from.path == value and main["dt-goal-safe@s1"].target.path == Path(
+    value, value_s1 = Path("/models/value/value"), Path("/models/value-s1/value")
+    assert main["dt-goal-safe@s1"].goal_from.path == value_s1 and main["dt-goal-safe@s1"].target.path == Path(
         "/models/goal-s1/model")
     assert main["dt-goal-safe@s1"].goal_from.deployed and not main["dt-goal-safe@s1"].goal_from.top_k
     assert main["dt-goal-safe@s1"].facts()["goal_from"].startswith("deployed place")
     assert main["dt-goal-finetuned-safe@s1"].goal_from is None
     # the goal-conditioned MLP is told the same place; filtered behaviour cloning chooses none
-    assert main["dt-goal-mlp-safe@s1"].goal_from.path == value and main["dt-goal-mlp-safe@s1"].goal_from.deployed
+    assert main["dt-goal-mlp-safe@s1"].goal_from.path == value_s1 and main["dt-goal-mlp-safe@s1"].goal_from.deployed
     assert main["bc-best-safe"].goal_from is None and main["bc-best-safe"].target.path == Path("/models/bc-best/model")
     assert main["dt-goal-finetuned-safe@s1"].target.path == Path("/models") / places_stage(where.name, 1) / "model"
     assert main["plan-learned"].target.path == value and main["plan-deployed"].target.deployed
+    assert main["dt-goal-safe"].goal_from.path == value and main["plan-deployed@s1"].target.path == value_s1
+    assert main["plan-learned@s1"].seed == 1 and main["plan-deployed@s1"].target.deployed
 
 
 def test_demonstrations_cover_every_training_hall(deployment_run):
@@ -228,6 +231,32 @@ def test_the_report_averages_seeds_and_states_the_claims(deployment_run):
     row = next(line for line in value.splitlines() if line.startswith("| learned planner's place"))
     cells = [c.strip() for c in row.split("|")[2:-1]]
     assert cells == [f"{np.mean(rho):.3f}", f"{np.min(rho):.3f}", f"{np.mean(share):.1%}", f"{np.min(share):.1%}"]
+    # the second seed's own fit of V has a line of its own, from its own row's records
+    rho1 = [r["plan-learned@s1"]["value_rank_correlation"] for r in results]
+    row = next(line for line in value.splitlines() if line.startswith("| learned planner's place (V's argmax), "
+                                                                       "flown by the oracle's controller, seed 1 |"))
+    assert row.split("|")[2].strip() == f"{np.mean(rho1):.3f}"
+
+
+def test_each_pre_training_seed_has_its_own_fit_of_the_learned_value(deployment_run):
+    """One V per pre-training seed: two fits on the same labels with different seeds, each stage
+    read by the evaluations, whose rows told a place by seed 1 are told it by seed 1's V."""
+    from safetensors.numpy import load_file
+
+    out, _ = deployment_run
+    dirs = {p.parent.name.rsplit("-", 1)[0]: p for p in (out / "stages").glob("deploy-value-*/value")}
+    assert set(dirs) == {"deploy-value", "deploy-value-s1"}
+    configs = {k: read_json(d.parent / "stage.json")["config"] for k, d in dirs.items()}
+    assert configs["deploy-value-s1"]["seed"] == configs["deploy-value"]["seed"] + 1
+    assert {k: v for k, v in configs["deploy-value-s1"].items() if k != "seed"} == \
+        {k: v for k, v in configs["deploy-value"].items() if k != "seed"}
+    w0, w1 = (load_file(str(dirs[k] / "value.safetensors")) for k in ("deploy-value", "deploy-value-s1"))
+    assert w0.keys() == w1.keys() and any(not np.array_equal(w0[k], w1[k]) for k in w0)
+    for stage in (out / "stages").glob("deploy-evaluate-layout-unseen-*/stage.json"):
+        record = read_json(stage)
+        assert {"deploy-value", "deploy-value-s1"} <= set(record["deps"])
+        res = record["result"]
+        assert res["plan-learned@s1"]["seed"] == 1 and res["plan-deployed@s1"]["variant"] == "plan-deployed"
 
 
 def test_the_deployment_sections_numbers_are_read_from_their_files(deployment_run):
@@ -467,7 +496,8 @@ def test_the_studys_controller_leaves_the_study_in_one_directory(deployment_run,
     assert cell["mean"] == pytest.approx(want["mean"], abs=1e-12)
     # plan --controller: the planner of its row (the deployed place), as plan --learned --deployed with the
     # study's value
-    [value] = (out / "stages").glob("deploy-value-*/value")
+    [value] = [p for p in (out / "stages").glob("deploy-value-*/value")
+               if not p.parent.name.startswith("deploy-value-s")]  # seed 0's
     for name, flags in (("p-ctl", ["--controller", str(ctl)]),
                         ("p-v", ["--learned", str(value), "--deployed"])):
         assert main(["plan", "layout-unseen-0", *flags, "--system.observe-devices", "--out", str(tmp_path / name),
@@ -599,7 +629,7 @@ def test_the_claims_page_names_its_machine_and_keeps_its_evidence_beside_it(depl
     edited = json.loads(json.dumps(units))
     edited["deployment"]["halls"][0]["transfer"][0] += 1.0  # one episode of one hall's nearest plan
     assert any("zero-shot" in m for m in mismatches(claims, edited))
-    assert "one fit of the learned value of a pose (`deploy-value`" in page
+    assert "a fit of the learned value of a pose per pre-training seed" in page
     assert (tmp_path / "c" / EVIDENCE / f"{out.name}.md").read_text() == (out / "report.md").read_text()
     assert {j["track"] for j in read_json(tmp_path / "c" / "claims.json")["judgements"]} == {"deployment"}
     twin = tmp_path / "twin" / out.name

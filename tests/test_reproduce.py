@@ -235,7 +235,8 @@ def test_changed_parameter_invalidates_exactly_its_dependents(tmp_path):
     places = {f"deploy-finetune-places-layout-unseen-{j}{s}" for j in (0, 1) for s in ("", "-s1")}
     assert deploy == {"deploy-dataset", "deploy-dataset-best", "deploy-dataset-mixed",
                       "deploy-finetune-layout-unseen-0", "deploy-finetune-layout-unseen-1", "deploy-value-labels",
-                      "deploy-value"} | evaluations | places | {f"deploy-{m}{s}" for m in models for s in ("", "-s1")}
+                      "deploy-value", "deploy-value-s1"} \
+        | evaluations | places | {f"deploy-{m}{s}" for m in models for s in ("", "-s1")}
     assert changed(trajectories=3) == dt | {f"strong-{n}" for n in dt}
     # the learned value's labels come from their own halls, its fit from them and the demonstrations' plans
     assert changed(layout_trajectories=3) == deploy - {"deploy-value-labels"}

@@ -209,9 +209,8 @@ def rests_on(studies: Sequence[Study]) -> list[str]:
     ]
     deployment = next((st for st in studies if TRACK_SPECS["deployment"] in st.config.tracks), None)
     if deployment is not None and deployment.done("deploy-value") is not None:
-        lines.append("- The goal-conditioned DT's cells read one fit of the learned value of a pose (`deploy-value`, "
-                     "one seed, shared by the three pre-training seeds): their intervals over halls hold that fit "
-                     "fixed and leave out how the rows would move with another fit of it.")
+        lines.append("- The goal-conditioned DT's cells read a fit of the learned value of a pose per pre-training "
+                     "seed (`deploy-value`, `deploy-value-sK`): a seed is its DT and its V together.")
     for count, diff in dt_against_hovering(deployment) if deployment is not None else []:
         cell = judgement("dt-over-hover", "deployment", diff, "", "halls", "")
         lines.append(f"- With {count} devices the return-conditioned DT against hovering with optimised phases, "

@@ -24,9 +24,10 @@ Stages 2-7 exist once per track: the paper track as above, and the strong track 
 motion, optimised phases) with the same names prefixed ``strong-``. The deployment track
 (``deploy-``) is the same pipeline with other parameters (:mod:`.tracks`): its dataset is the
 planning oracle's demonstrations in many generated halls (``deploy-dataset``); the learned
-value of a pose is labelled (``deploy-value-labels``) and fitted (``deploy-value``,
-:mod:`.places`); its learned rows are over several pre-training seeds (``deploy-pretrain``,
-``deploy-bc``, ``deploy-goal`` (the goal-conditioned DT), each with ``-sK`` copies), and it
+value of a pose is labelled (``deploy-value-labels``) and fitted once per pre-training seed
+(``deploy-value``, ``deploy-value-sK``, :mod:`.places`); its learned rows are over several
+pre-training seeds (``deploy-pretrain``, ``deploy-bc``, ``deploy-goal`` (the goal-conditioned
+DT), each with ``-sK`` copies), and it
 deploys to unseen halls (``deploy-evaluate-LAYOUT``). With ``--ablation`` the ablation's rows
 join them (``-pretrain-nN``, the data curve; ``-flat``; ``deploy-dataset-mixed`` with
 ``-mixed-dt`` and ``-mixed-bc``), over the same seeds, with the fine-tuning of the
@@ -72,6 +73,7 @@ from uavris.experiments.study.tracks import (
     track_rows,
     trained_models,
     transfer_sources,
+    value_stage,
     zero_shot_only,
 )
 from uavris.experiments.study.workers import (
@@ -200,7 +202,7 @@ class TrackStages(PlaceStages):
         # the stages the evaluation reads beside each site's fine-tuning
         self.inputs = [*(["experts-train"] if not track.demonstrations else []),
                        *(["experts-unseen"] if track.unseen_experts else []), *(m.stage for m in self.models),
-                       *(["value"] if track.places else [])]
+                       *(value_stage(s) for s in (self.value_seeds() if track.places else []))]
         # the return-conditioned DT's fine-tuning: the paper's; where the track tries places, the ablation's
         self.finetunes_returns = not track.places or rc.ablation
         # fine-tuning that tries places: the ablation's too (docs/places.md: in a quick run it ended below the

@@ -3,8 +3,9 @@ fine-tuning that tries places.
 
 Lives here: :class:`PlaceStages`, the part of a track's stages that
 :class:`.pipeline.TrackStages` inherits: :meth:`~PlaceStages.value_stages` (``value-labels``: the
-labels of training halls of several device counts, in parts a rerun reuses; ``value``: the
-fit, on them and on the poses the reference planner valued in the demonstrations' halls) and
+labels of training halls of several device counts, in parts a rerun reuses; ``value`` and
+``value-sK``: a fit per pre-training seed, on them and on the poses the reference planner
+valued in the demonstrations' halls) and
 :meth:`~PlaceStages.places_finetune_stages` (per unseen hall and goal-conditioned DT seed,
 fine-tuning whose candidates fly to the learned planner's best places). Not here: the rest of
 a track's stages and the pipeline (:mod:`.pipeline`), the rows that read these stages
@@ -23,7 +24,7 @@ from uavris.experiments.engine.jobs import Job
 from uavris.experiments.engine.scheduling import StudyContext
 from uavris.experiments.engine.stages import Stage
 from uavris.experiments.study.config import ReproduceConfig
-from uavris.experiments.study.tracks import TrainedModel, places_stage, zero_shot_only
+from uavris.experiments.study.tracks import TrainedModel, places_stage, value_stage, zero_shot_only
 from uavris.experiments.study.workers import finetune_job, value_fit_job, value_labels_job
 from uavris.experiments.training.finetune import FinetuneConfig
 from uavris.experiments.training.values import ValueFitConfig, ValueLabelsConfig
@@ -61,12 +62,18 @@ class PlaceStages:
         labels = ValueLabelsConfig(counts=tuple(v["counts"]), halls=v["halls"], poses=v["poses"],
                                    layout_seed=self.rc.layout_seed, system=self.rc.system.replace(observe_devices=True))
         costs = tuple(value_labels_cost(k, n, labels.poses, labels.tilted) for k, _, n in _chunks(labels))
-        fit = ValueFitConfig(preset=self.rc.preset, seed=self.rc.seed)
         # the labels are the planner's screen and rate of poses: a new oracle labels them again
-        return [Stage(self.t("value-labels"), {**labels.to_dict(), "oracle": oracle_planner.ORACLE_VERSION},
-                      partial(self._run_labels, labels, costs), (), costs),
-                Stage(self.t("value"), fit.to_dict(), partial(self._run_fit, fit),
-                      (self.t("value-labels"), self.t("dataset")), (value_fit_cost(fit.steps, fit.width),))]
+        stages = [Stage(self.t("value-labels"), {**labels.to_dict(), "oracle": oracle_planner.ORACLE_VERSION},
+                        partial(self._run_labels, labels, costs), (), costs)]
+        for seed in self.value_seeds():  # one fit per pre-training seed, on the same labels
+            fit = ValueFitConfig(preset=self.rc.preset, seed=self.rc.seed + seed)
+            stages.append(Stage(self.t(value_stage(seed)), fit.to_dict(), partial(self._run_fit, seed, fit),
+                                (self.t("value-labels"), self.t("dataset")), (value_fit_cost(fit.steps, fit.width),)))
+        return stages
+
+    def value_seeds(self) -> list[int]:
+        """The pre-training seeds of the track's models: each has its own fit of ``V`` (:func:`.tracks.value_stage`)."""
+        return sorted({m.seed for m in self.models})
 
     def _run_labels(self, cfg: ValueLabelsConfig, costs: tuple[float, ...], d: Path, deps: dict[str, Path]
                     ) -> dict[str, Any]:
@@ -77,11 +84,11 @@ class PlaceStages:
         self.ctx.run_all(self.t("value-labels"), jobs, "value labels job")
         return {"parts": [p.name for p in parts], "counts": list(cfg.counts), "halls": cfg.halls, "poses": cfg.poses}
 
-    def _run_fit(self, cfg: ValueFitConfig, d: Path, deps: dict[str, Path]) -> dict[str, Any]:
+    def _run_fit(self, seed: int, cfg: ValueFitConfig, d: Path, deps: dict[str, Path]) -> dict[str, Any]:
         # the labels stage's parts, and the poses the reference planner valued in the demonstrations' halls
         parts = sorted((deps[self.t("value-labels")] / "parts").glob("*.npz"))
         parts += sorted((deps[self.t("dataset")] / "labels").glob("*.npz"))
-        return self.ctx.run_one(self.t("value"), value_fit_job, (cfg.to_dict(), [str(p) for p in parts],
+        return self.ctx.run_one(self.t(value_stage(seed)), value_fit_job, (cfg.to_dict(), [str(p) for p in parts],
                                                                  str(d / "value")),
                                 d / "job.log", value_fit_cost(cfg.steps, cfg.width), reads=tuple(parts),
                                 writes=(d / "value",))
@@ -100,12 +107,12 @@ class PlaceStages:
                 cfg = self.places_config("<goal>", "<value>", w)
                 stages.append(Stage(self.t(places_stage(w.name, m.seed)), cfg.to_dict(),
                                     partial(self._run_places, w, m.stage, m.seed),
-                                    (self.t(m.stage), self.t("value")),
+                                    (self.t(m.stage), self.t(value_stage(m.seed))),
                                     (finetune_cost(cfg, self.horizon, self.control, self.model),)))
         return stages
 
     def _run_places(self, where: Site, model_stage: str, seed: int, d: Path, deps: dict[str, Path]) -> dict[str, Any]:
-        cfg = self.places_config(deps[self.t(model_stage)] / "model", deps[self.t("value")] / "value", where)
+        cfg = self.places_config(deps[self.t(model_stage)] / "model", deps[self.t(value_stage(seed))] / "value", where)
         name = self.t(places_stage(where.name, seed))
         return self.ctx.run_one(name, finetune_job, (cfg.to_dict(), str(d / "model"), self.ctx.device),
                                 d / "job.log", finetune_cost(cfg, self.horizon, self.control, self.model),

@@ -192,14 +192,16 @@ def _learned_rows(track: Track, site: Site, sources: list[tuple[str, float]], di
         rows.append((Row("dt-finetuned", "fine-tuned DT", DTModel.at(dirs[finetune_stage(site.name)] / "model")),
                      True))
     seeded = len({m.seed for m in models}) > 1
-    value = LearnedValue.at(dirs["value"] / "value") if "value" in dirs else None
+    # one learned value per pre-training seed, so that the seeds are independent units (each its own fit of V)
+    values = {s: LearnedValue.at(dirs[value_stage(s)] / "value")
+              for s in sorted({m.seed for m in models}) if value_stage(s) in dirs}
     if train and site.devices != train[0].devices:  # a flat encoder's weights read its training halls' count only
         models = [m for m in models if dict(m.model).get("state_encoder") != "flat"]
     # the headline controller is told the deployed place (V proposes, R disposes: its places valued by R and
-    # refined, staying always a candidate, the oracle's margin; docs/places.md)
-    deployed = dataclasses.replace(value, deployed=True) if value is not None else None
+    # refined, staying always a candidate, the oracle's margin; docs/places.md), by its own seed's V
+    deployed = {s: dataclasses.replace(v, deployed=True) for s, v in values.items()}
     for m in models:
-        goal = {"goal_from": deployed} if m.row in ("dt-goal", "dt-goal-mlp") else {}
+        goal = {"goal_from": deployed[m.seed]} if m.row in ("dt-goal", "dt-goal-mlp") else {}
         rows.append((Row(m.row, m.label, DTModel.at(dirs[m.stage] / "model"), seed=m.seed if seeded else None,
                          training_halls=m.halls, **goal), not m.ablation))
     for m in models:  # fine-tuned by trying places in this hall: it keeps the place it chose
@@ -207,11 +209,12 @@ def _learned_rows(track: Track, site: Site, sources: list[tuple[str, float]], di
         if m.row == "dt-goal" and stage in dirs:
             rows.append((Row("dt-goal-finetuned", "goal-conditioned DT, fine-tuned by trying places",
                              DTModel.at(dirs[stage] / "model"), seed=m.seed if seeded else None), True))
-    if value is not None:
+    for s, value in values.items():
+        seed = s if seeded else None
         rows += [(Row("plan-learned", "learned planner's place (V's argmax), flown by the oracle's controller",
-                      value), False),
+                      value, seed=seed), False),
                  (Row("plan-deployed", "the deployed place (V proposes, R disposes), flown by the oracle's "
-                      "controller", deployed), False)]
+                      "controller", deployed[s], seed=seed), False)]
     dts = [DTModel.at(dirs[m.stage] / "model") for m in models if m.row == "dt-zero-shot"]
     if len(dts) > 1:
         rows.append((Row("dt-ensemble", f"zero-shot DT, ensemble of the {len(dts)} seeds' models (mean action)",
@@ -238,6 +241,12 @@ def evaluation_stage(site: str) -> str:
 def finetune_stage(site: str) -> str:
     """The stage that fine-tunes the DT in ``site`` by the paper's Algorithm 1 (a track's prefix in front)."""
     return f"finetune-{site}"
+
+
+def value_stage(seed: int) -> str:
+    """The stage that fits the learned value of a pose of pre-training seed ``seed`` (its fit's seed
+    the study's plus ``seed``): the places that seed's goal-conditioned DT is told (docs/places.md)."""
+    return "value" + (f"-s{seed}" if seed else "")
 
 
 def places_stage(site: str, seed: int) -> str:

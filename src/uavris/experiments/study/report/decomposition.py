@@ -94,8 +94,9 @@ def decomposition_section(results: dict[str, dict[str, Any]], labels: dict[str, 
 
 
 def value_section(results: dict[str, dict[str, Any]], labels: dict[str, str]) -> list[str]:
-    """The learned value's accuracy in the unseen halls (docs/places.md), for every row that records
-    it (:func:`uavris.experiments.study.workers.value_accuracy`): the rank correlation of ``V``
+    """The learned value's accuracy in the unseen halls (docs/places.md), a line per pre-training
+    seed's fit, for every row that records it
+    (:func:`uavris.experiments.study.workers.value_accuracy`): the rank correlation of ``V``
     with ``R`` over the poses the oracle valued, and ``R`` at ``V``'s argmax against ``R`` at the
     oracle's target (both level, on the same fresh draws), mean and worst hall."""
     layouts = list(results)
@@ -109,7 +110,9 @@ def value_section(results: dict[str, dict[str, Any]], labels: dict[str, str]) ->
         rho = [float(np.nan if (r := results[lay][k]["value_rank_correlation"]) is None else r) for lay in layouts]
         share = [float(results[lay][k]["value_target_rate_level"]) / float(results[lay][ORACLE]["plan_rate_level"])
                  for lay in layouts]
-        rows.append((labels[k], f"{np.mean(rho):.3f}", f"{np.min(rho):.3f}", pct(float(np.mean(share))),
+        facts = results[layouts[0]][k]  # a seed's own fit of V is a line of its own
+        label = labels[facts["variant"]] + (f", seed {facts['seed']}" if facts.get("seed") else "")
+        rows.append((label, f"{np.mean(rho):.3f}", f"{np.min(rho):.3f}", pct(float(np.mean(share))),
                      pct(float(np.min(share)))))
     return ["", "### The learned value of a pose in the unseen halls", "",
             "Rank correlation (Spearman) of V with R over the level poses the oracle valued in each hall; R at V's "

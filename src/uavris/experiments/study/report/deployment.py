@@ -36,7 +36,7 @@ PLACE_TARGETS: tuple[tuple[str, float, float | None, str], ...] = (
     ("plan-deployed", 0.99, None, "the deployed place (V proposes, R disposes), flown by the oracle's controller"),
     ("dt-goal-finetuned-safe", 0.985, 0.95, "the goal-conditioned DT fine-tuned by trying places"))
 COUNT_TARGET = 0.99  # at every device count, the zero-shot place row (docs/places.md)
-# the rows whose place the learned value V chooses (one fit for every pre-training seed)
+# the rows whose place the learned value V chooses (a fit of V per pre-training seed)
 VALUE_ROWS = ("plan-learned", "plan-deployed", "dt-goal", "dt-goal-safe", "dt-goal-finetuned", "dt-goal-finetuned-safe")
 # The transferred policies of a hall, summarised by the report: the nearest deployment's, their mean, their best.
 NEAREST, MEAN_TRANSFER, BEST_TRANSFER = "transfer-nearest", "transfer-mean", "transfer-best"
@@ -202,9 +202,9 @@ def deployment_section(scores: dict[str, dict[str, float]], labels: dict[str, st
                       if i in first[k] else MISSING for i in range(n_seeds)))
             for k, label in seeded])
     if any(k in VALUE_ROWS for k, _ in rows):
-        lines += ["", "The learned value V that chooses the places of the rows told a place (the learned planner's, "
-                  "the deployed one) is one fit, shared by every pre-training seed: the intervals over halls "
-                  "hold it fixed and leave out how another fit of V would move those rows."]
+        lines += ["", "Each pre-training seed has its own fit of the learned value V, which chooses the places of "
+                  "that seed's rows told a place (the learned planner's, the deployed one): a row's mean over its "
+                  "seeds averages over the fits of V as over the models."]
     lines += ["", "Per layout (bps/Hz; in brackets the fraction of the oracle):", ""]
     lines += markdown_table(("layout", *(label for _, label in rows)), [
         (lay, *(f"{scores[lay][k]:.2f} ({scores[lay][k] / scores[lay][ORACLE]:.0%})" for k, _ in rows))
