@@ -238,6 +238,21 @@ def test_the_report_averages_seeds_and_states_the_claims(deployment_run):
     assert row.split("|")[2].strip() == f"{np.mean(rho1):.3f}"
 
 
+def test_plan_learned_from_a_study_without_its_value_is_one_line(tmp_path, capsys):
+    """`uavris plan HALL --learned OUT` reads the study's seed 0's V; a study without one says so in a line."""
+    from uavris.cli import main
+    from uavris.io import write_yaml
+
+    for track, says in (("paper", "learns no value of a pose"), ("deployment", "no finished deploy-value stage")):
+        out = tmp_path / track
+        write_yaml(out / "study.yaml", dataclasses.replace(RC, track=track).to_dict())
+        capsys.readouterr()
+        assert main(["plan", "layout-unseen-0", "--learned", str(out), "--system.observe-devices",
+                     "--no-progress"]) == 2
+        err = capsys.readouterr().err.strip()
+        assert says in err and "\n" not in err, err
+
+
 def test_each_pre_training_seed_has_its_own_fit_of_the_learned_value(deployment_run):
     """One V per pre-training seed: two fits on the same labels with different seeds, each stage
     read by the evaluations, whose rows told a place by seed 1 are told it by seed 1's V."""
@@ -499,10 +514,12 @@ def test_the_studys_controller_leaves_the_study_in_one_directory(deployment_run,
     [value] = [p for p in (out / "stages").glob("deploy-value-*/value")
                if not p.parent.name.startswith("deploy-value-s")]  # seed 0's
     for name, flags in (("p-ctl", ["--controller", str(ctl)]),
-                        ("p-v", ["--learned", str(value), "--deployed"])):
+                        ("p-v", ["--learned", str(value), "--deployed"]),
+                        ("p-study", ["--learned", str(out), "--deployed"])):  # a study: its seed 0's V
         assert main(["plan", "layout-unseen-0", *flags, "--system.observe-devices", "--out", str(tmp_path / name),
                      "--no-progress"]) == 0
-    assert read_json(tmp_path / "p-ctl.json")["target"] == read_json(tmp_path / "p-v.json")["target"]
+    assert read_json(tmp_path / "p-ctl.json")["target"] == read_json(tmp_path / "p-v.json")["target"] \
+        == read_json(tmp_path / "p-study.json")["target"]
     [stage] = [p for p in (out / "stages").glob("deploy-evaluate-layout-unseen-0-*") if "-k3-" not in p.name]
     [transfer] = [k for k, v in read_json(stage / "stage.json")["result"].items() if v["kind"] == "transfer"]
     capsys.readouterr()

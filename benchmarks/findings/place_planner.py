@@ -9,7 +9,7 @@ each ``K`` of ``--devices`` (default 4 and 8), from each hall's start:
 - the exact planner, :func:`uavris.agents.oracle.plan_target` (what ``uavris plan`` runs and
   the oracle flies to), every plan from scratch;
 - the learned planner, :func:`uavris.agents.place.planner.learned_plan` with a learned value
-  ``V`` (``--value``: a study's ``stages/deploy-value-*/value`` folder): amortised (V's
+  ``V`` (``--value``: a study's ``stages/deploy-value-KEY/value`` folder, seed 0's): amortised (V's
   argmax alone, no ``R`` computed) and semi-amortised (its top ``--top-k`` places and the
   start valued by ``R``, default 3);
 - the deployed place, :func:`uavris.agents.place.planner.decided_plan`: V proposes, R disposes.
@@ -22,7 +22,7 @@ Student-t 95% CI over halls, and the worst hall. Time: wall seconds per hall, an
 planner's time over each planner's in the same run. Targets (issue 67): the deployed place
 >= 99% of the exact plan's value, its decision <= 10% of its time.
 
-Run: ``python benchmarks/findings/place_planner.py --value runs/quick/stages/deploy-value-*/value``.
+Run: ``python benchmarks/findings/place_planner.py --value runs/quick/stages/deploy-value-[0-9a-f]*/value``.
 """
 
 from __future__ import annotations
@@ -49,7 +49,7 @@ from _machine import cpu_model, pin_to_one_core, table  # noqa: E402
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--value", required=True, help="a learned value (stages/deploy-value-*/value)")
+    parser.add_argument("--value", required=True, help="a learned value (stages/deploy-value-KEY/value)")
     parser.add_argument("--devices", type=int, nargs="+", default=[4, 8], help="device counts (default: 4 8)")
     parser.add_argument("--halls", type=int, default=8, help="unseen halls per device count (default: 8)")
     parser.add_argument("--top-k", type=int, default=3, help="places the semi-amortised planner values by R")

@@ -30,9 +30,9 @@ class PlanArgs:
     grid_step: float = 2.0
     """spacing of the rate map's grid, m (1.0 takes about four times as long)"""
     learned: Unset[Path] = None
-    """a learned value of a pose: a study's OUT/stages/deploy-value-KEY/value folder (made by `uavris reproduce
-    --track deployment`), or `pretrained` (the one shipped, with its deployed place): plan with the argmax of V
-    instead of the exact planner, and map V (milliseconds)"""
+    """a learned value of a pose: a study's output folder (made by `uavris reproduce`; its pre-training seed 0's V),
+    a value folder, or `pretrained` (the one shipped, with its deployed place): plan with the argmax of V instead of
+    the exact planner, and map V (milliseconds)"""
     top_k: int = 0
     """with --learned: value its best K places (1-5) and the start by the exact R (semi-amortised; seconds)"""
     deployed: bool = False
@@ -72,8 +72,12 @@ def plan_command(args: list[str]) -> None:
     for given in (a.learned, a.controller):  # `pretrained`: the shipped controller, its learned value and planner
         if given is not None and (shipped := shipped_controller(given)) is not None:
             a, named = replace(a, learned=None, controller=shipped), str(given)
-    if a.controller is not None:
+    if a.learned is not None:
+        from uavris.experiments.study.finished import STUDY_FILE, Study
 
+        if (a.learned / STUDY_FILE).is_file():  # a study: its pre-training seed 0's learned value
+            a = replace(a, learned=Study.open(a.learned).learned_value())
+    if a.controller is not None:
         told = read_controller(a.controller).goal_from
         if not isinstance(told, LearnedValue):
             raise UsageError(f"--controller {a.controller}: its row is told no learned place (no learned value)")

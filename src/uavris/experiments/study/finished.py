@@ -20,7 +20,14 @@ from uavris.experiments.engine.scheduling import StudyContext
 from uavris.experiments.engine.stages import Pipeline
 from uavris.experiments.study.config import ReproduceConfig
 from uavris.experiments.study.pipeline import TrackStages, build_pipeline, track_stages
-from uavris.experiments.study.tracks import TRACK_SPECS, Track, evaluation_stage, finetune_stage, places_stage
+from uavris.experiments.study.tracks import (
+    TRACK_SPECS,
+    Track,
+    evaluation_stage,
+    finetune_stage,
+    places_stage,
+    value_stage,
+)
 from uavris.experiments.study.workers import first_episode_slots
 from uavris.experiments.tools.targets import Row
 from uavris.io import read_json, read_yaml
@@ -90,6 +97,18 @@ class Study:
     def value_labels(self, track: Track) -> dict[str, Any] | None:
         """What the learned value's labels stage recorded (halls, counts, poses), where it finished."""
         return self.result(track.stage("value-labels"))
+
+    def learned_value(self, seed: int = 0) -> Path:
+        """The learned value of a pose of pre-training seed ``seed`` (its ``value`` folder) of the
+        study's track that chooses places; one line where the study has none or it did not finish."""
+        track = next((t for t in self.config.tracks if t.places), None)
+        if track is None:
+            raise UavrisError(f"the study in {self.out} learns no value of a pose (no track that chooses places)")
+        name = track.stage(value_stage(seed))
+        d = self.done(name)
+        if d is None:
+            raise UavrisError(f"the study in {self.out} has no finished {name} stage (seed {seed}'s learned value)")
+        return d / "value"
 
     def places_tried(self, track: Track, site: str, seed: int) -> tuple[Path, dict[str, Any]] | None:
         """Seed ``seed``'s fine-tuning by trying places in ``site`` (its directory and result), where it finished."""
