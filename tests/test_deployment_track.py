@@ -228,14 +228,16 @@ def test_the_report_averages_seeds_and_states_the_claims(deployment_run):
     share = [r["plan-learned"]["value_target_rate_level"] / r["oracle"]["plan_rate_level"] for r in results]
     assert all(-1.0 <= x <= 1.0 for x in rho)
     value = section[section.index("### The learned value of a pose"):]
-    row = next(line for line in value.splitlines() if line.startswith("| learned planner's place"))
+    row = next(line for line in value.splitlines() if line.startswith("| V of pre-training seed 0 |"))
     cells = [c.strip() for c in row.split("|")[2:-1]]
     assert cells == [f"{np.mean(rho):.3f}", f"{np.min(rho):.3f}", f"{np.mean(share):.1%}", f"{np.min(share):.1%}"]
-    # the second seed's own fit of V has a line of its own, from its own row's records
+    # the second seed's own fit of V has a line of its own, from its own row's records; a fit's one line
     rho1 = [r["plan-learned@s1"]["value_rank_correlation"] for r in results]
-    row = next(line for line in value.splitlines() if line.startswith("| learned planner's place (V's argmax), "
-                                                                       "flown by the oracle's controller, seed 1 |"))
+    row = next(line for line in value.splitlines() if line.startswith("| V of pre-training seed 1 |"))
     assert row.split("|")[2].strip() == f"{np.mean(rho1):.3f}"
+    table = value[value.index("| learned value |"):].split("\n\n")[0]  # this group's table
+    assert [line.split("|")[1].strip() for line in table.splitlines() if line.startswith("| V")] == [
+        "V of pre-training seed 0", "V of pre-training seed 1"]
 
 
 def test_plan_learned_from_a_study_without_its_value_is_one_line(tmp_path, capsys):

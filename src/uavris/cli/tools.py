@@ -47,6 +47,33 @@ class PlanArgs:
     """the system (the layout sets its devices and, if it has one, its room)"""
 
 
+def _learned_value(a: PlanArgs) -> tuple[PlanArgs, Path | str | None]:
+    """``a`` with ``--learned`` the value folder the user named (a study's seed 0's, the shipped
+    controller's, a controller's) and ``--top-k`` / ``--deployed`` its row's; and the controller
+    as the user typed it, for the line that tells them how to fly it."""
+    from dataclasses import replace
+
+    from uavris.experiments.tools.targets import LearnedValue, read_controller, shipped_controller
+
+    named: Path | str | None = a.controller
+    if a.learned is not None and a.controller is not None:
+        raise UsageError("--controller and --learned both name a learned value; pass one of them")
+    for given in (a.learned, a.controller):  # `pretrained`: the shipped controller, its learned value and planner
+        if given is not None and (shipped := shipped_controller(given)) is not None:
+            a, named = replace(a, learned=None, controller=shipped), str(given)
+    if a.learned is not None:  # a learned value needs the train extra (torch), as the study's pipeline does
+        from uavris.experiments.study.finished import STUDY_FILE, Study
+
+        if (a.learned / STUDY_FILE).is_file():  # a study: its pre-training seed 0's V
+            a = replace(a, learned=Study.open(a.learned).learned_value())
+    if a.controller is not None:
+        told = read_controller(a.controller).goal_from
+        if not isinstance(told, LearnedValue):
+            raise UsageError(f"--controller {a.controller}: its row is told no learned place (no learned value)")
+        a = replace(a, learned=told.path, top_k=told.top_k, deployed=told.deployed)
+    return a, named
+
+
 def plan_command(args: list[str]) -> None:
     """Where should the UAV go in this hall? The planning oracle's plan and a map of the expected sum rate.
 
@@ -62,26 +89,7 @@ def plan_command(args: list[str]) -> None:
     positional = ["--layout", args[0], *args[1:]] if args and not args[0].startswith("-") else args
     check_hall_flags(positional, SystemConfig(), "uavris plan")  # before the flags are read into the paper's system
     a = parse(PlanArgs, args, "uavris plan", plan_command.__doc__ or "")
-    named = a.controller  # what the user typed, for the line that tells them how to fly it
-    if a.learned is not None and a.controller is not None:
-        raise UsageError("--controller and --learned both name a learned value; pass one of them")
-    from dataclasses import replace
-
-    from uavris.experiments.tools.targets import LearnedValue, read_controller, shipped_controller
-
-    for given in (a.learned, a.controller):  # `pretrained`: the shipped controller, its learned value and planner
-        if given is not None and (shipped := shipped_controller(given)) is not None:
-            a, named = replace(a, learned=None, controller=shipped), str(given)
-    if a.learned is not None:
-        from uavris.experiments.study.finished import STUDY_FILE, Study
-
-        if (a.learned / STUDY_FILE).is_file():  # a study: its pre-training seed 0's learned value
-            a = replace(a, learned=Study.open(a.learned).learned_value())
-    if a.controller is not None:
-        told = read_controller(a.controller).goal_from
-        if not isinstance(told, LearnedValue):
-            raise UsageError(f"--controller {a.controller}: its row is told no learned place (no learned value)")
-        a = replace(a, learned=told.path, top_k=told.top_k, deployed=told.deployed)
+    a, named = _learned_value(a)
     if a.layout is None:
         layout = PAPER_LAYOUT if a.system.users == PAPER_LAYOUT.users else Layout(
             "custom", a.system.users, default_start(a.system))

@@ -209,7 +209,7 @@ class _Report:
         lines, claims = decomposition_section(results, labels, where)
         self.add(*lines)
         self.claims += claims
-        self.add(*value_section(results, labels))
+        self.add(*value_section(results))
 
     # ------------------------------------------------------------------ both tracks side by side
     def side_by_side(self, tracks: Sequence[Track], results: dict[str, dict[str, dict[str, Any]]]) -> None:

@@ -93,30 +93,33 @@ def decomposition_section(results: dict[str, dict[str, Any]], labels: dict[str, 
     return lines, [claim]
 
 
-def value_section(results: dict[str, dict[str, Any]], labels: dict[str, str]) -> list[str]:
-    """The learned value's accuracy in the unseen halls (docs/places.md), a line per pre-training
-    seed's fit, for every row that records it
-    (:func:`uavris.experiments.study.workers.value_accuracy`): the rank correlation of ``V``
-    with ``R`` over the poses the oracle valued, and ``R`` at ``V``'s argmax against ``R`` at the
-    oracle's target (both level, on the same fresh draws), mean and worst hall."""
+def value_section(results: dict[str, dict[str, Any]]) -> list[str]:
+    """The learned value's accuracy in the unseen halls (docs/places.md), a line per fit of ``V`` (one
+    per pre-training seed), from the rows that record it
+    (:func:`uavris.experiments.study.workers.value_accuracy`; a fit's rows record the same): the
+    rank correlation of ``V`` with ``R`` over the poses the oracle valued, and ``R`` at ``V``'s
+    argmax against ``R`` at the oracle's target (both level, on the same fresh draws), mean and
+    worst hall."""
     layouts = list(results)
     keys = [k for k in (next(iter(results.values())) if layouts else {})
             if all("value_rank_correlation" in results[lay].get(k, {}) for lay in layouts)]
-    if not keys:
+    by_seed: dict[int, str] = {}
+    for k in keys:
+        by_seed.setdefault(int(results[layouts[0]][k].get("seed") or 0), k)
+    if not by_seed:
         return []
     rows = []
-    for k in keys:
+    for seed, k in sorted(by_seed.items()):
         # undefined over fewer than three poses: NaN, stored as None in a stage's record
         rho = [float(np.nan if (r := results[lay][k]["value_rank_correlation"]) is None else r) for lay in layouts]
         share = [float(results[lay][k]["value_target_rate_level"]) / float(results[lay][ORACLE]["plan_rate_level"])
                  for lay in layouts]
-        facts = results[layouts[0]][k]  # a seed's own fit of V is a line of its own
-        label = labels[facts["variant"]] + (f", seed {facts['seed']}" if facts.get("seed") else "")
-        rows.append((label, f"{np.mean(rho):.3f}", f"{np.min(rho):.3f}", pct(float(np.mean(share))),
-                     pct(float(np.min(share)))))
+        rows.append((f"V of pre-training seed {seed}" if len(by_seed) > 1 else "V", f"{np.mean(rho):.3f}",
+                     f"{np.min(rho):.3f}", pct(float(np.mean(share))), pct(float(np.min(share)))))
     return ["", "### The learned value of a pose in the unseen halls", "",
             "Rank correlation (Spearman) of V with R over the level poses the oracle valued in each hall; R at V's "
-            "argmax as a fraction of R at the oracle's target (both level, on the same fresh draws).", "",
+            "argmax as a fraction of R at the oracle's target (both level, on the same fresh draws); a line per fit "
+            "of V.", "",
             *markdown_table(("learned value", "rank correlation, mean", "worst hall",
                              "R at its argmax / oracle's, mean", "worst hall"), rows, "lrrrr")]
 
