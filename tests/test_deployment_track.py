@@ -25,9 +25,9 @@ from uavris.experiments.study.config import ReproduceConfig
 from uavris.experiments.study.pipeline import build_pipeline
 from uavris.experiments.study.report.deployment import ZERO_SHOT_TARGET
 from uavris.experiments.study.reproduce import reproduce
+from uavris.experiments.study.stage_names import places_stage
 from uavris.experiments.study.tracks import (
     TRACK_SPECS,
-    places_stage,
     track_rows,
     trained_models,
     transfer_sources,

@@ -71,10 +71,13 @@ def _expected_now(run: Path, expert_algo: str | None = None) -> dict[str, float]
     from uavris.experiments.engine.scheduling import StudyContext
     from uavris.experiments.study.finished import Study
     from uavris.experiments.study.pipeline import build_pipeline
+    from uavris.experiments.study.stage_names import COMPARE
 
-    rc = Study.open(run).config
+    study = Study.open(run)
+    rc = study.config
     if rc.expert_algo == "auto":
-        chosen = [json.loads(f.read_text())["expert"] for f in sorted((run / "stages").glob("compare-*/summary.json"))]
+        compare = study.done(COMPARE)
+        chosen = [json.loads((compare / "summary.json").read_text())["expert"]] if compare is not None else []
         if expert_algo is None and len(set(chosen)) != 1:
             raise SystemExit(f"{run}: no finished comparison says which algorithm the experts are; pass --expert-algo")
         rc = dataclasses.replace(rc, expert_algo=expert_algo or chosen[0])

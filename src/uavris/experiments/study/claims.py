@@ -37,6 +37,7 @@ from uavris.experiments.study.claims_tracks import LEVEL, WITHIN, judge_scenario
 from uavris.experiments.study.config import AUTO
 from uavris.experiments.study.finished import Study
 from uavris.experiments.study.judgement import NOT_TESTED, Judgement, judgement
+from uavris.experiments.study.stage_names import COMPARE, value_stage
 from uavris.experiments.study.stamp import make_stamp, stamped
 from uavris.experiments.study.tracks import TRACK_SPECS, TRACKS
 from uavris.float_paths import warn_if_unpinned
@@ -91,7 +92,7 @@ def judge_studies(studies: Sequence[Study], budgets: Sequence[tuple[Path, int]] 
     ev: dict[str, Any] = evidence if evidence is not None else {}
     ev.update({"comparison": [], "scenario": {}, "deployment": {}})
     out: list[Judgement] = []
-    compare = next((d for s in studies if (d := s.done("compare"))), None)
+    compare = next((d for s in studies if (d := s.done(COMPARE))), None)
     if any(TRACK_SPECS["paper"] in s.config.tracks for s in studies):
         if compare:
             scores = comparison_scores(compare)
@@ -188,7 +189,7 @@ def rests_on(studies: Sequence[Study]) -> list[str]:
     each device count of a deployment study (:func:`dt_against_hovering`)."""
     lines = []
     for st in studies:
-        if (compare := st.done("compare")) is not None:
+        if (compare := st.done(COMPARE)) is not None:
             if st.config.expert_algo != AUTO:
                 chosen, why = st.config.expert_algo, "chosen by --expert-algo"
             else:
@@ -208,7 +209,7 @@ def rests_on(studies: Sequence[Study]) -> list[str]:
         "safety layer and the safety distance; the paper's DT observes neither.",
     ]
     deployment = next((st for st in studies if TRACK_SPECS["deployment"] in st.config.tracks), None)
-    if deployment is not None and deployment.done("deploy-value") is not None:
+    if deployment is not None and deployment.done(TRACK_SPECS["deployment"].stage(value_stage(0))) is not None:
         lines.append("- The goal-conditioned DT's cells read a fit of the learned value of a pose per pre-training "
                      "seed (`deploy-value`, `deploy-value-sK`): a seed is its DT and its V together.")
     for count, diff in dt_against_hovering(deployment) if deployment is not None else []:

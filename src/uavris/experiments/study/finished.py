@@ -20,14 +20,17 @@ from uavris.experiments.engine.scheduling import StudyContext
 from uavris.experiments.engine.stages import Pipeline
 from uavris.experiments.study.config import ReproduceConfig
 from uavris.experiments.study.pipeline import TrackStages, build_pipeline, track_stages
-from uavris.experiments.study.tracks import (
-    TRACK_SPECS,
-    Track,
+from uavris.experiments.study.stage_names import (
+    DATASET,
+    EXPERTS_TRAIN,
+    EXPERTS_UNSEEN,
+    VALUE_LABELS,
     evaluation_stage,
     finetune_stage,
     places_stage,
     value_stage,
 )
+from uavris.experiments.study.tracks import TRACK_SPECS, Track
 from uavris.experiments.study.workers import first_episode_slots
 from uavris.experiments.tools.targets import Row
 from uavris.io import read_json, read_yaml
@@ -84,7 +87,7 @@ class Study:
     def experts(self, track: Track, unseen: bool = False) -> Path | None:
         """The directory of ``track``'s experts of its training (or ``unseen``) deployments, where
         they finished: one run each under ``runs/SITE``."""
-        return self.done(track.stage("experts-unseen" if unseen else "experts-train"))
+        return self.done(track.stage(EXPERTS_UNSEEN if unseen else EXPERTS_TRAIN))
 
     def finetuned(self, track: Track, site: str) -> Path | None:
         """The directory of ``track``'s fine-tuning of the DT in ``site`` (its ``model``), where it finished."""
@@ -92,11 +95,11 @@ class Study:
 
     def demonstrations(self, track: Track) -> dict[str, Any] | None:
         """What ``track``'s dataset stage recorded (its episodes, ``slots``, poses valued), where it finished."""
-        return self.result(track.stage("dataset"))
+        return self.result(track.stage(DATASET))
 
     def value_labels(self, track: Track) -> dict[str, Any] | None:
         """What the learned value's labels stage recorded (halls, counts, poses), where it finished."""
-        return self.result(track.stage("value-labels"))
+        return self.result(track.stage(VALUE_LABELS))
 
     def learned_value(self, seed: int = 0) -> Path:
         """The learned value of a pose of pre-training seed ``seed`` (its ``value`` folder) of the

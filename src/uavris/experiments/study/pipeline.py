@@ -62,18 +62,27 @@ from uavris.experiments.engine.scheduling import StudyContext
 from uavris.experiments.engine.stages import Pipeline, Stage
 from uavris.experiments.study.config import AUTO, ReproduceConfig
 from uavris.experiments.study.places import PlaceStages
+from uavris.experiments.study.stage_names import (
+    COMPARE,
+    DATASET,
+    DATASET_BEST,
+    DATASET_MIXED,
+    EXPERTS_TRAIN,
+    EXPERTS_UNSEEN,
+    PRETRAIN,
+    evaluation_stage,
+    finetune_stage,
+    places_stage,
+    value_stage,
+)
 from uavris.experiments.study.tracks import (
     REFERENCE_ROWS,
     Track,
     TrainedModel,
-    evaluation_stage,
-    finetune_stage,
-    places_stage,
     strong_expert_config,
     track_rows,
     trained_models,
     transfer_sources,
-    value_stage,
     zero_shot_only,
 )
 from uavris.experiments.study.workers import (
@@ -132,7 +141,7 @@ def build_pipeline(rc: ReproduceConfig, out: Path, ctx: StudyContext) -> Pipelin
     then the stages of each registered :class:`StageKind`."""
     stages = []
     if any(t.name == "paper" for t in rc.tracks):
-        stages.append(dataclasses.replace(_compare_stage(rc, ctx), group="compare"))
+        stages.append(dataclasses.replace(_compare_stage(rc, ctx), group=COMPARE))
     tracks = track_stages(rc, ctx)
     for part in ("experts", "dt"):
         for t in tracks:
@@ -152,7 +161,7 @@ def _compare_stage(rc: ReproduceConfig, ctx: StudyContext) -> Stage:
     costs = tuple(train_cost(c) for c in comparison_configs(rc.preset, rc.compare_seeds, ALGORITHMS, "fig2",
                                                             rc.eval_episodes, rc.system,
                                                             steps=rc.compare_steps).values())
-    return Stage("compare", {"preset": rc.preset, "seeds": rc.compare_seeds, "steps": rc.compare_steps,
+    return Stage(COMPARE, {"preset": rc.preset, "seeds": rc.compare_seeds, "steps": rc.compare_steps,
                              "eval_episodes": rc.eval_episodes, "system": rc.system.to_dict()},
                  partial(_run_compare, rc, ctx), costs=costs)
 
@@ -162,7 +171,7 @@ def _run_compare(rc: ReproduceConfig, ctx: StudyContext, d: Path, deps: dict[str
 
     compare_algorithms(preset=rc.preset, seeds=rc.compare_seeds, workers=ctx.workers, out=d,
                        eval_episodes=rc.eval_episodes, progress=False, device=ctx.device, system=rc.system,
-                       submit=lambda jobs: ctx.submit("compare", jobs), steps=rc.compare_steps)
+                       submit=lambda jobs: ctx.submit(COMPARE, jobs), steps=rc.compare_steps)
     return compare_record(read_json(d / "summary.json"))
 
 
@@ -200,8 +209,8 @@ class TrackStages(PlaceStages):
         self.models = trained_models(track, [w.name for w in self.train], rc.scaling,
                                      rc.dt_seeds if track.seeded else 1, rc.ablation)
         # the stages the evaluation reads beside each site's fine-tuning
-        self.inputs = [*(["experts-train"] if not track.demonstrations else []),
-                       *(["experts-unseen"] if track.unseen_experts else []), *(m.stage for m in self.models),
+        self.inputs = [*([EXPERTS_TRAIN] if not track.demonstrations else []),
+                       *([EXPERTS_UNSEEN] if track.unseen_experts else []), *(m.stage for m in self.models),
                        *(value_stage(s) for s in (self.value_seeds() if track.places else []))]
         # the return-conditioned DT's fine-tuning: the paper's; where the track tries places, the ablation's
         self.finetunes_returns = not track.places or rc.ablation
@@ -213,13 +222,13 @@ class TrackStages(PlaceStages):
     def experts(self) -> list[Stage]:
         """Experts of the training (and, where the track has them, the unseen) deployments."""
         stages = []
-        for name, where in (("experts-train", self.train if not self.track.demonstrations else []),
-                            ("experts-unseen", self.unseen if self.track.unseen_experts else [])):
+        for name, where in ((EXPERTS_TRAIN, self.train if not self.track.demonstrations else []),
+                            (EXPERTS_UNSEEN, self.unseen if self.track.unseen_experts else [])):
             if not where:
                 continue
             if self.track.phase_control == "optimizer":  # the strong recipe: imitation of the planning oracle
                 cfgs = {d.name: strong_expert_config(d.name, self.rc.seed, self.rc.preset, self.rc.eval_episodes,
-                                                     d.system, d.start, curve=name == "experts-unseen") for d in where}
+                                                     d.system, d.start, curve=name == EXPERTS_UNSEEN) for d in where}
                 config = {"runs": {s: c.to_dict() for s, c in cfgs.items()}, "format": EXPERT_FORMAT,
                           "oracle": oracle_planner.ORACLE_VERSION}
                 stages.append(Stage(self.t(name), config,
@@ -244,14 +253,14 @@ class TrackStages(PlaceStages):
         config = {"algo": rc.expert_algo, "scenarios": [w.name for w in where], "seed": rc.seed, "preset": rc.preset,
                   "eval_episodes": rc.eval_episodes, "system": rc.system.to_dict(), "format": EXPERT_FORMAT}
         return Stage(name, config, partial(self._run_paper_experts, name, tuple(where)),
-                     ("compare",) if rc.expert_algo == AUTO else (), max(by_algo, key=sum),
+                     (COMPARE,) if rc.expert_algo == AUTO else (), max(by_algo, key=sum),
                      sum(map(sum, by_algo)) / len(by_algo))
 
     def _run_paper_experts(self, stage: str, where: Sequence[Site], d: Path,
                            deps: dict[str, Path]) -> dict[str, Any]:
         algo = self.rc.expert_algo
         if algo == AUTO:
-            algo = read_json(deps["compare"] / "summary.json")["expert"]
+            algo = read_json(deps[COMPARE] / "summary.json")["expert"]
         return self._run_experts(stage, self._expert_configs(algo, where), d, deps)
 
     def _run_experts(self, stage: str, cfgs: dict[str, TrainConfig], d: Path, deps: dict[str, Path]
@@ -278,7 +287,7 @@ class TrackStages(PlaceStages):
         for w in (w for w in self.unseen if not zero_shot_only(w, self.rc.system) and self.finetunes_returns):
             ft = self.finetune_config("<pretrain>", w)
             stages.append(Stage(self.t(finetune_stage(w.name)), ft.to_dict(), partial(self._run_finetune, w),
-                                (self.t("pretrain"),),
+                                (self.t(PRETRAIN),),
                                 (finetune_cost(ft, self.horizon, self.control, self.model),)))
         for w in self.unseen:
             stages.append(self._evaluate_stage(w))
@@ -292,31 +301,31 @@ class TrackStages(PlaceStages):
         if not self.track.demonstrations:
             cost = dataset_cost(len(self.train) * episodes, self.horizon, self.control)
             config = {"trajectories": episodes, "seed": COLLECT_SEED, "format": DATASET_FORMAT_VERSION}
-            return [Stage(t("dataset"), config, partial(self._run_collect, episodes, cost), (t("experts-train"),),
+            return [Stage(t(DATASET), config, partial(self._run_collect, episodes, cost), (t(EXPERTS_TRAIN),),
                           (cost,))]
         system = self.rc.system.replace(observe_devices=True)
         # a track that learns places fits its value to the level poses the teacher's plans valued with R
         oracle = DemonstrationConfig(halls=len(self.train), episodes=episodes, layout_seed=self.rc.layout_seed,
                                      system=system, value_labels=self.track.places)
-        stages = [self._demonstrations_stage("dataset", oracle)]
+        stages = [self._demonstrations_stage(DATASET, oracle)]
         if self.track.places:  # filtered behaviour cloning's data: the best demonstrations by return
             config = {"fraction": BEST_FRACTION, "format": DATASET_FORMAT_VERSION}
-            stages.append(Stage(self.t("dataset-best"), config, partial(self._run_best, oracle), (self.t("dataset"),),
+            stages.append(Stage(self.t(DATASET_BEST), config, partial(self._run_best, oracle), (self.t(DATASET),),
                                 (2.0,)))
         if self.track.ablation and self.rc.ablation:
-            stages.append(self._demonstrations_stage("dataset-mixed", dataclasses.replace(
+            stages.append(self._demonstrations_stage(DATASET_MIXED, dataclasses.replace(
                 oracle, halls=min(self.rc.mixed_layouts, len(self.train)), quality="mixed")))
         return stages
 
     def _run_best(self, cfg: DemonstrationConfig, d: Path, deps: dict[str, Path]) -> dict[str, Any]:
-        source = deps[self.t("dataset")] / "dataset"
-        return self.ctx.run_one(self.t("dataset-best"), best_demonstrations_job,
+        source = deps[self.t(DATASET)] / "dataset"
+        return self.ctx.run_one(self.t(DATASET_BEST), best_demonstrations_job,
                                 (cfg.to_dict(), str(source), BEST_FRACTION, str(d / "dataset")), d / "job.log", 2.0,
                                 reads=(source,), writes=(d / "dataset",))
 
     def _run_collect(self, episodes: int, cost: float, d: Path, deps: dict[str, Path]) -> dict[str, Any]:
-        experts = [deps[self.t("experts-train")] / "runs" / w.name for w in self.train]
-        return self.ctx.run_one(self.t("dataset"), dataset_job, ([str(e) for e in experts], episodes,
+        experts = [deps[self.t(EXPERTS_TRAIN)] / "runs" / w.name for w in self.train]
+        return self.ctx.run_one(self.t(DATASET), dataset_job, ([str(e) for e in experts], episodes,
                                                                  str(d / "dataset")),
                                 d / "job.log", cost, reads=tuple(experts), writes=(d / "dataset",))
 
@@ -365,7 +374,7 @@ class TrackStages(PlaceStages):
         return FinetuneConfig(model=model, scenario=where.name, preset=self.rc.preset, seed=self.rc.seed, **own)
 
     def _run_finetune(self, where: Site, d: Path, deps: dict[str, Path]) -> dict[str, Any]:
-        cfg = self.finetune_config(deps[self.t("pretrain")] / "model", where)
+        cfg = self.finetune_config(deps[self.t(PRETRAIN)] / "model", where)
         return self.ctx.run_one(self.t(finetune_stage(where.name)), finetune_job,
                                 (cfg.to_dict(), str(d / "model"), self.ctx.device), d / "job.log",
                                 finetune_cost(cfg, self.horizon, self.control, self.model),

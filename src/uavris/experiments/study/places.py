@@ -24,7 +24,8 @@ from uavris.experiments.engine.jobs import Job
 from uavris.experiments.engine.scheduling import StudyContext
 from uavris.experiments.engine.stages import Stage
 from uavris.experiments.study.config import ReproduceConfig
-from uavris.experiments.study.tracks import TrainedModel, places_stage, value_stage, zero_shot_only
+from uavris.experiments.study.stage_names import DATASET, VALUE_LABELS, places_stage, value_stage
+from uavris.experiments.study.tracks import TrainedModel, zero_shot_only
 from uavris.experiments.study.workers import finetune_job, value_fit_job, value_labels_job
 from uavris.experiments.training.finetune import FinetuneConfig
 from uavris.experiments.training.values import ValueFitConfig, ValueLabelsConfig
@@ -63,12 +64,12 @@ class PlaceStages:
                                    layout_seed=self.rc.layout_seed, system=self.rc.system.replace(observe_devices=True))
         costs = tuple(value_labels_cost(k, n, labels.poses, labels.tilted) for k, _, n in _chunks(labels))
         # the labels are the planner's screen and rate of poses: a new oracle labels them again
-        stages = [Stage(self.t("value-labels"), {**labels.to_dict(), "oracle": oracle_planner.ORACLE_VERSION},
+        stages = [Stage(self.t(VALUE_LABELS), {**labels.to_dict(), "oracle": oracle_planner.ORACLE_VERSION},
                         partial(self._run_labels, labels, costs), (), costs)]
         for seed in self.value_seeds():  # one fit per pre-training seed, on the same labels
             fit = ValueFitConfig(preset=self.rc.preset, seed=self.rc.seed + seed)
             stages.append(Stage(self.t(value_stage(seed)), fit.to_dict(), partial(self._run_fit, seed, fit),
-                                (self.t("value-labels"), self.t("dataset")), (value_fit_cost(fit.steps, fit.width),)))
+                                (self.t(VALUE_LABELS), self.t(DATASET)), (value_fit_cost(fit.steps, fit.width),)))
         return stages
 
     def value_seeds(self) -> list[int]:
@@ -81,13 +82,13 @@ class PlaceStages:
         jobs = [Job(part.stem, value_labels_job, (cfg.to_dict(), k, first, n, str(part)),
                     d / "logs" / f"{part.stem}.log", cost, writes=(part,))
                 for (k, first, n), part, cost in zip(_chunks(cfg), parts, costs) if not part.exists()]
-        self.ctx.run_all(self.t("value-labels"), jobs, "value labels job")
+        self.ctx.run_all(self.t(VALUE_LABELS), jobs, "value labels job")
         return {"parts": [p.name for p in parts], "counts": list(cfg.counts), "halls": cfg.halls, "poses": cfg.poses}
 
     def _run_fit(self, seed: int, cfg: ValueFitConfig, d: Path, deps: dict[str, Path]) -> dict[str, Any]:
         # the labels stage's parts, and the poses the reference planner valued in the demonstrations' halls
-        parts = sorted((deps[self.t("value-labels")] / "parts").glob("*.npz"))
-        parts += sorted((deps[self.t("dataset")] / "labels").glob("*.npz"))
+        parts = sorted((deps[self.t(VALUE_LABELS)] / "parts").glob("*.npz"))
+        parts += sorted((deps[self.t(DATASET)] / "labels").glob("*.npz"))
         return self.ctx.run_one(self.t(value_stage(seed)), value_fit_job, (cfg.to_dict(), [str(p) for p in parts],
                                                                  str(d / "value")),
                                 d / "job.log", value_fit_cost(cfg.steps, cfg.width), reads=tuple(parts),

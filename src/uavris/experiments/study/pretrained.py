@@ -21,11 +21,13 @@ import numpy as np
 from uavris.errors import UavrisError
 from uavris.experiments.study.config import ReproduceConfig
 from uavris.experiments.study.finished import Study
+from uavris.experiments.study.stage_names import DATASET, VALUE_LABELS, value_stage
 from uavris.experiments.study.tracks import TRACK_SPECS
 from uavris.io import atomic_write_text, read_json, replace_folder, write_json
 
 ROW = "dt-goal-safe"  # the deployment track's controller: the goal-conditioned DT told the deployed place
-STAGES = ("deploy-dataset", "deploy-value-labels", "deploy-value", "deploy-goal")  # what the shipped files come from
+# what the shipped files come from: the demonstrations, V's labels, seed 0's V and goal-conditioned DT
+STAGES = tuple(TRACK_SPECS["deployment"].stage(kind) for kind in (DATASET, VALUE_LABELS, value_stage(0), "goal"))
 CARD = "card.json"
 
 

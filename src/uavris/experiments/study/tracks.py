@@ -6,8 +6,8 @@ Lives here: :class:`Track` and :data:`TRACK_SPECS`; where a track trains and is 
 the models a track pre-trains (:class:`TrainedModel`, :func:`trained_models`) and the rows
 of its evaluation (:func:`track_rows`, each a :class:`uavris.experiments.tools.targets.Row`):
 adding a row to the study is an edit of :func:`track_rows`. Not here: the pipeline's stages
-(:mod:`.pipeline`), the job entry points a worker runs for them (:mod:`.workers`), the report
-(:mod:`.report`), the layouts (:mod:`uavris.layouts`).
+(:mod:`.pipeline`) and their names (:mod:`.stage_names`), the job entry points a worker runs for
+them (:mod:`.workers`), the report (:mod:`.report`), the layouts (:mod:`uavris.layouts`).
 
 - **paper**: the paper's study as published. The scenario experts are end-to-end DRL
   agents acting on all 22 action entries, of the algorithm that wins the Fig. 2
@@ -44,6 +44,17 @@ from uavris.agents.experts.imitation import ImitationConfig
 from uavris.agents.oracle.planner import SAFE_MARGIN_DEG
 from uavris.agents.references import HOVER_OPTIMIZER, ORACLE, ZERO_ACTION
 from uavris.config import SCENARIOS, TRAINING_SCENARIOS, UNSEEN_SCENARIOS, Scenario, SystemConfig, get_scenario
+from uavris.experiments.study.stage_names import (
+    DATASET,
+    DATASET_BEST,
+    DATASET_MIXED,
+    EXPERTS_TRAIN,
+    EXPERTS_UNSEEN,
+    PRETRAIN,
+    finetune_stage,
+    places_stage,
+    value_stage,
+)
 from uavris.experiments.tools.targets import DTModel, ExpertRun, LearnedValue, Row
 from uavris.experiments.training.train_expert import TrainConfig
 from uavris.layouts import LayoutGenerator, Site, layout_distance
@@ -187,7 +198,7 @@ def _learned_rows(track: Track, site: Site, sources: list[tuple[str, float]], di
     rows: list[tuple[Row, bool]] = []
     if track.unseen_experts:
         rows.append((Row("expert", "expert trained in the scenario",
-                         ExpertRun.at(dirs["experts-unseen"] / "runs" / site.name), kind="expert"), False))
+                         ExpertRun.at(dirs[EXPERTS_UNSEEN] / "runs" / site.name), kind="expert"), False))
     if finetune_stage(site.name) in dirs:
         rows.append((Row("dt-finetuned", "fine-tuned DT", DTModel.at(dirs[finetune_stage(site.name)] / "model")),
                      True))
@@ -227,31 +238,9 @@ def _learned_rows(track: Track, site: Site, sources: list[tuple[str, float]], di
                              kind="transfer", rank=rank), False))
             continue
         label = f"transferred from {src}{near}" + (f", {dist:.1f} m" if track.layouts else "")
-        rows.append((Row(f"transfer-{src}", label, ExpertRun.at(dirs["experts-train"] / "runs" / src),
+        rows.append((Row(f"transfer-{src}", label, ExpertRun.at(dirs[EXPERTS_TRAIN] / "runs" / src),
                          kind="transfer", rank=rank), False))
     return rows
-
-
-def evaluation_stage(site: str) -> str:
-    """The stage that evaluates every row of a track in ``site`` (a hall's or a scenario's name);
-    a track's prefix goes in front (:meth:`Track.stage`)."""
-    return f"evaluate-{site}"
-
-
-def finetune_stage(site: str) -> str:
-    """The stage that fine-tunes the DT in ``site`` by the paper's Algorithm 1 (a track's prefix in front)."""
-    return f"finetune-{site}"
-
-
-def value_stage(seed: int) -> str:
-    """The stage that fits the learned value of a pose of pre-training seed ``seed`` (its fit's seed
-    the study's plus ``seed``): the places that seed's goal-conditioned DT is told (docs/places.md)."""
-    return "value" + (f"-s{seed}" if seed else "")
-
-
-def places_stage(site: str, seed: int) -> str:
-    """The stage that fine-tunes the goal-conditioned DT of pre-training seed ``seed`` in ``site`` by trying places."""
-    return f"finetune-places-{site}" + (f"-s{seed}" if seed else "")
 
 
 @dataclass(frozen=True)
@@ -261,7 +250,7 @@ class TrainedModel:
     pre-training seed (added to the study's) and the row it becomes (:func:`track_rows`)."""
 
     stage: str  # "pretrain", "bc-s1", "pretrain-n32-s2", "mixed-dt"
-    dataset: str  # "dataset" or "dataset-mixed"
+    dataset: str  # the dataset stage it reads: DATASET, DATASET_BEST or DATASET_MIXED (.stage_names)
     fields: tuple[tuple[str, Any], ...]
     model: tuple[tuple[str, Any], ...]
     row: str  # "dt-zero-shot", "bc", "dt-zero-shot-n32", ...
@@ -290,30 +279,30 @@ def trained_models(track: Track, train: Sequence[str], scaling: Sequence[int], s
     mixed-quality dataset (``mixed-dt``, ``mixed-bc``).
     """
     bc = (("condition_on_return", False),)
-    kinds = [TrainedModel("pretrain", "dataset", (), (), "dt-zero-shot", "zero-shot DT")]
+    kinds = [TrainedModel(PRETRAIN, DATASET, (), (), "dt-zero-shot", "zero-shot DT")]
     if track.behaviour_cloning:
-        kinds.append(TrainedModel("bc", "dataset", (), bc, "bc", "behaviour cloning (the DT without return "
+        kinds.append(TrainedModel("bc", DATASET, (), bc, "bc", "behaviour cloning (the DT without return "
                                   "conditioning)"))
     if track.places:  # told a goal rather than a return: each demonstration's own plan target in training
         goal = (("goal", True), ("condition_on_return", False))
-        kinds += [TrainedModel("goal", "dataset", (), goal, "dt-goal",
+        kinds += [TrainedModel("goal", DATASET, (), goal, "dt-goal",
                                "goal-conditioned DT, told the deployed place (V proposes, R disposes)"),
                   # the field's baselines beside it: the same goal and inputs with no attention over time (a window of
                   # one slot), and behaviour cloning on the best tenth of the demonstrations by return
-                  TrainedModel("goal-mlp", "dataset", (), (*goal, ("context", 1)), "dt-goal-mlp",
+                  TrainedModel("goal-mlp", DATASET, (), (*goal, ("context", 1)), "dt-goal-mlp",
                                "goal-conditioned MLP (no attention over time), told the deployed place"),
-                  TrainedModel("bc-best", "dataset-best", (), bc, "bc-best",
+                  TrainedModel("bc-best", DATASET_BEST, (), bc, "bc-best",
                                "filtered behaviour cloning (the best 10% of the demonstrations by return)")]
     if ablation and track.ablation:
         if track.layouts:
-            kinds += [TrainedModel(f"pretrain-n{n}", "dataset", (("scenarios", tuple(train[:n])),), (),
+            kinds += [TrainedModel(f"{PRETRAIN}-n{n}", DATASET, (("scenarios", tuple(train[:n])),), (),
                                    f"dt-zero-shot-n{n}", f"zero-shot DT, {n} training layout{'s' * (n != 1)}",
                                    ablation=True, halls=n) for n in scaling]
-        kinds += [TrainedModel("flat", "dataset", (), (("state_encoder", "flat"),), "dt-flat",
+        kinds += [TrainedModel("flat", DATASET, (), (("state_encoder", "flat"),), "dt-flat",
                                "zero-shot DT, flat encoder", ablation=True),
-                  TrainedModel("mixed-dt", "dataset-mixed", (), (), "dt-mixed", "zero-shot DT, mixed-quality data",
+                  TrainedModel("mixed-dt", DATASET_MIXED, (), (), "dt-mixed", "zero-shot DT, mixed-quality data",
                                ablation=True),
-                  TrainedModel("mixed-bc", "dataset-mixed", (), bc, "bc-mixed", "behaviour cloning, mixed-quality data",
+                  TrainedModel("mixed-bc", DATASET_MIXED, (), bc, "bc-mixed", "behaviour cloning, mixed-quality data",
                                ablation=True)]
     return [dataclasses.replace(m, stage=m.stage if k == 0 else f"{m.stage}-s{k}", seed=k)
             for m in kinds for k in range(max(1, seeds))]

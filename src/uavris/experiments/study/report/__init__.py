@@ -48,8 +48,9 @@ from uavris.experiments.study.report.deployment import (
 )
 from uavris.experiments.study.report.figures import fig3, interactions_figure, trajectory_figure
 from uavris.experiments.study.report.schedule import schedule_figure, stage_table
+from uavris.experiments.study.stage_names import COMPARE, evaluation_stage
 from uavris.experiments.study.stamp import make_stamp, stamped
-from uavris.experiments.study.tracks import Track, evaluation_stage, zero_shot_only
+from uavris.experiments.study.tracks import Track, zero_shot_only
 from uavris.experiments.training.compare import fig2_table
 from uavris.io import atomic_write_bytes, atomic_write_text, read_json
 from uavris.presets import EVAL_SEED
@@ -71,11 +72,11 @@ class _Report:
     # ------------------------------------------------------------------ Fig. 2
     def fig2(self) -> None:
         self.add("", "## Algorithm comparison (paper Fig. 2, paper track)", "")
-        if "compare" not in self.ok:
-            self.add("Not available: the `compare` stage did not finish." if "compare" in self.study.pipeline.stages
+        if COMPARE not in self.ok:
+            self.add("Not available: the `compare` stage did not finish." if COMPARE in self.study.pipeline.stages
                      else "Not run: the paper track was not selected.")
             return
-        cdir = self.study.directory("compare")
+        cdir = self.study.directory(COMPARE)
         for ext in ("png", "pdf"):
             if (cdir / f"learning_curves.{ext}").exists():
                 shutil.copyfile(cdir / f"learning_curves.{ext}", self.figs / f"fig2_learning_curves.{ext}")
