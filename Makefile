@@ -13,7 +13,7 @@ export NO_MKDOCS_2_WARNING := 1
 $(STAMP): pyproject.toml constraints.txt
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet -c constraints.txt -e '.[train,test,docs]'
-	# the phase optimiser's kernel compiled once, up front (numba caches it for every later process)
+	# compiling the phase optimiser's kernel once, up front (10-25 s; numba caches it for every later process)
 	$(PY) -c "from uavris.physics.phase_opt import compile_optimiser; compile_optimiser()"
 	touch $(STAMP)
 

@@ -501,6 +501,7 @@ def test_the_first_use_of_the_optimiser_says_it_compiles(monkeypatch, tmp_path, 
     one line first; where it is cached (after make's install step), a fresh process finds it."""
     import subprocess
     import sys
+    import warnings
 
     from uavris.physics import phase_opt
 
@@ -509,7 +510,10 @@ def test_the_first_use_of_the_optimiser_says_it_compiles(monkeypatch, tmp_path, 
                  "--out", str(tmp_path)]) == 0
     err = capsys.readouterr().err.splitlines()
     assert err[0].startswith("uavris: compiling the phase optimiser, once: ") and len(err) == 1, err
-    phase_opt.compile_optimiser()  # in this process: compiled, so in numba's cache
+    with warnings.catch_warnings(record=True) as said:  # make's install step prints its own one line
+        warnings.simplefilter("always")
+        phase_opt.compile_optimiser()  # in this process: compiled, so in numba's cache
+    assert not [w for w in said if w.category is phase_opt.CompileNotice]
     fresh = subprocess.run([sys.executable, "-c", "from uavris.physics.phase_opt import kernel_ready; "
                             "print(kernel_ready())"], capture_output=True, text=True, check=True, timeout=120)
     assert fresh.stdout.strip() == "True"

@@ -158,7 +158,14 @@ def announce_compile() -> None:
 
 def compile_optimiser() -> None:
     """Compile (or load) the kernel now, on one slot of two active pairs: what ``make`` does once after
-    installing, so that no run or test waits for it."""
+    installing, so that no run or test waits for it. Without :class:`CompileNotice`: the caller has
+    said what it is doing (make's install step prints its line)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", CompileNotice)
+        _one_slot()
+
+
+def _one_slot() -> None:
     c = SystemConfig()
     rng = np.random.default_rng(0)
     h = (rng.standard_normal((1, c.num_users, c.num_elements))
