@@ -326,7 +326,7 @@ class ReproduceArgs:
     estimate: bool = False
     """print each stage's expected core-minutes and the expected wall clock on --workers, and exit (nothing run
     or written; the stages OUT already holds are "done" and the clock is that of the rest; the cost model of
-    uavris.experiments.engine.costs, measured on a 2-core AMD EPYC)"""
+    uavris.experiments.engine.costs, its unit costs measured on one machine: docs/timings.md)"""
 
 
 def parse_reproduce(args: list[str]) -> ReproduceArgs:

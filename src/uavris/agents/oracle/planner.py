@@ -170,7 +170,7 @@ RANK_OPTIMISER = dict(restarts=0, noise_levels=(1e3, 1.0), iterations=20)
 # batches. Against the same planner searching with R (96 training halls, one core, docs/timings.md): 4.1x
 # cheaper, its plans worth 0.19% less on average and 1.26% in the worst hall.
 TEACHER = PlanSettings(global_step=0.0, refine_from=1, front_margin_deg=None, cheap_refinement=True, check_batches=4)
-# That planner searching with R and checking on 8 batches: the teacher of earlier versions
+# That planner searching with R and checking on 8 batches (the teacher before 0.4.0)
 EXACT_TEACHER = PlanSettings(global_step=0.0, refine_from=1, front_margin_deg=None)
 
 FINALIST_CANDIDATES = 3  # the best candidates by the planning value, unrefined, among the finalists beside the refined

@@ -33,7 +33,7 @@ SB3_STEP_S: dict[str, dict[str, float]] = {
 # planning oracle as the teacher of imitation (its motion only, no phases).
 SLOT_S = {"agent": 0.16e-3, "optimizer": 0.41e-3}
 # a collected slot costs this share of an evaluated one (one batch, no slot records; the optimiser's measured
-# on this version's make run, docs/timings.md)
+# in the make run of docs/timings.md)
 COLLECT_SHARE = {"agent": 0.3, "optimizer": 0.79}
 IMITATION_SLOT_S = 0.56e-3  # a DAgger slot: the rollout, the oracle's label and its share of the fitting
 PLAN_S = 1.4  # the planner's plan of one hall without the global stage, refining with R (EXACT_TEACHER)

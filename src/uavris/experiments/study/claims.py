@@ -50,7 +50,7 @@ FLOAT_PATHS = ("Every number of a study is of the float path it ran: uavris pins
                "their AVX2 kernels (`uavris.float_paths`), and on that path an AMD EPYC of Zen 3 and one of Zen 5 "
                "(with AVX-512) gave the same bits for the whole quick study, its references on an Intel Xeon too. "
                "On another path (`UAVRIS_NATIVE_FLOATS=1`) the learned rows are another random draw: two verdicts "
-               "of an earlier version's table read differently on an Intel Xeon and an AMD EPYC, natively.")
+               "of the 0.3.0 table read differently on an Intel Xeon and an AMD EPYC, natively.")
 
 CLAIMS: dict[str, str] = {
     "ddpg-best": "DDPG trains the best expert of DDPG, PPO, SAC and TD3 (Fig. 2, Sec. V)",

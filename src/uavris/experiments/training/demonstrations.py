@@ -28,7 +28,7 @@ candidates ranked with ``R``, its pattern search on the cheap estimate) chooses 
 target, 4.1x cheaper than the same planner searching with ``R`` for plans worth 0.19% less on
 average, 1.26% in the worst of 96 halls (docs/timings.md): a demonstration is training data,
 not a reference, and the plan was most of a demonstration's cost (``exact_plans`` restores the
-search with ``R``, the teacher of earlier versions,
+search with ``R``, the teacher before 0.4.0,
 :data:`~uavris.agents.oracle.planner.EXACT_TEACHER`).
 
 Value labels (``value_labels``, the deployment track's): the level poses each hall's plan
