@@ -410,36 +410,43 @@ def test_a_row_added_in_one_place_is_in_the_tables_the_decomposition_and_the_cla
     of every row, the per-hall table, the decomposition and the claim that no learned row blocks
     a device, in every group of halls.
 
-    The added row changes every evaluation's key, so each hall is evaluated again: the added row
-    for real (workers.evaluate_row), the study's own rows taken from the run's files instead of
-    evaluated a second time (what they would give again: the same seeded episodes and models;
-    the suite checks that elsewhere, e.g. the Ray study against the local one)."""
+    The added row changes every evaluation's key, so each hall is evaluated again, and only the
+    added row is flown: the study's own rows are copied from the rows it kept (kept_rows), the
+    same files, in the copy of the study too."""
     from uavris.experiments.study import tracks, workers
     from uavris.experiments.tools.targets import Row, resolve_target
 
     out, _ = deployment_run
+    # every row of every evaluation kept, each under its own key
+    evaluated = sum(len(read_json(p)["result"]) for p in (out / "stages").glob("deploy-evaluate-*/stage.json"))
+    assert len([p for p in (out / "rows").iterdir() if not p.name.startswith(".")]) == evaluated
     copy = tmp_path / "run"
     shutil.copytree(out, copy)
     (tmp_path / "spin.py").write_text(SPINNING)
     added = Row("dt-spinning", "a spinning controller", resolve_target(f"{tmp_path / 'spin.py'}:spinning"))
     learned_rows = tracks._learned_rows
     monkeypatch.setattr(tracks, "_learned_rows", lambda *a, **k: [*learned_rows(*a, **k), (added, False)])
+    flown: list[tuple[str, str]] = []
+    evaluate_row = workers.evaluate_row
 
-    def the_added_row_evaluated(d, site, track, episodes, rows):
-        [before] = [s for s in (out / "stages").glob(f"deploy-evaluate-{site.name}-*")
-                    if read_json(s / "stage.json")["name"] == f"deploy-evaluate-{site.name}"]
-        for path in before.rglob("*"):
-            if path.is_file() and path.name not in ("stage.json", "timing.json", "job.log"):
-                (d / path.relative_to(before)).parent.mkdir(parents=True, exist_ok=True)
-                shutil.copyfile(path, d / path.relative_to(before))
-        results = read_json(before / "stage.json")["result"]
-        assert added.key not in results and {r.key for r in rows} == {*results, added.key}
-        return {r.key: workers.evaluate_row(d, site, track, episodes, r) if r.key == added.key else results[r.key]
-                for r in rows}
+    def counted(d, site, track, episodes, row):
+        flown.append((site.name, row.key))
+        return evaluate_row(d, site, track, episodes, row)
 
-    monkeypatch.setattr(workers, "evaluate_rows", the_added_row_evaluated)
+    monkeypatch.setattr(workers, "evaluate_row", counted)
     pretrained = {p.name: p.stat().st_mtime_ns for p in (copy / "stages").glob("deploy-pretrain-*/stage.json")}
     report = reproduce(RC, copy, workers=1, progress=False).read_text()
+    records = {p.parent: read_json(p) for p in (copy / "stages").glob("deploy-evaluate-*/stage.json")}
+    again = {d: r for d, r in records.items() if added.key in r["result"]}
+    halls = {r["result"][added.key]["scenario"] for r in again.values()}
+    assert halls and sorted(flown) == sorted((h, added.key) for h in halls)  # no other row flown again
+    for new_stage, record in again.items():  # the others' files are the study's own
+        [old_stage] = [p.parent for p in (out / "stages").glob("deploy-evaluate-*/stage.json")
+                       if read_json(p)["name"] == record["name"]]
+        for name in (p.name for p in old_stage.glob("*.csv")):
+            assert (new_stage / name).read_bytes() == (old_stage / name).read_bytes(), name
+        before = read_json(old_stage / "stage.json")["result"]
+        assert {k: v for k, v in record["result"].items() if k != added.key} == before
     # only the evaluations (their rows are in their keys) and the report are made again
     assert {p.name: p.stat().st_mtime_ns for p in (copy / "stages").glob("deploy-pretrain-*/stage.json")} == pretrained
     section = report[report.index("## Deployment track"):]

@@ -90,6 +90,11 @@ class StageRecord:
     end: float = float("nan")
 
 
+def study_folder(stage_dir: Path) -> Path:
+    """The folder of the study whose stage folder is ``stage_dir`` (:meth:`Pipeline.directory`)."""
+    return Path(stage_dir).parent.parent
+
+
 class Pipeline:
     """Stages in dependency order, each skipped when its keyed folder is finished."""
 

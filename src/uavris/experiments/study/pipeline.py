@@ -59,8 +59,9 @@ from uavris.experiments.engine.costs import (
 )
 from uavris.experiments.engine.jobs import Job
 from uavris.experiments.engine.scheduling import StudyContext
-from uavris.experiments.engine.stages import Pipeline, Stage
+from uavris.experiments.engine.stages import Pipeline, Stage, study_folder
 from uavris.experiments.study.config import AUTO, ReproduceConfig
+from uavris.experiments.study.kept_rows import KEPT_ROWS_DIR
 from uavris.experiments.study.places import PlaceStages
 from uavris.experiments.study.stage_names import (
     COMPARE,
@@ -418,7 +419,9 @@ class TrackStages(PlaceStages):
     def _run_evaluate(self, where: Site, sources: list[tuple[str, float]], keys: list[str], cost: float,
                       d: Path, deps: dict[str, Path]) -> dict[str, Any]:
         rows = self._rows(where, sources, {k: deps[self.t(k)] for k in keys})
-        # its rows' models are in the stages it depends on; its results go to its own folder
+        # its rows' models are in the stages it depends on; its results go to its own folder, and each row's
+        # to the study's kept rows too (a cluster's nodes may not share the study's folder: not there)
+        kept = None if self.ctx.ray_address else str(study_folder(d) / KEPT_ROWS_DIR)
         return self.ctx.run_one(self.t(evaluation_stage(where.name)), evaluate_job,
-                                (str(d), where, self.track.name, self.rc.eval_episodes, rows), d / "job.log", cost,
-                                reads=tuple(deps.values()), writes=(d,))
+                                (str(d), where, self.track.name, self.rc.eval_episodes, rows, kept), d / "job.log",
+                                cost, reads=tuple(deps.values()), writes=(d,))

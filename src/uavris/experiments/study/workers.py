@@ -17,6 +17,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
+from uavris.experiments.study.kept_rows import keep, row_key, take
 from uavris.experiments.study.tracks import TRACK_SPECS, Track
 from uavris.experiments.tools.targets import LearnedValue, Row
 from uavris.io import read_json, write_json
@@ -136,9 +137,10 @@ def finetune_job(cfg_dict: dict[str, Any], out: str, device: str = "cpu") -> dic
 RESULTS_FORMAT = 5
 
 
-def evaluate_job(out: str, site: Site, track: str, episodes: int, rows: Sequence[Row]) -> dict[str, Any]:
+def evaluate_job(out: str, site: Site, track: str, episodes: int, rows: Sequence[Row], kept: str | None = None
+                 ) -> dict[str, Any]:
     """Every row of a track in one unseen site on the same seeded episodes (see :func:`evaluate_rows`)."""
-    return evaluate_rows(Path(out), site, TRACK_SPECS[track], episodes, rows)
+    return evaluate_rows(Path(out), site, TRACK_SPECS[track], episodes, rows, Path(kept) if kept else None)
 
 
 class _Whereabouts:
@@ -181,7 +183,8 @@ def _decomposition(system: Any, rec: _Whereabouts) -> dict[str, Any]:
             "behind_share": rec.behind / max(rec.slots, 1)}
 
 
-def evaluate_rows(out: Path, site: Site, track: Track, episodes: int, rows: Sequence[Row]) -> dict[str, Any]:
+def evaluate_rows(out: Path, site: Site, track: Track, episodes: int, rows: Sequence[Row], kept: Path | None = None
+                  ) -> dict[str, Any]:
     """Every row (:func:`~.tracks.track_rows`: the learned rows and the references) in ``site``,
     each in its own system (:meth:`~uavris.experiments.tools.targets.Row.system`: under the
     safety layer where the row says so), on episodes ``EVAL_SEED ..``; per-episode CSVs in
@@ -189,11 +192,13 @@ def evaluate_rows(out: Path, site: Site, track: Track, episodes: int, rows: Sequ
     the report draws). Each summary records what its row is (:meth:`Row.facts
     <uavris.experiments.tools.targets.Row.facts>`). In the deployment track every summary also holds the
     decomposition of :func:`_decomposition`, and the oracle's its plan's target
-    (:func:`oracle_target`).
+    (:func:`oracle_target`). With ``kept`` (the study's :data:`.kept_rows.KEPT_ROWS_DIR`), a row
+    evaluated before with the same inputs is copied from there instead of flown again, and a row
+    flown here is kept there (:mod:`.kept_rows`).
     """
     from uavris.agents.references import ORACLE
 
-    result = {row.key: evaluate_row(out, site, track, episodes, row) for row in rows}
+    result = {row.key: _row_kept_or_evaluated(out, site, track, episodes, row, kept) for row in rows}
     if track.layouts:
         from uavris.agents.oracle import PlanningOracle
 
@@ -203,6 +208,18 @@ def evaluate_rows(out: Path, site: Site, track: Track, episodes: int, rows: Sequ
             if isinstance(row.target, LearnedValue) and not row.target.top_k:
                 result[row.key].update(value_accuracy(site, row.target.planner_model(), oracle))
     return result
+
+
+def _row_kept_or_evaluated(out: Path, site: Site, track: Track, episodes: int, row: Row, kept: Path | None
+                           ) -> dict[str, Any]:
+    if kept is None:
+        return evaluate_row(out, site, track, episodes, row)
+    key = row_key(site, track.name, episodes, row, RESULTS_FORMAT, kept.parent)
+    summary = take(kept, key, out, row)
+    if summary is None:
+        summary = evaluate_row(out, site, track, episodes, row)
+        keep(kept, key, out, row)
+    return summary
 
 
 def first_episode_slots(evaluation: Path, row: str) -> Path:
