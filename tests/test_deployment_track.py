@@ -255,6 +255,32 @@ def test_plan_learned_from_a_study_without_its_value_is_one_line(tmp_path, capsy
         assert says in err and "\n" not in err, err
 
 
+def test_a_kept_rows_key_is_what_its_numbers_depend_on(tmp_path):
+    """kept_rows.row_key: the same row in a moved copy of its model folder has the same key; another
+    byte in a model file, another planner of the same learned value, another hall, another
+    safety margin give another; a module's policy is not kept."""
+    from uavris.experiments.study.kept_rows import row_key
+    from uavris.experiments.tools.targets import DTModel, LearnedValue, Row, UserPolicy
+
+    track = TRACK_SPECS["deployment"]
+    first, second = ReproduceConfig("smoke", track="deployment").sites(track)[1][:2]
+    for name in ("model", "value"):
+        (tmp_path / "a" / name).mkdir(parents=True)
+        (tmp_path / "a" / name / "w.safetensors").write_bytes(b"weights")
+    shutil.copytree(tmp_path / "a", tmp_path / "b")
+
+    def key(where="a", site=first, deployed=True, margin=None):
+        value = LearnedValue.at(tmp_path / where / "value")
+        row = Row("dt-goal", "goal DT", DTModel.at(tmp_path / where / "model"),
+                  goal_from=dataclasses.replace(value, deployed=deployed), front_margin_deg=margin)
+        return row_key(site, track.name, 2, row, 5)
+
+    assert key() == key("b")  # where the files lie is not what the numbers depend on
+    (tmp_path / "b" / "model" / "w.safetensors").write_bytes(b"weightz")
+    assert len({key(), key("b"), key(deployed=False), key(site=second), key(margin=1.0)}) == 5
+    assert row_key(first, track.name, 2, Row("mine", "mine", UserPolicy("json:loads")), 5) is None
+
+
 def test_each_pre_training_seed_has_its_own_fit_of_the_learned_value(deployment_run):
     """One V per pre-training seed: two fits on the same labels with different seeds, each stage
     read by the evaluations, whose rows told a place by seed 1 are told it by seed 1's V."""
@@ -449,6 +475,12 @@ def test_a_row_added_in_one_place_is_in_the_tables_the_decomposition_and_the_cla
         assert {k: v for k, v in record["result"].items() if k != added.key} == before
     # only the evaluations (their rows are in their keys) and the report are made again
     assert {p.name: p.stat().st_mtime_ns for p in (copy / "stages").glob("deploy-pretrain-*/stage.json")} == pretrained
+    # --force flies every row of the stage again, the kept ones too
+    [(forced, record)] = [(d, r) for d, r in again.items() if r["name"] == "deploy-evaluate-layout-unseen-0"]
+    flown.clear()
+    reproduce(RC, copy, workers=1, progress=False, force=[record["name"]])
+    assert sorted(k for h, k in flown if h == "layout-unseen-0") == sorted(record["result"])
+    assert read_json(forced / "stage.json")["result"] == record["result"]
     section = report[report.index("## Deployment track"):]
     groups = section.split("\n### Halls of")  # the study's halls, the other generator's, 3 devices of both
     assert len(groups) == 4

@@ -349,9 +349,10 @@ def reproduce_command(args: list[str]) -> None:
     optimised phases, experts imitating the oracle): the same stages prefixed strong-.
     Deployment track (the planning oracle's demonstrations in generated halls, docs/study.md
     section 2): deploy-dataset, deploy-dataset-best (its best 10% by return), deploy-value-labels
-    (the learned value's labels) and deploy-value (its fit), deploy-pretrain, deploy-bc (behaviour
-    cloning), deploy-goal (the goal-conditioned DT), deploy-goal-mlp (the same without attention over
-    time) and deploy-bc-best (filtered behaviour cloning) for each pre-training seed, and
+    (the learned value's labels), and for each pre-training seed deploy-value (the learned value's
+    fit), deploy-pretrain, deploy-bc (behaviour cloning), deploy-goal (the goal-conditioned DT),
+    deploy-goal-mlp (the same without attention over time) and deploy-bc-best (filtered behaviour
+    cloning) (seed K's: -sK), and
     deploy-evaluate-LAYOUT per unseen layout; with
     --ablation also fine-tuning that tries places (deploy-finetune-places-LAYOUT, per seed), the
     return-conditioned DT's fine-tuning (deploy-finetune-LAYOUT), the data curve

@@ -47,6 +47,7 @@ class StudyContext:
                  device: str = "cpu") -> None:
         self.workers, self.backend, self.ray_address, self.bar = workers, backend, ray_address, bar
         self.device = device
+        self.reuse = True  # whether stages may take results kept by an earlier run (False: a run with --force)
         self.runner = JobRunner(workers, backend, ray_address)
         self.failures: list[JobResult] = []
         self.jobs: list[tuple[str, JobResult]] = []  # (stage, result) of every job run, in finishing order

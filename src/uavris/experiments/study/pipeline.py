@@ -423,5 +423,5 @@ class TrackStages(PlaceStages):
         # to the study's kept rows too (a cluster's nodes may not share the study's folder: not there)
         kept = None if self.ctx.ray_address else str(study_folder(d) / KEPT_ROWS_DIR)
         return self.ctx.run_one(self.t(evaluation_stage(where.name)), evaluate_job,
-                                (str(d), where, self.track.name, self.rc.eval_episodes, rows, kept), d / "job.log",
-                                cost, reads=tuple(deps.values()), writes=(d,))
+                                (str(d), where, self.track.name, self.rc.eval_episodes, rows, kept, self.ctx.reuse),
+                                d / "job.log", cost, reads=tuple(deps.values()), writes=(d,))

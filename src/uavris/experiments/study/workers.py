@@ -137,10 +137,10 @@ def finetune_job(cfg_dict: dict[str, Any], out: str, device: str = "cpu") -> dic
 RESULTS_FORMAT = 5
 
 
-def evaluate_job(out: str, site: Site, track: str, episodes: int, rows: Sequence[Row], kept: str | None = None
-                 ) -> dict[str, Any]:
+def evaluate_job(out: str, site: Site, track: str, episodes: int, rows: Sequence[Row], kept: str | None = None,
+                 reuse: bool = True) -> dict[str, Any]:
     """Every row of a track in one unseen site on the same seeded episodes (see :func:`evaluate_rows`)."""
-    return evaluate_rows(Path(out), site, TRACK_SPECS[track], episodes, rows, Path(kept) if kept else None)
+    return evaluate_rows(Path(out), site, TRACK_SPECS[track], episodes, rows, Path(kept) if kept else None, reuse)
 
 
 class _Whereabouts:
@@ -183,8 +183,8 @@ def _decomposition(system: Any, rec: _Whereabouts) -> dict[str, Any]:
             "behind_share": rec.behind / max(rec.slots, 1)}
 
 
-def evaluate_rows(out: Path, site: Site, track: Track, episodes: int, rows: Sequence[Row], kept: Path | None = None
-                  ) -> dict[str, Any]:
+def evaluate_rows(out: Path, site: Site, track: Track, episodes: int, rows: Sequence[Row], kept: Path | None = None,
+                  reuse: bool = True) -> dict[str, Any]:
     """Every row (:func:`~.tracks.track_rows`: the learned rows and the references) in ``site``,
     each in its own system (:meth:`~uavris.experiments.tools.targets.Row.system`: under the
     safety layer where the row says so), on episodes ``EVAL_SEED ..``; per-episode CSVs in
@@ -193,12 +193,12 @@ def evaluate_rows(out: Path, site: Site, track: Track, episodes: int, rows: Sequ
     <uavris.experiments.tools.targets.Row.facts>`). In the deployment track every summary also holds the
     decomposition of :func:`_decomposition`, and the oracle's its plan's target
     (:func:`oracle_target`). With ``kept`` (the study's :data:`.kept_rows.KEPT_ROWS_DIR`), a row
-    evaluated before with the same inputs is copied from there instead of flown again, and a row
-    flown here is kept there (:mod:`.kept_rows`).
+    evaluated before with the same inputs is copied from there instead of flown again (not
+    without ``reuse``: a run with ``--force``), and a row flown here is kept there (:mod:`.kept_rows`).
     """
     from uavris.agents.references import ORACLE
 
-    result = {row.key: _row_kept_or_evaluated(out, site, track, episodes, row, kept) for row in rows}
+    result = {row.key: _row_kept_or_evaluated(out, site, track, episodes, row, kept, reuse) for row in rows}
     if track.layouts:
         from uavris.agents.oracle import PlanningOracle
 
@@ -210,12 +210,12 @@ def evaluate_rows(out: Path, site: Site, track: Track, episodes: int, rows: Sequ
     return result
 
 
-def _row_kept_or_evaluated(out: Path, site: Site, track: Track, episodes: int, row: Row, kept: Path | None
-                           ) -> dict[str, Any]:
-    if kept is None:
+def _row_kept_or_evaluated(out: Path, site: Site, track: Track, episodes: int, row: Row, kept: Path | None,
+                           reuse: bool) -> dict[str, Any]:
+    key = row_key(site, track.name, episodes, row, RESULTS_FORMAT) if kept is not None else None
+    if kept is None or key is None:
         return evaluate_row(out, site, track, episodes, row)
-    key = row_key(site, track.name, episodes, row, RESULTS_FORMAT, kept.parent)
-    summary = take(kept, key, out, row)
+    summary = take(kept, key, out, row) if reuse else None
     if summary is None:
         summary = evaluate_row(out, site, track, episodes, row)
         keep(kept, key, out, row)

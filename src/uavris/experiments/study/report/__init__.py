@@ -210,7 +210,7 @@ class _Report:
         lines, claims = decomposition_section(results, labels, where)
         self.add(*lines)
         self.claims += claims
-        self.add(*value_section(results))
+        self.add(*value_section(results, self.rc.seed))
 
     # ------------------------------------------------------------------ both tracks side by side
     def side_by_side(self, tracks: Sequence[Track], results: dict[str, dict[str, dict[str, Any]]]) -> None:

@@ -93,13 +93,13 @@ def decomposition_section(results: dict[str, dict[str, Any]], labels: dict[str, 
     return lines, [claim]
 
 
-def value_section(results: dict[str, dict[str, Any]]) -> list[str]:
+def value_section(results: dict[str, dict[str, Any]], first_seed: int = 0) -> list[str]:
     """The learned value's accuracy in the unseen halls (docs/places.md), a line per fit of ``V`` (one
     per pre-training seed), from the rows that record it
     (:func:`uavris.experiments.study.workers.value_accuracy`; a fit's rows record the same): the
     rank correlation of ``V`` with ``R`` over the poses the oracle valued, and ``R`` at ``V``'s
     argmax against ``R`` at the oracle's target (both level, on the same fresh draws), mean and
-    worst hall."""
+    worst hall. A fit is named by its pre-training seed, the study's ``first_seed`` plus its own."""
     layouts = list(results)
     keys = [k for k in (next(iter(results.values())) if layouts else {})
             if all("value_rank_correlation" in results[lay].get(k, {}) for lay in layouts)]
@@ -114,7 +114,7 @@ def value_section(results: dict[str, dict[str, Any]]) -> list[str]:
         rho = [float(np.nan if (r := results[lay][k]["value_rank_correlation"]) is None else r) for lay in layouts]
         share = [float(results[lay][k]["value_target_rate_level"]) / float(results[lay][ORACLE]["plan_rate_level"])
                  for lay in layouts]
-        rows.append((f"V of pre-training seed {seed}" if len(by_seed) > 1 else "V", f"{np.mean(rho):.3f}",
+        rows.append((f"V of pre-training seed {first_seed + seed}" if len(by_seed) > 1 else "V", f"{np.mean(rho):.3f}",
                      f"{np.min(rho):.3f}", pct(float(np.mean(share))), pct(float(np.min(share)))))
     return ["", "### The learned value of a pose in the unseen halls", "",
             "Rank correlation (Spearman) of V with R over the level poses the oracle valued in each hall; R at V's "
@@ -182,9 +182,11 @@ def counts_section(groups: dict[tuple[int, bool], dict[str, dict[str, Any]]], bo
     rows.append(("oracle (bps/Hz)", *(f"{np.mean([scores[c][lay][ORACLE] for lay in scores[c]]):.2f}"
                                        for c in scores)))
     if all(lay in bounds for s in scores.values() for lay in s):
+        # the best plan of each hall: of the oracle and of each seed's learned places (not their mean over seeds)
         rows.append(("best plan found / the bound no controller can beat",
-                     *(with_ci(over_units([max(v for r, v in scores[c][lay].items() if r in PLAN_ROWS)
-                                           / bounds[lay] for lay in scores[c]]), pct) for c in scores)))
+                     *(with_ci(over_units([max(float(v["mean"]) for v in by_label[c][lay].values()
+                                               if v.get("variant") in PLAN_ROWS) / bounds[lay]
+                                           for lay in scores[c]]), pct) for c in scores)))
     if episodes is not None and "dt-goal-safe" in keys:
         rows.append(("halls where a seed of the goal-conditioned DT is below hovering with optimised phases (paired "
                      "95% CI over episodes)", *(halls_below_hovering(by_label[c], episodes) for c in scores)))
