@@ -1,6 +1,8 @@
 """An evaluation stage run again after a row is added: its kept rows copied against every row flown again.
 
-Feeds docs/timings.md (issue 68's lever "a row's evaluation keyed by that row's own inputs").
+Feeds docs/timings.md.
+
+Issue 68's lever "a row's evaluation keyed by that row's own inputs".
 
 A finished study's evaluation of one hall is made again with one row more, the way a study
 does it when its rows change (``uavris.experiments.study.workers.evaluate_rows``), twice in one
@@ -17,7 +19,7 @@ script prints the two times and their ratio.
 
 Run from the repository root, on a finished make run (``make run``: runs/quick)::
 
-    .venv/bin/python benchmarks/kept_rows.py runs/quick --hall layout-unseen-1
+    .venv/bin/python benchmarks/findings/kept_rows.py runs/quick --hall layout-unseen-1
 """
 
 from __future__ import annotations
@@ -28,18 +30,20 @@ for _variable in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", 
     os.environ[_variable] = "1"
 
 import argparse  # noqa: E402
+import sys  # noqa: E402
 import tempfile  # noqa: E402
 import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/, for _machine.py
 from _machine import cpu_model, pin_to_one_core  # noqa: E402
 
 
-def main() -> None:
+def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("study", type=Path, help="a finished study with a deployment track (runs/quick)")
     parser.add_argument("--hall", default="layout-unseen-1", help="one of its unseen halls")
-    args = parser.parse_args()
+    args = parser.parse_args(argv)
     pinned = pin_to_one_core()
 
     from uavris.experiments.engine.jobs import configure_threads
