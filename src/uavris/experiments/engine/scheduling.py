@@ -44,10 +44,10 @@ class StudyContext:
     """The job runner, priorities, progress and schedule shared by a pipeline's stages."""
 
     def __init__(self, workers: int, backend: str, ray_address: str | None, bar: Any = None,
-                 device: str = "cpu") -> None:
+                 device: str = "cpu", reuse: bool = True) -> None:
         self.workers, self.backend, self.ray_address, self.bar = workers, backend, ray_address, bar
         self.device = device
-        self.reuse = True  # whether stages may take results kept by an earlier run (False: a run with --force)
+        self.reuse = reuse  # whether stages may take results kept by an earlier run (False: a run with --force)
         self.runner = JobRunner(workers, backend, ray_address)
         self.failures: list[JobResult] = []
         self.jobs: list[tuple[str, JobResult]] = []  # (stage, result) of every job run, in finishing order

@@ -89,8 +89,8 @@ def reproduce(rc: ReproduceConfig, out: str | Path, *, workers: int = 2, backend
     # The bar counts expected seconds of work (uavris.experiments.engine.scheduling), shown as a share.
     bar = progress_bar(0, "reproduce", "s", progress,
                        bar_format="{desc}: {percentage:3.0f}%|{bar}| [{elapsed}{postfix}]")
-    ctx = StudyContext(workers, backend, ray_address, bar, device)
-    ctx.reuse = not [f for f in force if f != "report"]  # --force: every row flown again (study.kept_rows)
+    # --force: every row flown again (study.kept_rows)
+    ctx = StudyContext(workers, backend, ray_address, bar, device, reuse=not [f for f in force if f != "report"])
     pipeline = build_pipeline(rc, out, ctx)
     unknown = [f for f in force if f not in pipeline.stages and f != "report"]
     if unknown:
