@@ -73,6 +73,63 @@ def test_system_room_applies_before_the_layout(hall_run: Path, tmp_path: Path) -
     assert got["mean"] == pytest.approx(mean, abs=1e-12)
 
 
+class _Built(Exception):
+    """Raised by a command's library call in place of the work: the system the command built."""
+
+
+def _stop_with_system(monkeypatch: pytest.MonkeyPatch, command: str) -> None:
+    """Replace the library call ``command`` makes with one that raises the system it was given
+    (plan: the hall its layout makes of it), so the test reads what the command line built."""
+    import uavris.experiments.tools.benchmark as benchmark
+    import uavris.experiments.tools.demo as demo
+    import uavris.experiments.tools.evaluate as evaluate_tool
+    import uavris.experiments.tools.plan as plan
+    import uavris.experiments.tools.sweep as sweep
+    import uavris.experiments.training.compare as compare
+
+    def stop(system: SystemConfig) -> None:
+        raise _Built(system)
+
+    where, name, take = {
+        "evaluate": (evaluate_tool, "evaluate_target", lambda *a, **k: k["system"]),
+        "benchmark": (benchmark, "benchmark", lambda *a, **k: k["system"]),
+        "demo": (demo, "run_demo", lambda *a, **k: a[3]),
+        "plan": (plan, "plan_hall", lambda *a, **k: a[0].system(a[1])),
+        "sweep": (sweep, "sweep", lambda *a, **k: k["base"]),
+        "compare-algorithms": (compare, "compare_algorithms", lambda *a, **k: k["system"]),
+    }[command]
+    monkeypatch.setattr(where, name, lambda *a, **k: stop(take(*a, **k)))
+
+
+HALL_12_HIGH = HALL_30.replace("room: [30, 20, 6]", "room: [30, 20, 12]")
+
+
+@pytest.mark.parametrize("command", ["evaluate", "benchmark", "demo", "plan", "sweep", "compare-algorithms"])
+def test_system_flags_beside_a_layout_are_judged_in_its_hall(command: str, monkeypatch: pytest.MonkeyPatch,
+                                                            tmp_path: Path) -> None:
+    """--system.* flags beside --layout are judged in the hall the layout makes, not in the
+    paper's: 3 active pairs among 8 devices (the paper's 4 allow 2), a ceiling of 11 m in a
+    12 m room (the paper's is 8 m). Every command that takes a layout builds both lines."""
+    hall = tmp_path / "high.yaml"
+    hall.write_text(HALL_12_HIGH)
+    start = {"evaluate": ["evaluate", "zero-action", "--out", str(tmp_path / "e")],
+             "benchmark": ["benchmark", "zero-action", "--out", str(tmp_path / "b")],
+             "demo": ["demo"], "plan": ["plan"],
+             "sweep": ["sweep", "zero-action", "--param", "system.nx", "2", "--out", str(tmp_path / "s")],
+             "compare-algorithms": ["compare-algorithms", "--out", str(tmp_path / "c")]}[command]
+    _stop_with_system(monkeypatch, command)
+    lines = ((["--layout", "layout-train-0-k8", "--system.max-active-pairs", "3"],
+              dict(num_users=8, max_active_pairs=3)),
+             (["--layout", str(hall), "--system.z-max", "11"], dict(room=(30.0, 20.0, 12.0), z_max=11.0)))
+    for flags, want in lines:
+        if command == "plan":  # its hall is its positional argument
+            flags = flags[1:]
+        with pytest.raises(_Built) as built:
+            main([*start, *flags])
+        system = built.value.args[0]
+        assert type(system) is SystemConfig and {k: getattr(system, k) for k in want} == want, (command, flags)
+
+
 def test_a_generated_layout_is_drawn_in_the_room_of_the_flag(tmp_path: Path) -> None:
     out = tmp_path / "e"
     assert main(["evaluate", "zero-action", "--layout", "layout-unseen-0", "--system.room", "60", "60", "8",

@@ -14,6 +14,7 @@ from typing import Annotated, Literal
 import tyro
 
 from uavris.agents.torch_device import Device
+from uavris.cli.options import LOOSE_SYSTEM, check_hall_flags, in_hall
 from uavris.cli.parsing import Unset, UsageError, output_dir, parse, writing
 from uavris.config import ScenarioName, SystemConfig
 from uavris.env.wrappers import PhaseControl
@@ -54,7 +55,7 @@ class EvaluateArgs:
     """torch device (auto: CUDA when torch sees one)"""
     progress: bool = True
     """show a progress bar"""
-    system: SystemConfig = SystemConfig()
+    system: SystemConfig = LOOSE_SYSTEM
     """the system evaluated in: the target's own, with these fields changed"""
     row: Unset[str] = None
     """a row of a study's report, TARGET being the study's output directory (uavris reproduce --out): its key in
@@ -92,7 +93,6 @@ def evaluate_command(args: list[str]) -> None:
     evaluates it, here or in a hall of your own (default OUT runs/rows/ROW).
     """
     from uavris.agents.torch_device import resolve_device
-    from uavris.cli.options import check_hall_flags, in_hall
     from uavris.experiments.tools.evaluate import evaluate_target, results_dir
     from uavris.experiments.tools.targets import resolve_target
 
@@ -234,7 +234,7 @@ class BenchmarkArgs(StudyRowFlags):
     """torch device (auto: CUDA when torch sees one)"""
     progress: bool = True
     """show a progress bar"""
-    system: SystemConfig = SystemConfig()
+    system: SystemConfig = LOOSE_SYSTEM
     """the system: the target's own, with these fields changed"""
 
 
@@ -248,7 +248,6 @@ def benchmark_command(args: list[str]) -> None:
     each cell's per-episode CSVs.
     """
     from uavris.agents.torch_device import resolve_device
-    from uavris.cli.options import check_hall_flags, in_hall
     from uavris.experiments.tools.benchmark import benchmark, default_benchmark_dir
     from uavris.experiments.tools.targets import resolve_target
 
@@ -262,7 +261,7 @@ def benchmark_command(args: list[str]) -> None:
             from dataclasses import replace
 
             a = replace(a, target=str(_row_controller(a.target, a.row, a.track, out / "controller")))
-        system, _ = in_hall(None, resolve_target(a.target).own_system(), a.system, args)  # its layout: a cell
+        system, _ = in_hall(a.layout, resolve_target(a.target).own_system(), a.system, args)  # --layout: one cell
         rows, md = benchmark(a.target, a.preset, a.cells, out, resolve_device(a.device), progress=a.progress,
                              system=system, phase_control=a.phase_control, layout=a.layout,
                              trust_pickle=a.trust_pickle)
@@ -302,7 +301,7 @@ class SweepArgs(StudyRowFlags):
     """local (process pool) or ray (pip install 'uavris[ray]')"""
     progress: bool = True
     """show a progress bar"""
-    system: SystemConfig = SystemConfig()
+    system: SystemConfig = LOOSE_SYSTEM
     """the system the grid varies"""
 
 
@@ -319,11 +318,10 @@ def sweep_command(args: list[str]) -> None:
     """
     import hashlib
 
-    from uavris.cli.options import LOOSE_SYSTEM, check_hall_flags, in_hall
     from uavris.experiments.tools.sweep import parse_axis, sweep
 
     check_hall_flags(args, SystemConfig(), "uavris sweep")  # a room given twice: one line, before the values are read
-    a = parse(SweepArgs, args, "uavris sweep", sweep_command.__doc__ or "", default=SweepArgs((), system=LOOSE_SYSTEM))
+    a = parse(SweepArgs, args, "uavris sweep", sweep_command.__doc__ or "")
     system, hall = in_hall(a.layout, SystemConfig(), a.system, args)
     row_of = None
     if a.row is not None:

@@ -85,9 +85,9 @@ class _DevicesLater(SystemConfig):
         return SystemConfig(**{**{f.name: getattr(self, f.name) for f in fields(SystemConfig)}, **changes})
 
 
-# The default system of a command parsed once whose --layout may give the devices (a flag's room need
-# not fit the paper's devices): tyro keeps the default's class, so the parse checks every field but them,
-# and in_hall builds the checked system.
+# The default of the `system` field of every command that takes a layout (a flag's room or pair count need
+# not fit the paper's devices): tyro keeps the default's class, so the parse checks every field but the
+# hall's, and in_hall (plan: its layout) builds the checked system in the hall the line names.
 LOOSE_SYSTEM = _DevicesLater()
 
 

@@ -14,6 +14,7 @@ from typing import Annotated, Literal
 
 import tyro
 
+from uavris.cli.options import LOOSE_SYSTEM, check_hall_flags, in_hall
 from uavris.cli.parsing import Unset, UsageError, parse, writing
 from uavris.config import ScenarioName, SystemConfig
 from uavris.presets import COLLECT_SEED
@@ -43,7 +44,7 @@ class PlanArgs:
     row is told its place by"""
     progress: bool = True
     """show a progress bar"""
-    system: SystemConfig = SystemConfig()
+    system: SystemConfig = LOOSE_SYSTEM
     """the system (the layout sets its devices and, if it has one, its room)"""
 
 
@@ -82,7 +83,6 @@ def plan_command(args: list[str]) -> None:
     over the hall at the target's altitude, with the devices, their safety balls, the start
     and the target).
     """
-    from uavris.cli.options import check_hall_flags
     from uavris.experiments.tools.plan import check_devices, check_grid, plan_hall, planning_seconds
     from uavris.layouts import PAPER_LAYOUT, Layout, default_start, resolve_layout
 
@@ -191,17 +191,16 @@ class DemoArgs:
     """the hall: paper, layout-train-N / layout-unseen-N (-kK: K devices), or a YAML layout file (devices,
     optionally start and room; --system.* flags apply first) (default: the devices of --system.users, the paper's
     unless given)"""
-    system: SystemConfig = SystemConfig()
+    system: SystemConfig = LOOSE_SYSTEM
     """the system (the paper's, with these fields changed)"""
 
 
 def demo_command(args: list[str]) -> None:
     """Roll out the zero action, random actions and a co-phasing hover, and print their average sum rate."""
-    from uavris.cli.options import LOOSE_SYSTEM, check_hall_flags, in_hall
     from uavris.experiments.tools.demo import run_demo
 
     check_hall_flags(args, SystemConfig(), "uavris demo")  # a room given twice: one line, before the values are read
-    a = parse(DemoArgs, args, "uavris demo", demo_command.__doc__ or "", default=DemoArgs(system=LOOSE_SYSTEM))
+    a = parse(DemoArgs, args, "uavris demo", demo_command.__doc__ or "")
     system, hall = in_hall(a.layout, SystemConfig(), a.system, args)
     run_demo(a.episodes, a.seed, a.scenario or hall or "fig2", system)
 

@@ -165,7 +165,7 @@ class CompareArgs:
     """torch device (auto: CUDA when torch sees one)"""
     progress: bool = True
     """show a progress bar"""
-    system: SystemConfig = SystemConfig()
+    system: SystemConfig = LOOSE_SYSTEM
     """the system trained and evaluated in"""
 
 
@@ -180,8 +180,7 @@ def compare_command(args: list[str]) -> None:
     from uavris.experiments.training.compare import compare_algorithms, default_compare_dir
 
     check_hall_flags(args, SystemConfig(), "uavris compare-algorithms")  # a room given twice: one line, first
-    a = parse(CompareArgs, args, "uavris compare-algorithms", compare_command.__doc__ or "",
-              default=CompareArgs(system=LOOSE_SYSTEM))
+    a = parse(CompareArgs, args, "uavris compare-algorithms", compare_command.__doc__ or "")
     system, hall = in_hall(a.layout, SystemConfig(), a.system, args)
     scenario = a.scenario or ("fig2" if hall is None else hall.name)
     start = hall.start if hall is not None and scenario == hall.name else None
