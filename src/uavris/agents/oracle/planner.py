@@ -282,6 +282,14 @@ def facing_attitudes(c: SystemConfig, places: NDArray) -> NDArray[np.float64]:
     return att
 
 
+def turned_towards(c: SystemConfig, places: NDArray) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
+    """:func:`facing_attitudes` at ``places`` (none: an empty ``(0, 3)``) and which of them are
+    turned: the places where the surface can be turned towards the devices at all (the others
+    stay level, and are valued once)."""
+    facing = facing_attitudes(c, places) if len(places) else np.zeros((0, 3))
+    return facing, np.any(facing != 0.0, axis=1)
+
+
 def held(c: SystemConfig, places: NDArray, atts: NDArray) -> NDArray[np.bool_]:
     """Which poses the attitude safety layer lets the UAV hold: every device at least ``c.front_margin_deg``
     in front of the RIS (docs/model.md section 3); all of them where the system has no margin."""

@@ -25,7 +25,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from uavris.agents.oracle.objective import expected_optimised_rate, feasible
-from uavris.agents.oracle.planner import SAFE_MARGIN_DEG, facing_attitudes, holding, screen
+from uavris.agents.oracle.planner import SAFE_MARGIN_DEG, holding, screen, turned_towards
 from uavris.config import SystemConfig
 
 LOW_BAND = 1.5  # m above the region's floor: the low third of the poses
@@ -65,7 +65,6 @@ def hall_labels(config: SystemConfig, count: int, seed: int, tilted: bool = Fals
     q = label_poses(config, count, rng)
     att = np.zeros_like(q)
     if tilted:
-        facing = facing_attitudes(holding(config, SAFE_MARGIN_DEG), q)
-        turned = np.any(facing != 0.0, axis=1)
+        facing, turned = turned_towards(holding(config, SAFE_MARGIN_DEG), q)
         q, att = np.concatenate([q, q[turned]]), np.concatenate([att, facing[turned]])
     return q, att, expected_optimised_rate(config, q, att, seed=seed)

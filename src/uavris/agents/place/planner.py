@@ -36,9 +36,9 @@ from uavris.agents.oracle.planner import (
     Plan,
     PlanSettings,
     check_finalists,
-    facing_attitudes,
     holding,
     pattern_search,
+    turned_towards,
 )
 from uavris.agents.oracle.policy import fly_to, motion_entries
 from uavris.agents.place.value import PoseValue, predict
@@ -76,14 +76,13 @@ def place_values(model: PoseValue, config: SystemConfig, start: NDArray, places:
                  ) -> tuple[NDArray[np.float64], NDArray[np.float64], float]:
     """The episode value of flying to each of ``places`` and hovering there, by ``V`` and the
     travel-time rule, with the attitude it is valued at (level; with ``tilt`` the better of
-    level and turned towards the devices where the UAV can hold it, :func:`facing_attitudes`),
-    and ``V`` at the start (the value of staying)."""
+    level and turned towards the devices where the UAV can hold it,
+    :func:`~uavris.agents.oracle.planner.turned_towards`), and ``V`` at the start (the value of staying)."""
     users = np.asarray(config.users, dtype=np.float64)
     v = predict(model, users, places)
     att = np.zeros_like(places)
     if tilt and len(places):
-        facing = facing_attitudes(config, places)
-        turned = np.any(facing != 0.0, axis=1)
+        facing, turned = turned_towards(config, places)
         vt = v.copy()
         vt[turned] = predict(model, users, places[turned], facing[turned])
         att = np.where((vt > v)[:, None], facing, 0.0)
@@ -230,8 +229,7 @@ def decided_plan(model: PoseValue, config: SystemConfig, start: tuple[float, flo
             memo.update(zip((keys[i] for i in new), r.tolist()))
         return np.array([memo[k] for k in keys])
 
-    facing = facing_attitudes(c, chosen) if len(chosen) else np.zeros((0, 3))
-    tilted = np.any(facing != 0.0, axis=1)
+    facing, tilted = turned_towards(c, chosen)
     pos = np.concatenate([start_q[None], chosen, chosen[tilted]])
     att = np.concatenate([level[None], np.zeros_like(chosen), facing[tilted]])
     r = cheap(pos, att)

@@ -38,6 +38,7 @@ from uavris.config import DictConfig
 from uavris.errors import ConfigError, UavrisError
 from uavris.experiments.study.claims_tracks import LEVEL
 from uavris.experiments.study.finished import Study
+from uavris.experiments.study.stage_names import PRETRAIN
 from uavris.experiments.study.tracks import TRACK_SPECS, zero_shot_only
 from uavris.io import read_csv, read_json, write_json
 from uavris.stats import interactions_to_level
@@ -67,7 +68,7 @@ def finetune_curve_alike(study: Study, where: Any, episodes: int) -> tuple[list[
 
     track = TRACK_SPECS["deployment"]
     fdir = study.finetuned(track, where.name)
-    pretrained = study.done(track.stage("pretrain"))
+    pretrained = study.done(track.stage(PRETRAIN))
     if fdir is None or pretrained is None:
         raise UavrisError(f"{study.out}: the paper's DT was not fine-tuned in {where.name} (uavris reproduce --track "
                           "deployment --ablation runs it)")
