@@ -327,7 +327,6 @@ def test_the_one_parse_checks_nothing_against_its_own_defaults(tmp_path: Path, m
     checked: lines valid for their preset, hall or file build, and an invalid one is still refused."""
     import yaml
 
-    import uavris.agents.dt.checkpoint as checkpoint
     from uavris.agents.experts.imitation import ImitationConfig
     from uavris.cli.training import parse_finetune, parse_reproduce, parse_train
     from uavris.errors import ConfigError
@@ -356,7 +355,7 @@ def test_the_one_parse_checks_nothing_against_its_own_defaults(tmp_path: Path, m
     assert parse_train(["--layout", str(high), "--system.z-max", "11", "--preset", "smoke"]).run.system.z_max == 11.0
     pairs = parse_train(["--layout", "layout-train-0-k8", "--system.max-active-pairs", "3", "--preset", "smoke"])
     assert pairs.run.system.max_active_pairs == 3 and pairs.run.system.num_users == 8
-    monkeypatch.setattr(checkpoint, "dt_system", lambda model: TrainConfig().system)  # a model of the paper's hall
+    monkeypatch.setattr(cli_training, "dt_system", lambda model: TrainConfig().system)  # a model of the paper's hall
     ft = parse_finetune(["--model", "m", "--scenario", "unseen1", "--preset", "smoke", "--candidates", "4"]).run
     assert (ft.candidates, ft.elites) == (4, 2)  # the smoke preset's elites, not the parse's (quick's 50)
     with pytest.raises(ConfigError, match="elites"):

@@ -13,7 +13,10 @@ import pytest
 
 from uavris.agents.evaluation import evaluate
 from uavris.agents.references import reference_policy
+from uavris.cli import evaluation as cli_evaluation
 from uavris.cli import main
+from uavris.cli import tools as cli_tools
+from uavris.cli import training as cli_training
 from uavris.config import PAPER_USERS, SCENARIOS, PropulsionParams, SystemConfig
 from uavris.layouts import LayoutGenerator
 from uavris.presets import EVAL_SEED
@@ -98,7 +101,10 @@ def _stop_with_system(monkeypatch: pytest.MonkeyPatch, command: str) -> None:
         "sweep": (sweep, "sweep", lambda *a, **k: k["base"]),
         "compare-algorithms": (compare, "compare_algorithms", lambda *a, **k: k["system"]),
     }[command]
-    monkeypatch.setattr(where, name, lambda *a, **k: stop(take(*a, **k)))
+    real = getattr(where, name)
+    for module in (where, cli_evaluation, cli_tools, cli_training):  # the library's name, and a command's own
+        if getattr(module, name, None) is real:
+            monkeypatch.setattr(module, name, lambda *a, **k: stop(take(*a, **k)))
 
 
 HALL_12_HIGH = HALL_30.replace("room: [30, 20, 6]", "room: [30, 20, 12]")

@@ -13,13 +13,15 @@ import dataclasses
 import io
 import json
 import os
+import re
+import shutil
 import tempfile
 from pathlib import Path
 from typing import Any, Callable, Iterable, Mapping, Sequence
 
 import yaml
 
-from uavris.errors import UavrisError
+from uavris.errors import CheckpointError, UavrisError
 
 
 def _default_mode() -> int:
@@ -59,7 +61,6 @@ def atomic_write_text(path: str | Path, text: str) -> None:
 def replace_folder(made: Path, dest: Path, aside: Path) -> None:
     """Put the finished folder ``made`` in the place of ``dest`` whole (the old one moved to
     ``aside`` first, then removed): a reader sees the old folder or the new one, never a mix."""
-    import shutil
 
     shutil.rmtree(aside, ignore_errors=True)
     if dest.exists():
@@ -183,7 +184,6 @@ def read_csv(path: str | Path) -> list[dict[str, str]]:
 def file_part(text: str, fallback: str = "policy") -> str:
     """``text`` as one part of a file's name: letters, digits, ``_``, ``-`` and ``@`` (no folder,
     no dot that a suffix could be taken from), safe for any file system."""
-    import re
 
     return re.sub(r"[^\w@-]+", "_", text).strip("_") or fallback
 
@@ -219,7 +219,6 @@ def refuse_links_out(directory: str | Path, what: str) -> None:
     """One :class:`~uavris.errors.CheckpointError` line where a link in ``directory`` (``what``: a
     controller, a DT model, an expert's run, a learned value) leads outside it: such a folder reads
     only its own files, and the link is refused before anything in the folder is opened."""
-    from uavris.errors import CheckpointError
 
     if Path(directory).is_dir() and (out := link_out(directory)) is not None:
         raise CheckpointError(f"{out[0]} is a link to {out[1]}, outside {directory}: {what} reads only its own "
@@ -233,7 +232,6 @@ def read_checkpoint_meta(directory: str | Path, meta_file: str, kind: str, versi
     (``directory`` is not ``what``), corrupt, of another kind (it does not describe
     ``described``) or of another version, and before anything is opened when a link in it leads
     outside it (a controller, model, run or value folder reads only its own files)."""
-    from uavris.errors import CheckpointError
 
     refuse_links_out(directory, what)
     path = Path(directory) / meta_file

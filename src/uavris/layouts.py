@@ -48,6 +48,7 @@ from uavris.config import (
     float_tuple,
     scenario_at,
 )
+from uavris.io import read_yaml, write_yaml
 
 START_HEIGHT = 4.5  # m: the paper's starting altitude (every scenario of its Sec. V)
 SPLITS: tuple[str, ...] = ("train", "unseen", "other")
@@ -296,14 +297,12 @@ def layout_from_dict(data: Any, where: str, base: SystemConfig | None = None) ->
 
 def read_layout(path: str | Path, base: SystemConfig | None = None) -> Layout:
     """A layout file (module docstring); any problem is one :class:`ConfigError` line naming the file."""
-    from uavris.io import read_yaml
 
     return layout_from_dict(read_yaml(Path(path)), str(path), base)
 
 
 def write_layout(path: str | Path, layout: Layout) -> Path:
     """Write ``layout`` as a layout file (atomically)."""
-    from uavris.io import write_yaml
 
     write_yaml(Path(path), layout.to_dict())
     return Path(path)

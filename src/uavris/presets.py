@@ -14,6 +14,8 @@ from __future__ import annotations
 
 from typing import Any, Literal, get_args
 
+from uavris.errors import ConfigError
+
 Preset = Literal["smoke", "quick", "paper"]  # what --preset accepts
 PRESETS: tuple[str, ...] = get_args(Preset)
 
@@ -149,7 +151,6 @@ TRACK_FINETUNE: dict[str, dict[str, dict[str, Any]]] = {
 
 
 def check_preset(preset: str) -> None:
-    from uavris.errors import ConfigError
 
     if preset not in PRESETS:
         raise ConfigError(f"unknown preset {preset!r}; choose one of {', '.join(PRESETS)}")

@@ -22,6 +22,7 @@ from uavris.agents.oracle import greedy_oracle_policy, oracle_policy
 from uavris.agents.policy import Constant
 from uavris.config import SystemConfig
 from uavris.env.wrappers import MOTION_DIM
+from uavris.errors import ConfigError
 
 REFERENCE_SEED = 0
 
@@ -52,7 +53,6 @@ ZERO_ACTION, ORACLE, HOVER_OPTIMIZER = "zero-action", "oracle", "hover-optimizer
 def reference_policy(name: str, config: SystemConfig | None = None, seed: int = REFERENCE_SEED) -> Any:
     """The reference ``name`` (a key of :data:`REFERENCES`) for ``config`` (default: the paper's)."""
     if name not in REFERENCES:
-        from uavris.errors import ConfigError
 
         raise ConfigError(f"unknown reference {name!r}; choose one of {', '.join(REFERENCES)}")
     return REFERENCES[name].make(config or SystemConfig(), seed)

@@ -41,6 +41,7 @@ from types import FrameType
 from typing import Any, Callable, Iterator
 
 from uavris.errors import UavrisError
+from uavris.experiments.engine.jobs import configure_threads
 
 EXIT_BAD_INPUT = 2
 EXIT_INTERRUPTED = 128 + signal.SIGINT  # 130, what a shell reports for a process Ctrl-C ended
@@ -95,7 +96,6 @@ def _run(argv: list[str]) -> None:
     name, rest = argv[0], argv[1:]
     if name not in COMMANDS:
         raise UsageError(f"unknown command {name!r}; choose one of {', '.join(COMMANDS)} (see {PROG} --help)")
-    from uavris.experiments.engine.jobs import configure_threads
 
     configure_threads(torch_now=False)  # one thread per process: the cores go to the jobs (engine.jobs)
     command(name)(rest)

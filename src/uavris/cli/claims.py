@@ -17,7 +17,10 @@ from typing import Annotated
 import tyro
 
 from uavris.cli.parsing import Unset, UsageError, output_dir, parse, writing
-from uavris.experiments.study.from_scratch import FromScratchConfig
+from uavris.experiments.display.tables import markdown_table
+from uavris.experiments.study.claims import write_claims
+from uavris.experiments.study.from_scratch import FromScratchConfig, from_scratch
+from uavris.experiments.study.pages import PAGES, make_pages, studies
 from uavris.presets import Preset
 
 
@@ -46,7 +49,6 @@ def claims_command(args: list[str]) -> None:
     units is not measured. Writes OUT/claims.md (the claim x track table, what each cell
     compares, what the verdicts rest on) and OUT/claims.json.
     """
-    from uavris.experiments.study.claims import write_claims
 
     a = parse(ClaimsArgs, args, "uavris claims", claims_command.__doc__ or "")
     if bool(a.budgets) != (a.budget_comparison is not None):
@@ -77,8 +79,6 @@ def from_scratch_command(args: list[str]) -> None:
     Writes --out (JSON: each hall's levels, curves and interactions, rewritten after every hall;
     uavris claims --from-scratch reads it).
     """
-    from uavris.experiments.display.tables import markdown_table
-    from uavris.experiments.study.from_scratch import from_scratch
 
     a = parse(FromScratchArgs, args, "uavris from-scratch", from_scratch_command.__doc__ or "")
     rows: list[tuple[str, ...]] = []
@@ -127,7 +127,6 @@ def pages_command(args: list[str]) -> None:
     evidence beside it) and the studies under --runs; each study's progress goes to
     RUNS/.pages/STUDY.log. Ctrl-C or SIGTERM stops the running studies.
     """
-    from uavris.experiments.study.pages import PAGES, make_pages, studies
 
     a = parse(PagesArgs, args, "uavris pages", pages_command.__doc__ or "")
     if a.jobs < 1 or a.workers < 1:

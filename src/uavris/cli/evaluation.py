@@ -6,20 +6,25 @@ library. Not here: the rollouts, datasets and figures themselves (:mod:`uavris.e
 
 from __future__ import annotations
 
+import hashlib
 import sys
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Annotated, Literal
 
 import tyro
 
-from uavris.agents.torch_device import Device
+from uavris.agents.torch_device import Device, resolve_device
 from uavris.cli.options import LOOSE_SYSTEM, check_hall_flags, in_hall
 from uavris.cli.parsing import Unset, UsageError, output_dir, parse, writing
 from uavris.config import ScenarioName, SystemConfig
 from uavris.env.wrappers import PhaseControl
+from uavris.experiments.display.tables import counted, interval, rate_interval, signed
 from uavris.experiments.engine.jobs import Backend
-from uavris.experiments.tools.benchmark import Cells
+from uavris.experiments.tools.benchmark import Cells, benchmark, default_benchmark_dir
+from uavris.experiments.tools.evaluate import evaluate_target, results_dir
+from uavris.experiments.tools.targets import resolve_target, write_controller
+from uavris.layouts import Site, resolve_layout
 from uavris.presets import EVAL_SEED, STUDY, Preset
 
 DEFAULT_EPISODES = STUDY["quick"]["eval_episodes"]  # uavris evaluate's: the quick report's
@@ -92,9 +97,6 @@ def evaluate_command(args: list[str]) -> None:
     A row of a study's report (--row, TARGET the study's OUT) is evaluated as the report
     evaluates it, here or in a hall of your own (default OUT runs/rows/ROW).
     """
-    from uavris.agents.torch_device import resolve_device
-    from uavris.experiments.tools.evaluate import evaluate_target, results_dir
-    from uavris.experiments.tools.targets import resolve_target
 
     check_hall_flags(args, SystemConfig(), "uavris evaluate")  # before the flags are read into the paper's system
     a = parse(EvaluateArgs, args, "uavris evaluate", evaluate_command.__doc__ or "")
@@ -121,7 +123,6 @@ def evaluate_command(args: list[str]) -> None:
 def _row_controller(study: str | Path, key: str, track: str, dest: Path) -> Path:
     """Row ``key`` of ``track`` of the study in ``study`` as a controller directory at ``dest``."""
     from uavris.experiments.study.finished import Study
-    from uavris.experiments.tools.targets import write_controller
 
     opened = Study.open(study)
     _, unseen = opened.sites(track)
@@ -140,19 +141,15 @@ def paper_hall(system: SystemConfig) -> SystemConfig:
     """``system`` in the paper's hall (its devices and room): where the named scenarios (fig2,
     train1..8, unseen1..2) are, whatever hall a model was trained in (the --system.* flags still
     apply on top)."""
-    from uavris.layouts import resolve_layout
 
     return resolve_layout("paper", system).resolve(system)[0]
 
 
 def _evaluate_row(a: EvaluateArgs, args: list[str]) -> None:
     """``uavris evaluate OUT --row KEY``: a row of the study in OUT, in the site the flags name."""
-    from uavris.agents.torch_device import resolve_device
     from uavris.cli.options import in_hall, seed_note
     from uavris.experiments.study.finished import Study
     from uavris.experiments.study.tracks import TRACK_SPECS
-    from uavris.experiments.tools.evaluate import evaluate_target, results_dir
-    from uavris.layouts import Site
 
     study = Study.open(a.target)
     rc = study.config
@@ -177,7 +174,6 @@ def _evaluate_row(a: EvaluateArgs, args: list[str]) -> None:
 
 
 def _print_evaluation(what: str, summary: dict, path: Path) -> None:
-    from uavris.experiments.display.tables import counted, interval, rate_interval, signed
 
     if summary.get("warning"):
         print(f"uavris: warning: {summary['warning']}", file=sys.stderr)
@@ -247,9 +243,6 @@ def benchmark_command(args: list[str]) -> None:
     zero action with its paired 95% CI, means over cells), benchmark.csv, benchmark.json and
     each cell's per-episode CSVs.
     """
-    from uavris.agents.torch_device import resolve_device
-    from uavris.experiments.tools.benchmark import benchmark, default_benchmark_dir
-    from uavris.experiments.tools.targets import resolve_target
 
     check_hall_flags(args, SystemConfig(), "uavris benchmark")  # before the flags are read into the paper's system
     a = parse(BenchmarkArgs, args, "uavris benchmark", benchmark_command.__doc__ or "")
@@ -258,7 +251,6 @@ def benchmark_command(args: list[str]) -> None:
                          "pass one of them")
     with writing(a.out or default_benchmark_dir(a.target if a.row is None else a.row)) as out:
         if a.row is not None:  # the study's row as a controller of its own, kept beside the results
-            from dataclasses import replace
 
             a = replace(a, target=str(_row_controller(a.target, a.row, a.track, out / "controller")))
         system, _ = in_hall(a.layout, resolve_target(a.target).own_system(), a.system, args)  # --layout: one cell
@@ -316,7 +308,6 @@ def sweep_command(args: list[str]) -> None:
     Example: uavris sweep hover-optimizer oracle --param system.tx-power-dbm -10:30:10
     --param system.ris-size 2,4,8
     """
-    import hashlib
 
     from uavris.experiments.tools.sweep import parse_axis, sweep
 
@@ -347,7 +338,6 @@ def sweep_command(args: list[str]) -> None:
         out = a.out
     output_dir(out)
     if row_of is not None:  # the study's row as a controller of its own, kept beside the results
-        from dataclasses import replace
 
         with writing(out):  # sweep() holds the lock for the sweep itself
             a = replace(a, targets=(str(_row_controller(row_of, a.row, a.track, out / "controller")),))

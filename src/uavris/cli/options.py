@@ -19,6 +19,7 @@ from uavris.agents.torch_device import Device, resolve_device
 from uavris.cli.parsing import Unset, UsageError, output_dir, read_first
 from uavris.config import Scenario, SystemConfig
 from uavris.errors import ConfigError
+from uavris.layouts import resolve_layout
 from uavris.runs import CONFIG_FILE, config_path
 
 T = TypeVar("T")
@@ -113,7 +114,6 @@ def check_hall_flags(args: list[str], system: SystemConfig, prog: str = "uavris"
 
 def _check_given_beside_layout(named: str | None, given: set[str], system: SystemConfig) -> None:
     """``check_hall_flags``' rule for a layout already read: one line where a flag gives what it gives."""
-    from uavris.layouts import resolve_layout
 
     if named is None:
         return
@@ -201,7 +201,6 @@ def in_hall(layout: str | None, base: SystemConfig, parsed: SystemConfig,
     room: ``--layout`` with ``--system.users``, or a file with a room with ``--system.room``,
     gives them twice, which is one error line whatever the values (the paper's room given
     beside a file's room is no less a contradiction)."""
-    from uavris.layouts import resolve_layout
 
     given = given_flags(args)
     _check_given_beside_layout(layout, given, base)

@@ -26,6 +26,7 @@ import contextlib
 import inspect
 import io
 import sys
+import tempfile
 from pathlib import Path
 from typing import Annotated, Any, Callable, Iterator, Literal, Optional, TypeVar, get_args, get_origin
 
@@ -33,6 +34,8 @@ import tyro
 from tyro.constructors import ConstructorRegistry, PrimitiveConstructorSpec, PrimitiveTypeInfo
 
 from uavris.errors import UavrisError
+from uavris.io import read_yaml
+from uavris.runs.lock import locked
 
 try:  # tyro's parse-error events: private and experimental in tyro 1.0, whose version the project pins
     from tyro._errors import (
@@ -190,7 +193,6 @@ def output_dir(path: Path | None, flag: str = "--out") -> None:
         folder = folder.parent
     if not folder.is_dir():
         raise UsageError(f"{flag} {target}: {folder} is not a directory")
-    import tempfile
 
     try:
         with tempfile.TemporaryFile(dir=folder, prefix=".uavris-probe-"):
@@ -208,7 +210,6 @@ def writing(path: Path, flag: str = "--out", files_only: bool = False) -> Iterat
     that writes takes it around all of its writing (``reproduce`` and ``sweep`` inside the
     library, which their workers share). ``files_only``: the command writes files into ``path``
     itself (a plot's folder), never into its subfolders, which may then be links."""
-    from uavris.runs.lock import locked
 
     output_dir(path, flag)
     with locked(path, links=files_only):
@@ -217,7 +218,6 @@ def writing(path: Path, flag: str = "--out", files_only: bool = False) -> Iterat
 
 def load_overrides(path: Path, kind: str) -> dict[str, Any]:
     """A YAML mapping of config fields (``--config``)."""
-    from uavris.io import read_yaml
 
     try:
         data = read_yaml(path)  # a missing, unreadable or malformed file is already one line

@@ -8,15 +8,20 @@ the commands that score policies (:mod:`.evaluation`).
 from __future__ import annotations
 
 import sys
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Annotated, Literal
 
 import tyro
 
-from uavris.cli.options import LOOSE_SYSTEM, check_hall_flags, in_hall
+from uavris.cli.options import LOOSE_SYSTEM, check_hall_flags, in_hall, seed_note
 from uavris.cli.parsing import Unset, UsageError, parse, writing
 from uavris.config import ScenarioName, SystemConfig
+from uavris.experiments.display.tables import counted
+from uavris.experiments.tools.demo import run_demo
+from uavris.experiments.tools.targets import LearnedValue, read_controller, shipped_controller, write_controller
+from uavris.io import file_part
+from uavris.layouts import PAPER_LAYOUT, Layout, default_start, resolve_layout
 from uavris.presets import COLLECT_SEED
 
 
@@ -52,9 +57,7 @@ def _learned_value(a: PlanArgs) -> tuple[PlanArgs, Path | str | None]:
     """``a`` with ``--learned`` the value folder the user named (a study's seed 0's, the shipped
     controller's, a controller's) and ``--top-k`` / ``--deployed`` its row's; and the controller
     as the user typed it, for the line that tells them how to fly it."""
-    from dataclasses import replace
 
-    from uavris.experiments.tools.targets import LearnedValue, read_controller, shipped_controller
 
     named: Path | str | None = a.controller
     if a.learned is not None and a.controller is not None:
@@ -84,7 +87,6 @@ def plan_command(args: list[str]) -> None:
     and the target).
     """
     from uavris.experiments.tools.plan import check_devices, check_grid, plan_hall, planning_seconds
-    from uavris.layouts import PAPER_LAYOUT, Layout, default_start, resolve_layout
 
     positional = ["--layout", args[0], *args[1:]] if args and not args[0].startswith("-") else args
     check_hall_flags(positional, SystemConfig(), "uavris plan")  # before the flags are read into the paper's system
@@ -165,7 +167,6 @@ def collect_command(args: list[str]) -> None:
     (metadata.json + main_data.hdf5): per-episode scenario, expert and seed, the system
     configuration and the environment spec (minari's recover_environment() rebuilds the env).
     """
-    from uavris.experiments.display.tables import counted
     from uavris.experiments.training.collect import collect, dataset_summary
 
     a = parse(CollectArgs, args, "uavris collect", collect_command.__doc__ or "")
@@ -197,7 +198,6 @@ class DemoArgs:
 
 def demo_command(args: list[str]) -> None:
     """Roll out the zero action, random actions and a co-phasing hover, and print their average sum rate."""
-    from uavris.experiments.tools.demo import run_demo
 
     check_hall_flags(args, SystemConfig(), "uavris demo")  # a room given twice: one line, before the values are read
     a = parse(DemoArgs, args, "uavris demo", demo_command.__doc__ or "")
@@ -253,10 +253,7 @@ def export_command(args: list[str]) -> None:
     `uavris evaluate OUT --row ROW` in the same hall. A row that flies another hall's plan (transfer-...) is that
     hall's and cannot be exported. Writes --out/controller.json and its models' files.
     """
-    from uavris.cli.options import seed_note
     from uavris.experiments.study.finished import Study
-    from uavris.experiments.tools.targets import write_controller
-    from uavris.io import file_part
 
     a = parse(ExportArgs, args, "uavris export", export_command.__doc__ or "")
     study = Study.open(a.study)

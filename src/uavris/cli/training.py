@@ -15,9 +15,10 @@ from typing import Annotated, Any, Callable
 
 import tyro
 
+from uavris.agents.dt.checkpoint import dt_system
 from uavris.agents.experts import Algorithm
 from uavris.agents.experts.imitation import ImitationConfig
-from uavris.agents.torch_device import Device
+from uavris.agents.torch_device import Device, resolve_device
 from uavris.cli.options import (
     LAYOUT_HELP,
     LOOSE_SYSTEM,
@@ -31,12 +32,15 @@ from uavris.cli.options import (
 )
 from uavris.cli.parsing import Unset, UsageError, load_overrides, output_dir, parse, parse_built, writing
 from uavris.config import ScenarioName, SystemConfig
+from uavris.experiments.display.tables import counted, rate_interval
 from uavris.experiments.engine.jobs import Backend
 from uavris.experiments.study.config import ReproduceConfig
-from uavris.experiments.training.finetune import FinetuneConfig
-from uavris.experiments.training.pretrain import PretrainConfig
-from uavris.experiments.training.train_expert import TrainConfig
+from uavris.experiments.study.reproduce import estimate, reproduce
+from uavris.experiments.training.finetune import FinetuneConfig, default_finetune_dir, finetune
+from uavris.experiments.training.pretrain import PretrainConfig, default_pretrain_dir, pretrain
+from uavris.experiments.training.train_expert import TrainConfig, default_run_dir, train
 from uavris.presets import STUDY, Preset
+from uavris.runs import read_done
 
 Flat = tyro.conf.arg(name="")  # the config's fields become the command's own flags
 
@@ -118,9 +122,6 @@ def train_command(args: list[str]) -> None:
     (rerun it with --config), episodes.csv, evals.csv, TensorBoard logs (tb/), checkpoints/
     and model.zip. Every TrainConfig field is a flag; --preset and --algo choose the defaults.
     """
-    from uavris.experiments.display.tables import counted, rate_interval
-    from uavris.experiments.training.train_expert import default_run_dir, train
-    from uavris.runs import read_done
 
     a = parse_train(args)
     run_dir = a.options.out or default_run_dir(a.run)
@@ -176,7 +177,6 @@ def compare_command(args: list[str]) -> None:
     and bootstrap CIs beside the zero action, the references and the paper's values, and
     report.md. Finished jobs are skipped on a rerun; interrupted ones resume.
     """
-    from uavris.agents.torch_device import resolve_device
     from uavris.experiments.training.compare import compare_algorithms, default_compare_dir
 
     check_hall_flags(args, SystemConfig(), "uavris compare-algorithms")  # a room given twice: one line, first
@@ -229,8 +229,6 @@ def pretrain_command(args: list[str]) -> None:
     logs (tb/), checkpoints/ and model/ (model.safetensors + model.json), which `uavris
     evaluate` and `uavris finetune-dt --model` accept.
     """
-    from uavris.experiments.training.pretrain import default_pretrain_dir, pretrain
-    from uavris.runs import read_done
 
     a = parse_pretrain(args)
     run_dir = _run_dt(pretrain, a.run, a.options, default_pretrain_dir)
@@ -249,7 +247,6 @@ class FinetuneArgs:
 
 def parse_finetune(args: list[str]) -> FinetuneArgs:
     """``uavris finetune-dt``'s line, parsed once and built."""
-    from uavris.agents.dt.checkpoint import dt_system
 
     def build(parsed: FinetuneArgs) -> FinetuneArgs:
         """The preset's fine-tuning of the model in its own system (in the hall of --layout, with its
@@ -285,8 +282,6 @@ def finetune_command(args: list[str]) -> None:
     finetune.csv (with the environment interactions used), TensorBoard logs, checkpoints/
     and model/.
     """
-    from uavris.experiments.training.finetune import default_finetune_dir, finetune
-    from uavris.runs import read_done
 
     a = parse_finetune(args)
     run_dir = _run_dt(finetune, a.run, a.options, default_finetune_dir)
@@ -364,8 +359,6 @@ def reproduce_command(args: list[str]) -> None:
     inputs); independent stages run concurrently.
     Writes OUT/report.md and OUT/figures/.
     """
-    from uavris.agents.torch_device import resolve_device
-    from uavris.experiments.study.reproduce import estimate, reproduce
 
     a = parse_reproduce(args)
     out = a.out or Path("runs") / a.study.preset

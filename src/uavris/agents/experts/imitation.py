@@ -33,6 +33,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from uavris.agents.oracle import PlanningOracle
 from uavris.agents.policy import Privileged
 from uavris.config import ConfigError, DictConfig, Scenario, SystemConfig, unkeyed
 from uavris.env.rollout import rollout
@@ -98,7 +99,6 @@ def imitate(model: Any, config: SystemConfig, scenario: str | Scenario, cfg: Imi
     """
     import torch
 
-    from uavris.agents.oracle import PlanningOracle
 
     policy = model.policy
     if not hasattr(policy, "log_std"):

@@ -20,8 +20,11 @@ from numpy.typing import NDArray
 
 from uavris.agents.experts.hyperparams import Hyperparams, check_algorithm
 from uavris.agents.experts.vec_env import expert_spaces
+from uavris.agents.row_invariant import rows_apart
 from uavris.config import SystemConfig
 from uavris.errors import CheckpointError
+from uavris.io import atomic_write_bytes, read_checkpoint_meta, write_json
+from uavris.runs.seal import check_sealed
 
 POLICY_KIND, POLICY_FORMAT_VERSION = "uavris-expert-policy", 1
 # What the architecture's JSON may hold: the keyword arguments uavris's models are built with (build_model).
@@ -65,7 +68,6 @@ def save_policy(model: Any, algo: str, stem: Path) -> None:
     (the algorithm and the keyword arguments its network is built with), atomically."""
     from safetensors.torch import save
 
-    from uavris.io import atomic_write_bytes, write_json
 
     kwargs = {k: v for k, v in model.policy_kwargs.items() if k in POLICY_KWARGS}
     if algo == "ppo":  # on-policy algorithms hand use_sde to the policy beside its kwargs
@@ -86,7 +88,6 @@ def load_policy(stem: Path, config: SystemConfig, phase_control: str, device: st
     from safetensors import SafetensorError
     from safetensors.torch import load
 
-    from uavris.io import read_checkpoint_meta
 
     meta = read_checkpoint_meta(stem.parent, f"{stem.name}.json", POLICY_KIND, POLICY_FORMAT_VERSION,
                                 "an expert's policy", "an expert's policy")
@@ -122,7 +123,6 @@ class SB3Policy:
         return int(self.model.observation_space.shape[0])
 
     def __call__(self, obs: NDArray[np.float32]) -> NDArray[np.float32]:
-        from uavris.agents.row_invariant import rows_apart
 
         with rows_apart(getattr(self.model, "policy", self.model)):
             action, _ = self.model.predict(obs, deterministic=True)
@@ -146,7 +146,6 @@ def _check_model_file(path: Path) -> None:
 def load_model(path: str | Path, algo: str, env: Any = None, device: str = "cpu", trust_pickle: bool = False) -> Any:
     """An SB3 model of ``algo`` from ``path`` (a model.zip or checkpoint): SB3 unpickles it, so
     only a file sealed as uavris's own or, with ``trust_pickle``, one the user trusts."""
-    from uavris.runs.seal import check_sealed
 
     path = Path(path)
     _check_model_file(path)

@@ -14,6 +14,8 @@ from typing import Mapping
 import matplotlib
 
 matplotlib.use("Agg")
+import io
+
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from matplotlib.ticker import MaxNLocator  # noqa: E402
@@ -28,7 +30,6 @@ plt.rcParams.update({"font.size": 9, "axes.grid": True, "grid.alpha": 0.3, "figu
 def save_figure(fig: plt.Figure, stem: Path) -> list[Path]:
     """Write ``stem.png`` and ``stem.pdf`` atomically (the suffixes appended: a dot in the stem's
     name is kept); returns both paths."""
-    import io
 
     out = []
     for ext, kw in (("png", {"dpi": 200}), ("pdf", {})):

@@ -29,12 +29,15 @@ are seeded by their own configuration, so both backends give the same results.
 from __future__ import annotations
 
 import contextlib
+import ctypes
 import dataclasses
 import heapq
 import itertools
 import multiprocessing as mp
 import os
+import platform
 import signal
+import socket
 import sys
 import threading
 import time
@@ -46,8 +49,11 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Iterator, Literal, get_args
 
+import numpy
+
 from uavris.errors import UavrisError
 from uavris.experiments.engine import shipping
+from uavris.float_paths import cpu_info, float_path
 
 
 @dataclass(frozen=True)
@@ -95,11 +101,9 @@ def configure_threads(torch_now: bool = True) -> None:
     section 3). The environment variables make processes started from this one
     (the job runner's workers) start with one thread too.
     """
-    import os
 
     for var in THREAD_VARIABLES:
         os.environ.setdefault(var, "1")
-    import numpy  # noqa: F401  (its BLAS must be loaded for threadpoolctl to limit it)
     import scipy.linalg  # noqa: F401  (likewise scipy's own BLAS)
     from threadpoolctl import threadpool_limits
 
@@ -118,17 +122,13 @@ def machine() -> str:
     model numbers: two CPUs of one name may differ), CPUs, the float path its libraries ran
     (:func:`uavris.float_paths.float_path`), Python, numpy and torch versions (a verdict that
     flips with the CPU is not a finding: docs/study.md section 3)."""
-    import os
-    import platform
 
-    from uavris.float_paths import cpu_info, float_path
 
     found = cpu_info()
     cpu = next((found[k] for k in ("model name", "Hardware", "Processor") if k in found),
                platform.processor() or "unknown CPU")
     if "cpu family" in found and "model" in found:
         cpu += f" (family {found['cpu family']}, model {found['model']})"
-    import numpy
 
     try:
         import torch
@@ -208,7 +208,6 @@ def _interrupt_thread(ident: int) -> None:
     Ctrl-C and SIGTERM land in the main thread, which waits for that thread, so without this the
     job would run to its end (minutes) before the command stopped. CPython's own call for it
     (``PyThreadState_SetAsyncExc``): compiled code (numba, torch) finishes its current call first."""
-    import ctypes
 
     ctypes.pythonapi.PyThreadState_SetAsyncExc(ctypes.c_ulong(ident), ctypes.py_object(KeyboardInterrupt))
 
@@ -245,7 +244,6 @@ class JobRunner:
         if backend not in BACKENDS:
             raise ValueError(f"unknown backend {backend!r}; choose one of {', '.join(BACKENDS)}")
         self.workers, self.backend, self.ray_address = max(1, int(workers)), backend, ray_address
-        import os
 
         for var in THREAD_VARIABLES:  # the workers this runner starts begin with one thread (configure_threads)
             os.environ.setdefault(var, "1")
@@ -543,7 +541,6 @@ def _sigterm_kept() -> Iterator[None]:
     if threading.current_thread() is not threading.main_thread():
         yield  # only the main thread sets handlers (Ray leaves them alone there too)
         return
-    import signal
 
     previous = signal.getsignal(signal.SIGTERM)
     try:
@@ -561,7 +558,6 @@ def _interrupted(job: Job) -> JobResult:
 def _reachable(address: str) -> None:
     """One line when nothing answers at a cluster's ``HOST:PORT`` (Ray itself would retry for
     minutes); other forms of address (``ray://``, ``auto``) are left to Ray."""
-    import socket
 
     host, sep, port = address.rpartition(":")
     if not sep or not port.isdigit() or "/" in address:

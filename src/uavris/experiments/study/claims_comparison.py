@@ -18,15 +18,21 @@ from typing import Sequence
 
 import numpy as np
 
+from uavris.agents.evaluation import evaluate
+from uavris.agents.references import HOVER_OPTIMIZER, ORACLE, REFERENCES, ZERO_ACTION, reference_policy
+from uavris.config import SystemConfig
 from uavris.experiments.display.tables import markdown_table
 from uavris.experiments.study.judgement import NOT_TESTED, Judgement
-from uavris.io import read_csv
+from uavris.experiments.study.stamp import make_stamp, stamped
+from uavris.io import atomic_write_text, read_csv
+from uavris.presets import EVAL_SEED
 from uavris.stats import (
     HOLDS,
     MIN_UNITS,
     NOT_MEASURED,
     NOT_RESOLVED,
     REFUTED,
+    over_units,
     paired_difference,
     t_p_value,
     welch_difference,
@@ -105,11 +111,6 @@ def eval_curves(cdir: Path) -> dict[str, list[tuple[np.ndarray, np.ndarray]]]:
 def fig2_zero_action() -> dict[str, float]:
     """The zero action in ``fig2`` of the paper's system on the comparison's 32 episodes: its mean
     and the Student-t 95% interval of that mean over the episodes (``ci_low``, ``ci_high``)."""
-    from uavris.agents.evaluation import evaluate
-    from uavris.agents.references import ZERO_ACTION, reference_policy
-    from uavris.config import SystemConfig
-    from uavris.presets import EVAL_SEED
-    from uavris.stats import over_units
 
     return over_units(evaluate(reference_policy(ZERO_ACTION, SystemConfig()), SystemConfig(), "fig2", 32,
                                EVAL_SEED).avg_sum_rate)
@@ -147,7 +148,6 @@ def budget_figure(cdir: Path, stem: Path, zero: float) -> list[Path]:
     """The periodic evaluations of a comparison's runs against environment steps (log axis):
     each seed thin, the mean of the seeds that reached a step thick, beside the zero action
     (``zero``, on the same episodes) (PNG and PDF)."""
-    from uavris.agents.references import REFERENCES, ZERO_ACTION
     from uavris.experiments.display.plots import plt, reference_lines, save_figure
 
     fig, ax = plt.subplots(figsize=(5.4, 3.6))
@@ -177,11 +177,6 @@ def budget_figure(cdir: Path, stem: Path, zero: float) -> list[Path]:
 def fig2_references() -> dict[str, dict[str, float]]:
     """Hovering with optimised phases and the oracle in ``fig2`` of the paper's system on the
     comparison's 32 episodes: mean and 95% CI over the episodes, by reference name."""
-    from uavris.agents.evaluation import evaluate
-    from uavris.agents.references import HOVER_OPTIMIZER, ORACLE, reference_policy
-    from uavris.config import SystemConfig
-    from uavris.presets import EVAL_SEED
-    from uavris.stats import over_units
 
     return {name: over_units(evaluate(reference_policy(name, SystemConfig()), SystemConfig(), "fig2", 32,
                                       EVAL_SEED).avg_sum_rate) for name in (HOVER_OPTIMIZER, ORACLE)}
@@ -195,9 +190,6 @@ def write_budget_page(comparisons: Sequence[tuple[Path, Sequence[int]]], page: P
     (:func:`budget_figure`) and DDPG against each algorithm at every budget where it ran, as
     estimates (the claims page judges them, corrected with its other cells). ``made_by``: the
     commands that made the comparisons. Returns the files written."""
-    from uavris.agents.references import HOVER_OPTIMIZER, ORACLE, REFERENCES
-    from uavris.experiments.study.stamp import make_stamp, stamped
-    from uavris.io import atomic_write_text
 
     zero = fig2_zero_action()
     refs = fig2_references()

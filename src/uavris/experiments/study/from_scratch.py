@@ -33,14 +33,19 @@ from typing import Any, Callable
 
 import numpy as np
 
+from uavris.agents.evaluation import evaluate
 from uavris.agents.oracle.planner import SAFE_MARGIN_DEG
 from uavris.config import DictConfig
 from uavris.errors import ConfigError, UavrisError
+from uavris.experiments.engine.jobs import machine
 from uavris.experiments.study.claims_tracks import LEVEL
 from uavris.experiments.study.finished import Study
 from uavris.experiments.study.stage_names import PRETRAIN
 from uavris.experiments.study.tracks import TRACK_SPECS, zero_shot_only
+from uavris.experiments.tools.targets import DTModel, Row
+from uavris.experiments.training.train_expert import TrainConfig, train
 from uavris.io import read_csv, read_json, write_json
+from uavris.presets import EVAL_SEED
 from uavris.stats import interactions_to_level
 
 
@@ -62,9 +67,6 @@ def finetune_curve_alike(study: Study, where: Any, episodes: int) -> tuple[list[
     """The paper's DT's fine-tuning in ``where`` as the expert's curve is measured: the
     pre-trained model and each round's model evaluated on the study's ``episodes`` evaluation
     episodes under the safety layer, against the interactions fine-tuning had used by then."""
-    from uavris.agents.evaluation import evaluate
-    from uavris.experiments.tools.targets import DTModel, Row
-    from uavris.presets import EVAL_SEED
 
     track = TRACK_SPECS["deployment"]
     fdir = study.finetuned(track, where.name)
@@ -89,8 +91,6 @@ def from_scratch(out: str | Path, cfg: FromScratchConfig, dest: Path,
     """Measure (module docstring) in the study ``out``; write ``dest`` (JSON) after every hall,
     calling ``report`` with each hall's numbers; returns what it wrote. The halls ``dest``
     already holds of the same measurement of the same study are kept, not measured again."""
-    from uavris.experiments.engine.jobs import machine
-    from uavris.experiments.training.train_expert import TrainConfig, train
 
     study = Study.open(out)
     rc, track = study.config, TRACK_SPECS["deployment"]

@@ -30,6 +30,18 @@ from typing import Any, Sequence
 
 import numpy as np
 
+from uavris.agents.oracle import plan_target
+from uavris.agents.oracle.planner import TEACHER, PlanSettings, holding
+from uavris.agents.oracle.search import Found, SearchSettings, exhaustive_plan, plan_gap, plan_seeds
+from uavris.config import SystemConfig
+from uavris.experiments.display.tables import markdown_table
+from uavris.experiments.engine.jobs import configure_threads, machine
+from uavris.experiments.study.stamp import make_stamp, stamped
+from uavris.io import atomic_write_text, read_json, write_json
+from uavris.layouts import LayoutGenerator
+from uavris.physics.phase_opt import compile_optimiser
+from uavris.stats import over_units
+
 DEARER = 10  # the search costs at least this many times the oracle's time
 FORMAT = 2  # 2: the search seeded with the oracle's poses, its fine grid 2 m each way
 
@@ -53,8 +65,6 @@ def search(system: Any, start: tuple, oracle_s: float, seeds: list, path: Path) 
     made the same search (its settings, seeds, margin and format) at least :data:`DEARER` times
     the oracle's cost; else made (its grids halved, up to twice, until it is dear enough) and
     written there."""
-    from uavris.agents.oracle.search import Found, SearchSettings, exhaustive_plan
-    from uavris.io import read_json, write_json
 
     seeded = [[np.asarray(q).tolist(), np.asarray(a).tolist()] for q, a in seeds]
     if path.exists():
@@ -84,11 +94,6 @@ def search(system: Any, start: tuple, oracle_s: float, seeds: list, path: Path) 
 def measure(split: str, j: int, k: int, out: Path) -> dict[str, Any]:
     """One hall: the teacher, the oracle and the search (:func:`search`), timed, and their values
     on the same fresh draws."""
-    from uavris.agents.oracle import plan_target
-    from uavris.agents.oracle.planner import TEACHER, PlanSettings, holding
-    from uavris.agents.oracle.search import plan_gap, plan_seeds
-    from uavris.config import SystemConfig
-    from uavris.layouts import LayoutGenerator
 
     system, where = LayoutGenerator(devices=k).layout(split, j).resolve(SystemConfig())
     timed = {}
@@ -112,8 +117,6 @@ def measure(split: str, j: int, k: int, out: Path) -> dict[str, Any]:
 
 def versions() -> dict[str, Any]:
     """What a hall's numbers were made by: a hall of another oracle, teacher or search is measured again."""
-    from uavris.agents.oracle.planner import TEACHER, PlanSettings
-    from uavris.agents.oracle.search import SearchSettings
 
     return {"oracle_settings": str(PlanSettings()), "teacher_settings": str(TEACHER),
             "search_settings": str(SearchSettings()), "format": FORMAT}
@@ -121,7 +124,6 @@ def versions() -> dict[str, Any]:
 
 def summary_rows(done: dict[str, dict[str, Any]]) -> tuple[list[tuple[str, ...]], list[tuple[str, ...]]]:
     """The per-hall table and the per-count table (fractions over halls with their t interval)."""
-    from uavris.stats import over_units
 
     per_hall = [("hall", "devices", "oracle", "search", "stay", "teacher", "search - oracle (SE)",
                  "oracle / search", "oracle s", "oracle s / teacher's s", "search s / oracle s")]
@@ -147,15 +149,12 @@ def summary_rows(done: dict[str, dict[str, Any]]) -> tuple[list[tuple[str, ...]]
 
 
 def markdown(rows: list[tuple[str, ...]]) -> list[str]:
-    from uavris.experiments.display.tables import markdown_table
 
     return markdown_table(rows[0], rows[1:], "l" + "r" * (len(rows[0]) - 1))
 
 
 def write_page(done: dict[str, dict[str, Any]], page: Path, out: Path, command: str) -> Path:
     """``docs/results/oracle-gap.md``, stamped: what is measured, then the two tables."""
-    from uavris.experiments.study.stamp import make_stamp, stamped
-    from uavris.io import atomic_write_text
 
     per_hall, per_count = summary_rows(done)
     lines = ["# How good the oracle is: its gap to a much wider search", "",
@@ -201,9 +200,6 @@ def parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     args = parser().parse_args(argv)
-    from uavris.experiments.engine.jobs import configure_threads, machine
-    from uavris.io import read_json, write_json
-    from uavris.physics.phase_opt import compile_optimiser
 
     configure_threads()
     args.out.mkdir(parents=True, exist_ok=True)

@@ -28,6 +28,11 @@ from pathlib import Path
 from typing import Callable, Sequence
 
 from uavris.errors import UavrisError
+from uavris.experiments.study import oracle_gap
+from uavris.experiments.study.claims_comparison import write_budget_page
+from uavris.experiments.study.stamp import HISTORICAL_FILE, historical_banner, read_stamp, stale
+from uavris.experiments.tools.targets import PRETRAINED
+from uavris.io import read_json, read_yaml
 from uavris.presets import STUDY
 
 
@@ -144,7 +149,6 @@ def _write_claims(runs: Path, dest: Path, preset: str, seeds: int) -> list[Path]
 
 
 def _write_budget(runs: Path, dest: Path, preset: str, seeds: int) -> list[Path]:
-    from uavris.experiments.study.claims_comparison import write_budget_page
 
     budget, long, _ = _budgets(preset)
     steps = int(STUDY[preset]["compare_steps"])
@@ -153,8 +157,6 @@ def _write_budget(runs: Path, dest: Path, preset: str, seeds: int) -> list[Path]
 
 
 def _write_oracle_gap(runs: Path, dest: Path, preset: str, seeds: int) -> list[Path]:
-    from uavris.experiments.study import oracle_gap
-    from uavris.io import read_json
 
     run = studies(preset, seeds)["oracle-gap"]
     parsed = oracle_gap.parser().parse_args(run.command(runs, preset))
@@ -170,7 +172,6 @@ def _write_pretrained(runs: Path, dest: Path, preset: str, seeds: int) -> list[P
     the make run's pages replace the package's controller."""
     from uavris.experiments.study.config import ReproduceConfig
     from uavris.experiments.study.pretrained import ship, write_card_page
-    from uavris.experiments.tools.targets import PRETRAINED
 
     package = preset == "quick" and dest.resolve() == (PRETRAINED.parents[3] / "docs" / "results").resolve()
     shipped = ship(runs / "quick", PRETRAINED if package else dest / "pretrained", made_by=ReproduceConfig(preset))
@@ -356,8 +357,6 @@ def check_pages(results: Path) -> list[str]:
     does not list with its reason, a listed page that does not say so before its first section
     (:func:`~uavris.experiments.study.stamp.historical_banner`) or that is current after all, a
     listed page that is not there, a stamp that does not read."""
-    from uavris.experiments.study.stamp import HISTORICAL_FILE, historical_banner, read_stamp, stale
-    from uavris.io import read_yaml
 
     listed_file = results / HISTORICAL_FILE
     listed = read_yaml(listed_file) if listed_file.is_file() else {}

@@ -18,12 +18,19 @@ from typing import Any, Sequence
 
 import numpy as np
 
+from uavris.agents.references import ORACLE
 from uavris.errors import UavrisError
+from uavris.experiments.display.tables import markdown_table, pct, with_ci
+from uavris.experiments.engine.scheduling import StudyContext
 from uavris.experiments.study.config import ReproduceConfig
 from uavris.experiments.study.finished import Study
+from uavris.experiments.study.pipeline import build_pipeline
 from uavris.experiments.study.stage_names import DATASET, VALUE_LABELS, value_stage
+from uavris.experiments.study.stamp import make_stamp, stamped
 from uavris.experiments.study.tracks import TRACK_SPECS
+from uavris.experiments.tools.targets import write_controller
 from uavris.io import atomic_write_text, read_json, replace_folder, write_json
+from uavris.stats import over_units
 
 ROW = "dt-goal-safe"  # the deployment track's controller: the goal-conditioned DT told the deployed place
 # what the shipped files come from: the demonstrations, V's labels, seed 0's V and goal-conditioned DT
@@ -34,8 +41,6 @@ CARD = "card.json"
 def make_keys(config: ReproduceConfig | None = None) -> dict[str, str]:
     """The keys of :data:`STAGES` in this code's make run (``uavris reproduce --preset quick``; or
     in the study of ``config``), from its pipeline built in a scratch folder, nothing run."""
-    from uavris.experiments.engine.scheduling import StudyContext
-    from uavris.experiments.study.pipeline import build_pipeline
 
     with tempfile.TemporaryDirectory() as tmp:
         pipeline = build_pipeline(config or ReproduceConfig("quick"), Path(tmp), StudyContext(1, "local", None))
@@ -45,8 +50,6 @@ def make_keys(config: ReproduceConfig | None = None) -> dict[str, str]:
 def scores(study: Study) -> list[dict[str, Any]]:
     """The row's fraction of the oracle (its seed 0's and the mean of its seeds) per device count
     of the study's unseen halls, with the Student-t 95% CI over halls."""
-    from uavris.agents.references import ORACLE
-    from uavris.stats import over_units
 
     track = TRACK_SPECS["deployment"]
     per: dict[tuple[int, str], list[tuple[float, float]]] = {}
@@ -68,7 +71,6 @@ def ship(study_dir: Path, dest: Path, made_by: ReproduceConfig | None = None) ->
     in place whole) with ``card.json``: the keys of :data:`STAGES` in that study, its preset and
     seed, and its scores (:func:`scores`). The study must be this code's make run (or this code's
     study of ``made_by``: its keys :func:`make_keys`'s): the card would be stale at once."""
-    from uavris.experiments.tools.targets import write_controller
 
     study = Study.open(study_dir)
     keys = {name: study.pipeline.stages[name].key for name in STAGES}
@@ -106,8 +108,6 @@ def write_card_page(shipped: Path, page: Path, command: str, studies: Sequence[s
     """The model card (``docs/results/pretrained.md``, stamped): what the shipped controller is, the
     data and halls it learned from, its scores at each device count with intervals, its stage keys;
     ``studies``: the study it was shipped from (the stamp's)."""
-    from uavris.experiments.display.tables import markdown_table, pct, with_ci
-    from uavris.experiments.study.stamp import make_stamp, stamped
 
     card = read_json(shipped / CARD)
     rows = [(f"{s['devices']} devices" + (", another generator" if s["halls"] == "other" else ""), str(s["n"]),

@@ -25,7 +25,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Sequence
 
+import uavris
+from uavris.agents.oracle.planner import ORACLE_VERSION, TEACHER
 from uavris.errors import UavrisError
+from uavris.experiments.engine.jobs import machine
+from uavris.float_paths import float_path
 
 STAMP_FORMAT = 1  # the stamp's own fields; raised when they change
 OPEN, CLOSE = "<!-- uavris-page", "-->"
@@ -59,7 +63,6 @@ class Stamp:
 
 def current_versions() -> dict[str, Any]:
     """This code's results format, oracle version and teacher: what a current page's stamp holds."""
-    from uavris.agents.oracle.planner import ORACLE_VERSION, TEACHER
     from uavris.experiments.study.workers import RESULTS_FORMAT
 
     return {"results_format": RESULTS_FORMAT, "oracle_version": ORACLE_VERSION,
@@ -90,9 +93,6 @@ def commit() -> str | None:
 def make_stamp(page: str, studies: Sequence[str | Path] = (), preset: str | None = None, command: str = "",
                **extra: Any) -> Stamp:
     """The stamp of ``page`` written now by this code, on this machine."""
-    import uavris
-    from uavris.experiments.engine.jobs import machine
-    from uavris.float_paths import float_path
 
     return Stamp(page=page, **current_versions(), preset=preset, commit=commit(), version=uavris.__version__,
                  machine=machine(), float_path=float_path(),

@@ -17,18 +17,31 @@ from typing import Any, Sequence
 
 import numpy as np
 
+from uavris import physics as ph
+from uavris.agents.dt.dataset import load_dataset
+from uavris.agents.evaluation import evaluate
+from uavris.agents.oracle import PlanningOracle
+from uavris.agents.oracle.objective import assessed_rate
+from uavris.agents.place.planner import learned_plan
+from uavris.agents.place.value import predict
+from uavris.agents.references import ORACLE
 from uavris.experiments.study.kept_rows import keep, row_key, take
 from uavris.experiments.study.tracks import TRACK_SPECS, Track
+from uavris.experiments.tools.evaluate import write_results
 from uavris.experiments.tools.targets import LearnedValue, Row
+from uavris.experiments.tools.trajectory import SlotLog, write_slots
+from uavris.experiments.training.collect import collect, dataset_summary
+from uavris.experiments.training.demonstrations import DemonstrationConfig, collect_demonstrations, demonstrate
+from uavris.experiments.training.values import ValueFitConfig, ValueLabelsConfig, fit, make_labels, write_label_part
 from uavris.io import read_json, write_json
 from uavris.layouts import Site
 from uavris.presets import EVAL_SEED
 from uavris.runs import read_done
+from uavris.stats import summarize
 
 
 def dataset_job(expert_dirs: list[str], trajectories: int, out: str) -> dict[str, Any]:
     """Collect the experts' trajectories into a dataset; returns its summary."""
-    from uavris.experiments.training.collect import collect, dataset_summary
 
     return dataset_summary(collect(expert_dirs, trajectories, out, force=True, progress=False))
 
@@ -38,14 +51,12 @@ QUERIES_FILE = "queries.json"  # a demonstration part's model queries (poses its
 
 def demonstrations_job(cfg_dict: dict[str, Any], first: int, count: int, out: str) -> dict[str, Any]:
     """Demonstrations of halls ``first .. first + count - 1`` as a dataset of their own at ``out``."""
-    from uavris.experiments.training.demonstrations import DemonstrationConfig, collect_demonstrations, demonstrate
 
     cfg = DemonstrationConfig.from_dict(cfg_dict)
     labels: dict[str, list[Any]] | None = {} if cfg.value_labels else None
     queries: dict[str, int] = {}
     trajectories = demonstrate(cfg, first, count, labels=labels, queries=queries)
     if labels:  # the plans' valued poses: labels of the learned value (a part beside the dataset's)
-        from uavris.experiments.training.values import write_label_part
 
         part = Path(out)
         write_label_part(part.parent.parent / "labels" / f"{part.name}.npz",
@@ -57,9 +68,6 @@ def demonstrations_job(cfg_dict: dict[str, Any], first: int, count: int, out: st
 
 def merge_demonstrations(cfg_dict: dict[str, Any], parts: Sequence[str], out: str) -> dict[str, Any]:
     """The parts' demonstrations, in hall order, as one dataset at ``out``; returns its summary."""
-    from uavris.agents.dt.dataset import load_dataset
-    from uavris.experiments.training.collect import dataset_summary
-    from uavris.experiments.training.demonstrations import DemonstrationConfig, collect_demonstrations
 
     cfg = DemonstrationConfig.from_dict(cfg_dict)
     trajectories = [tr for part in parts for tr in load_dataset(part).trajectories]
@@ -77,9 +85,6 @@ def merge_demonstrations(cfg_dict: dict[str, Any], parts: Sequence[str], out: st
 def best_demonstrations_job(cfg_dict: dict[str, Any], source: str, fraction: float, out: str) -> dict[str, Any]:
     """The ``fraction`` of the demonstrations at ``source`` with the highest returns (filtered
     behaviour cloning's data: the field's baseline), in their order, as one dataset at ``out``."""
-    from uavris.agents.dt.dataset import load_dataset
-    from uavris.experiments.training.collect import dataset_summary
-    from uavris.experiments.training.demonstrations import DemonstrationConfig, collect_demonstrations
 
     trajectories = load_dataset(source).trajectories
     keep = max(1, round(fraction * len(trajectories)))
@@ -104,7 +109,6 @@ def pretrain_job(cfg_dict: dict[str, Any], out: str, device: str = "cpu") -> dic
 def value_labels_job(cfg_dict: dict[str, Any], count: int, first: int, n: int, out: str) -> dict[str, Any]:
     """The learned value's labels of training halls ``first .. first + n - 1`` of ``count``
     devices, a part at ``out``."""
-    from uavris.experiments.training.values import ValueLabelsConfig, make_labels
 
     make_labels(ValueLabelsConfig.from_dict(cfg_dict), count, first, n, out)
     return {"count": count, "halls": n}
@@ -112,7 +116,6 @@ def value_labels_job(cfg_dict: dict[str, Any], count: int, first: int, n: int, o
 
 def value_fit_job(cfg_dict: dict[str, Any], parts: Sequence[str], out: str) -> dict[str, Any]:
     """The learned value fitted to the label ``parts``, a checkpoint at ``out``; returns its done record."""
-    from uavris.experiments.training.values import ValueFitConfig, fit
 
     fit(ValueFitConfig.from_dict(cfg_dict), parts, out)
     return read_json(Path(out) / "done.json")
@@ -149,7 +152,6 @@ class _Whereabouts:
     each episode's last pose, and every slot (``log``; its ``on_step`` is the rollout's too)."""
 
     def __init__(self, system: Any, episodes: int) -> None:
-        from uavris.experiments.tools.trajectory import SlotLog
 
         self.users = np.asarray(system.users, dtype=np.float64)
         self.behind, self.slots = 0, 0
@@ -157,7 +159,6 @@ class _Whereabouts:
         self.log = SlotLog(EVAL_SEED + np.arange(episodes))
 
     def __call__(self, sim: Any, obs: Any, executed: Any, alive: Any) -> None:
-        from uavris import physics as ph
 
         self.behind += int((ph.worst_elevation(sim.att, sim.pos, self.users) <= 0.0)[alive].sum())
         self.slots += int(alive.sum())
@@ -174,7 +175,6 @@ def _decomposition(system: Any, rec: _Whereabouts) -> dict[str, Any]:
     phases (the planner's R, on the fresh draws plans state their numbers with, so that it
     pairs with the oracle's target's) at its median end position, level and with its own
     attitude, and the share of its slots with a device behind the RIS (docs/study.md section 2)."""
-    from uavris.agents.oracle.objective import assessed_rate
 
     pos, att = rec.end_pose()
     (level, own), _ = assessed_rate(system, np.stack([pos, pos]), np.stack([np.zeros(3), att]))
@@ -196,11 +196,9 @@ def evaluate_rows(out: Path, site: Site, track: Track, episodes: int, rows: Sequ
     evaluated before with the same inputs is copied from there instead of flown again (not
     without ``reuse``: a run with ``--force``), and a row flown here is kept there (:mod:`.kept_rows`).
     """
-    from uavris.agents.references import ORACLE
 
     result = {row.key: _row_kept_or_evaluated(out, site, track, episodes, row, kept, reuse) for row in rows}
     if track.layouts:
-        from uavris.agents.oracle import PlanningOracle
 
         oracle = PlanningOracle()
         result[ORACLE].update(oracle_target(site, oracle))
@@ -230,10 +228,6 @@ def first_episode_slots(evaluation: Path, row: str) -> Path:
 def evaluate_row(out: Path, site: Site, track: Track, episodes: int, row: Row) -> dict[str, Any]:
     """One row of :func:`evaluate_rows`: its per-episode CSV and summary in ``out`` (named by its
     key), its first episode slot by slot in ``out/slots``; the summary."""
-    from uavris.agents.evaluation import evaluate
-    from uavris.experiments.tools.evaluate import write_results
-    from uavris.experiments.tools.trajectory import write_slots
-    from uavris.stats import summarize
 
     system = row.system(site.system)
     loaded = row.load(system)
@@ -252,8 +246,6 @@ def oracle_target(where: Site, oracle: Any = None) -> dict[str, Any]:
     """The planning oracle's target in ``where``: its pose, R there with its attitude
     (``plan_rate``, with its standard error) and level (``plan_rate_level``, what
     :func:`_decomposition`'s place gap compares an end position with, on the same draws)."""
-    from uavris.agents.oracle import PlanningOracle
-    from uavris.agents.oracle.objective import assessed_rate
 
     plan = (oracle or PlanningOracle()).plan(where.system, where.scenario.start)
     (level,), _ = assessed_rate(where.system, plan.target, np.zeros(3))
@@ -268,9 +260,6 @@ def value_accuracy(where: Site, value: Any, oracle: Any) -> dict[str, Any]:
     its numbers with (``value_target_rate_level``: the oracle's ``plan_rate_level`` is its match)."""
     from scipy.stats import spearmanr
 
-    from uavris.agents.oracle.objective import assessed_rate
-    from uavris.agents.place.planner import learned_plan
-    from uavris.agents.place.value import predict
 
     system, start = where.system, where.scenario.start
     oracle.plan(system, start)

@@ -13,6 +13,7 @@ from uavris.agents.evaluation import check_episodes, evaluate
 from uavris.agents.references import REFERENCES, reference_policy
 from uavris.config import SCENARIOS, Scenario, SystemConfig, get_scenario
 from uavris.experiments.display.tables import counted, rate_interval
+from uavris.experiments.tools.evaluate import hall_name
 from uavris.physics import propulsion_power
 
 DEMO_POLICIES = ("zero-action", "random", "hover-aligned")
@@ -33,7 +34,6 @@ def where_text(cfg: SystemConfig, where: Scenario) -> str:
     """Where the demo flies, as its first line names it: a scenario of the paper's (a start in
     the paper's hall, or in devices of ``--system.users``), or a hall of its own (``--layout``)
     by the layout's name, as a hall: the paper has no scenario of that name."""
-    from uavris.experiments.tools.evaluate import hall_name
 
     if SCENARIOS.get(where.name) == where:
         hall = hall_name(cfg, None, where.name)

@@ -24,12 +24,17 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
+from uavris.agents.evaluation import evaluate
 from uavris.agents.oracle import PlanSettings, expected_optimised_rate, plan_target
 from uavris.agents.oracle.objective import feasible
+from uavris.agents.policy import fit_policy
 from uavris.config import SystemConfig
 from uavris.errors import ConfigError
 from uavris.experiments.display.plots import plt, save_figure
 from uavris.experiments.display.progress import progress_bar
+from uavris.experiments.tools.evaluate import outside_training
+from uavris.experiments.tools.targets import read_controller
+from uavris.experiments.tools.trajectory import SlotLog
 from uavris.io import write_json
 from uavris.layouts import Layout
 from uavris.presets import EVAL_SEED
@@ -214,11 +219,6 @@ def controller_flight(controller: Path, layout: Layout, seed: int = EVAL_SEED) -
     CONTROLLER --layout`` runs it: its pose at the last slot, its average sum rate and, where the
     hall lies outside what it was trained in, the warning ``evaluate`` prints. The place it is
     told is a request; a weak controller may not get there."""
-    from uavris.agents.evaluation import evaluate
-    from uavris.agents.policy import fit_policy
-    from uavris.experiments.tools.evaluate import outside_training
-    from uavris.experiments.tools.targets import read_controller
-    from uavris.experiments.tools.trajectory import SlotLog
 
     row = read_controller(controller)
     hall, where = layout.resolve(row.own_system())

@@ -40,12 +40,17 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
-from uavris.config import SCENARIOS, SystemConfig, get_scenario
+from uavris.agents.evaluation import check_episodes, evaluate
+from uavris.agents.policy import fit_policy
+from uavris.config import SCENARIOS, Scenario, SystemConfig, get_scenario
 from uavris.errors import ConfigError, UavrisError
 from uavris.experiments.display.plots import plt, save_figure
 from uavris.experiments.display.progress import progress_bar
 from uavris.experiments.engine.jobs import Job, run_jobs
+from uavris.experiments.tools.evaluate import hall_name, layout_origin, outside_training
+from uavris.experiments.tools.targets import as_row, resolve_target
 from uavris.io import other_inputs, read_json, to_plain, write_csv, write_json
+from uavris.layouts import LayoutGenerator
 from uavris.presets import EVAL_SEED
 from uavris.runs.lock import locked
 from uavris.stats import over_units, t_interval
@@ -141,7 +146,6 @@ def cell_systems(base: SystemConfig, axes: Sequence[Axis], point: Sequence[float
                  scenario: str | Any | None) -> list[tuple[SystemConfig, Any]]:
     """The (system, start) pairs a cell is evaluated in: one, or ``halls`` generated halls of
     the cell's number of devices (``devices`` axis); checked before any job runs."""
-    from uavris.layouts import LayoutGenerator
 
     system = base
     for axis, value in zip(axes, point):
@@ -163,10 +167,6 @@ def sweep_cell(target: str, system: dict[str, Any], scenario: dict[str, Any], ep
                trust_pickle: bool = False) -> None:
     """A job: ``target`` in one hall of one cell on episodes ``EVAL_SEED ..``; its mean and its
     per-episode rates to the JSON file ``out``."""
-    from uavris.agents.evaluation import evaluate
-    from uavris.agents.policy import fit_policy
-    from uavris.config import Scenario
-    from uavris.experiments.tools.targets import as_row, resolve_target
 
     cfg = SystemConfig.from_dict(system)
     row = as_row(resolve_target(target, trust_pickle))  # a controller's row: its safety layer, its goals
@@ -190,9 +190,6 @@ def sweep(targets: Sequence[str], axes: Sequence[Axis], out: Path, *, base: Syst
     """Every ``target`` in every cell of the grid of ``axes`` (one or two), written to ``out``
     (module docstring); returns the paths of the CSV and the figures. ``layout``: the layout the
     hall came from (the CLI's ``--layout``), recorded in ``sweep.json``."""
-    from uavris.agents.evaluation import check_episodes
-    from uavris.experiments.tools.evaluate import layout_origin
-    from uavris.experiments.tools.targets import resolve_target
 
     if not 1 <= len(axes) <= 2 or len({a.name for a in axes}) != len(axes):
         raise ConfigError("a sweep takes one or two different --param")
@@ -212,8 +209,6 @@ def sweep(targets: Sequence[str], axes: Sequence[Axis], out: Path, *, base: Syst
         raise ConfigError(f"the grid has {len(grid)} cells; at most {MAX_CELLS}")
     places = {point: cell_systems(base, axes, point, halls, scenario) for point in grid}  # every cell checked first
     if warn is not None:  # a trained model flown outside what it was trained in, once per policy
-        from uavris.experiments.tools.evaluate import outside_training
-        from uavris.experiments.tools.targets import as_row
 
         for t in targets:
             row = as_row(resolve_target(t, trust_pickle))
@@ -298,7 +293,6 @@ def swept_hall(base: SystemConfig, scenario: str | Any | None, axes: Sequence[Ax
     """Where the sweep flew, for its figure's title: a rate is a hall's, and the same policy
     scores differently in another (the paper's hall and a start of it, a layout by its name,
     or a devices sweep's generated halls)."""
-    from uavris.experiments.tools.evaluate import hall_name
 
     if any(a.name == "devices" for a in axes):
         return f"{halls} generated halls per device count (layout seed 0)"

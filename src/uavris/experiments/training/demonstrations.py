@@ -58,6 +58,7 @@ from uavris.agents.policy import Privileged
 from uavris.config import DictConfig, SystemConfig
 from uavris.env.simulator import BatchedSimulator
 from uavris.errors import ConfigError
+from uavris.experiments.display.progress import progress_bar
 from uavris.experiments.display.tables import counted
 from uavris.layouts import Layout, LayoutGenerator
 from uavris.presets import COLLECT_SEED
@@ -174,7 +175,6 @@ def collect_demonstrations(cfg: DemonstrationConfig, out: str | Path, *, force: 
                            progress: bool = True, trajectories: Sequence[Trajectory] | None = None) -> Path:
     """Every hall's demonstrations (or the given ``trajectories``, made by :func:`demonstrate`
     in parts) as one Minari dataset at ``out``; returns its path."""
-    from uavris.experiments.display.progress import progress_bar
 
     out = Path(out)
     check_dataset_target(out, force)  # before the rollouts, not only when writing

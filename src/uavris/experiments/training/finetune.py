@@ -49,7 +49,9 @@ from uavris.agents.dt.policy import DTBatchPolicy, load_dt_policy
 from uavris.agents.dt.training import TrainingWindows, load_trainer_state, make_optimizer, train_steps
 from uavris.agents.dt.trajectories import ELITE_RULES, EliteRule, Trajectory, record_episodes, select_elites
 from uavris.agents.evaluation import evaluate
-from uavris.agents.policy import check_policy_fits
+from uavris.agents.place.checkpoint import load_value
+from uavris.agents.place.planner import learned_plan, places_to_try
+from uavris.agents.policy import LevelAttitude, check_policy_fits
 from uavris.config import (
     PRESET,
     DictConfig,
@@ -159,7 +161,6 @@ def _candidates(cfg: FinetuneConfig, h: int, dt_policy: Callable[..., DTBatchPol
     (:class:`~uavris.agents.policy.LevelAttitude`): not only noise around the model's own path
     but the alternative to its tilts, recorded as flown, which the paired elites keep where it
     pays (a tilt that puts a device behind the RIS: docs/study.md, section 2)."""
-    from uavris.agents.policy import LevelAttitude
 
     noise_seed = int(np.random.SeedSequence([cfg.seed, h]).generate_state(1)[0])
     per_seed = cfg.rollouts_per_seed if cfg.selection == "paired" else 1
@@ -226,8 +227,6 @@ class Places:
     @classmethod
     def from_value(cls, cfg: FinetuneConfig, system: SystemConfig, start: tuple[float, float, float]) -> Places:
         """The learned value ``cfg.value``'s place, and with ``cfg.places`` the places to try."""
-        from uavris.agents.place.checkpoint import load_value
-        from uavris.agents.place.planner import learned_plan, places_to_try
 
         if cfg.value is None:
             raise ConfigError("a goal-conditioned DT fine-tunes with a learned value to tell its goal "

@@ -11,6 +11,7 @@ range of training halls of one count, written as a part a rerun reuses), :func:`
 from __future__ import annotations
 
 import dataclasses
+import io
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -78,7 +79,6 @@ def write_label_part(out: str | Path, *, users: np.ndarray, position: np.ndarray
     """Labels of one count (devices ``(n, K, 3)``, positions ``(n, 3)``, ``R`` ``(n,)``, halls
     ``(n,)``, attitudes ``(n, 3)``, level where not given) as an ``.npz`` part, written
     atomically (a part on disk is a finished one)."""
-    import io
 
     buf = io.BytesIO()
     np.savez(buf, users=users, position=position, rate=rate, hall=hall,

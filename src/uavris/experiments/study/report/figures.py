@@ -12,6 +12,7 @@ from typing import Any
 
 import numpy as np
 
+from uavris import physics as ph
 from uavris.agents.references import REFERENCES
 from uavris.config import get_scenario
 from uavris.experiments.display.plots import REFERENCE_STYLE, plt, reference_lines, save_figure
@@ -76,7 +77,6 @@ def trajectory_figure(scenario: str, slots: Path, system: Any, stem: Path, seed:
     """3-D view of one evaluation episode of a DT, as its evaluation stage recorded it slot by
     slot (``slots``: :func:`uavris.experiments.tools.trajectory.write_slots`): UAV path, RIS
     normal every few slots, devices and their safety balls (as circles at the floor of the region)."""
-    from uavris import physics as ph
 
     rows = read_csv(slots)
     pos = np.array([[float(r[c]) for c in ("x", "y", "z")] for r in rows])
