@@ -151,6 +151,5 @@ TRACK_FINETUNE: dict[str, dict[str, dict[str, Any]]] = {
 
 
 def check_preset(preset: str) -> None:
-
     if preset not in PRESETS:
         raise ConfigError(f"unknown preset {preset!r}; choose one of {', '.join(PRESETS)}")

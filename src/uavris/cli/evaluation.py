@@ -174,7 +174,6 @@ def _evaluate_row(a: EvaluateArgs, args: list[str]) -> None:
 
 
 def _print_evaluation(what: str, summary: dict, path: Path) -> None:
-
     if summary.get("warning"):
         print(f"uavris: warning: {summary['warning']}", file=sys.stderr)
     print(f"{what} in {summary['scenario']} ({summary['hall']}): average sum rate {summary['mean']:.2f} bps/Hz "

@@ -58,7 +58,6 @@ def _learned_value(a: PlanArgs) -> tuple[PlanArgs, Path | str | None]:
     controller's, a controller's) and ``--top-k`` / ``--deployed`` its row's; and the controller
     as the user typed it, for the line that tells them how to fly it."""
 
-
     named: Path | str | None = a.controller
     if a.learned is not None and a.controller is not None:
         raise UsageError("--controller and --learned both name a learned value; pass one of them")

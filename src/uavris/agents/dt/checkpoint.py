@@ -16,6 +16,8 @@ from pathlib import Path
 from typing import Any
 
 import torch
+from safetensors import SafetensorError
+from safetensors.torch import load, save
 
 from uavris import runs
 from uavris.agents.dt.config import DTConfig
@@ -38,7 +40,6 @@ def save_dt(model: DecisionTransformer, directory: str | Path, metadata: dict[st
 
     The JSON goes last, so a directory whose ``model.json`` exists has matching weights.
     """
-    from safetensors.torch import save
 
     directory = Path(directory)
     tensors = {k: v.detach().cpu().contiguous().clone() for k, v in model.state_dict().items()}
@@ -57,8 +58,6 @@ def read_dt_metadata(directory: str | Path) -> dict[str, Any]:
 
 def load_dt(directory: str | Path, device: str = "cpu") -> tuple[DecisionTransformer, dict[str, Any]]:
     """Rebuild the model of a checkpoint directory (in eval mode, on ``device``) and return its metadata."""
-    from safetensors import SafetensorError
-    from safetensors.torch import load
 
     directory = Path(directory)
     meta = read_dt_metadata(directory)

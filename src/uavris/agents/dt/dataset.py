@@ -40,7 +40,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Sequence
 
+import gymnasium as gym
 import numpy as np
+from gymnasium.envs.registration import EnvSpec
 from numpy.typing import NDArray
 
 from uavris.agents.dt.trajectories import Trajectory
@@ -98,8 +100,6 @@ def env_spec_for(system: SystemConfig, scenario: str | Scenario):
     exactly; the registered entry point takes the config as a dict. A named scenario is
     recorded by its name, any other (a layout's start) as ``{"name": ..., "start": [x, y, z]}``.
     """
-    import gymnasium as gym
-    from gymnasium.envs.registration import EnvSpec
 
     try:
         where = get_scenario(scenario)
@@ -140,7 +140,6 @@ def write_dataset(path: str | Path, trajectories: Sequence[Trajectory], system: 
     interrupted write never leaves a half dataset. An existing dataset is replaced only
     with ``force``; a non-empty directory that is not a dataset is never touched.
     """
-    import gymnasium as gym
     import minari
     from minari.data_collector import EpisodeBuffer
     from minari.dataset.minari_storage import MinariStorage
@@ -343,7 +342,6 @@ def _checked_metadata(data_dir: Path, where: str) -> tuple[dict[str, Any], Syste
 
 def _check_spaces(meta: dict[str, Any], system: SystemConfig, act_dim: int, where: str) -> None:
     """The recorded spaces, exactly as Minari serialises the environment's for ``system``."""
-    import gymnasium as gym
     from minari.serialization import serialize_space
 
     low, high = observation_bounds(system)
@@ -363,7 +361,6 @@ def _check_env_spec(spec: Any, system: SystemConfig | None, where: str) -> dict[
     uavris's registered environment, through its registered entry point and no wrapper, with
     ``system`` (when given): anything else would have Minari's ``recover_environment`` import
     and call what the file names. Returns the spec's kwargs."""
-    import gymnasium as gym
 
     try:
         fields = json.loads(spec) if isinstance(spec, str) else None
@@ -417,7 +414,6 @@ def episode_environment(dataset: Any, episode: int, eval_env: bool = False) -> A
     entry point, never the one the file names) with the episode's own
     hall and start from its metadata, so that a dataset over many halls rebuilds each of them.
     Reset it with the episode's seed to replay the episode."""
-    import gymnasium as gym
 
     recorded = dataset.storage.metadata
     spec = (eval_env and recorded.get("eval_env_spec")) or recorded.get("env_spec")

@@ -23,6 +23,8 @@ from typing import Any, Callable, Sequence
 import numpy as np
 import torch
 from numpy.typing import NDArray
+from safetensors import SafetensorError
+from safetensors.torch import load, save
 
 from uavris.agents.dt.config import DTConfig
 from uavris.agents.dt.encoders import pooled_over_devices
@@ -216,7 +218,6 @@ def train_steps(model: DecisionTransformer, opt: torch.optim.Optimizer, windows:
 def save_trainer_state(directory: Path, opt: torch.optim.Optimizer, rng: np.random.Generator,
                        extra: dict[str, Any]) -> None:
     """Optimiser moments and the torch RNG as safetensors, the rest as JSON (no pickle)."""
-    from safetensors.torch import save
 
     state = opt.state_dict()
     tensors = {"torch_rng": torch.get_rng_state()}
@@ -230,8 +231,6 @@ def save_trainer_state(directory: Path, opt: torch.optim.Optimizer, rng: np.rand
 
 def load_trainer_state(directory: Path, opt: torch.optim.Optimizer, rng: np.random.Generator) -> dict[str, Any]:
     """Restore what :func:`save_trainer_state` wrote; returns its JSON (with the ``extra`` fields)."""
-    from safetensors import SafetensorError
-    from safetensors.torch import load
 
     path = directory / "trainer.safetensors"
     meta = read_json(directory / "trainer.json")

@@ -99,7 +99,6 @@ def imitate(model: Any, config: SystemConfig, scenario: str | Scenario, cfg: Imi
     """
     import torch
 
-
     policy = model.policy
     if not hasattr(policy, "log_std"):
         raise ConfigError("imitation is implemented for PPO (a Gaussian policy with a state-independent std)")

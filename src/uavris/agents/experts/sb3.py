@@ -17,6 +17,10 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
+from safetensors import SafetensorError
+from safetensors.torch import load, save
+from stable_baselines3 import DDPG, PPO, SAC, TD3
+from stable_baselines3.common.noise import NormalActionNoise
 
 from uavris.agents.experts.hyperparams import Hyperparams, check_algorithm
 from uavris.agents.experts.vec_env import expert_spaces
@@ -33,7 +37,6 @@ POLICY_KWARGS = ("net_arch", "use_sde", "n_critics", "share_features_extractor")
 
 def algorithm_class(algo: str) -> type:
     check_algorithm(algo)
-    from stable_baselines3 import DDPG, PPO, SAC, TD3
 
     return {"ddpg": DDPG, "ppo": PPO, "sac": SAC, "td3": TD3}[algo]
 
@@ -41,7 +44,6 @@ def algorithm_class(algo: str) -> type:
 def build_model(algo: str, env: Any, hp: Hyperparams, seed: int, tensorboard_log: str | None = None,
                 device: str = "cpu") -> Any:
     """A fresh SB3 model of ``algo`` on ``env`` (a VecEnv) with hyperparameters ``hp``, on ``device``."""
-    from stable_baselines3.common.noise import NormalActionNoise
 
     cls = algorithm_class(algo)
     common: dict[str, Any] = dict(learning_rate=hp.learning_rate, gamma=hp.gamma, seed=seed, device=device,
@@ -66,8 +68,6 @@ def build_model(algo: str, env: Any, hp: Hyperparams, seed: int, tensorboard_log
 def save_policy(model: Any, algo: str, stem: Path) -> None:
     """The policy of an SB3 ``model`` as ``STEM.safetensors`` (its weights) and ``STEM.json``
     (the algorithm and the keyword arguments its network is built with), atomically."""
-    from safetensors.torch import save
-
 
     kwargs = {k: v for k, v in model.policy_kwargs.items() if k in POLICY_KWARGS}
     if algo == "ppo":  # on-policy algorithms hand use_sde to the policy beside its kwargs
@@ -85,9 +85,6 @@ def has_policy(stem: Path) -> bool:
 def load_policy(stem: Path, config: SystemConfig, phase_control: str, device: str = "cpu") -> Any:
     """The policy network :func:`save_policy` wrote at ``stem``, for ``config`` (its spaces), in
     eval mode; nothing in the files is run. One :class:`CheckpointError` line naming what is wrong."""
-    from safetensors import SafetensorError
-    from safetensors.torch import load
-
 
     meta = read_checkpoint_meta(stem.parent, f"{stem.name}.json", POLICY_KIND, POLICY_FORMAT_VERSION,
                                 "an expert's policy", "an expert's policy")
@@ -123,7 +120,6 @@ class SB3Policy:
         return int(self.model.observation_space.shape[0])
 
     def __call__(self, obs: NDArray[np.float32]) -> NDArray[np.float32]:
-
         with rows_apart(getattr(self.model, "policy", self.model)):
             action, _ = self.model.predict(obs, deterministic=True)
         return action

@@ -12,6 +12,8 @@ from pathlib import Path
 from typing import Any
 
 import torch
+from safetensors import SafetensorError
+from safetensors.torch import load, save
 
 from uavris.agents.place.value import PoseValue, ValueConfig
 from uavris.errors import CheckpointError, ConfigError
@@ -24,7 +26,6 @@ WEIGHTS_FILE, META_FILE = "value.safetensors", "value.json"
 
 def save_value(model: PoseValue, directory: str | Path, metadata: dict[str, Any] | None = None) -> Path:
     """Write ``value.safetensors`` then ``value.json`` into ``directory``; returns it."""
-    from safetensors.torch import save
 
     directory = Path(directory)
     tensors = {k: v.detach().cpu().contiguous().clone() for k, v in model.state_dict().items()}
@@ -41,8 +42,6 @@ def is_value_dir(path: str | Path) -> bool:
 def load_value(directory: str | Path) -> tuple[PoseValue, dict[str, Any]]:
     """The learned value of a checkpoint directory (in eval mode) and its metadata; one
     :class:`~uavris.errors.CheckpointError` line naming what is wrong with it."""
-    from safetensors import SafetensorError
-    from safetensors.torch import load
 
     directory = Path(directory)
     meta = read_checkpoint_meta(directory, META_FILE, VALUE_KIND, VALUE_FORMAT_VERSION, "a learned value",

@@ -123,7 +123,6 @@ def machine() -> str:
     (:func:`uavris.float_paths.float_path`), Python, numpy and torch versions (a verdict that
     flips with the CPU is not a finding: docs/study.md section 3)."""
 
-
     found = cpu_info()
     cpu = next((found[k] for k in ("model name", "Hardware", "Processor") if k in found),
                platform.processor() or "unknown CPU")

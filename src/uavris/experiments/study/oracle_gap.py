@@ -149,7 +149,6 @@ def summary_rows(done: dict[str, dict[str, Any]]) -> tuple[list[tuple[str, ...]]
 
 
 def markdown(rows: list[tuple[str, ...]]) -> list[str]:
-
     return markdown_table(rows[0], rows[1:], "l" + "r" * (len(rows[0]) - 1))
 
 

@@ -149,7 +149,6 @@ def _write_claims(runs: Path, dest: Path, preset: str, seeds: int) -> list[Path]
 
 
 def _write_budget(runs: Path, dest: Path, preset: str, seeds: int) -> list[Path]:
-
     budget, long, _ = _budgets(preset)
     steps = int(STUDY[preset]["compare_steps"])
     return write_budget_page([(runs / "budget", (steps, budget)), (runs / "budget-ppo", (long,))],
@@ -157,7 +156,6 @@ def _write_budget(runs: Path, dest: Path, preset: str, seeds: int) -> list[Path]
 
 
 def _write_oracle_gap(runs: Path, dest: Path, preset: str, seeds: int) -> list[Path]:
-
     run = studies(preset, seeds)["oracle-gap"]
     parsed = oracle_gap.parser().parse_args(run.command(runs, preset))
     done = {name: read_json(parsed.out / f"{name}.json")

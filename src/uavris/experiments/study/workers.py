@@ -16,6 +16,7 @@ from pathlib import Path
 from typing import Any, Sequence
 
 import numpy as np
+from scipy.stats import spearmanr
 
 from uavris import physics as ph
 from uavris.agents.dt.dataset import load_dataset
@@ -152,14 +153,12 @@ class _Whereabouts:
     each episode's last pose, and every slot (``log``; its ``on_step`` is the rollout's too)."""
 
     def __init__(self, system: Any, episodes: int) -> None:
-
         self.users = np.asarray(system.users, dtype=np.float64)
         self.behind, self.slots = 0, 0
         self.pos, self.att = np.zeros((episodes, 3)), np.zeros((episodes, 3))
         self.log = SlotLog(EVAL_SEED + np.arange(episodes))
 
     def __call__(self, sim: Any, obs: Any, executed: Any, alive: Any) -> None:
-
         self.behind += int((ph.worst_elevation(sim.att, sim.pos, self.users) <= 0.0)[alive].sum())
         self.slots += int(alive.sum())
         self.pos[alive], self.att[alive] = sim.pos[alive], sim.att[alive]
@@ -258,8 +257,6 @@ def value_accuracy(where: Site, value: Any, oracle: Any) -> dict[str, Any]:
     ``V`` with ``R`` over the level poses the planning ``oracle`` valued there with ``R``
     (``value_rank_correlation``), and ``R`` at ``V``'s argmax, level, on the draws a plan states
     its numbers with (``value_target_rate_level``: the oracle's ``plan_rate_level`` is its match)."""
-    from scipy.stats import spearmanr
-
 
     system, start = where.system, where.scenario.start
     oracle.plan(system, start)

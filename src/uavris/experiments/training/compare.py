@@ -19,6 +19,7 @@ from pathlib import Path
 from typing import Any, Callable, Sequence
 
 import numpy as np
+import yaml
 
 from uavris import runs
 from uavris.agents.evaluation import evaluate
@@ -313,7 +314,6 @@ def render_report(rows: list[dict[str, Any]], cfgs: dict[tuple[str, int], TrainC
         hp = cfgs[(a, seeds[0])].hyperparams
         lines.append(f"- **{a.upper()}**: " + ", ".join(f"{k}={v}" for k, v in hyperparams_for(a, hp).items()))
     lines += ["", "System configuration:", "", "```yaml"]
-    import yaml
 
     lines += [yaml.safe_dump(any_cfg.system.to_dict(), sort_keys=False).rstrip(), "```", ""]
     return "\n".join(lines)

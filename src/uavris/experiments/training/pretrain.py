@@ -24,6 +24,7 @@ from pathlib import Path
 from typing import Mapping, Sequence
 
 import numpy as np
+import torch
 
 from uavris.agents.dt.checkpoint import save_dt
 from uavris.agents.dt.config import DTConfig
@@ -143,7 +144,6 @@ def pretrain(cfg: PretrainConfig, run_dir: str | Path, *, resume: bool = False, 
 
     ``interrupt_at`` is a test hook that stops training after that step.
     """
-    import torch
 
     run_dir = Path(run_dir)
     ds = training_subset(load_dataset(cfg.dataset), cfg.scenarios)

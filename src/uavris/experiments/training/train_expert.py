@@ -37,6 +37,7 @@ from pathlib import Path
 from typing import Any, Mapping
 
 import numpy as np
+from stable_baselines3.common.callbacks import BaseCallback
 
 from uavris import runs
 from uavris.agents.evaluation import EpisodeResults, evaluate
@@ -168,8 +169,6 @@ class _Recorder:
                                 start_steps)
 
     def callback(self):
-        from stable_baselines3.common.callbacks import BaseCallback
-
         rec = self
 
         class Callback(BaseCallback):
