@@ -176,3 +176,41 @@ def test_the_source_tree_page_names_every_module_and_its_layers_hold():
                     entry = parts[depth]
                     if entry in rank:
                         assert rank[entry] <= i, f"{source.relative_to(package)} imports {target}, listed below it"
+
+
+def _imports_inside_functions(path: Path) -> set[str]:
+    """The modules ``path`` imports inside a function body (at any depth in it)."""
+    import ast
+
+    out: set[str] = set()
+
+    def visit(node: ast.AST, inside: bool) -> None:
+        for child in ast.iter_child_nodes(node):
+            here = inside or isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef))
+            if here and isinstance(child, ast.Import):
+                out.update(a.name for a in child.names)
+            elif here and isinstance(child, ast.ImportFrom):
+                out.add("." * child.level + (child.module or ""))
+            visit(child, here)
+
+    visit(ast.parse(path.read_text()), False)
+    return out
+
+
+def test_every_import_inside_a_function_is_listed_with_its_reason():
+    """docs/architecture.md's table names, per module, every module it imports inside a function,
+    each row with a reason; a lazy import added (or one moved to the top) without the table is a
+    failure, as is a row the code no longer needs."""
+    text = (ROOT / "docs" / "architecture.md").read_text()
+    table = text.split("## Imports inside functions", 1)[1].split("\n## ", 1)[0]
+    listed: dict[str, set[str]] = {}
+    for line in table.splitlines():
+        cells = [c.strip() for c in line.strip().strip("|").split("|")] if line.startswith("| `") else []
+        if cells:
+            assert len(cells) == 3 and cells[2], f"a row without its reason: {line}"
+            listed[cells[0].strip("`")] = {t.strip().strip("`") for t in cells[1].split(",")}
+    package = ROOT / "src" / "uavris"
+    found = {str(p.relative_to(package)): names for p in sorted(package.rglob("*.py"))
+             if (names := _imports_inside_functions(p))}
+    assert found == listed, {k: (found.get(k), listed.get(k)) for k in found.keys() | listed.keys()
+                             if found.get(k) != listed.get(k)}

@@ -15,7 +15,7 @@ from typing import Annotated, Literal
 import tyro
 
 from uavris.agents.torch_device import Device, resolve_device
-from uavris.cli.options import LOOSE_SYSTEM, check_hall_flags, in_hall
+from uavris.cli.options import LOOSE_SYSTEM, check_hall_flags, in_hall, seed_note
 from uavris.cli.parsing import Unset, UsageError, output_dir, parse, writing
 from uavris.config import ScenarioName, SystemConfig
 from uavris.env.wrappers import PhaseControl
@@ -147,7 +147,6 @@ def paper_hall(system: SystemConfig) -> SystemConfig:
 
 def _evaluate_row(a: EvaluateArgs, args: list[str]) -> None:
     """``uavris evaluate OUT --row KEY``: a row of the study in OUT, in the site the flags name."""
-    from uavris.cli.options import in_hall, seed_note
     from uavris.experiments.study.finished import Study
     from uavris.experiments.study.tracks import TRACK_SPECS
 
