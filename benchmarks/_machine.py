@@ -15,8 +15,8 @@ def pin_to_one_core() -> str:
 
 
 def cpu_model() -> str:
-    """The machine, as every report of uavris describes it (:func:`uavris.experiments.engine.jobs.machine`)."""
-    from uavris.experiments.engine.jobs import machine
+    """The machine, as every report of uavris describes it (:func:`uavris.experiments.engine.process.machine`)."""
+    from uavris.experiments.engine.process import machine
 
     return machine()
 

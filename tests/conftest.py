@@ -19,9 +19,9 @@ if os.environ.get("CI"):
 from uavris.agents.oracle.planner import PlanSettings  # noqa: E402
 from uavris.agents.oracle.store import STORE_ENV  # noqa: E402
 from uavris.config import SystemConfig  # noqa: E402 - after the hypothesis profile is registered
-from uavris.experiments.engine.jobs import configure_threads  # noqa: E402
+from uavris.experiments.engine.process import configure_threads  # noqa: E402
 
-configure_threads()  # one thread per test process, as in every worker and the command line (engine.jobs)
+configure_threads()  # one thread per test process, as in every worker and the command line (engine.process)
 # The seal of uavris's own pickles (uavris.runs.seal): one key for the tests and every process they start,
 # none written to the user's home (test_seal_key_is_made_once_and_kept_private tests the key file).
 os.environ.setdefault("UAVRIS_SEAL_KEY", "5eed" * 16)

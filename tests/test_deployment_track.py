@@ -672,7 +672,7 @@ def test_the_claims_page_names_its_machine_and_keeps_its_evidence_beside_it(depl
     from-scratch curves (what a reader checks the cells against without the studies), names the
     machine and float path it judged on, and says what the goal-conditioned cells hold fixed; two
     studies of one directory name, whose reports would share a file, are refused in one line."""
-    from uavris.experiments.engine.jobs import machine
+    from uavris.experiments.engine.process import machine
     from uavris.experiments.study.claims import EVIDENCE, write_claims
 
     out, _ = deployment_run

@@ -189,10 +189,10 @@ def test_the_warning_points_at_the_users_line_and_comes_once(monkeypatch, tmp_pa
 
 
 def test_a_report_names_the_cpu_and_the_float_path_it_ran() -> None:
-    """The machine line of a report (uavris.experiments.engine.jobs.machine) tells apart two CPUs of one
+    """The machine line of a report (uavris.experiments.engine.process.machine) tells apart two CPUs of one
     name (an AMD EPYC of family 25 and one of family 26 both call themselves "AMD EPYC") by their family and
     model numbers, and says whether the libraries ran the pinned AVX2 path or their native kernels."""
-    from uavris.experiments.engine.jobs import machine
+    from uavris.experiments.engine.process import machine
     from uavris.float_paths import float_path
 
     info = Path("/proc/cpuinfo").read_text(encoding="utf-8") if Path("/proc/cpuinfo").exists() else ""

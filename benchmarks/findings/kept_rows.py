@@ -46,7 +46,7 @@ def main(argv: list[str] | None = None) -> None:
     args = parser.parse_args(argv)
     pinned = pin_to_one_core()
 
-    from uavris.experiments.engine.jobs import configure_threads
+    from uavris.experiments.engine.process import configure_threads
     from uavris.experiments.study.finished import Study
     from uavris.experiments.study.tracks import TRACK_SPECS
     from uavris.experiments.study.workers import evaluate_rows

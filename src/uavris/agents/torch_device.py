@@ -1,7 +1,7 @@
 """The torch device a command trains or acts on (``--device``).
 
 Lives here: :func:`resolve_device`, used by the SB3 experts and the Decision Transformer
-alike. Not here: thread settings (:func:`uavris.experiments.engine.jobs.configure_threads`).
+alike. Not here: thread settings (:func:`uavris.experiments.engine.process.configure_threads`).
 CPU is the default and what the test suite runs; results on a GPU are not bit-identical
 to the CPU's (different kernels), so a study that must reproduce exactly stays on the CPU.
 """

@@ -41,7 +41,7 @@ from types import FrameType
 from typing import Any, Callable, Iterator
 
 from uavris.errors import UavrisError
-from uavris.experiments.engine.jobs import configure_threads
+from uavris.experiments.engine.process import configure_threads
 
 EXIT_BAD_INPUT = 2
 EXIT_INTERRUPTED = 128 + signal.SIGINT  # 130, what a shell reports for a process Ctrl-C ended
@@ -97,7 +97,7 @@ def _run(argv: list[str]) -> None:
     if name not in COMMANDS:
         raise UsageError(f"unknown command {name!r}; choose one of {', '.join(COMMANDS)} (see {PROG} --help)")
 
-    configure_threads(torch_now=False)  # one thread per process: the cores go to the jobs (engine.jobs)
+    configure_threads(torch_now=False)  # one thread per process: the cores go to the jobs (engine.process)
     command(name)(rest)
 
 

@@ -8,7 +8,7 @@ mmap and trim thresholds keeps those blocks in the heap and reuses them. Set
 
 Lives here: :func:`tune_allocator`, which :class:`uavris.env.simulator.BatchedSimulator`
 calls for 64 environments or more (docs/model.md section 17). Not here: the one torch
-thread per worker process (:func:`uavris.experiments.engine.jobs.configure_threads`).
+thread per worker process (:func:`uavris.experiments.engine.process.configure_threads`).
 """
 
 from __future__ import annotations

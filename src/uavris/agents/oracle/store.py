@@ -51,7 +51,7 @@ from uavris.runs.seal import mac
 
 STORE_ENV = "UAVRIS_PLAN_STORE"
 # the environment that chooses the libraries' kernels (uavris.float_paths). Not the thread counts: every
-# process of uavris runs one thread per pool (engine.jobs.configure_threads, set after this module may
+# process of uavris runs one thread per pool (engine.process.configure_threads, set after this module may
 # have been imported), and the planner's kernels are serial (numba without parallel)
 _FLOAT_ENV_PREFIXES = ("NUMBA_", "MKL_", "OPENBLAS_", "NPY_", "ATEN_", "ONEDNN_", "OMP_", "UAVRIS_NATIVE_FLOATS")
 _NOT_NUMERICS = ("NUMBA_CACHE_DIR",)

@@ -1,6 +1,7 @@
 """The job engine: jobs on a process pool or Ray, resumable keyed stages, their schedule and costs.
 
-Modules: :mod:`.jobs` (:class:`~.jobs.JobRunner`, :func:`~.jobs.configure_threads`),
+Modules: :mod:`.process` (:func:`~.process.configure_threads`, :func:`~.process.machine`),
+:mod:`.jobs` (:class:`~.jobs.JobRunner`),
 :mod:`.stages` (:class:`~.stages.Stage`, :class:`~.stages.Pipeline`), :mod:`.scheduling`
 (:class:`~.scheduling.StudyContext`: the runner, priorities and progress shared by a
 pipeline's stages), :mod:`.costs` (expected seconds of each kind of job) and

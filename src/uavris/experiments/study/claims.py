@@ -26,7 +26,7 @@ from typing import Any, Sequence
 
 from uavris.errors import UavrisError
 from uavris.experiments.display.tables import markdown_table
-from uavris.experiments.engine.jobs import machine
+from uavris.experiments.engine.process import machine
 from uavris.experiments.study.claims_comparison import (
     budget_figure,
     budget_table,

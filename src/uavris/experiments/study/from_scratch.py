@@ -37,7 +37,7 @@ from uavris.agents.evaluation import evaluate
 from uavris.agents.oracle.planner import SAFE_MARGIN_DEG
 from uavris.config import DictConfig
 from uavris.errors import ConfigError, UavrisError
-from uavris.experiments.engine.jobs import machine
+from uavris.experiments.engine.process import machine
 from uavris.experiments.study.claims_tracks import LEVEL
 from uavris.experiments.study.finished import Study
 from uavris.experiments.study.stage_names import PRETRAIN

@@ -35,7 +35,7 @@ from uavris.agents.oracle.planner import TEACHER, PlanSettings, holding
 from uavris.agents.oracle.search import Found, SearchSettings, exhaustive_plan, plan_gap, plan_seeds
 from uavris.config import SystemConfig
 from uavris.experiments.display.tables import markdown_table
-from uavris.experiments.engine.jobs import configure_threads, machine
+from uavris.experiments.engine.process import configure_threads, machine
 from uavris.experiments.study.stamp import make_stamp, stamped
 from uavris.io import atomic_write_text, read_json, write_json
 from uavris.layouts import LayoutGenerator

@@ -28,7 +28,7 @@ from typing import Any, Sequence
 import uavris
 from uavris.agents.oracle.planner import ORACLE_VERSION, TEACHER
 from uavris.errors import UavrisError
-from uavris.experiments.engine.jobs import machine
+from uavris.experiments.engine.process import machine
 from uavris.float_paths import float_path
 
 STAMP_FORMAT = 1  # the stamp's own fields; raised when they change
@@ -47,7 +47,7 @@ class Stamp:
     preset: str | None  # the studies' preset, None where the page reads none
     commit: str | None  # the git commit of the code that wrote the page ("+dirty": uncommitted changes)
     version: str  # uavris's version
-    machine: str  # CPU, CPUs, float path, Python and library versions (engine.jobs.machine)
+    machine: str  # CPU, CPUs, float path, Python and library versions (engine.process.machine)
     float_path: str  # the float path this process ran (uavris.float_paths.float_path)
     date: str  # the day the page was written (UTC, ISO)
     studies: tuple[str, ...] = ()  # the study directories (or files) the page read

@@ -23,7 +23,7 @@ from uavris.agents.references import HOVER_OPTIMIZER, ORACLE, ZERO_ACTION
 from uavris.config import UNSEEN_SCENARIOS, get_scenario
 from uavris.errors import UavrisError
 from uavris.experiments.display.tables import counted, fraction, interval, markdown_table, num
-from uavris.experiments.engine.jobs import machine
+from uavris.experiments.engine.process import machine
 from uavris.experiments.engine.stages import StageRecord
 from uavris.experiments.study.claims import claims_table, judge_studies
 from uavris.experiments.study.claims_tracks import episode_rates
