@@ -88,10 +88,17 @@ def test_finetuning_and_evaluation_worked_by_hand():
     # oracle with the optimiser)
     assert costs.evaluate_cost(3, 8, 50, "agent") == pytest.approx(
         3 * 8 * 50 * costs.SLOT_S["agent"] + costs.PLAN_S + 2 * 8 * 50 * slot)
-    # a generated hall of 8 devices: twice the optimiser's pairs, the oracle's global stage with and
-    # without the safety layer, and the transferred plan's hall planned
+    # a generated hall of 8 devices: an optimised slot as dear as R of a pose there against 4 devices
+    # (0.0455 / 0.0105 s), the oracle's global stage with and without the safety layer, and the
+    # transferred plan's hall planned
+    dear = 0.0455 / 0.0105
     assert costs.evaluate_cost(3, 8, 50, "optimizer", 8, 2, True, 1) == pytest.approx(
-        3 * 8 * 50 * slot * 2 + 2 * costs.ORACLE_PLAN_S[8] + costs.PLAN_S + 2 * 8 * 50 * slot * 2)
+        3 * 8 * 50 * slot * dear + 2 * costs.ORACLE_PLAN_S[8] + costs.PLAN_S + 2 * 8 * 50 * slot * dear)
+    # a hall of 3 (one pair, the closed form) or 4 devices: a slot as in the make run's halls; more
+    # devices, dearer slots, faster than the pairs grow
+    assert costs.optimiser_scale(3) == costs.optimiser_scale(4) == 1.0
+    grows = [costs.optimiser_scale(k) for k in (6, 8, 10, 12)]
+    assert grows == sorted(grows) and all(g > k / 4 for g, k in zip(grows, (6, 8, 10, 12)))
     # two DT rows of the DT paper's size read their 20-slot window every slot: a quarter of a
     # one-window gradient step each (the DT step's reference is a batch of 64 such windows)
     paper = SimpleNamespace(context=20, width=128, depth=3)

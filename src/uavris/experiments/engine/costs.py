@@ -124,17 +124,26 @@ def value_fit_cost(steps: int, width: int) -> float:
     return steps * VALUE_STEP_S * (width / 64) ** 2
 
 
+def optimiser_scale(devices: int) -> float:
+    """What a slot of the per-slot phase optimiser costs in a hall of ``devices`` against one of
+    4: as the planner's ``R`` of a pose does (:data:`POSE_S`, its pairings optimised; beyond 8
+    devices as the square of the count), at least 1 (the slot's other work). It grows faster than
+    the pairs: an evaluated row's episode cost 0.16, 0.26 and 0.46 s at 6, 8 and 10 devices
+    (2026-11-29, Zen 4), where pairs alone gave a 10-device hall a third of its measured time."""
+    return max(1.0, POSE_S.get(devices, POSE_S[8] * (devices / 8) ** 2) / POSE_S[4])
+
+
 def evaluate_cost(policies: int, episodes: int, horizon: int, phase_control: str, devices: int = 4,
                   oracle_plans: int = 1, generated: bool = False, teacher_plans: int = 0,
                   dt_forwards: int = 0, model: Any = None) -> float:
     """Evaluating ``policies`` learned policies and the references (zero action, hover with the
     optimiser's phases, the planning oracle) on ``episodes`` episodes in a hall of ``devices``
-    devices: the optimiser's slots grow with its pairs; ``dt_forwards`` DT models of ``model``'s
+    devices: the optimiser's slots grow with them (:func:`optimiser_scale`); ``dt_forwards`` DT models of ``model``'s
     size (a DT or behaviour-cloning row one, an ensemble its members) read their window every
     slot, as fine-tuning's rollouts do; the oracle plans ``oracle_plans`` times (with and
     without a safety layer), in a ``generated`` hall with its global stage
     (:data:`ORACLE_PLAN_S`), and ``teacher_plans`` other halls are planned (a transferred plan's)."""
-    pairs = max(1.0, devices / 4)
+    pairs = optimiser_scale(devices)
     learned = policies * episodes * horizon * SLOT_S[phase_control] * (pairs if phase_control == "optimizer" else 1.0)
     if dt_forwards and model is not None:
         learned += dt_forwards * episodes * horizon * _dt_step(1, model.context, model.width, model.depth) / 4
