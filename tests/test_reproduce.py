@@ -626,6 +626,10 @@ def test_reproduce_estimate_runs_nothing(tmp_path: Path, capsys: pytest.CaptureF
     assert main(["reproduce", "--preset", "quick", "--estimate", "--expert-algo", "ppo"]) == 0
     out = capsys.readouterr().out
     assert "expected wall clock" in out and "| deploy-pretrain |" in out and "| compare | 12 |" in out
+    assert "paper-track experts: ppo" in out.splitlines()[0]
+    assert main(["reproduce", "--preset", "quick", "--track", "deployment", "--estimate"]) == 0
+    first = capsys.readouterr().out.splitlines()[0]  # a study without the paper track trains no experts of it
+    assert first.startswith("expected wall clock") and "experts" not in first
     assert list(tmp_path.iterdir()) == []
 
 

@@ -58,8 +58,9 @@ def estimate(rc: ReproduceConfig, workers: int, out: str | Path | None = None, f
                            [row(name, st) for name, st in pipeline.stages.items()], "lrrrr")
     what = f"what is left of {out} ({len(done)} of {len(pipeline.stages)} stages done)" if done else \
         f"`uavris reproduce --preset {rc.preset} --track {rc.track}`"
-    lines = [f"expected wall clock of {what} on {workers} worker(s): {wall / 3600:.1f} h ({wall / 60:.0f} min); "
-             f"paper-track experts: {algo}", "", *table]
+    experts = f"; paper-track experts: {algo}" if any(t.name == "paper" for t in rc.tracks) else ""
+    lines = [f"expected wall clock of {what} on {workers} worker(s): {wall / 3600:.1f} h ({wall / 60:.0f} min)"
+             f"{experts}", "", *table]
     total = sum(sum(st.costs) for name, st in pipeline.stages.items() if name not in done)
     lines += ["", f"{'work left' if done else 'total work'} {total / 3600:.1f} core-hours; unit costs measured on a "
               "2-core AMD EPYC, one job per core (uavris.experiments.engine.costs); an estimate, not a promise", ""]
