@@ -61,7 +61,6 @@ def atomic_write_text(path: str | Path, text: str) -> None:
 def replace_folder(made: Path, dest: Path, aside: Path) -> None:
     """Put the finished folder ``made`` in the place of ``dest`` whole (the old one moved to
     ``aside`` first, then removed): a reader sees the old folder or the new one, never a mix."""
-
     shutil.rmtree(aside, ignore_errors=True)
     if dest.exists():
         dest.rename(aside)
@@ -184,7 +183,6 @@ def read_csv(path: str | Path) -> list[dict[str, str]]:
 def file_part(text: str, fallback: str = "policy") -> str:
     """``text`` as one part of a file's name: letters, digits, ``_``, ``-`` and ``@`` (no folder,
     no dot that a suffix could be taken from), safe for any file system."""
-
     return re.sub(r"[^\w@-]+", "_", text).strip("_") or fallback
 
 
@@ -219,7 +217,6 @@ def refuse_links_out(directory: str | Path, what: str) -> None:
     """One :class:`~uavris.errors.CheckpointError` line where a link in ``directory`` (``what``: a
     controller, a DT model, an expert's run, a learned value) leads outside it: such a folder reads
     only its own files, and the link is refused before anything in the folder is opened."""
-
     if Path(directory).is_dir() and (out := link_out(directory)) is not None:
         raise CheckpointError(f"{out[0]} is a link to {out[1]}, outside {directory}: {what} reads only its own "
                               "files (copy it in)")
@@ -232,7 +229,6 @@ def read_checkpoint_meta(directory: str | Path, meta_file: str, kind: str, versi
     (``directory`` is not ``what``), corrupt, of another kind (it does not describe
     ``described``) or of another version, and before anything is opened when a link in it leads
     outside it (a controller, model, run or value folder reads only its own files)."""
-
     refuse_links_out(directory, what)
     path = Path(directory) / meta_file
     if not path.is_file():

@@ -297,13 +297,11 @@ def layout_from_dict(data: Any, where: str, base: SystemConfig | None = None) ->
 
 def read_layout(path: str | Path, base: SystemConfig | None = None) -> Layout:
     """A layout file (module docstring); any problem is one :class:`ConfigError` line naming the file."""
-
     return layout_from_dict(read_yaml(Path(path)), str(path), base)
 
 
 def write_layout(path: str | Path, layout: Layout) -> Path:
     """Write ``layout`` as a layout file (atomically)."""
-
     write_yaml(Path(path), layout.to_dict())
     return Path(path)
 

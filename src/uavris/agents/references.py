@@ -53,6 +53,5 @@ ZERO_ACTION, ORACLE, HOVER_OPTIMIZER = "zero-action", "oracle", "hover-optimizer
 def reference_policy(name: str, config: SystemConfig | None = None, seed: int = REFERENCE_SEED) -> Any:
     """The reference ``name`` (a key of :data:`REFERENCES`) for ``config`` (default: the paper's)."""
     if name not in REFERENCES:
-
         raise ConfigError(f"unknown reference {name!r}; choose one of {', '.join(REFERENCES)}")
     return REFERENCES[name].make(config or SystemConfig(), seed)

@@ -49,7 +49,6 @@ def claims_command(args: list[str]) -> None:
     units is not measured. Writes OUT/claims.md (the claim x track table, what each cell
     compares, what the verdicts rest on) and OUT/claims.json.
     """
-
     a = parse(ClaimsArgs, args, "uavris claims", claims_command.__doc__ or "")
     if bool(a.budgets) != (a.budget_comparison is not None):
         raise UsageError("--budget-comparison and --budgets go together")
@@ -79,7 +78,6 @@ def from_scratch_command(args: list[str]) -> None:
     Writes --out (JSON: each hall's levels, curves and interactions, rewritten after every hall;
     uavris claims --from-scratch reads it).
     """
-
     a = parse(FromScratchArgs, args, "uavris from-scratch", from_scratch_command.__doc__ or "")
     rows: list[tuple[str, ...]] = []
 
@@ -127,7 +125,6 @@ def pages_command(args: list[str]) -> None:
     evidence beside it) and the studies under --runs; each study's progress goes to
     RUNS/.pages/STUDY.log. Ctrl-C or SIGTERM stops the running studies.
     """
-
     a = parse(PagesArgs, args, "uavris pages", pages_command.__doc__ or "")
     if a.jobs < 1 or a.workers < 1:
         raise UsageError(f"--jobs and --workers must be >= 1, got {a.jobs} and {a.workers}")

@@ -97,7 +97,6 @@ def evaluate_command(args: list[str]) -> None:
     A row of a study's report (--row, TARGET the study's OUT) is evaluated as the report
     evaluates it, here or in a hall of your own (default OUT runs/rows/ROW).
     """
-
     check_hall_flags(args, SystemConfig(), "uavris evaluate")  # before the flags are read into the paper's system
     a = parse(EvaluateArgs, args, "uavris evaluate", evaluate_command.__doc__ or "")
     check_one_start(a.scenario, a.layout)
@@ -141,7 +140,6 @@ def paper_hall(system: SystemConfig) -> SystemConfig:
     """``system`` in the paper's hall (its devices and room): where the named scenarios (fig2,
     train1..8, unseen1..2) are, whatever hall a model was trained in (the --system.* flags still
     apply on top)."""
-
     return resolve_layout("paper", system).resolve(system)[0]
 
 
@@ -241,7 +239,6 @@ def benchmark_command(args: list[str]) -> None:
     zero action with its paired 95% CI, means over cells), benchmark.csv, benchmark.json and
     each cell's per-episode CSVs.
     """
-
     check_hall_flags(args, SystemConfig(), "uavris benchmark")  # before the flags are read into the paper's system
     a = parse(BenchmarkArgs, args, "uavris benchmark", benchmark_command.__doc__ or "")
     if a.layout is not None and a.cells != "all":
@@ -249,7 +246,6 @@ def benchmark_command(args: list[str]) -> None:
                          "pass one of them")
     with writing(a.out or default_benchmark_dir(a.target if a.row is None else a.row)) as out:
         if a.row is not None:  # the study's row as a controller of its own, kept beside the results
-
             a = replace(a, target=str(_row_controller(a.target, a.row, a.track, out / "controller")))
         system, _ = in_hall(a.layout, resolve_target(a.target).own_system(), a.system, args)  # --layout: one cell
         rows, md = benchmark(a.target, a.preset, a.cells, out, resolve_device(a.device), progress=a.progress,
@@ -306,7 +302,6 @@ def sweep_command(args: list[str]) -> None:
     Example: uavris sweep hover-optimizer oracle --param system.tx-power-dbm -10:30:10
     --param system.ris-size 2,4,8
     """
-
     from uavris.experiments.tools.sweep import parse_axis, sweep
 
     check_hall_flags(args, SystemConfig(), "uavris sweep")  # a room given twice: one line, before the values are read
@@ -336,7 +331,6 @@ def sweep_command(args: list[str]) -> None:
         out = a.out
     output_dir(out)
     if row_of is not None:  # the study's row as a controller of its own, kept beside the results
-
         with writing(out):  # sweep() holds the lock for the sweep itself
             a = replace(a, targets=(str(_row_controller(row_of, a.row, a.track, out / "controller")),))
     paths = sweep(a.targets, axes, out, base=system, scenario=a.scenario or hall, episodes=a.episodes, halls=a.halls,

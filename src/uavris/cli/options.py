@@ -114,7 +114,6 @@ def check_hall_flags(args: list[str], system: SystemConfig, prog: str = "uavris"
 
 def _check_given_beside_layout(named: str | None, given: set[str], system: SystemConfig) -> None:
     """``check_hall_flags``' rule for a layout already read: one line where a flag gives what it gives."""
-
     if named is None:
         return
     if "--system.users" in given:
@@ -201,7 +200,6 @@ def in_hall(layout: str | None, base: SystemConfig, parsed: SystemConfig,
     room: ``--layout`` with ``--system.users``, or a file with a room with ``--system.room``,
     gives them twice, which is one error line whatever the values (the paper's room given
     beside a file's room is no less a contradiction)."""
-
     given = given_flags(args)
     _check_given_beside_layout(layout, given, base)
     changes = _given_fields(base, parsed, given, "--system")

@@ -210,7 +210,6 @@ def writing(path: Path, flag: str = "--out", files_only: bool = False) -> Iterat
     that writes takes it around all of its writing (``reproduce`` and ``sweep`` inside the
     library, which their workers share). ``files_only``: the command writes files into ``path``
     itself (a plot's folder), never into its subfolders, which may then be links."""
-
     output_dir(path, flag)
     with locked(path, links=files_only):
         yield Path(path)
@@ -218,7 +217,6 @@ def writing(path: Path, flag: str = "--out", files_only: bool = False) -> Iterat
 
 def load_overrides(path: Path, kind: str) -> dict[str, Any]:
     """A YAML mapping of config fields (``--config``)."""
-
     try:
         data = read_yaml(path)  # a missing, unreadable or malformed file is already one line
     except UavrisError as e:

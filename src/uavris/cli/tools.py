@@ -57,7 +57,6 @@ def _learned_value(a: PlanArgs) -> tuple[PlanArgs, Path | str | None]:
     """``a`` with ``--learned`` the value folder the user named (a study's seed 0's, the shipped
     controller's, a controller's) and ``--top-k`` / ``--deployed`` its row's; and the controller
     as the user typed it, for the line that tells them how to fly it."""
-
     named: Path | str | None = a.controller
     if a.learned is not None and a.controller is not None:
         raise UsageError("--controller and --learned both name a learned value; pass one of them")
@@ -197,7 +196,6 @@ class DemoArgs:
 
 def demo_command(args: list[str]) -> None:
     """Roll out the zero action, random actions and a co-phasing hover, and print their average sum rate."""
-
     check_hall_flags(args, SystemConfig(), "uavris demo")  # a room given twice: one line, before the values are read
     a = parse(DemoArgs, args, "uavris demo", demo_command.__doc__ or "")
     system, hall = in_hall(a.layout, SystemConfig(), a.system, args)

@@ -122,7 +122,6 @@ def train_command(args: list[str]) -> None:
     (rerun it with --config), episodes.csv, evals.csv, TensorBoard logs (tb/), checkpoints/
     and model.zip. Every TrainConfig field is a flag; --preset and --algo choose the defaults.
     """
-
     a = parse_train(args)
     run_dir = a.options.out or default_run_dir(a.run)
     device = check_run_options(a.options, run_dir)
@@ -229,7 +228,6 @@ def pretrain_command(args: list[str]) -> None:
     logs (tb/), checkpoints/ and model/ (model.safetensors + model.json), which `uavris
     evaluate` and `uavris finetune-dt --model` accept.
     """
-
     a = parse_pretrain(args)
     run_dir = _run_dt(pretrain, a.run, a.options, default_pretrain_dir)
     done = read_done(run_dir)
@@ -247,7 +245,6 @@ class FinetuneArgs:
 
 def parse_finetune(args: list[str]) -> FinetuneArgs:
     """``uavris finetune-dt``'s line, parsed once and built."""
-
     def build(parsed: FinetuneArgs) -> FinetuneArgs:
         """The preset's fine-tuning of the model in its own system (in the hall of --layout, with its
         start unless a scenario is named there), the flags written on top."""
@@ -282,7 +279,6 @@ def finetune_command(args: list[str]) -> None:
     finetune.csv (with the environment interactions used), TensorBoard logs, checkpoints/
     and model/.
     """
-
     a = parse_finetune(args)
     run_dir = _run_dt(finetune, a.run, a.options, default_finetune_dir)
     done = read_done(run_dir)
@@ -359,7 +355,6 @@ def reproduce_command(args: list[str]) -> None:
     inputs); independent stages run concurrently.
     Writes OUT/report.md and OUT/figures/.
     """
-
     a = parse_reproduce(args)
     out = a.out or Path("runs") / a.study.preset
     if a.report_only and (a.estimate or a.force):

@@ -40,7 +40,6 @@ def save_dt(model: DecisionTransformer, directory: str | Path, metadata: dict[st
 
     The JSON goes last, so a directory whose ``model.json`` exists has matching weights.
     """
-
     directory = Path(directory)
     tensors = {k: v.detach().cpu().contiguous().clone() for k, v in model.state_dict().items()}
     atomic_write_bytes(directory / WEIGHTS_FILE, save(tensors))
@@ -58,7 +57,6 @@ def read_dt_metadata(directory: str | Path) -> dict[str, Any]:
 
 def load_dt(directory: str | Path, device: str = "cpu") -> tuple[DecisionTransformer, dict[str, Any]]:
     """Rebuild the model of a checkpoint directory (in eval mode, on ``device``) and return its metadata."""
-
     directory = Path(directory)
     meta = read_dt_metadata(directory)
     try:

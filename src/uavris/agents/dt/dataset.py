@@ -100,7 +100,6 @@ def env_spec_for(system: SystemConfig, scenario: str | Scenario):
     exactly; the registered entry point takes the config as a dict. A named scenario is
     recorded by its name, any other (a layout's start) as ``{"name": ..., "start": [x, y, z]}``.
     """
-
     try:
         where = get_scenario(scenario)
         where.validate_for(system)
@@ -361,7 +360,6 @@ def _check_env_spec(spec: Any, system: SystemConfig | None, where: str) -> dict[
     uavris's registered environment, through its registered entry point and no wrapper, with
     ``system`` (when given): anything else would have Minari's ``recover_environment`` import
     and call what the file names. Returns the spec's kwargs."""
-
     try:
         fields = json.loads(spec) if isinstance(spec, str) else None
     except ValueError:
@@ -414,7 +412,6 @@ def episode_environment(dataset: Any, episode: int, eval_env: bool = False) -> A
     entry point, never the one the file names) with the episode's own
     hall and start from its metadata, so that a dataset over many halls rebuilds each of them.
     Reset it with the episode's seed to replay the episode."""
-
     recorded = dataset.storage.metadata
     spec = (eval_env and recorded.get("eval_env_spec")) or recorded.get("env_spec")
     if spec is None:

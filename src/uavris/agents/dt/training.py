@@ -218,7 +218,6 @@ def train_steps(model: DecisionTransformer, opt: torch.optim.Optimizer, windows:
 def save_trainer_state(directory: Path, opt: torch.optim.Optimizer, rng: np.random.Generator,
                        extra: dict[str, Any]) -> None:
     """Optimiser moments and the torch RNG as safetensors, the rest as JSON (no pickle)."""
-
     state = opt.state_dict()
     tensors = {"torch_rng": torch.get_rng_state()}
     for pid, st in state["state"].items():
@@ -231,7 +230,6 @@ def save_trainer_state(directory: Path, opt: torch.optim.Optimizer, rng: np.rand
 
 def load_trainer_state(directory: Path, opt: torch.optim.Optimizer, rng: np.random.Generator) -> dict[str, Any]:
     """Restore what :func:`save_trainer_state` wrote; returns its JSON (with the ``extra`` fields)."""
-
     path = directory / "trainer.safetensors"
     meta = read_json(directory / "trainer.json")
     try:

@@ -44,7 +44,6 @@ def algorithm_class(algo: str) -> type:
 def build_model(algo: str, env: Any, hp: Hyperparams, seed: int, tensorboard_log: str | None = None,
                 device: str = "cpu") -> Any:
     """A fresh SB3 model of ``algo`` on ``env`` (a VecEnv) with hyperparameters ``hp``, on ``device``."""
-
     cls = algorithm_class(algo)
     common: dict[str, Any] = dict(learning_rate=hp.learning_rate, gamma=hp.gamma, seed=seed, device=device,
                                   verbose=0, tensorboard_log=tensorboard_log,
@@ -68,7 +67,6 @@ def build_model(algo: str, env: Any, hp: Hyperparams, seed: int, tensorboard_log
 def save_policy(model: Any, algo: str, stem: Path) -> None:
     """The policy of an SB3 ``model`` as ``STEM.safetensors`` (its weights) and ``STEM.json``
     (the algorithm and the keyword arguments its network is built with), atomically."""
-
     kwargs = {k: v for k, v in model.policy_kwargs.items() if k in POLICY_KWARGS}
     if algo == "ppo":  # on-policy algorithms hand use_sde to the policy beside its kwargs
         kwargs["use_sde"] = bool(model.use_sde)
@@ -85,7 +83,6 @@ def has_policy(stem: Path) -> bool:
 def load_policy(stem: Path, config: SystemConfig, phase_control: str, device: str = "cpu") -> Any:
     """The policy network :func:`save_policy` wrote at ``stem``, for ``config`` (its spaces), in
     eval mode; nothing in the files is run. One :class:`CheckpointError` line naming what is wrong."""
-
     meta = read_checkpoint_meta(stem.parent, f"{stem.name}.json", POLICY_KIND, POLICY_FORMAT_VERSION,
                                 "an expert's policy", "an expert's policy")
     algo, kwargs = meta.get("algo"), meta.get("policy_kwargs")
@@ -142,7 +139,6 @@ def _check_model_file(path: Path) -> None:
 def load_model(path: str | Path, algo: str, env: Any = None, device: str = "cpu", trust_pickle: bool = False) -> Any:
     """An SB3 model of ``algo`` from ``path`` (a model.zip or checkpoint): SB3 unpickles it, so
     only a file sealed as uavris's own or, with ``trust_pickle``, one the user trusts."""
-
     path = Path(path)
     _check_model_file(path)
     check_sealed(path, trust_pickle)

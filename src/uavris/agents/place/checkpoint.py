@@ -26,7 +26,6 @@ WEIGHTS_FILE, META_FILE = "value.safetensors", "value.json"
 
 def save_value(model: PoseValue, directory: str | Path, metadata: dict[str, Any] | None = None) -> Path:
     """Write ``value.safetensors`` then ``value.json`` into ``directory``; returns it."""
-
     directory = Path(directory)
     tensors = {k: v.detach().cpu().contiguous().clone() for k, v in model.state_dict().items()}
     atomic_write_bytes(directory / WEIGHTS_FILE, save(tensors))
@@ -42,7 +41,6 @@ def is_value_dir(path: str | Path) -> bool:
 def load_value(directory: str | Path) -> tuple[PoseValue, dict[str, Any]]:
     """The learned value of a checkpoint directory (in eval mode) and its metadata; one
     :class:`~uavris.errors.CheckpointError` line naming what is wrong with it."""
-
     directory = Path(directory)
     meta = read_checkpoint_meta(directory, META_FILE, VALUE_KIND, VALUE_FORMAT_VERSION, "a learned value",
                                 "a uavris learned value")

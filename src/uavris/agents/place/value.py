@@ -66,7 +66,6 @@ def in_ris_frame(users: NDArray, position: NDArray, attitude: NDArray) -> NDArra
     """The devices ``(K, 3)`` (or ``(P, K, 3)``) as a level RIS at each position ``(P, 3)`` would
     see them where the RIS is tilted by ``attitude`` ``(P, 3)``: ``q + R(att)^T (u - q)``
     (eq. (10)'s rotation), ``(P, K, 3)``."""
-
     q = np.asarray(position, dtype=np.float64)
     att = np.asarray(attitude, dtype=np.float64)
     rot = ph.rotation_matrix(att[:, 0], att[:, 1], att[:, 2])  # (P, 3, 3): columns the RIS axes

@@ -30,7 +30,6 @@ plt.rcParams.update({"font.size": 9, "axes.grid": True, "grid.alpha": 0.3, "figu
 def save_figure(fig: plt.Figure, stem: Path) -> list[Path]:
     """Write ``stem.png`` and ``stem.pdf`` atomically (the suffixes appended: a dot in the stem's
     name is kept); returns both paths."""
-
     out = []
     for ext, kw in (("png", {"dpi": 200}), ("pdf", {})):
         buf = io.BytesIO()

@@ -16,7 +16,6 @@ from tqdm.auto import tqdm
 def progress_bar(total: float, desc: str, unit: str, enabled: bool, initial: float = 0, **kwargs: Any) -> Any:
     """A tqdm bar (usable as a context manager); a disabled one, whose calls do nothing, when
     progress output is off. ``kwargs`` go to tqdm (``leave``, ``bar_format``)."""
-
     return tqdm(total=total, initial=initial, unit=unit, desc=desc, dynamic_ncols=True, disable=not enabled,
                 **kwargs)
 

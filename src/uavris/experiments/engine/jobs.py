@@ -150,7 +150,6 @@ def _interrupt_thread(ident: int) -> None:
     Ctrl-C and SIGTERM land in the main thread, which waits for that thread, so without this the
     job would run to its end (minutes) before the command stopped. CPython's own call for it
     (``PyThreadState_SetAsyncExc``): compiled code (numba, torch) finishes its current call first."""
-
     ctypes.pythonapi.PyThreadState_SetAsyncExc(ctypes.c_ulong(ident), ctypes.py_object(KeyboardInterrupt))
 
 
@@ -500,7 +499,6 @@ def _interrupted(job: Job) -> JobResult:
 def _reachable(address: str) -> None:
     """One line when nothing answers at a cluster's ``HOST:PORT`` (Ray itself would retry for
     minutes); other forms of address (``ray://``, ``auto``) are left to Ray."""
-
     host, sep, port = address.rpartition(":")
     if not sep or not port.isdigit() or "/" in address:
         return

@@ -306,7 +306,6 @@ def write_evidence(studies: Sequence[Study], folder: Path, from_scratch: Path | 
     :func:`judge_studies`'s evidence), as the folder ``folder`` (made beside it and put in its
     place whole, so it never mixes two invocations' evidence): what a reader checks the cells
     against, and computes them again from, without the studies' gigabytes."""
-
     folder.parent.mkdir(parents=True, exist_ok=True)
     made = Path(tempfile.mkdtemp(prefix=f".{folder.name}.", dir=folder.parent))
     try:

@@ -111,7 +111,6 @@ def eval_curves(cdir: Path) -> dict[str, list[tuple[np.ndarray, np.ndarray]]]:
 def fig2_zero_action() -> dict[str, float]:
     """The zero action in ``fig2`` of the paper's system on the comparison's 32 episodes: its mean
     and the Student-t 95% interval of that mean over the episodes (``ci_low``, ``ci_high``)."""
-
     return over_units(evaluate(reference_policy(ZERO_ACTION, SystemConfig()), SystemConfig(), "fig2", 32,
                                EVAL_SEED).avg_sum_rate)
 
@@ -177,7 +176,6 @@ def budget_figure(cdir: Path, stem: Path, zero: float) -> list[Path]:
 def fig2_references() -> dict[str, dict[str, float]]:
     """Hovering with optimised phases and the oracle in ``fig2`` of the paper's system on the
     comparison's 32 episodes: mean and 95% CI over the episodes, by reference name."""
-
     return {name: over_units(evaluate(reference_policy(name, SystemConfig()), SystemConfig(), "fig2", 32,
                                       EVAL_SEED).avg_sum_rate) for name in (HOVER_OPTIMIZER, ORACLE)}
 
@@ -190,7 +188,6 @@ def write_budget_page(comparisons: Sequence[tuple[Path, Sequence[int]]], page: P
     (:func:`budget_figure`) and DDPG against each algorithm at every budget where it ran, as
     estimates (the claims page judges them, corrected with its other cells). ``made_by``: the
     commands that made the comparisons. Returns the files written."""
-
     zero = fig2_zero_action()
     refs = fig2_references()
     figs = budget_figure(comparisons[-1][0], page.with_suffix(""), zero["mean"])

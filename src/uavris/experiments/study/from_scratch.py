@@ -67,7 +67,6 @@ def finetune_curve_alike(study: Study, where: Any, episodes: int) -> tuple[list[
     """The paper's DT's fine-tuning in ``where`` as the expert's curve is measured: the
     pre-trained model and each round's model evaluated on the study's ``episodes`` evaluation
     episodes under the safety layer, against the interactions fine-tuning had used by then."""
-
     track = TRACK_SPECS["deployment"]
     fdir = study.finetuned(track, where.name)
     pretrained = study.done(track.stage(PRETRAIN))
@@ -91,7 +90,6 @@ def from_scratch(out: str | Path, cfg: FromScratchConfig, dest: Path,
     """Measure (module docstring) in the study ``out``; write ``dest`` (JSON) after every hall,
     calling ``report`` with each hall's numbers; returns what it wrote. The halls ``dest``
     already holds of the same measurement of the same study are kept, not measured again."""
-
     study = Study.open(out)
     rc, track = study.config, TRACK_SPECS["deployment"]
     if track not in rc.tracks or not rc.ablation:

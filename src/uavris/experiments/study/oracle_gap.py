@@ -65,7 +65,6 @@ def search(system: Any, start: tuple, oracle_s: float, seeds: list, path: Path) 
     made the same search (its settings, seeds, margin and format) at least :data:`DEARER` times
     the oracle's cost; else made (its grids halved, up to twice, until it is dear enough) and
     written there."""
-
     seeded = [[np.asarray(q).tolist(), np.asarray(a).tolist()] for q, a in seeds]
     if path.exists():
         kept = read_json(path)
@@ -94,7 +93,6 @@ def search(system: Any, start: tuple, oracle_s: float, seeds: list, path: Path) 
 def measure(split: str, j: int, k: int, out: Path) -> dict[str, Any]:
     """One hall: the teacher, the oracle and the search (:func:`search`), timed, and their values
     on the same fresh draws."""
-
     system, where = LayoutGenerator(devices=k).layout(split, j).resolve(SystemConfig())
     timed = {}
     began = time.perf_counter()
@@ -117,14 +115,12 @@ def measure(split: str, j: int, k: int, out: Path) -> dict[str, Any]:
 
 def versions() -> dict[str, Any]:
     """What a hall's numbers were made by: a hall of another oracle, teacher or search is measured again."""
-
     return {"oracle_settings": str(PlanSettings()), "teacher_settings": str(TEACHER),
             "search_settings": str(SearchSettings()), "format": FORMAT}
 
 
 def summary_rows(done: dict[str, dict[str, Any]]) -> tuple[list[tuple[str, ...]], list[tuple[str, ...]]]:
     """The per-hall table and the per-count table (fractions over halls with their t interval)."""
-
     per_hall = [("hall", "devices", "oracle", "search", "stay", "teacher", "search - oracle (SE)",
                  "oracle / search", "oracle s", "oracle s / teacher's s", "search s / oracle s")]
     for name, h in done.items():
@@ -154,7 +150,6 @@ def markdown(rows: list[tuple[str, ...]]) -> list[str]:
 
 def write_page(done: dict[str, dict[str, Any]], page: Path, out: Path, command: str) -> Path:
     """``docs/results/oracle-gap.md``, stamped: what is measured, then the two tables."""
-
     per_hall, per_count = summary_rows(done)
     lines = ["# How good the oracle is: its gap to a much wider search", "",
              "Every learned row of the study is read as a fraction of the oracle, so the oracle must be the optimum "

@@ -355,7 +355,6 @@ def check_pages(results: Path) -> list[str]:
     does not list with its reason, a listed page that does not say so before its first section
     (:func:`~uavris.experiments.study.stamp.historical_banner`) or that is current after all, a
     listed page that is not there, a stamp that does not read."""
-
     listed_file = results / HISTORICAL_FILE
     listed = read_yaml(listed_file) if listed_file.is_file() else {}
     if not isinstance(listed, dict) or not all(isinstance(k, str) and isinstance(v, str) and v.strip()

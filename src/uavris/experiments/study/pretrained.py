@@ -41,7 +41,6 @@ CARD = "card.json"
 def make_keys(config: ReproduceConfig | None = None) -> dict[str, str]:
     """The keys of :data:`STAGES` in this code's make run (``uavris reproduce --preset quick``; or
     in the study of ``config``), from its pipeline built in a scratch folder, nothing run."""
-
     with tempfile.TemporaryDirectory() as tmp:
         pipeline = build_pipeline(config or ReproduceConfig("quick"), Path(tmp), StudyContext(1, "local", None))
         return {name: pipeline.stages[name].key for name in STAGES}
@@ -50,7 +49,6 @@ def make_keys(config: ReproduceConfig | None = None) -> dict[str, str]:
 def scores(study: Study) -> list[dict[str, Any]]:
     """The row's fraction of the oracle (its seed 0's and the mean of its seeds) per device count
     of the study's unseen halls, with the Student-t 95% CI over halls."""
-
     track = TRACK_SPECS["deployment"]
     per: dict[tuple[int, str], list[tuple[float, float]]] = {}
     for w in study.sites(track)[1]:
@@ -71,7 +69,6 @@ def ship(study_dir: Path, dest: Path, made_by: ReproduceConfig | None = None) ->
     in place whole) with ``card.json``: the keys of :data:`STAGES` in that study, its preset and
     seed, and its scores (:func:`scores`). The study must be this code's make run (or this code's
     study of ``made_by``: its keys :func:`make_keys`'s): the card would be stale at once."""
-
     study = Study.open(study_dir)
     keys = {name: study.pipeline.stages[name].key for name in STAGES}
     if keys != make_keys(made_by):
@@ -108,7 +105,6 @@ def write_card_page(shipped: Path, page: Path, command: str, studies: Sequence[s
     """The model card (``docs/results/pretrained.md``, stamped): what the shipped controller is, the
     data and halls it learned from, its scores at each device count with intervals, its stage keys;
     ``studies``: the study it was shipped from (the stamp's)."""
-
     card = read_json(shipped / CARD)
     rows = [(f"{s['devices']} devices" + (", another generator" if s["halls"] == "other" else ""), str(s["n"]),
              with_ci(s["seed0"], pct), with_ci(s["seeds_mean"], pct)) for s in card["scores"]]

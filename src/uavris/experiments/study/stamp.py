@@ -93,7 +93,6 @@ def commit() -> str | None:
 def make_stamp(page: str, studies: Sequence[str | Path] = (), preset: str | None = None, command: str = "",
                **extra: Any) -> Stamp:
     """The stamp of ``page`` written now by this code, on this machine."""
-
     return Stamp(page=page, **current_versions(), preset=preset, commit=commit(), version=uavris.__version__,
                  machine=machine(), float_path=float_path(),
                  date=datetime.datetime.now(datetime.timezone.utc).date().isoformat(),

@@ -43,7 +43,6 @@ from uavris.stats import summarize
 
 def dataset_job(expert_dirs: list[str], trajectories: int, out: str) -> dict[str, Any]:
     """Collect the experts' trajectories into a dataset; returns its summary."""
-
     return dataset_summary(collect(expert_dirs, trajectories, out, force=True, progress=False))
 
 
@@ -52,13 +51,11 @@ QUERIES_FILE = "queries.json"  # a demonstration part's model queries (poses its
 
 def demonstrations_job(cfg_dict: dict[str, Any], first: int, count: int, out: str) -> dict[str, Any]:
     """Demonstrations of halls ``first .. first + count - 1`` as a dataset of their own at ``out``."""
-
     cfg = DemonstrationConfig.from_dict(cfg_dict)
     labels: dict[str, list[Any]] | None = {} if cfg.value_labels else None
     queries: dict[str, int] = {}
     trajectories = demonstrate(cfg, first, count, labels=labels, queries=queries)
     if labels:  # the plans' valued poses: labels of the learned value (a part beside the dataset's)
-
         part = Path(out)
         write_label_part(part.parent.parent / "labels" / f"{part.name}.npz",
                          **{k: np.concatenate(v) for k, v in labels.items()})
@@ -69,7 +66,6 @@ def demonstrations_job(cfg_dict: dict[str, Any], first: int, count: int, out: st
 
 def merge_demonstrations(cfg_dict: dict[str, Any], parts: Sequence[str], out: str) -> dict[str, Any]:
     """The parts' demonstrations, in hall order, as one dataset at ``out``; returns its summary."""
-
     cfg = DemonstrationConfig.from_dict(cfg_dict)
     trajectories = [tr for part in parts for tr in load_dataset(part).trajectories]
     summary = dataset_summary(collect_demonstrations(cfg, out, force=True, progress=False, trajectories=trajectories))
@@ -86,7 +82,6 @@ def merge_demonstrations(cfg_dict: dict[str, Any], parts: Sequence[str], out: st
 def best_demonstrations_job(cfg_dict: dict[str, Any], source: str, fraction: float, out: str) -> dict[str, Any]:
     """The ``fraction`` of the demonstrations at ``source`` with the highest returns (filtered
     behaviour cloning's data: the field's baseline), in their order, as one dataset at ``out``."""
-
     trajectories = load_dataset(source).trajectories
     keep = max(1, round(fraction * len(trajectories)))
     best = set(np.argsort([-tr.episode_return for tr in trajectories], kind="stable")[:keep].tolist())
@@ -110,14 +105,12 @@ def pretrain_job(cfg_dict: dict[str, Any], out: str, device: str = "cpu") -> dic
 def value_labels_job(cfg_dict: dict[str, Any], count: int, first: int, n: int, out: str) -> dict[str, Any]:
     """The learned value's labels of training halls ``first .. first + n - 1`` of ``count``
     devices, a part at ``out``."""
-
     make_labels(ValueLabelsConfig.from_dict(cfg_dict), count, first, n, out)
     return {"count": count, "halls": n}
 
 
 def value_fit_job(cfg_dict: dict[str, Any], parts: Sequence[str], out: str) -> dict[str, Any]:
     """The learned value fitted to the label ``parts``, a checkpoint at ``out``; returns its done record."""
-
     fit(ValueFitConfig.from_dict(cfg_dict), parts, out)
     return read_json(Path(out) / "done.json")
 
@@ -174,7 +167,6 @@ def _decomposition(system: Any, rec: _Whereabouts) -> dict[str, Any]:
     phases (the planner's R, on the fresh draws plans state their numbers with, so that it
     pairs with the oracle's target's) at its median end position, level and with its own
     attitude, and the share of its slots with a device behind the RIS (docs/study.md section 2)."""
-
     pos, att = rec.end_pose()
     (level, own), _ = assessed_rate(system, np.stack([pos, pos]), np.stack([np.zeros(3), att]))
     return {"end_position": pos.tolist(), "end_attitude_deg": np.degrees(att).tolist(),
@@ -195,10 +187,8 @@ def evaluate_rows(out: Path, site: Site, track: Track, episodes: int, rows: Sequ
     evaluated before with the same inputs is copied from there instead of flown again (not
     without ``reuse``: a run with ``--force``), and a row flown here is kept there (:mod:`.kept_rows`).
     """
-
     result = {row.key: _row_kept_or_evaluated(out, site, track, episodes, row, kept, reuse) for row in rows}
     if track.layouts:
-
         oracle = PlanningOracle()
         result[ORACLE].update(oracle_target(site, oracle))
         for row in rows:
@@ -227,7 +217,6 @@ def first_episode_slots(evaluation: Path, row: str) -> Path:
 def evaluate_row(out: Path, site: Site, track: Track, episodes: int, row: Row) -> dict[str, Any]:
     """One row of :func:`evaluate_rows`: its per-episode CSV and summary in ``out`` (named by its
     key), its first episode slot by slot in ``out/slots``; the summary."""
-
     system = row.system(site.system)
     loaded = row.load(system)
     rec = _Whereabouts(system, episodes)
@@ -245,7 +234,6 @@ def oracle_target(where: Site, oracle: Any = None) -> dict[str, Any]:
     """The planning oracle's target in ``where``: its pose, R there with its attitude
     (``plan_rate``, with its standard error) and level (``plan_rate_level``, what
     :func:`_decomposition`'s place gap compares an end position with, on the same draws)."""
-
     plan = (oracle or PlanningOracle()).plan(where.system, where.scenario.start)
     (level,), _ = assessed_rate(where.system, plan.target, np.zeros(3))
     return {"plan_rate": plan.rate, "plan_rate_se": plan.rate_se, "plan_rate_level": float(level),
@@ -257,7 +245,6 @@ def value_accuracy(where: Site, value: Any, oracle: Any) -> dict[str, Any]:
     ``V`` with ``R`` over the level poses the planning ``oracle`` valued there with ``R``
     (``value_rank_correlation``), and ``R`` at ``V``'s argmax, level, on the draws a plan states
     its numbers with (``value_target_rate_level``: the oracle's ``plan_rate_level`` is its match)."""
-
     system, start = where.system, where.scenario.start
     oracle.plan(system, start)
     poses, rates = oracle.valued_poses(system)

@@ -34,7 +34,6 @@ def where_text(cfg: SystemConfig, where: Scenario) -> str:
     """Where the demo flies, as its first line names it: a scenario of the paper's (a start in
     the paper's hall, or in devices of ``--system.users``), or a hall of its own (``--layout``)
     by the layout's name, as a hall: the paper has no scenario of that name."""
-
     if SCENARIOS.get(where.name) == where:
         hall = hall_name(cfg, None, where.name)
         return f"scenario {where.name}" + ("" if hall == "the paper's hall" else f" in {hall}")

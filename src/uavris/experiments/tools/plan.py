@@ -219,7 +219,6 @@ def controller_flight(controller: Path, layout: Layout, seed: int = EVAL_SEED) -
     CONTROLLER --layout`` runs it: its pose at the last slot, its average sum rate and, where the
     hall lies outside what it was trained in, the warning ``evaluate`` prints. The place it is
     told is a request; a weak controller may not get there."""
-
     row = read_controller(controller)
     hall, where = layout.resolve(row.own_system())
     evaluated = row.system(hall)

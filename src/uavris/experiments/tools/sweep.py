@@ -146,7 +146,6 @@ def cell_systems(base: SystemConfig, axes: Sequence[Axis], point: Sequence[float
                  scenario: str | Any | None) -> list[tuple[SystemConfig, Any]]:
     """The (system, start) pairs a cell is evaluated in: one, or ``halls`` generated halls of
     the cell's number of devices (``devices`` axis); checked before any job runs."""
-
     system = base
     for axis, value in zip(axes, point):
         system = axis.apply(system, value)
@@ -167,7 +166,6 @@ def sweep_cell(target: str, system: dict[str, Any], scenario: dict[str, Any], ep
                trust_pickle: bool = False) -> None:
     """A job: ``target`` in one hall of one cell on episodes ``EVAL_SEED ..``; its mean and its
     per-episode rates to the JSON file ``out``."""
-
     cfg = SystemConfig.from_dict(system)
     row = as_row(resolve_target(target, trust_pickle))  # a controller's row: its safety layer, its goals
     if row.own_system().observe_devices:
@@ -190,7 +188,6 @@ def sweep(targets: Sequence[str], axes: Sequence[Axis], out: Path, *, base: Syst
     """Every ``target`` in every cell of the grid of ``axes`` (one or two), written to ``out``
     (module docstring); returns the paths of the CSV and the figures. ``layout``: the layout the
     hall came from (the CLI's ``--layout``), recorded in ``sweep.json``."""
-
     if not 1 <= len(axes) <= 2 or len({a.name for a in axes}) != len(axes):
         raise ConfigError("a sweep takes one or two different --param")
     if not targets:
@@ -209,7 +206,6 @@ def sweep(targets: Sequence[str], axes: Sequence[Axis], out: Path, *, base: Syst
         raise ConfigError(f"the grid has {len(grid)} cells; at most {MAX_CELLS}")
     places = {point: cell_systems(base, axes, point, halls, scenario) for point in grid}  # every cell checked first
     if warn is not None:  # a trained model flown outside what it was trained in, once per policy
-
         for t in targets:
             row = as_row(resolve_target(t, trust_pickle))
             found = next((w for where in places.values() for system, _ in where
@@ -293,7 +289,6 @@ def swept_hall(base: SystemConfig, scenario: str | Any | None, axes: Sequence[Ax
     """Where the sweep flew, for its figure's title: a rate is a hall's, and the same policy
     scores differently in another (the paper's hall and a start of it, a layout by its name,
     or a devices sweep's generated halls)."""
-
     if any(a.name == "devices" for a in axes):
         return f"{halls} generated halls per device count (layout seed 0)"
     where = get_scenario(scenario or "fig2")

@@ -175,7 +175,6 @@ def collect_demonstrations(cfg: DemonstrationConfig, out: str | Path, *, force: 
                            progress: bool = True, trajectories: Sequence[Trajectory] | None = None) -> Path:
     """Every hall's demonstrations (or the given ``trajectories``, made by :func:`demonstrate`
     in parts) as one Minari dataset at ``out``; returns its path."""
-
     out = Path(out)
     check_dataset_target(out, force)  # before the rollouts, not only when writing
     if trajectories is None:

@@ -162,7 +162,6 @@ def _candidates(cfg: FinetuneConfig, h: int, dt_policy: Callable[..., DTBatchPol
     (:class:`~uavris.agents.policy.LevelAttitude`): not only noise around the model's own path
     but the alternative to its tilts, recorded as flown, which the paired elites keep where it
     pays (a tilt that puts a device behind the RIS: docs/study.md, section 2)."""
-
     noise_seed = int(np.random.SeedSequence([cfg.seed, h]).generate_state(1)[0])
     per_seed = cfg.rollouts_per_seed if cfg.selection == "paired" else 1
     distinct = cfg.candidates // per_seed
@@ -228,7 +227,6 @@ class Places:
     @classmethod
     def from_value(cls, cfg: FinetuneConfig, system: SystemConfig, start: tuple[float, float, float]) -> Places:
         """The learned value ``cfg.value``'s place, and with ``cfg.places`` the places to try."""
-
         if cfg.value is None:
             raise ConfigError("a goal-conditioned DT fine-tunes with a learned value to tell its goal "
                               "(FinetuneConfig.value)")
@@ -284,7 +282,6 @@ def finetune(cfg: FinetuneConfig, run_dir: str | Path, *, resume: bool = False, 
     """Fine-tune a pre-trained DT in ``cfg.scenario`` (Algorithm 1, stage 2): the zero-shot
     model evaluated (round 0), then ``cfg.rounds`` of :func:`improvement_round`, each evaluated,
     logged and checkpointed (``resume`` goes on from the last); returns the model directory."""
-
     run_dir = Path(run_dir)
     pre = load_dt_policy(cfg.model, cfg.target_return, device=device)  # a run directory stands for its final model
     base, pre_meta, model_dir = pre.policy, pre.meta, pre.directory

@@ -144,7 +144,6 @@ def pretrain(cfg: PretrainConfig, run_dir: str | Path, *, resume: bool = False, 
 
     ``interrupt_at`` is a test hook that stops training after that step.
     """
-
     run_dir = Path(run_dir)
     ds = training_subset(load_dataset(cfg.dataset), cfg.scenarios)
     more = [load_dataset(path) for path in cfg.more_datasets]

@@ -79,7 +79,6 @@ def write_label_part(out: str | Path, *, users: np.ndarray, position: np.ndarray
     """Labels of one count (devices ``(n, K, 3)``, positions ``(n, 3)``, ``R`` ``(n,)``, halls
     ``(n,)``, attitudes ``(n, 3)``, level where not given) as an ``.npz`` part, written
     atomically (a part on disk is a finished one)."""
-
     buf = io.BytesIO()
     np.savez(buf, users=users, position=position, rate=rate, hall=hall,
              attitude=np.zeros_like(position) if attitude is None else attitude)

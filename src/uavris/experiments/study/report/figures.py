@@ -77,7 +77,6 @@ def trajectory_figure(scenario: str, slots: Path, system: Any, stem: Path, seed:
     """3-D view of one evaluation episode of a DT, as its evaluation stage recorded it slot by
     slot (``slots``: :func:`uavris.experiments.tools.trajectory.write_slots`): UAV path, RIS
     normal every few slots, devices and their safety balls (as circles at the floor of the region)."""
-
     rows = read_csv(slots)
     pos = np.array([[float(r[c]) for c in ("x", "y", "z")] for r in rows])
     normals = np.array([ph.ris_axes(np.radians([float(r[c]) for c in ("yaw_deg", "pitch_deg", "roll_deg")]))[:, 2]
