@@ -107,6 +107,12 @@ POSE_S = {3: 0.72e-4, 4: 0.0105, 5: 0.0101, 6: 0.0192, 7: 0.0326, 8: 0.0455}
 VALUE_STEP_S = 0.0155  # a gradient step of the learned value at width 64, batch 256 (scales with width^2)
 
 
+def pose_cost(devices: int) -> float:
+    """The planner's ``R`` of one pose in a hall of ``devices`` (:data:`POSE_S`; beyond 8 devices
+    as the square of the count)."""
+    return POSE_S.get(devices, POSE_S[8] * (devices / 8) ** 2)
+
+
 # Poses labelled per position where each is labelled again tilted towards the devices (ValueLabelsConfig.tilted):
 # measured over 32 training halls of each of 3-8 devices, 1.83 (3 devices) to 1.55 (8).
 TILTED_LABELS = 1.65
@@ -116,7 +122,7 @@ def value_labels_cost(count: int, halls: int, poses: int, tilted: bool = False) 
     """Labelling ``poses`` positions in each of ``halls`` halls of ``count`` devices (and each hall's
     screen), each again tilted where ``tilted``."""
     per = poses * (TILTED_LABELS if tilted else 1.0)
-    return halls * (per * POSE_S.get(count, POSE_S[8] * (count / 8) ** 2) + 0.05)
+    return halls * (per * pose_cost(count) + 0.05)
 
 
 def value_fit_cost(steps: int, width: int) -> float:
@@ -126,11 +132,11 @@ def value_fit_cost(steps: int, width: int) -> float:
 
 def optimiser_scale(devices: int) -> float:
     """What a slot of the per-slot phase optimiser costs in a hall of ``devices`` against one of
-    4: as the planner's ``R`` of a pose does (:data:`POSE_S`, its pairings optimised; beyond 8
-    devices as the square of the count), at least 1 (the slot's other work). It grows faster than
+    4: as the planner's ``R`` of a pose does (:func:`pose_cost`, its pairings optimised), at least
+    1 (the slot's other work). It grows faster than
     the pairs: an evaluated row's episode cost 0.16, 0.26 and 0.46 s at 6, 8 and 10 devices
     (2026-11-29, Zen 4), where pairs alone gave a 10-device hall a third of its measured time."""
-    return max(1.0, POSE_S.get(devices, POSE_S[8] * (devices / 8) ** 2) / POSE_S[4])
+    return max(1.0, pose_cost(devices) / POSE_S[4])
 
 
 def evaluate_cost(policies: int, episodes: int, horizon: int, phase_control: str, devices: int = 4,
@@ -143,10 +149,10 @@ def evaluate_cost(policies: int, episodes: int, horizon: int, phase_control: str
     slot, as fine-tuning's rollouts do; the oracle plans ``oracle_plans`` times (with and
     without a safety layer), in a ``generated`` hall with its global stage
     (:data:`ORACLE_PLAN_S`), and ``teacher_plans`` other halls are planned (a transferred plan's)."""
-    pairs = optimiser_scale(devices)
-    learned = policies * episodes * horizon * SLOT_S[phase_control] * (pairs if phase_control == "optimizer" else 1.0)
+    dearer = optimiser_scale(devices)
+    learned = policies * episodes * horizon * SLOT_S[phase_control] * (dearer if phase_control == "optimizer" else 1.0)
     if dt_forwards and model is not None:
         learned += dt_forwards * episodes * horizon * _dt_step(1, model.context, model.width, model.depth) / 4
     plan = ORACLE_PLAN_S.get(devices, ORACLE_PLAN_S[8] * devices / 8) if generated else PLAN_S
-    references = oracle_plans * plan + teacher_plans * PLAN_S + 2 * episodes * horizon * SLOT_S["optimizer"] * pairs
+    references = oracle_plans * plan + teacher_plans * PLAN_S + 2 * episodes * horizon * SLOT_S["optimizer"] * dearer
     return learned + references
