@@ -22,7 +22,8 @@ from uavris.env.simulator import BatchedSimulator
 from uavris.experiments.study.report.decomposition import decomposition_section
 from uavris.experiments.study.report.deployment import row_labels
 from uavris.experiments.study.workers import _decomposition, _Whereabouts, oracle_target
-from uavris.experiments.tools.targets import DTModel, Row
+from uavris.experiments.tools.rows import Row
+from uavris.experiments.tools.targets import DTModel
 from uavris.layouts import Layout, Site
 from uavris.physics.phase_opt import optimize_slot_phases
 

@@ -260,7 +260,8 @@ def test_a_kept_rows_key_is_what_its_numbers_depend_on(tmp_path):
     byte in a model file, another planner of the same learned value, another hall, another
     safety margin give another; a module's policy is not kept."""
     from uavris.experiments.study.kept_rows import row_key
-    from uavris.experiments.tools.targets import DTModel, LearnedValue, Row, UserPolicy
+    from uavris.experiments.tools.rows import Row
+    from uavris.experiments.tools.targets import DTModel, LearnedValue, UserPolicy
 
     track = TRACK_SPECS["deployment"]
     first, second = ReproduceConfig("smoke", track="deployment").sites(track)[1][:2]
@@ -440,7 +441,7 @@ def test_a_row_added_in_one_place_is_in_the_tables_the_decomposition_and_the_cla
     added row is flown: the study's own rows are copied from the rows it kept (kept_rows), the
     same files, in the copy of the study too."""
     from uavris.experiments.study import tracks, workers
-    from uavris.experiments.tools.targets import Row, resolve_target
+    from uavris.experiments.tools.rows import Row, resolve_target
 
     out, _ = deployment_run
     # every row of every evaluation kept, each under its own key

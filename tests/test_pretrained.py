@@ -6,7 +6,7 @@ import numpy as np
 from uavris.agents.references import ORACLE, ZERO_ACTION
 from uavris.experiments.study.pretrained import stale_card
 from uavris.experiments.tools.evaluate import evaluate_target
-from uavris.experiments.tools.targets import PRETRAINED
+from uavris.experiments.tools.rows import PRETRAINED
 from uavris.presets import EVAL_SEED
 
 

@@ -239,7 +239,7 @@ def test_a_folder_of_every_kind_refuses_a_link_that_leaves_it(run, tmp_path, cap
     from uavris.agents.dt.checkpoint import load_dt
     from uavris.agents.place.checkpoint import load_value
     from uavris.errors import CheckpointError
-    from uavris.experiments.tools.targets import PRETRAINED
+    from uavris.experiments.tools.rows import PRETRAINED
 
     for name in ("policy.json", "config.yaml"):  # its weights' description; its configuration, read first
         expert = _copy(run, tmp_path / f"expert-{name}")

@@ -1,5 +1,5 @@
 """A new kind of target is one class in the user's own module: every command that takes a
-target reads it, and nothing of uavris is edited (tools/targets.py, "The kinds")."""
+target reads it, and nothing of uavris is edited (tools/targets.py, "The kinds"; the registry in tools/rows.py)."""
 
 from __future__ import annotations
 
@@ -14,8 +14,9 @@ import pytest
 from uavris.cli import main
 from uavris.config import SystemConfig
 from uavris.errors import UavrisError
-from uavris.experiments.tools import targets
-from uavris.experiments.tools.targets import Loaded, ModelDir, Row, Target, register_target_kind, resolve_target
+from uavris.experiments.tools import rows
+from uavris.experiments.tools.rows import Row, register_target_kind, resolve_target
+from uavris.experiments.tools.targets import Loaded, ModelDir, Target
 
 
 @dataclass(frozen=True)
@@ -37,7 +38,7 @@ class ConstantAction(ModelDir):
 
 @pytest.fixture
 def constant_kind(monkeypatch: pytest.MonkeyPatch) -> type[ConstantAction]:
-    monkeypatch.setattr(targets, "TARGET_KINDS", list(targets.TARGET_KINDS))  # the registry as it was, after
+    monkeypatch.setattr(rows, "TARGET_KINDS", list(rows.TARGET_KINDS))  # the registry as it was, after
     return register_target_kind(ConstantAction)
 
 
@@ -83,20 +84,21 @@ class Named(Target):
 
 def test_a_kind_without_files_is_written_under_runs_and_recorded_by_its_name(monkeypatch: pytest.MonkeyPatch,
                                                                              tmp_path: Path) -> None:
-    monkeypatch.setattr(targets, "TARGET_KINDS", list(targets.TARGET_KINDS))
+    monkeypatch.setattr(rows, "TARGET_KINDS", list(rows.TARGET_KINDS))
     register_target_kind(Named)
     a, b = resolve_target("named:one"), resolve_target("named:two")
     assert isinstance(a, Named) and a.origin() == "named:one" and a.origin() != b.origin()
     assert a.default_out() == Path("runs/policies/named_one/eval")
     # and it is no part of a controller directory (read_controller could not read it back)
     with pytest.raises(UavrisError, match="cannot be exported"):
-        targets.write_controller(Row("mine", "mine", target=a), tmp_path / "c")
+        rows.write_controller(Row("mine", "mine", target=a), tmp_path / "c")
 
 
 def test_a_controller_is_not_exported_again(tmp_path: Path) -> None:
     (tmp_path / "c").mkdir()
     (tmp_path / "c" / "controller.json").write_text("{}")
     again = resolve_target(str(tmp_path / "c"))
-    assert isinstance(again, targets.Controller)
+    assert isinstance(again, rows.Controller)
     with pytest.raises(UavrisError, match="cannot be exported"):
-        targets.write_controller(Row("c", "c", target=again), tmp_path / "out")
+        rows.write_controller(Row("c", "c", target=again), tmp_path / "out")
+

@@ -50,7 +50,7 @@ def main(argv: list[str] | None = None) -> None:
     from uavris.experiments.study.finished import Study
     from uavris.experiments.study.tracks import TRACK_SPECS
     from uavris.experiments.study.workers import evaluate_rows
-    from uavris.experiments.tools.targets import Row
+    from uavris.experiments.tools.rows import Row
 
     configure_threads()
     study = Study.open(args.study)

@@ -23,7 +23,7 @@ from uavris.experiments.display.tables import counted, interval, rate_interval, 
 from uavris.experiments.engine.jobs import Backend
 from uavris.experiments.tools.benchmark import Cells, benchmark, default_benchmark_dir
 from uavris.experiments.tools.evaluate import evaluate_target, results_dir
-from uavris.experiments.tools.targets import resolve_target, write_controller
+from uavris.experiments.tools.rows import resolve_target, write_controller
 from uavris.layouts import Site, resolve_layout
 from uavris.presets import EVAL_SEED, STUDY, Preset
 

@@ -19,7 +19,8 @@ from uavris.cli.parsing import Unset, UsageError, parse, writing
 from uavris.config import ScenarioName, SystemConfig
 from uavris.experiments.display.tables import counted
 from uavris.experiments.tools.demo import run_demo
-from uavris.experiments.tools.targets import LearnedValue, read_controller, shipped_controller, write_controller
+from uavris.experiments.tools.rows import read_controller, shipped_controller, write_controller
+from uavris.experiments.tools.targets import LearnedValue
 from uavris.io import file_part
 from uavris.layouts import PAPER_LAYOUT, Layout, default_start, resolve_layout
 from uavris.presets import COLLECT_SEED

@@ -33,7 +33,7 @@ from uavris.experiments.study.claims_tracks import (
 from uavris.experiments.study.finished import Study
 from uavris.experiments.study.judgement import NOT_TESTED, Judgement, judgement
 from uavris.experiments.study.tracks import TRACK_SPECS, Track, zero_shot_only
-from uavris.experiments.tools.targets import variant_key
+from uavris.experiments.tools.rows import variant_key
 from uavris.stats import judged, judged_censored
 
 DEPLOYMENT_DT = variant_key("dt-zero-shot", safe=True)  # the paper's DT (return-conditioned) under the safety layer

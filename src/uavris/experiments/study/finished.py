@@ -32,7 +32,7 @@ from uavris.experiments.study.stage_names import (
 )
 from uavris.experiments.study.tracks import TRACK_SPECS, Track
 from uavris.experiments.study.workers import first_episode_slots
-from uavris.experiments.tools.targets import Row
+from uavris.experiments.tools.rows import Row
 from uavris.io import read_json, read_yaml
 from uavris.layouts import Site
 

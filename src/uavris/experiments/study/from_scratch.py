@@ -42,7 +42,8 @@ from uavris.experiments.study.claims_tracks import LEVEL
 from uavris.experiments.study.finished import Study
 from uavris.experiments.study.stage_names import PRETRAIN
 from uavris.experiments.study.tracks import TRACK_SPECS, zero_shot_only
-from uavris.experiments.tools.targets import DTModel, Row
+from uavris.experiments.tools.rows import Row
+from uavris.experiments.tools.targets import DTModel
 from uavris.experiments.training.train_expert import TrainConfig, train
 from uavris.io import read_csv, read_json, write_json
 from uavris.presets import EVAL_SEED

@@ -27,7 +27,8 @@ from pathlib import Path
 from typing import Any
 
 from uavris.agents.oracle.planner import ORACLE_VERSION
-from uavris.experiments.tools.targets import Row, Target, UserPolicy
+from uavris.experiments.tools.rows import Row
+from uavris.experiments.tools.targets import Target, UserPolicy
 from uavris.float_paths import float_path
 from uavris.io import read_json
 from uavris.layouts import Site

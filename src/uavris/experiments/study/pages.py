@@ -31,7 +31,7 @@ from uavris.errors import UavrisError
 from uavris.experiments.study import oracle_gap
 from uavris.experiments.study.claims_comparison import write_budget_page
 from uavris.experiments.study.stamp import HISTORICAL_FILE, historical_banner, read_stamp, stale
-from uavris.experiments.tools.targets import PRETRAINED
+from uavris.experiments.tools.rows import PRETRAINED
 from uavris.io import read_json, read_yaml
 from uavris.presets import STUDY
 

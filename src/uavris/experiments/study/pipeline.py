@@ -96,7 +96,8 @@ from uavris.experiments.study.workers import (
     merge_demonstrations,
     pretrain_job,
 )
-from uavris.experiments.tools.targets import DTModel, Row
+from uavris.experiments.tools.rows import Row
+from uavris.experiments.tools.targets import DTModel
 from uavris.experiments.training.demonstrations import DemonstrationConfig
 from uavris.experiments.training.finetune import FinetuneConfig
 from uavris.experiments.training.pretrain import PretrainConfig

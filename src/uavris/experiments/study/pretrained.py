@@ -6,7 +6,7 @@ and its scores), :func:`make_keys` (the keys this code's make run makes for thos
 without running anything), :func:`stale_card` (where the shipped files' keys differ from them:
 a stale shipped model is a failing test) and :func:`write_card_page` (its model card, stamped,
 ``docs/results/pretrained.md``). Not here: reading the shipped controller, which every command
-takes by the name ``pretrained`` (:class:`uavris.experiments.tools.targets.Controller`).
+takes by the name ``pretrained`` (:class:`uavris.experiments.tools.rows.Controller`).
 """
 
 from __future__ import annotations
@@ -28,7 +28,7 @@ from uavris.experiments.study.pipeline import build_pipeline
 from uavris.experiments.study.stage_names import DATASET, VALUE_LABELS, value_stage
 from uavris.experiments.study.stamp import make_stamp, stamped
 from uavris.experiments.study.tracks import TRACK_SPECS
-from uavris.experiments.tools.targets import write_controller
+from uavris.experiments.tools.rows import write_controller
 from uavris.io import atomic_write_text, read_json, replace_folder, write_json
 from uavris.stats import over_units
 

@@ -4,7 +4,7 @@ Lives here: :class:`Track` and :data:`TRACK_SPECS`; where a track trains and is 
 (:func:`sites`, a :class:`uavris.layouts.Site` each) and whose experts are transferred
 (:func:`transfer_sources`); the strong track's expert recipe (:func:`strong_expert_config`);
 the models a track pre-trains (:class:`TrainedModel`, :func:`trained_models`) and the rows
-of its evaluation (:func:`track_rows`, each a :class:`uavris.experiments.tools.targets.Row`):
+of its evaluation (:func:`track_rows`, each a :class:`uavris.experiments.tools.rows.Row`):
 adding a row to the study is an edit of :func:`track_rows`. Not here: the pipeline's stages
 (:mod:`.pipeline`) and their names (:mod:`.stage_names`), the job entry points a worker runs for
 them (:mod:`.workers`), the report (:mod:`.report`), the layouts (:mod:`uavris.layouts`).
@@ -55,7 +55,8 @@ from uavris.experiments.study.stage_names import (
     places_stage,
     value_stage,
 )
-from uavris.experiments.tools.targets import DTModel, ExpertRun, LearnedValue, Row
+from uavris.experiments.tools.rows import Row
+from uavris.experiments.tools.targets import DTModel, ExpertRun, LearnedValue
 from uavris.experiments.training.train_expert import TrainConfig
 from uavris.layouts import LayoutGenerator, Site, layout_distance
 from uavris.presets import STRONG_IMITATION

@@ -29,7 +29,8 @@ from uavris.agents.references import ORACLE
 from uavris.experiments.study.kept_rows import keep, row_key, take
 from uavris.experiments.study.tracks import TRACK_SPECS, Track
 from uavris.experiments.tools.evaluate import write_results
-from uavris.experiments.tools.targets import LearnedValue, Row
+from uavris.experiments.tools.rows import Row
+from uavris.experiments.tools.targets import LearnedValue
 from uavris.experiments.tools.trajectory import SlotLog, write_slots
 from uavris.experiments.training.collect import collect, dataset_summary
 from uavris.experiments.training.demonstrations import DemonstrationConfig, collect_demonstrations, demonstrate
@@ -124,7 +125,7 @@ def finetune_job(cfg_dict: dict[str, Any], out: str, device: str = "cpu") -> dic
     return read_done(model_dir)
 
 
-# The evaluation stages' results: 2 records each row's facts (uavris.experiments.tools.targets.Row.facts),
+# The evaluation stages' results: 2 records each row's facts (uavris.experiments.tools.rows.Row.facts),
 # which the report and the claims read; 3 the planner a goal-conditioned row is told its place by (the
 # headline DT: the semi-amortised place, no longer V's argmax); 4 the oracle's plan and flight keeping every
 # device 1 degree in front of the RIS (PlanSettings.front_margin_deg); 5 the goal-conditioned DT told the deployed
@@ -177,11 +178,11 @@ def _decomposition(system: Any, rec: _Whereabouts) -> dict[str, Any]:
 def evaluate_rows(out: Path, site: Site, track: Track, episodes: int, rows: Sequence[Row], kept: Path | None = None,
                   reuse: bool = True) -> dict[str, Any]:
     """Every row (:func:`~.tracks.track_rows`: the learned rows and the references) in ``site``,
-    each in its own system (:meth:`~uavris.experiments.tools.targets.Row.system`: under the
+    each in its own system (:meth:`~uavris.experiments.tools.rows.Row.system`: under the
     safety layer where the row says so), on episodes ``EVAL_SEED ..``; per-episode CSVs in
     ``out``, named by the rows' keys, and the first episode slot by slot in ``out/slots`` (what
     the report draws). Each summary records what its row is (:meth:`Row.facts
-    <uavris.experiments.tools.targets.Row.facts>`). In the deployment track every summary also holds the
+    <uavris.experiments.tools.rows.Row.facts>`). In the deployment track every summary also holds the
     decomposition of :func:`_decomposition`, and the oracle's its plan's target
     (:func:`oracle_target`). With ``kept`` (the study's :data:`.kept_rows.KEPT_ROWS_DIR`), a row
     evaluated before with the same inputs is copied from there instead of flown again (not

@@ -28,7 +28,8 @@ from uavris.config import UNSEEN_SCENARIOS, ConfigError, SystemConfig, get_scena
 from uavris.experiments.display.progress import progress_bar
 from uavris.experiments.display.tables import counted, interval, markdown_table, num, pct, rate_interval, signed
 from uavris.experiments.tools.evaluate import evaluate_target, layout_origin
-from uavris.experiments.tools.targets import Target, as_row, resolve_target
+from uavris.experiments.tools.rows import as_row, resolve_target
+from uavris.experiments.tools.targets import Target
 from uavris.float_paths import warn_if_unpinned
 from uavris.io import atomic_write_text, other_inputs, read_csv, write_csv, write_json
 from uavris.layouts import resolve_layout

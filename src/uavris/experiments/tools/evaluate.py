@@ -27,7 +27,8 @@ from uavris.env.rollout import policy_phase_control
 from uavris.env.wrappers import check_phase_control
 from uavris.errors import UavrisError
 from uavris.experiments.display.progress import progress_bar
-from uavris.experiments.tools.targets import Controller, Reference, Row, Target, as_row, resolve_target
+from uavris.experiments.tools.rows import Controller, Row, as_row, resolve_target
+from uavris.experiments.tools.targets import Reference, Target
 from uavris.experiments.tools.trajectory import SlotLog, rate_by_active_pairs, trajectory_plot, write_slots
 from uavris.io import file_part, write_csv, write_json
 from uavris.layouts import Layout, resolve_layout
@@ -36,7 +37,7 @@ from uavris.stats import t_interval
 
 def evaluated_key(summary: dict[str, Any]) -> str:
     """8 hex digits of what was evaluated beyond the file name's readable part (the system, the
-    phase control, the start and the model, :meth:`~.targets.Row.origin`): evaluations of
+    phase control, the start and the model, :meth:`~.rows.Row.origin`): evaluations of
     another system or of another model of the same name (two studies' ``model`` folders, two
     ``pol.py:go``) into the same folder keep their own files, and the same evaluation again
     replaces its own."""
@@ -59,8 +60,8 @@ def evaluate_target(target: str | Target | Row, scenario: str | Scenario | None,
                     progress: bool = False, system: SystemConfig | None = None,
                     layout: str | Layout | None = None, references: bool = True, trajectory: bool = False
                     ) -> tuple[dict[str, Any], Path]:
-    """Evaluate ``target`` (a name :func:`~.targets.resolve_target` reads, a resolved
-    :class:`~.targets.Target`, or a report's :class:`~.targets.Row`, evaluated as the report
+    """Evaluate ``target`` (a name :func:`~.rows.resolve_target` reads, a resolved
+    :class:`~.targets.Target`, or a report's :class:`~.rows.Row`, evaluated as the report
     does: under the safety layer, held level, an ensemble, another hall's plan);
     ``phase_control="optimizer"`` replaces its phases by the optimiser's.
 

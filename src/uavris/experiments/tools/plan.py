@@ -33,7 +33,7 @@ from uavris.errors import ConfigError
 from uavris.experiments.display.plots import plt, save_figure
 from uavris.experiments.display.progress import progress_bar
 from uavris.experiments.tools.evaluate import outside_training
-from uavris.experiments.tools.targets import read_controller
+from uavris.experiments.tools.rows import read_controller
 from uavris.experiments.tools.trajectory import SlotLog
 from uavris.io import write_json
 from uavris.layouts import Layout

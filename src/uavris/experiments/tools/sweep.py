@@ -48,7 +48,7 @@ from uavris.experiments.display.plots import plt, save_figure
 from uavris.experiments.display.progress import progress_bar
 from uavris.experiments.engine.jobs import Job, run_jobs
 from uavris.experiments.tools.evaluate import hall_name, layout_origin, outside_training
-from uavris.experiments.tools.targets import as_row, resolve_target
+from uavris.experiments.tools.rows import as_row, resolve_target
 from uavris.io import other_inputs, read_json, to_plain, write_csv, write_json
 from uavris.layouts import LayoutGenerator
 from uavris.presets import EVAL_SEED

@@ -25,7 +25,7 @@ import numpy as np
 from uavris.agents.references import HOVER_OPTIMIZER, ORACLE
 from uavris.experiments.display.plots import REFERENCE_STYLE, plt, save_figure
 from uavris.experiments.display.tables import MISSING, counted, markdown_table, pct, signed, with_ci
-from uavris.experiments.tools.targets import variant_key
+from uavris.experiments.tools.rows import variant_key
 from uavris.stats import HOLDS, MIN_UNITS, NOT_MEASURED, NOT_RESOLVED, REFUTED, over_units, verdict
 
 # Targets of the deployment track (docs/study.md, section 2).
@@ -61,7 +61,7 @@ PAIRS: tuple[tuple[str, str], ...] = (("dt-zero-shot", HOVER_OPTIMIZER), ("dt-ze
 
 def row_facts(results: dict[str, dict[str, Any]]) -> dict[str, dict[str, Any]]:
     """What each row of a group of halls is, by its variant (the key its seeds are averaged
-    under), as the evaluation stages recorded it (:meth:`uavris.experiments.tools.targets.Row.facts`):
+    under), as the evaluation stages recorded it (:meth:`uavris.experiments.tools.rows.Row.facts`):
     its first hall's summary of the row, of its first pre-training seed where it has several."""
     out: dict[str, dict[str, Any]] = {}
     for v in next(iter(results.values())).values():
@@ -101,7 +101,7 @@ def layout_scores(results: dict[str, dict[str, Any]], field: str = "mean") -> di
     the summaries, e.g. the decomposition's), with the transferred experts summarised as the
     nearest (its label says so), their mean and their best, and a row trained over several
     pre-training seeds (its summaries' ``seed``) as the mean over its seeds in the layout,
-    under its ``variant`` (:class:`uavris.experiments.tools.targets.Row`)."""
+    under its ``variant`` (:class:`uavris.experiments.tools.rows.Row`)."""
     out = {}
     for layout, res in results.items():
         res = {k: {**v, "mean": v[field]} for k, v in res.items() if field in v}
