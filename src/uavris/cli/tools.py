@@ -87,9 +87,7 @@ def plan_command(args: list[str]) -> None:
     """
     from uavris.experiments.tools.plan import check_devices, check_grid, plan_hall, planning_seconds
 
-    positional = ["--layout", args[0], *args[1:]] if args and not args[0].startswith("-") else args
-    check_hall_flags(positional, SystemConfig(), "uavris plan")  # before the flags are read into the paper's system
-    a = parse(PlanArgs, args, "uavris plan", plan_command.__doc__ or "")
+    a = parse(PlanArgs, args, "uavris plan", plan_command.__doc__ or "")  # the hall's fields judged in the layout's
     a, named = _learned_value(a)
     if a.layout is None:
         layout = PAPER_LAYOUT if a.system.users == PAPER_LAYOUT.users else Layout(
