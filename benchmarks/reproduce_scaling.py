@@ -36,7 +36,8 @@ from _machine import cpu_model  # noqa: E402  (benchmarks/_machine.py)
 
 def run_training_jobs(backend: str, workers: int, jobs: int, steps: int) -> tuple[float, list[float]]:
     """(wall clock s, final evaluation means in seed order)."""
-    from uavris.experiments.engine.jobs import Job, run_jobs
+    from uavris.experiments.engine.jobs import run_jobs
+    from uavris.experiments.engine.worker import Job
     from uavris.experiments.training.train_expert import TrainConfig, train_job
 
     with tempfile.TemporaryDirectory(prefix=f"uavris-jobs-{backend}-{workers}-") as tmp:

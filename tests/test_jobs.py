@@ -14,7 +14,8 @@ from pathlib import Path
 
 import pytest
 
-from uavris.experiments.engine.jobs import Job, JobRunner
+from uavris.experiments.engine.jobs import JobRunner
+from uavris.experiments.engine.worker import Job
 
 HANG_S = 120.0  # the six jobs take seconds (worker start-up included)
 
@@ -298,7 +299,8 @@ def test_workers_end_when_their_command_is_killed(tmp_path: Path):
     went on with their jobs into an output whose lock the kill had freed, now end themselves."""
     import signal
 
-    driver = ("from pathlib import Path\nfrom uavris.experiments.engine.jobs import Job, JobRunner\n"
+    driver = ("from pathlib import Path\nfrom uavris.experiments.engine.jobs import JobRunner\n"
+              "from uavris.experiments.engine.worker import Job\n"
               "with JobRunner(2) as runner:\n    runner.run({jobs})\n")
     pids, err, proc = _start_hanging(tmp_path, driver)
     workers = []
@@ -367,7 +369,8 @@ from concurrent.futures import ThreadPoolExecutor, wait
 from pathlib import Path
 
 import uavris.cli as cli
-from uavris.experiments.engine.jobs import Job, JobRunner
+from uavris.experiments.engine.jobs import JobRunner
+from uavris.experiments.engine.worker import Job
 
 
 def gone(pid):
@@ -401,7 +404,7 @@ from pathlib import Path
 
 from uavris.experiments.engine.scheduling import StudyContext
 from uavris.experiments.engine.stages import Pipeline, Stage
-from uavris.experiments.engine.jobs import Job
+from uavris.experiments.engine.worker import Job
 
 ctx = StudyContext({workers}, "local", None)
 jobs = {jobs}
@@ -449,7 +452,7 @@ import sys
 from pathlib import Path
 
 import uavris.cli as cli
-from uavris.experiments.engine.jobs import Job
+from uavris.experiments.engine.worker import Job
 from uavris.experiments.engine.scheduling import StudyContext
 from uavris.experiments.engine.stages import Pipeline, Stage
 

@@ -15,9 +15,9 @@ import pytest
 from tqdm import tqdm
 
 from uavris.experiments.engine.forecast import Speeds, eta_seconds, replay, stage_family
-from uavris.experiments.engine.jobs import Job
 from uavris.experiments.engine.scheduling import StudyContext
 from uavris.experiments.engine.stages import Pipeline, Stage, StageRecord
+from uavris.experiments.engine.worker import Job
 
 
 def test_replay_of_a_study_under_way_worked_by_hand():

@@ -18,9 +18,10 @@ from report_check import check_deployment_claims, check_deployment_report, check
 from tests.conftest import SMOKE_SYSTEM
 from uavris.agents.oracle.store import STORE_ENV
 from uavris.errors import UavrisError
-from uavris.experiments.engine.jobs import Job, JobRunner, run_jobs
+from uavris.experiments.engine.jobs import JobRunner, run_jobs
 from uavris.experiments.engine.scheduling import StudyContext
 from uavris.experiments.engine.stages import Pipeline, Stage
+from uavris.experiments.engine.worker import Job
 from uavris.experiments.study.config import ReproduceConfig
 from uavris.experiments.study.pipeline import build_pipeline
 from uavris.experiments.study.reproduce import reproduce

@@ -1,9 +1,10 @@
 """Run independent jobs on a local process pool or on Ray; report failures with their logs.
 
-Lives here: :class:`Job`, :class:`JobResult`, :class:`JobRunner`, :func:`run_jobs`,
-:func:`configure_threads` used by every worker (:mod:`.process`). Not here: what
-the jobs do (:mod:`uavris.experiments.training`, :mod:`uavris.experiments.study.workers`) and
-the stages that submit them (:mod:`.stages`, :mod:`uavris.experiments.study.pipeline`).
+Lives here: :class:`JobRunner`, :func:`run_jobs`, :func:`abort_runners`. Not here: the job
+and what runs in its worker (:mod:`.worker`: :class:`~.worker.Job`, :class:`~.worker.JobResult`),
+the Ray side (:mod:`.ray_backend`), what the jobs do (:mod:`uavris.experiments.training`,
+:mod:`uavris.experiments.study.workers`) and the stages that submit them (:mod:`.stages`,
+:mod:`uavris.experiments.study.pipeline`).
 
 Each job runs in a worker process (spawned, so torch and numpy start clean) with one thread
 in every thread pool (:func:`configure_threads`) and writes its own log file. A job that
@@ -15,128 +16,34 @@ own, and only a job whose process dies again is reported failed ("worker died").
 Workers never outlive their command: Ctrl-C and SIGTERM close the runner with ``abort``
 (:meth:`JobRunner.close`, :func:`abort_runners`), which stops them, and a worker whose
 parent is gone (killed by SIGKILL or the OOM killer, which no handler sees) exits within a
-second (:func:`_watch_parent`). The output's lock goes with the command's process; a worker
+second (:func:`uavris.experiments.engine.worker.new_pool`). The output's lock goes with the command's process; a worker
 left running would go on writing into an output that a rerun may then lock and write too.
 
 Backends: ``local`` (``concurrent.futures`` process pool, the default) and ``ray``
 (``pip install 'uavris[ray]'``): without an address a local Ray instance with ``workers``
 CPUs is started; with ``ray_address`` the jobs go to that cluster, whose nodes must have
 uavris installed but need not share a file system with the driver: each job's files travel
-with it (:mod:`.shipping`; what it reads and writes is declared on the :class:`Job`). Jobs
+with it (:mod:`.shipping`; what it reads and writes is declared on the :class:`~.worker.Job`). Jobs
 are seeded by their own configuration, so both backends give the same results.
 """
 
 from __future__ import annotations
 
-import contextlib
 import ctypes
 import dataclasses
 import heapq
 import itertools
-import multiprocessing as mp
 import os
-import signal
-import socket
-import sys
 import threading
 import time
-import traceback
 import weakref
 from concurrent.futures import Future, ProcessPoolExecutor, as_completed
 from concurrent.futures.process import BrokenProcessPool
-from dataclasses import dataclass
-from pathlib import Path
-from typing import Any, Callable, Iterator, Literal, get_args
+from typing import Callable, Literal, get_args
 
-from uavris.errors import UavrisError
-from uavris.experiments.engine import shipping
-from uavris.experiments.engine.process import THREAD_VARIABLES, configure_threads
-
-
-@dataclass(frozen=True)
-class Job:
-    """A picklable unit of work: ``fn(*args)`` with its output going to ``log``; ``cost`` is
-    its expected duration on one core (s, :mod:`.costs`), which orders and weighs it.
-    ``reads`` and ``writes``: the files and folders it reads and writes besides its log
-    (writes it may resume from included), which go to a cluster node with it and come back."""
-
-    name: str
-    fn: Callable[..., Any]
-    args: tuple[Any, ...]
-    log: Path
-    cost: float = 0.0
-    reads: tuple[Path, ...] = ()
-    writes: tuple[Path, ...] = ()
-
-
-@dataclass(frozen=True)
-class JobResult:
-    name: str
-    ok: bool
-    value: Any
-    error: str | None
-    log: Path
-    worker: int | None = None  # the worker slot that ran it (0 .. workers-1; None on Ray)
-    start: float = float("nan")  # time.time() when it started and ended
-    end: float = float("nan")
-
-
-def _run_logged(job: Job, in_command: bool = False) -> JobResult:
-    """Run ``job`` with its output in its log; a failure is its result. ``in_command``: it runs
-    in the command's own process (one worker), where Ctrl-C or SIGTERM is the command's to
-    stop on, not this job's failure (the next job would start)."""
-    job.log.parent.mkdir(parents=True, exist_ok=True)
-    with open(job.log, "a", encoding="utf-8") as log:
-        old_out, old_err = sys.stdout, sys.stderr
-        sys.stdout = sys.stderr = log
-        try:
-            configure_threads()
-            value = job.fn(*job.args)
-            return JobResult(job.name, True, value, None, job.log)
-        except BaseException as e:  # noqa: BLE001 - report every failure, keep the pool alive
-            if in_command and isinstance(e, KeyboardInterrupt):
-                raise
-            traceback.print_exc()
-            return JobResult(job.name, False, None, f"{type(e).__name__}: {e}", job.log)
-        finally:
-            sys.stdout, sys.stderr = old_out, old_err
-
-
-PARENT_POLL_S = 1.0  # how often a worker checks that the command that started it still runs
-ORPHANED_EXIT = 143  # a worker's exit status once its command is gone (as if stopped by SIGTERM)
-
-
-def _watch_parent(parent: int) -> None:
-    """Pool initializer: once per worker, a thread that ends the worker when ``parent`` (the
-    command's process) is gone. A command killed by SIGKILL or the OOM killer cannot stop its
-    workers, and they would finish their jobs into an output whose lock went with it.
-
-    The worker ignores SIGINT: Ctrl-C reaches the terminal's whole process group, and the
-    command stops its workers itself (:func:`abort_runners`). A worker left to raise
-    KeyboardInterrupt while it waits for a job prints ``Process SpawnProcess-N:`` and a
-    traceback beside the command's one line.
-
-    Not ``prctl(PR_SET_PDEATHSIG)``: Linux sends that when the *thread* that started the
-    worker ends, and a worker is started by whichever thread submitted to the pool (a stage's
-    thread in a study, which ends long before the study). The parent's pid comes from the
-    command, not ``os.getppid()`` here, so that a parent that died before this ran is seen."""
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-    threading.Thread(target=_exit_when_orphaned, args=(parent,), name="uavris-parent-watch", daemon=True).start()
-
-
-def _exit_when_orphaned(parent: int, poll_s: float = PARENT_POLL_S) -> None:
-    """Exit this process once it is no longer ``parent``'s child (it was re-parented to init or
-    a subreaper). ``os._exit``: no cleanup of a job that nobody will read."""
-    while os.getppid() == parent:
-        time.sleep(poll_s)
-    os._exit(ORPHANED_EXIT)
-
-
-def _new_pool(workers: int) -> ProcessPoolExecutor:
-    """A process pool whose workers are spawned (torch and numpy start clean) and watch their parent."""
-    return ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("spawn"),
-                               initializer=_watch_parent, initargs=(os.getpid(),))
-
+from uavris.experiments.engine import ray_backend
+from uavris.experiments.engine.process import THREAD_VARIABLES
+from uavris.experiments.engine.worker import Job, JobResult, interrupted, new_pool, run_logged
 
 Backend = Literal["local", "ray"]  # where jobs run (--backend)
 BACKENDS: tuple[str, ...] = get_args(Backend)
@@ -246,7 +153,7 @@ class JobRunner:
             pools = list(self._stopping)
         for _, _, job, fut in waiting:  # their callers (a study's stage threads, on SIGTERM) wait on them
             if fut is not None:
-                fut.set_result(_interrupted(job))
+                fut.set_result(interrupted(job))
         if abort:
             with self._lock:  # taken once: a second close (the signal's thread and the pipeline both abort) sends none
                 here, self._here = self._here, None
@@ -262,9 +169,7 @@ class JobRunner:
                     if pool in self._stopping:
                         self._stopping.remove(pool)
             if self._ray_started:
-                import ray
-
-                ray.shutdown()
+                ray_backend.shutdown()
                 self._ray_started = False
 
     def run(self, jobs: list[Job], on_done: Callable[[JobResult], None] | None = None,
@@ -278,7 +183,10 @@ class JobRunner:
         if self.backend == "ray":
             if on_queued:
                 on_queued()
-            return self._run_ray(jobs, on_done)
+            self.connect()
+            with self._lock:
+                refs = ray_backend.submit(jobs, self.ray_address)
+            return ray_backend.collect(refs, on_done, self.ray_address)
         if self.workers <= 1:
             return [self._run_here(job, on_done, priority, on_queued if i == 0 else None)
                     for i, job in enumerate(jobs)]
@@ -287,13 +195,13 @@ class JobRunner:
             for job in jobs:
                 fut: Future[JobResult] = Future()
                 if self._closing:  # a stage that goes on after Ctrl-C or SIGTERM closed the runner
-                    fut.set_result(_interrupted(job))
+                    fut.set_result(interrupted(job))
                 else:
                     heapq.heappush(self._waiting, (-(priority + job.cost), next(self._order), job, fut))
                 futures[fut] = job
             if not self._closing:
                 if self._pool is None:
-                    self._pool = _new_pool(self.workers)
+                    self._pool = new_pool(self.workers)
                 self._dispatch()
         if on_queued:
             on_queued()
@@ -320,20 +228,20 @@ class JobRunner:
                 alone: bool) -> None:
         """``job`` on ``pool`` (lock held); a pool broken meanwhile is replaced first."""
         if self._closing:
-            outer.set_result(_interrupted(job))
+            outer.set_result(interrupted(job))
             return
         try:
-            inner = pool.submit(_run_logged, job)
+            inner = pool.submit(run_logged, job)
         except BrokenProcessPool:
             pool = self._replace_pool(pool)
-            inner = pool.submit(_run_logged, job)
+            inner = pool.submit(run_logged, job)
         inner.add_done_callback(lambda inner: self._finished(inner, job, outer, slot, started, pool, alone))
 
     def _replace_pool(self, broken: ProcessPoolExecutor) -> ProcessPoolExecutor:
         """A fresh shared pool in place of ``broken`` (lock held; a no-op if already replaced)."""
         if broken is self._pool:
             broken.shutdown(wait=False)
-            self._pool = _new_pool(self.workers)
+            self._pool = new_pool(self.workers)
         assert self._pool is not None
         return self._pool
 
@@ -348,12 +256,12 @@ class JobRunner:
                     # this one again in a pool of its own, where it can neither take a neighbour
                     # down nor be taken down by one. Dying there too, it failed.
                     self._replace_pool(pool)
-                    solo = _new_pool(1)
+                    solo = new_pool(1)
                     self._solos.add(solo)
                     self._submit(job, outer, slot, started, solo, alone=True)
                     return
             # closing, the pool broke because close(abort=True) stopped its workers
-            res = _interrupted(job) if self._closing else \
+            res = interrupted(job) if self._closing else \
                 JobResult(job.name, False, None, f"worker died: {type(e).__name__}: {e}", job.log)
         except BaseException as e:  # noqa: BLE001 - whatever else went wrong with the process
             res = JobResult(job.name, False, None, f"worker died: {type(e).__name__}: {e}", job.log)
@@ -380,9 +288,9 @@ class JobRunner:
             on_queued()
         started = self._take_turn(entry)
         if started is None:
-            return dataclasses.replace(_interrupted(job), worker=0)  # no on_done: as in run()
+            return dataclasses.replace(interrupted(job), worker=0)  # no on_done: as in run()
         try:
-            res = _run_logged(job, in_command=True)
+            res = run_logged(job, in_command=True)
         finally:
             with self._lock:
                 self.active.pop(id(job), None)
@@ -413,103 +321,9 @@ class JobRunner:
         cluster that cannot be reached is one :class:`UavrisError`, before any job is queued."""
         if self.backend != "ray":
             return
-        try:
-            import ray
-        except ImportError:
-            raise UavrisError("the Ray backend needs Ray: pip install 'uavris[ray]'") from None
-        with self._lock, _sigterm_kept():
-            if ray.is_initialized():
-                return
-            if not self.ray_address:
-                # "local": a new instance even where `ray start` left this machine's address behind
-                ray.init(address="local", num_cpus=self.workers, include_dashboard=False, log_to_driver=False)
-            else:
-                _reachable(self.ray_address)
-                try:
-                    ray.init(address=self.ray_address, log_to_driver=False)
-                except (ConnectionError, RuntimeError) as e:
-                    first = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
-                    raise UavrisError(f"cannot join the Ray cluster at {self.ray_address}: {first} (a cluster "
-                                      "with token authentication needs RAY_AUTH_MODE=token and its RAY_AUTH_TOKEN "
-                                      "here too)") from None
-            self._ray_started = True
-
-    def _run_ray(self, jobs: list[Job], on_done: Callable[[JobResult], None] | None) -> list[JobResult]:
-        import ray
-
-        self.connect()
         with self._lock:
-            # A job whose worker or node is lost (a preempted cluster node) is run again elsewhere, where it
-            # resumes from the checkpoints it had; a job that fails is not: it returns its error as a result.
-            options = {"num_cpus": 1, "max_retries": RAY_SYSTEM_RETRIES, "retry_exceptions": False}
-            if self.ray_address:  # a cluster's nodes may not share our file system: the files go with the jobs
-                undeclared = [job.name for job in jobs if not job.writes]
-                if undeclared:
-                    raise ValueError(f"jobs {undeclared} declare no files they write; a cluster cannot run them")
-                remote = ray.remote(**options)(shipping.run_shipped)
-                refs = {remote.remote(job, shipping.pack((*job.reads, *shipping.outputs(job))), _run_logged): job
-                        for job in jobs}
-            else:
-                refs = {ray.remote(**options)(_run_logged).remote(job): job for job in jobs}
-        pending = list(refs)
-        results: list[JobResult] = []
-        while pending:
-            ready, pending = ray.wait(pending, num_returns=1)
-            for ref in ready:
-                job = refs[ref]
-                try:
-                    res = ray.get(ref)
-                except Exception as e:  # noqa: BLE001 - a worker that died
-                    res = JobResult(job.name, False, None, f"ray worker died: {type(e).__name__}: {e}", job.log)
-                else:
-                    if self.ray_address:
-                        res, files = res
-                        try:
-                            shipping.unpack(files, shipping.outputs(job), exact=shipping.outputs(job))
-                        except (OSError, ValueError) as e:
-                            res = JobResult(job.name, False, None, f"its files could not be written here: {e}", job.log)
-                results.append(res)
-                if on_done:
-                    on_done(res)
-        return results
-
-
-@contextlib.contextmanager
-def _sigterm_kept() -> Iterator[None]:
-    """The process's SIGTERM handler as it was before the block: ``ray.init`` replaces it with
-    one that exits at once (status 1 or 15, no line), which would skip the command's own
-    (:mod:`uavris.cli`: the one line, exit status 143, the workers stopped first)."""
-    if threading.current_thread() is not threading.main_thread():
-        yield  # only the main thread sets handlers (Ray leaves them alone there too)
-        return
-
-    previous = signal.getsignal(signal.SIGTERM)
-    try:
-        yield
-    finally:
-        if previous is not None:  # None: set outside Python, which cannot be put back
-            signal.signal(signal.SIGTERM, previous)
-
-
-def _interrupted(job: Job) -> JobResult:
-    """The result of a job that the runner's close kept from starting or stopped."""
-    return JobResult(job.name, False, None, "interrupted", job.log)
-
-
-def _reachable(address: str) -> None:
-    """One line when nothing answers at a cluster's ``HOST:PORT`` (Ray itself would retry for
-    minutes); other forms of address (``ray://``, ``auto``) are left to Ray."""
-    host, sep, port = address.rpartition(":")
-    if not sep or not port.isdigit() or "/" in address:
-        return
-    try:
-        socket.create_connection((host.strip("[]"), int(port)), timeout=10).close()
-    except OSError as e:
-        raise UavrisError(f"cannot reach the Ray cluster at {address}: {e.strerror or e} (is `ray start --head` "
-                          "running there, and is the port open?)") from None
-
-
-RAY_SYSTEM_RETRIES = 3  # per job, for system failures only (a lost worker process or node)
+            if ray_backend.connect(self.workers, self.ray_address):
+                self._ray_started = True
 
 
 def run_jobs(jobs: list[Job], workers: int, on_done: Callable[[JobResult], None] | None = None,

@@ -23,8 +23,9 @@ from typing import Any, Callable
 
 from uavris.errors import UavrisError
 from uavris.experiments.engine.forecast import Speeds, eta_seconds
-from uavris.experiments.engine.jobs import Job, JobResult, JobRunner
+from uavris.experiments.engine.jobs import JobRunner
 from uavris.experiments.engine.stages import Pipeline, StageRecord
+from uavris.experiments.engine.worker import Job, JobResult
 
 HOLD_LIMIT_S = 30.0  # the longest the runner waits for the first stages to queue their jobs
 TICK_S = 2.0  # how often the bar counts the running jobs' progress and redraws its ETA

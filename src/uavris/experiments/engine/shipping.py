@@ -3,7 +3,7 @@
 Lives here: :func:`pack`, :func:`unpack` and :func:`run_shipped`, which the Ray backend of
 :class:`~uavris.experiments.engine.jobs.JobRunner` runs on a node when the study goes to a
 cluster (``--ray-address``). Not here: what a job reads and writes (each job declares it:
-:attr:`~uavris.experiments.engine.jobs.Job.reads` and ``writes``).
+:attr:`~uavris.experiments.engine.worker.Job.reads` and ``writes``).
 
 A job's paths are absolute and the same on every node: the driver packs what the job reads
 and what it writes so far (its checkpoints, for a resumed job) into one tar archive, the
@@ -132,7 +132,7 @@ def _same(path: Path, data: bytes) -> bool:
 
 
 def outputs(job: Any) -> tuple[Path, ...]:
-    """What comes back from a job (a :class:`~uavris.experiments.engine.jobs.Job`): its declared
+    """What comes back from a job (a :class:`~uavris.experiments.engine.worker.Job`): its declared
     writes and its log."""
     return (*job.writes, job.log)
 

@@ -57,9 +57,9 @@ from uavris.experiments.engine.costs import (
     pretrain_cost,
     train_cost,
 )
-from uavris.experiments.engine.jobs import Job
 from uavris.experiments.engine.scheduling import StudyContext
 from uavris.experiments.engine.stages import Pipeline, Stage, study_folder
+from uavris.experiments.engine.worker import Job
 from uavris.experiments.study.config import AUTO, ReproduceConfig
 from uavris.experiments.study.kept_rows import KEPT_ROWS_DIR
 from uavris.experiments.study.places import PlaceStages

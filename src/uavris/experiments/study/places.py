@@ -20,9 +20,9 @@ from typing import Any, Callable
 
 from uavris.agents.oracle import planner as oracle_planner
 from uavris.experiments.engine.costs import finetune_cost, value_fit_cost, value_labels_cost
-from uavris.experiments.engine.jobs import Job
 from uavris.experiments.engine.scheduling import StudyContext
 from uavris.experiments.engine.stages import Stage
+from uavris.experiments.engine.worker import Job
 from uavris.experiments.study.config import ReproduceConfig
 from uavris.experiments.study.stage_names import DATASET, VALUE_LABELS, places_stage, value_stage
 from uavris.experiments.study.tracks import TrainedModel, zero_shot_only

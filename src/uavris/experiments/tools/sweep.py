@@ -46,7 +46,8 @@ from uavris.config import SCENARIOS, Scenario, SystemConfig, get_scenario
 from uavris.errors import ConfigError, UavrisError
 from uavris.experiments.display.plots import plt, save_figure
 from uavris.experiments.display.progress import progress_bar
-from uavris.experiments.engine.jobs import Job, run_jobs
+from uavris.experiments.engine.jobs import run_jobs
+from uavris.experiments.engine.worker import Job
 from uavris.experiments.tools.evaluate import hall_name, layout_origin, outside_training
 from uavris.experiments.tools.rows import as_row, resolve_target
 from uavris.io import other_inputs, read_json, to_plain, write_csv, write_json

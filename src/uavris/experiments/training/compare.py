@@ -31,7 +31,8 @@ from uavris.experiments.display.plots import learning_curves
 from uavris.experiments.display.progress import progress_bar
 from uavris.experiments.display.tables import MISSING, counted, interval, markdown_table, num, pct
 from uavris.experiments.engine.costs import train_cost
-from uavris.experiments.engine.jobs import Job, JobResult, run_jobs
+from uavris.experiments.engine.jobs import run_jobs
+from uavris.experiments.engine.worker import Job, JobResult
 from uavris.experiments.training.train_expert import TrainConfig, train_job
 from uavris.io import atomic_write_text, read_csv, write_csv, write_json
 from uavris.presets import PRESETS
