@@ -24,14 +24,20 @@ from uavris.experiments.engine.worker import Job, JobResult, run_logged
 RAY_SYSTEM_RETRIES = 3  # per job, for system failures only (a lost worker process or node)
 
 
-def connect(workers: int, ray_address: str | None) -> bool:
-    """Start a local Ray instance of ``workers`` CPUs (no address) or join the cluster at
-    ``ray_address``; False where Ray is already connected in this process. A cluster that cannot
-    be reached is one :class:`UavrisError`, before any job is queued."""
+def _ray() -> Any:
+    """The ``ray`` module, imported on first use (the ray extra); one line where it is not installed."""
     try:
         import ray
     except ImportError:
         raise UavrisError("the Ray backend needs Ray: pip install 'uavris[ray]'") from None
+    return ray
+
+
+def connect(workers: int, ray_address: str | None) -> bool:
+    """Start a local Ray instance of ``workers`` CPUs (no address) or join the cluster at
+    ``ray_address``; False where Ray is already connected in this process. A cluster that cannot
+    be reached is one :class:`UavrisError`, before any job is queued."""
+    ray = _ray()
     with _sigterm_kept():
         if ray.is_initialized():
             return False
@@ -55,8 +61,7 @@ def submit(jobs: list[Job], ray_address: str | None) -> dict[Any, Job]:
     preempted cluster node) is run again elsewhere, where it resumes from the checkpoints it had;
     a job that fails is not: it returns its error as a result. On a cluster every job must
     declare the files it writes (they come back with its result)."""
-    import ray
-
+    ray = _ray()
     options = {"num_cpus": 1, "max_retries": RAY_SYSTEM_RETRIES, "retry_exceptions": False}
     if not ray_address:
         return {ray.remote(**options)(run_logged).remote(job): job for job in jobs}
@@ -71,8 +76,7 @@ def collect(refs: dict[Any, Job], on_done: Callable[[JobResult], None] | None,
             ray_address: str | None) -> list[JobResult]:
     """The results of :func:`submit`'s jobs as they end (``on_done`` called on each); on a cluster
     the files each wrote are written here. A worker that died is its job's failure."""
-    import ray
-
+    ray = _ray()
     pending = list(refs)
     results: list[JobResult] = []
     while pending:
@@ -98,9 +102,7 @@ def collect(refs: dict[Any, Job], on_done: Callable[[JobResult], None] | None,
 
 def shutdown() -> None:
     """Leave Ray (a local instance stops)."""
-    import ray
-
-    ray.shutdown()
+    _ray().shutdown()
 
 
 @contextlib.contextmanager
