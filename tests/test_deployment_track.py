@@ -698,7 +698,7 @@ def test_the_claims_page_names_its_machine_and_keeps_its_evidence_beside_it(depl
     assert not (tmp_path / "d" / "claims.md").exists()
 
 
-def test_a_shipped_controller_knows_the_study_it_came_from(deployment_run, tmp_path):
+def test_a_shipped_controller_knows_the_study_it_came_from(deployment_run, tmp_path, monkeypatch):
     """`uavris pages pretrained` ships a study's goal-conditioned DT with the stage keys it came
     from: its card is current for the study that made it and stale for one whose demonstrations
     moved; a study of another configuration is refused; the folder flies as any controller."""
@@ -719,12 +719,27 @@ def test_a_shipped_controller_knows_the_study_it_came_from(deployment_run, tmp_p
         [stage] = [d for d in (out / "stages").iterdir() if d.name.rsplit("-", 1)[0] == f"deploy-evaluate-{w.name}"]
         r = read_json(stage / "stage.json")["result"]
         groups.setdefault((w.devices, w.split), []).append(r["dt-goal-safe"]["mean"] / r["oracle"]["mean"])
-    assert [(s["devices"], s["halls"], s["n"]) for s in card["scores"]] == [(*k, len(v))
-                                                                            for k, v in sorted(groups.items())]
-    for s, (_, v) in zip(card["scores"], sorted(groups.items())):
+    by_count = sorted(groups.items(), key=lambda kv: (kv[0][0], kv[0][1] != "unseen"))  # each count's unseen first
+    assert [(s["devices"], s["halls"], s["n"]) for s in card["scores"]] == [(*k, len(v)) for k, v in by_count]
+    for s, (_, v) in zip(card["scores"], by_count):
         assert s["seed0"]["mean"] == pytest.approx(np.mean(v), rel=1e-12)
-    page = write_card_page(shipped, tmp_path / "pretrained.md", "uavris pages pretrained").read_text()
+    page = write_card_page(shipped, tmp_path / "pretrained.md", "uavris pages pretrained", scored_by=["C"]).read_text()
     assert page.startswith("<!-- uavris-page") and f"| 4 devices | {len(groups[4, 'unseen'])} |" in page
+    assert "scored at the other device counts by `C`" in page
+    # scored in a second study of the same models (here the same study): each count and generator once, the first's
+    again = ship(out, tmp_path / "again", made_by=RC, scored_in=[out])
+    assert read_json(again / CARD)["scores"] == card["scores"]
+    from types import SimpleNamespace
+
+    from uavris.experiments.study import pretrained
+
+    real = pretrained.Study.open
+    stages = {name: SimpleNamespace(key="0" * 12) for name in pretrained.STAGES}
+    other = SimpleNamespace(pipeline=SimpleNamespace(stages=stages))
+    monkeypatch.setattr(pretrained.Study, "open", lambda d: other if Path(d).name == "other-models" else real(d))
+    with pytest.raises(UavrisError, match="evaluates other models"):  # another study's models: not the shipped one's
+        ship(out, tmp_path / "refused", made_by=RC, scored_in=[tmp_path / "other-models"])
+    assert not (tmp_path / "refused").exists()
     # a hall of 5 devices, a count it never saw: it reads the devices as a set
     summary, _ = evaluate_target(str(shipped), None, 2, EVAL_SEED, out=tmp_path / "e", references=False,
                                  layout="layout-unseen-0-k5")

@@ -172,9 +172,11 @@ def _write_pretrained(runs: Path, dest: Path, preset: str, seeds: int) -> list[P
     from uavris.experiments.study.pretrained import ship, write_card_page
 
     package = preset == "quick" and dest.resolve() == (PRETRAINED.parents[3] / "docs" / "results").resolve()
-    shipped = ship(runs / "quick", PRETRAINED if package else dest / "pretrained", made_by=ReproduceConfig(preset))
-    return [write_card_page(shipped, dest / "pretrained.md", studies(preset, seeds)["quick"].line(runs, preset),
-                            [str(runs / "quick")]),
+    shipped = ship(runs / "quick", PRETRAINED if package else dest / "pretrained", made_by=ReproduceConfig(preset),
+                   scored_in=[runs / "counts"])
+    table = studies(preset, seeds)
+    return [write_card_page(shipped, dest / "pretrained.md", table["quick"].line(runs, preset),
+                            [str(runs / "quick"), str(runs / "counts")], [table["counts"].line(runs, preset)]),
             shipped]
 
 
@@ -189,8 +191,8 @@ PAGES: dict[str, Page] = {p.name: p for p in (
          _write_claims, "the paper's claims judged over the training seeds and the unseen halls, with its evidence"),
     Page("budget", "budget.md", lambda seeds: ("budget", "budget-ppo"), _write_budget,
          "Fig. 2 at the study's budget, four and sixteen times it"),
-    Page("pretrained", "pretrained.md", lambda seeds: ("quick",), _write_pretrained,
-         "the controller shipped with the package, shipped again, and its model card"),
+    Page("pretrained", "pretrained.md", lambda seeds: ("quick", "counts"), _write_pretrained,
+         "the controller shipped with the package, shipped again, and its model card (scored at every device count)"),
     Page("oracle-gap", "oracle-gap.md", lambda seeds: ("oracle-gap",), _write_oracle_gap,
          "the oracle against a search at least ten times dearer, at 3 to 8 devices"),
 )}

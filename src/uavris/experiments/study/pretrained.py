@@ -61,19 +61,36 @@ def scores(study: Study) -> list[dict[str, Any]]:
             per.setdefault((w.devices, w.split), []).append((res[ROW]["mean"] / res[ORACLE]["mean"],
                                                               float(np.mean(seeds)) / res[ORACLE]["mean"]))
     return [{"devices": k, "halls": split, "n": len(v), "seed0": over_units([a for a, _ in v]),
-             "seeds_mean": over_units([b for _, b in v])} for (k, split), v in sorted(per.items())]
+             "seeds_mean": over_units([b for _, b in v])} for (k, split), v in sorted(per.items(), key=_card_order)]
 
 
-def ship(study_dir: Path, dest: Path, made_by: ReproduceConfig | None = None) -> Path:
+def _card_order(item: tuple[tuple[int, str], Any]) -> tuple[int, bool]:
+    """The card's order of its halls: by device count, the unseen halls before the other generator's."""
+    (devices, split), _ = item
+    return devices, split != "unseen"
+
+
+def ship(study_dir: Path, dest: Path, made_by: ReproduceConfig | None = None,
+         scored_in: Sequence[Path] = ()) -> Path:
     """Export the quick study ``study_dir``'s controller (:data:`ROW`, seed 0) into ``dest`` (put
     in place whole) with ``card.json``: the keys of :data:`STAGES` in that study, its preset and
-    seed, and its scores (:func:`scores`). The study must be this code's make run (or this code's
+    seed, and its scores (:func:`scores`), also in the halls of the studies ``scored_in`` (the
+    device-count study: the same models, the same keys, or one line) where ``study_dir`` has
+    none of that count and generator. The study must be this code's make run (or this code's
     study of ``made_by``: its keys :func:`make_keys`'s): the card would be stale at once."""
     study = Study.open(study_dir)
     keys = {name: study.pipeline.stages[name].key for name in STAGES}
     if keys != make_keys(made_by):
         raise UavrisError(f"{study_dir} is not this code's make run (its keys of {', '.join(STAGES)} are not this "
                           "code's): run `make run` and ship from its study")
+    scored = {(s["devices"], s["halls"]): s for s in scores(study)}
+    for other_dir in scored_in:
+        other = Study.open(other_dir)
+        if {name: other.pipeline.stages[name].key for name in STAGES} != keys:
+            raise UavrisError(f"{other_dir} evaluates other models than {study_dir} (its keys of "
+                              f"{', '.join(STAGES)} differ): its scores are not the shipped controller's")
+        for s in scores(other):
+            scored.setdefault((s["devices"], s["halls"]), s)
     unseen = study.sites("deployment")[1]
     row = study.row(ROW, "deployment", unseen[0])
     dest.parent.mkdir(parents=True, exist_ok=True)
@@ -84,7 +101,7 @@ def ship(study_dir: Path, dest: Path, made_by: ReproduceConfig | None = None) ->
         write_json(made / CARD, {"row": ROW, "seed": row.seed or 0, "preset": study.config.preset,
                                  "training_halls": len(train), "training_devices": sorted({w.devices for w in train}),
                                  "episodes_per_hall": study.config.layout_trajectories, "stage_keys": keys,
-                                 "scores": scores(study)})
+                                 "scores": [s for _, s in sorted(scored.items(), key=_card_order)]})
         made.chmod(0o755)
         replace_folder(made, dest, dest.with_name(f".{dest.name}.old"))
     finally:
@@ -101,10 +118,12 @@ def stale_card(shipped: Path, made_by: ReproduceConfig | None = None) -> list[st
             for name, key in now.items() if card["stage_keys"].get(name) != key]
 
 
-def write_card_page(shipped: Path, page: Path, command: str, studies: Sequence[str] = ()) -> Path:
+def write_card_page(shipped: Path, page: Path, command: str, studies: Sequence[str] = (),
+                    scored_by: Sequence[str] = ()) -> Path:
     """The model card (``docs/results/pretrained.md``, stamped): what the shipped controller is, the
     data and halls it learned from, its scores at each device count with intervals, its stage keys;
-    ``studies``: the study it was shipped from (the stamp's)."""
+    ``studies``: the studies it was shipped from and scored in (the stamp's); ``scored_by``: the
+    commands of the studies that scored it at other device counts."""
     card = read_json(shipped / CARD)
     rows = [(f"{s['devices']} devices" + (", another generator" if s["halls"] == "other" else ""), str(s["n"]),
              with_ci(s["seed0"], pct), with_ci(s["seeds_mean"], pct)) for s in card["scores"]]
@@ -118,8 +137,10 @@ def write_card_page(shipped: Path, page: Path, command: str, studies: Sequence[s
              "episodes each); `V` from the optimised-phase rate `R` at poses of training halls of 3 to 8 "
              "devices, level and tilted, and the poses the demonstrations' teacher valued. It reads any number of "
              "devices (a set encoder); it was not trained on halls of another generator or of 10 devices.", "",
-             f"Made by `{command}`. Its fraction of the oracle in the study's unseen halls (mean [95% CI over "
-             "halls]; the shipped seed, and the mean of the pre-training seeds' controllers):", "",
+             f"Made by `{command}`"
+             + "".join(f"; scored at the other device counts by `{line}`" for line in scored_by)
+             + ". Its fraction of the oracle in the studies' unseen halls (mean [95% CI over halls]; the shipped "
+             "seed, and the mean of the pre-training seeds' controllers):", "",
              *markdown_table(("halls", "n", "shipped (seed 0)", "mean of the seeds"), rows, "lrll"), "",
              "The stage keys it came from (a test fails when this code's make run makes others: the shipped "
              "model is then stale and shipped again):", "",
