@@ -14,10 +14,11 @@
   oracle's, over generated halls), :mod:`~.training.pretrain` and :mod:`~.training.finetune`
   (the DT's two stages), :mod:`~.training.dt_runs` (writing their run directories).
 - :mod:`.tools`: what a user calls on a policy or a hall: :mod:`~.tools.targets` (what a
-  name on the command line names, and a report's row), :mod:`~.tools.evaluate`, :mod:`~.tools.user_policy`,
+  name on the command line names), :mod:`~.tools.rows` (a report's row, a controller
+  directory, the registry), :mod:`~.tools.evaluate`, :mod:`~.tools.user_policy`,
   :mod:`~.tools.benchmark` (the study's protocol), :mod:`~.tools.sweep` (a grid of system
-  parameters), :mod:`~.tools.plan` (the oracle's plan and
-  rate map), :mod:`~.tools.run_curves` (learning curves), :mod:`~.tools.demo`.
+  parameters), :mod:`~.tools.plan` (the oracle's plan and rate map), :mod:`~.tools.run_curves`
+  (learning curves), :mod:`~.tools.demo`.
 - :mod:`.study`: ``uavris reproduce``: :mod:`~.study.config`, :mod:`~.study.tracks` (and
   their rows), :mod:`~.study.pipeline`, :mod:`~.study.workers`, :mod:`~.study.reproduce`,
   :mod:`~.study.finished` (a study's directory opened: its stages, results and rows) and :mod:`~.study.report`.

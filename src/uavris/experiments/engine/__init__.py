@@ -1,7 +1,8 @@
 """The job engine: jobs on a process pool or Ray, resumable keyed stages, their schedule and costs.
 
 Modules: :mod:`.process` (:func:`~.process.configure_threads`, :func:`~.process.machine`),
-:mod:`.jobs` (:class:`~.jobs.JobRunner`),
+:mod:`.worker` (:class:`~.worker.Job` and its run in a worker process), :mod:`.ray_backend`
+(jobs on Ray), :mod:`.jobs` (:class:`~.jobs.JobRunner`),
 :mod:`.stages` (:class:`~.stages.Stage`, :class:`~.stages.Pipeline`), :mod:`.scheduling`
 (:class:`~.scheduling.StudyContext`: the runner, priorities and progress shared by a
 pipeline's stages), :mod:`.costs` (expected seconds of each kind of job) and

@@ -7,7 +7,7 @@ the Ray side (:mod:`.ray_backend`), what the jobs do (:mod:`uavris.experiments.t
 :mod:`uavris.experiments.study.pipeline`).
 
 Each job runs in a worker process (spawned, so torch and numpy start clean) with one thread
-in every thread pool (:func:`configure_threads`) and writes its own log file. A job that
+in every thread pool (:func:`~.process.configure_threads`) and writes its own log file. A job that
 raises is reported and the others go on; the caller decides the exit code from the
 returned failures. A worker process that dies (killed by the OOM killer, say) breaks the
 local pool and every job running in it: those jobs run once more, each in a process of its
@@ -16,8 +16,9 @@ own, and only a job whose process dies again is reported failed ("worker died").
 Workers never outlive their command: Ctrl-C and SIGTERM close the runner with ``abort``
 (:meth:`JobRunner.close`, :func:`abort_runners`), which stops them, and a worker whose
 parent is gone (killed by SIGKILL or the OOM killer, which no handler sees) exits within a
-second (:func:`uavris.experiments.engine.worker.new_pool`). The output's lock goes with the command's process; a worker
-left running would go on writing into an output that a rerun may then lock and write too.
+second (:func:`~.worker.new_pool`: each worker watches its parent). The output's lock goes
+with the command's process; a worker left running would go on writing into an output that a
+rerun may then lock and write too.
 
 Backends: ``local`` (``concurrent.futures`` process pool, the default) and ``ray``
 (``pip install 'uavris[ray]'``): without an address a local Ray instance with ``workers``
@@ -65,7 +66,7 @@ def abort_runners() -> None:
     workers (:mod:`uavris.cli`). The command's main thread unwinds from the signal, but a
     study's stage threads wait for their jobs, and a study waits for its stage threads before
     it closes the runner: without this, the study would go on until its running stages ended
-    (SIGTERM reaches the command alone, and pool workers ignore Ctrl-C: :func:`_watch_parent`).
+    (SIGTERM reaches the command alone, and pool workers ignore Ctrl-C: :func:`~.worker.new_pool`).
     A program that calls the library gets the same from :meth:`Pipeline.run
     <uavris.experiments.engine.stages.Pipeline.run>` on KeyboardInterrupt."""
     with _RUNNERS_LOCK:

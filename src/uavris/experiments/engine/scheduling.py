@@ -184,7 +184,7 @@ class StudyContext:
 
     def run_one(self, stage: str, fn: Any, args: tuple[Any, ...], log: Path, cost: float,
                 reads: tuple[Path, ...] = (), writes: tuple[Path, ...] = ()) -> Any:
-        """One job of a stage (reading and writing the files of :class:`~.jobs.Job`); its value,
+        """One job of a stage (reading and writing the files of :class:`~.worker.Job`); its value,
         or a :class:`UavrisError` naming its log when it failed."""
         [res] = self.submit(stage, [Job(stage, fn, args, log, cost, reads, writes)])
         if not res.ok:

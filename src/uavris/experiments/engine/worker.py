@@ -82,7 +82,7 @@ def _watch_parent(parent: int) -> None:
     workers, and they would finish their jobs into an output whose lock went with it.
 
     The worker ignores SIGINT: Ctrl-C reaches the terminal's whole process group, and the
-    command stops its workers itself (:func:`abort_runners`). A worker left to raise
+    command stops its workers itself (:func:`~.jobs.abort_runners`). A worker left to raise
     KeyboardInterrupt while it waits for a job prints ``Process SpawnProcess-N:`` and a
     traceback beside the command's one line.
 
