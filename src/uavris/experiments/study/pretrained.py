@@ -43,7 +43,12 @@ def make_keys(config: ReproduceConfig | None = None) -> dict[str, str]:
     in the study of ``config``), from its pipeline built in a scratch folder, nothing run."""
     with tempfile.TemporaryDirectory() as tmp:
         pipeline = build_pipeline(config or ReproduceConfig("quick"), Path(tmp), StudyContext(1, "local", None))
-        return {name: pipeline.stages[name].key for name in STAGES}
+        return shipped_keys(pipeline)
+
+
+def shipped_keys(pipeline: Any) -> dict[str, str]:
+    """The keys of :data:`STAGES` in ``pipeline`` (a study's): what the shipped files come from."""
+    return {name: pipeline.stages[name].key for name in STAGES}
 
 
 def scores(study: Study) -> list[dict[str, Any]]:
@@ -79,14 +84,14 @@ def ship(study_dir: Path, dest: Path, made_by: ReproduceConfig | None = None,
     none of that count and generator. The study must be this code's make run (or this code's
     study of ``made_by``: its keys :func:`make_keys`'s): the card would be stale at once."""
     study = Study.open(study_dir)
-    keys = {name: study.pipeline.stages[name].key for name in STAGES}
+    keys = shipped_keys(study.pipeline)
     if keys != make_keys(made_by):
         raise UavrisError(f"{study_dir} is not this code's make run (its keys of {', '.join(STAGES)} are not this "
                           "code's): run `make run` and ship from its study")
     scored = {(s["devices"], s["halls"]): s for s in scores(study)}
     for other_dir in scored_in:
         other = Study.open(other_dir)
-        if {name: other.pipeline.stages[name].key for name in STAGES} != keys:
+        if shipped_keys(other.pipeline) != keys:
             raise UavrisError(f"{other_dir} evaluates other models than {study_dir} (its keys of "
                               f"{', '.join(STAGES)} differ): its scores are not the shipped controller's")
         for s in scores(other):
