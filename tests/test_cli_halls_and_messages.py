@@ -265,10 +265,10 @@ def test_a_device_is_named_as_the_user_knows_it() -> None:
     from uavris.config import ConfigError
 
     with pytest.raises(ConfigError) as e:
-        SystemConfig(users=((15.0, 5.0, 1.0), (50.0, 5.0, 1.0)))
+        SystemConfig(users=((15.0, 5.0, 1.0), (50.0, 5.0, 1.0))).check()
     assert "SystemConfig.users[1] (device D2) must be a point inside the room" in str(e.value)
     with pytest.raises(ConfigError) as e:
-        SystemConfig(users=((15.0, 5.0, 1.0), (25.0, 5.0, 1.0), (27.0, 5.0, 1.0)))
+        SystemConfig(users=((15.0, 5.0, 1.0), (25.0, 5.0, 1.0), (27.0, 5.0, 1.0))).check()
     assert "SystemConfig.users[2] (device D3) must be at least min_device_spacing" in str(e.value)
     assert "from device D2 = [25.0, 5.0, 1.0]" in str(e.value)
 
@@ -422,3 +422,129 @@ def test_every_kind_of_system_flag_written_on_the_line_changes_the_targets_syste
     assert got == base.replace(angle_dependent_reflection=False, v_max=3.0,
                                propulsion=PropulsionParams(induced_w=90.0, tip_speed=110.0))
     assert got.horizon == 30 and got.learn_amplitudes and got.observe_devices and got.propulsion.induced_w == 90.0
+
+
+# ------------------------------------------------------------- 7. every flag the user's, on every command
+SYSTEM_COMMANDS = {  # each command that builds a system, as a line that stops before any work
+    "evaluate": ["evaluate", "zero-action"], "benchmark": ["benchmark", "zero-action"], "demo": ["demo"],
+    "plan": ["plan"], "sweep": ["sweep", "zero-action", "--param", "system.nx", "2"],
+    "compare-algorithms": ["compare-algorithms"], "train": ["train", "--preset", "smoke"],
+    "finetune-dt": ["finetune-dt", "--model", "m", "--preset", "smoke"],
+    "reproduce": ["reproduce", "--preset", "smoke", "--estimate"]}
+
+
+def _flags(command: list[str], capsys: pytest.CaptureFixture[str]) -> set[str]:
+    assert main([*command, "--help"]) == 0
+    return set(re.findall(r"--[a-z][a-z0-9.-]*", capsys.readouterr().out))
+
+
+def _flag_names(cls: type, prefix: str) -> set[str]:
+    """The flag of every field of the config class ``cls`` (a nested config's fields, an optional one's
+    too, under its name) but those it suppresses."""
+    import dataclasses
+    import typing
+
+    import tyro
+
+    hints = typing.get_type_hints(cls)
+    extras = typing.get_type_hints(cls, include_extras=True)
+    out: set[str] = set()
+    for f in dataclasses.fields(cls):
+        if tyro.conf.Suppress in getattr(extras[f.name], "__metadata__", ()):
+            continue  # not a flag by design (a model's data sizes: the dataset gives them)
+        name = f"{prefix}{f.name.replace('_', '-')}"
+        nested = [t for t in (hints[f.name], *typing.get_args(hints[f.name])) if dataclasses.is_dataclass(t)]
+        out |= _flag_names(nested[0], f"{name}.") if nested else {name}
+    return out
+
+
+@pytest.mark.parametrize("command", sorted(SYSTEM_COMMANDS))
+def test_every_field_of_the_system_is_a_flag_of_every_command_that_builds_one(
+        command: str, capsys: pytest.CaptureFixture[str]) -> None:
+    """A field added to SystemConfig is a --system.* flag of every command that builds a system, with
+    no edit of the command line's code (the flags are the config's fields); the written ones are taken
+    field by field (test_every_kind_of_system_flag_written_on_the_line_changes_the_targets_system)."""
+    from uavris.config import SystemConfig
+
+    line = SYSTEM_COMMANDS[command] if command != "finetune-dt" else ["finetune-dt"]
+    missing = _flag_names(SystemConfig, "--system.") - _flags(line, capsys)
+    assert not missing, (command, sorted(missing))
+
+
+@pytest.mark.parametrize("command, cls", [("train", "TrainConfig"), ("pretrain-dt", "PretrainConfig"),
+                                          ("finetune-dt", "FinetuneConfig"), ("reproduce", "ReproduceConfig")])
+def test_every_field_of_a_commands_config_is_one_of_its_flags(command: str, cls: str,
+                                                              capsys: pytest.CaptureFixture[str]) -> None:
+    from uavris.experiments.study.config import ReproduceConfig
+    from uavris.experiments.training.finetune import FinetuneConfig
+    from uavris.experiments.training.pretrain import PretrainConfig
+    from uavris.experiments.training.train_expert import TrainConfig
+
+    config = {"TrainConfig": TrainConfig, "PretrainConfig": PretrainConfig, "FinetuneConfig": FinetuneConfig,
+              "ReproduceConfig": ReproduceConfig}[cls]
+    missing = _flag_names(config, "--") - _flags([command], capsys)
+    assert not missing, (command, sorted(missing))
+
+
+def test_a_field_added_to_a_config_is_taken_where_written_even_at_its_default() -> None:
+    """The build's rule is the config's fields, whatever they are: a config with a field of its own,
+    its base (a file's, a model's) not at the default, takes the field where its flag is written,
+    at its default value too, and keeps the base's where it is not."""
+    import dataclasses
+
+    from uavris.cli.options import with_flags
+    from uavris.cli.parsing import parse
+
+    @dataclasses.dataclass(frozen=True)
+    class Added:
+        kept: int = 1
+        added: float = 2.0
+
+    base = Added(kept=5, added=7.0)
+    for line, want in ((["--added", "2.0"], Added(5, 2.0)), (["--kept", "1"], Added(1, 7.0)), ([], base)):
+        assert with_flags(base, parse(Added, line, "t", ""), line) == want, line
+
+
+LOW_HALL = HALL_30  # a 6 m room: the paper's ceiling of 8 m is above it
+
+
+@pytest.mark.parametrize("command", sorted(SYSTEM_COMMANDS))
+def test_a_ceiling_written_at_its_default_beside_a_lower_room_is_the_users(
+        command: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+    """--system.z-max 8 (its default) beside the layout of a 6 m room is the user's ceiling, judged in
+    that room (one line), never silently the room's; unwritten, the room caps it."""
+    hall = tmp_path / "low.yaml"
+    hall.write_text(LOW_HALL)
+    monkeypatch.setattr(cli_training, "dt_system", lambda model: SystemConfig())  # finetune-dt's model: the paper's
+    line = [*SYSTEM_COMMANDS[command], *(["--out", str(tmp_path / "o")] if command not in ("demo", "plan") else [])]
+    layout = [str(hall)] if command == "plan" else ["--layout", str(hall)]
+    err = _one_line(capsys, main([*line, *layout, "--system.z-max", "8"]))
+    assert "z_max <= room height 6.0, got (2.0, 8.0)" in err, err
+    assert not (tmp_path / "o").exists()
+
+
+def test_a_flag_written_at_its_default_beside_a_file_or_a_model_is_the_users(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A file's (train --config), a model's (finetune-dt --model, evaluate's target) system is the
+    base; a flag written at the library's default value is still the user's over it, and every
+    field not written stays the base's."""
+    import yaml
+
+    from uavris.cli.training import parse_finetune, parse_train
+    from uavris.experiments.tools.targets import Reference
+    from uavris.presets import TRAIN
+
+    own = SystemConfig(v_max=3.0, horizon=30)
+    file = tmp_path / "run.yaml"
+    file.write_text(yaml.safe_dump({"system": {"v_max": 3.0, "horizon": 30}, "total_steps": 999}))
+    run = parse_train(["--config", str(file), "--system.v-max", "5", "--total-steps",
+                       str(TRAIN["quick"]["total_steps"])]).run
+    assert (run.system.v_max, run.system.horizon, run.total_steps) == (5.0, 30, TRAIN["quick"]["total_steps"])
+    monkeypatch.setattr(cli_training, "dt_system", lambda model: own)
+    tuned = parse_finetune(["--model", "m", "--scenario", "unseen1", "--system.v-max", "5"]).run
+    assert (tuned.system.v_max, tuned.system.horizon) == (5.0, 30)
+    monkeypatch.setattr(Reference, "own_system", lambda self: own)
+    _stop_with_system(monkeypatch, "evaluate")
+    with pytest.raises(_Built) as built:
+        main(["evaluate", "zero-action", "--system.v-max", "5", "--out", str(tmp_path / "e")])
+    assert (built.value.args[0].v_max, built.value.args[0].horizon) == (5.0, 30)

@@ -42,10 +42,29 @@ def test_scenarios():
 )
 def test_bad_config_names_the_field(changes, field):
     with pytest.raises(ConfigError) as e:
-        SystemConfig(**changes)
+        SystemConfig(**changes).check()
     msg = str(e.value)
     assert f"SystemConfig.{field} must be" in msg
     assert "\n" not in msg
+
+
+def test_a_system_is_judged_whole_once_its_hall_is_given():
+    """A field's own range is judged when a system is made; its hall (the devices in the room, the
+    pairs they make) once the system is whole: a smaller room (a flag) waits for the devices that fit
+    it (a layout), and every way to use a system judges it."""
+    small = SystemConfig(room=(20.0, 20.0, 5.0), z_max=5.0)  # the paper's D3 (30, 20) lies outside
+    with pytest.raises(ConfigError, match=r"users\[2\] \(device D3\) must be a point inside the room"):
+        small.check()
+    with pytest.raises(ConfigError, match="device D3"):
+        UavRisD2DEnv(small, scenario=[10.0, 10.0, 4.5])
+    with pytest.raises(ConfigError, match="device D3"):
+        SystemConfig.from_dict(small.to_dict())
+    fitted = small.replace(users=((5.0, 5.0, 1.0), (15.0, 15.0, 1.0)))  # replace judges the whole system
+    assert fitted.check() is fitted and fitted.num_users == 2
+    with pytest.raises(ConfigError, match="max_active_pairs must be an integer in"):
+        fitted.replace(max_active_pairs=2)  # two devices make one pair
+    with pytest.raises(ConfigError, match="SystemConfig.v_max must be"):
+        SystemConfig(v_max=-1.0)  # a field's own range: at once
 
 
 def test_start_outside_region_is_rejected():

@@ -3,8 +3,10 @@
 Every parameter of the paper's simulation section is a field of :class:`SystemConfig`;
 the parameters the paper leaves open (slot length, horizon, speed and acceleration bounds,
 attitude step, noise power, energy budget, flight region) carry documented defaults, see
-``docs/model.md``. Configs are frozen and validated on construction: a bad value raises
-:class:`~uavris.errors.ConfigError` naming the field and the allowed range.
+``docs/model.md``. Configs are frozen data: a bad value of a field raises
+:class:`~uavris.errors.ConfigError` naming the field and the allowed range when the config is
+made; what several fields decide together (a system's hall: its devices in its room) is judged
+by :meth:`SystemConfig.check`, once the config is whole.
 
 Lives here: :class:`SystemConfig`, :class:`PropulsionParams`, :class:`Scenario`, the
 named scenarios and :class:`DictConfig`, the one ``to_dict`` / ``from_dict`` convention of
@@ -62,9 +64,15 @@ class DictConfig:
                 value = tuple(value)  # JSON and YAML have lists only; the configs hold tuples (hashable)
             values[name] = value
         try:
-            return cls(**values)
+            built = cls(**values)
         except TypeError as e:
             raise ConfigError(f"bad {cls.__name__}: {e}") from None
+        return built.check()
+
+    def check(self: C) -> C:
+        """What no single field decides, judged once the config is whole (a system's hall); ``self``.
+        A field's own range is judged when the config is made; this is for a class to widen."""
+        return self
 
 
 class _PresetValue:
@@ -256,11 +264,15 @@ class SystemConfig(DictConfig):
         _check(self.front_margin_deg is None or (_finite(self.front_margin_deg) and 0 <= self.front_margin_deg < 90),
                o, "front_margin_deg", "None (no attitude safety layer) or an angle in [0, 90) degrees",
                self.front_margin_deg)
-        self._check_hall()
+        _check(_finite(self.min_device_spacing) and self.min_device_spacing >= 0, o, "min_device_spacing",
+               "a finite distance >= 0 (m)", self.min_device_spacing)
 
-    def _check_hall(self) -> None:
-        """What the hall decides: the UAV's heights under its ceiling, every device inside the room,
-        below the UAV's floor and apart from the others, and the pairs its devices can make."""
+    def check(self) -> SystemConfig:
+        """What the hall decides, judged once the system is whole (a command's build, a layout's
+        system, a file read, every simulator made of it): the UAV's heights under the ceiling, every
+        device inside the room, below the UAV's floor and apart from the others, the pairs its
+        devices can make; ``self``. Made on its own, a system judges only each field's range, so
+        that its room and its devices can come from different places (a flag, a layout)."""
         o = "SystemConfig"
         _check(_finite(self.z_min) and _finite(self.z_max) and 0 <= self.z_min < self.z_max <= self.room[2],
                o, "z_min/z_max", f"0 <= z_min < z_max <= room height {self.room[2]}", (self.z_min, self.z_max))
@@ -272,8 +284,6 @@ class SystemConfig(DictConfig):
             # the UAV's floor would be cut off by back-side blocking whenever the UAV flies lower.
             _check(u[2] < self.z_min, o, _device(k), f"below the UAV's floor z_min = {self.z_min:g} m "
                    f"(a device height < {self.z_min:g})", list(u))
-        _check(_finite(self.min_device_spacing) and self.min_device_spacing >= 0, o, "min_device_spacing",
-               "a finite distance >= 0 (m)", self.min_device_spacing)
         for i in range(len(self.users)):
             for j in range(i + 1, len(self.users)):
                 gap = math.dist(self.users[i][:2], self.users[j][:2])
@@ -285,6 +295,7 @@ class SystemConfig(DictConfig):
         if self.max_active_pairs is not None:
             v = self.max_active_pairs
             _check(isinstance(v, int) and 1 <= v <= kmax, o, "max_active_pairs", f"an integer in [1, {kmax}]", v)
+        return self
 
     @property
     def num_users(self) -> int:
@@ -331,7 +342,8 @@ class SystemConfig(DictConfig):
         return (self.room[0], self.room[1], self.z_max)
 
     def replace(self, **changes: Any) -> SystemConfig:
-        return dataclasses.replace(self, **changes)
+        """This system with ``changes``, checked whole (:meth:`check`)."""
+        return dataclasses.replace(self, **changes).check()
 
     def nearest_device(self, position: Vec3) -> tuple[int, float]:
         """Index of the device closest to ``position`` and its distance, m."""

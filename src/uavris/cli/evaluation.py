@@ -15,7 +15,7 @@ from typing import Annotated, Literal
 import tyro
 
 from uavris.agents.torch_device import Device, resolve_device
-from uavris.cli.options import LOOSE_SYSTEM, check_hall_flags, in_hall, seed_note
+from uavris.cli.options import in_hall, seed_note
 from uavris.cli.parsing import Unset, UsageError, output_dir, parse, writing
 from uavris.config import ScenarioName, SystemConfig
 from uavris.env.wrappers import PhaseControl
@@ -60,7 +60,7 @@ class EvaluateArgs:
     """torch device (auto: CUDA when torch sees one)"""
     progress: bool = True
     """show a progress bar"""
-    system: SystemConfig = LOOSE_SYSTEM
+    system: SystemConfig = SystemConfig()
     """the system evaluated in: the target's own, with these fields changed"""
     row: Unset[str] = None
     """a row of a study's report, TARGET being the study's output directory (uavris reproduce --out): its key in
@@ -97,7 +97,6 @@ def evaluate_command(args: list[str]) -> None:
     A row of a study's report (--row, TARGET the study's OUT) is evaluated as the report
     evaluates it, here or in a hall of your own (default OUT runs/rows/ROW).
     """
-    check_hall_flags(args, SystemConfig(), "uavris evaluate")  # before the flags are read into the paper's system
     a = parse(EvaluateArgs, args, "uavris evaluate", evaluate_command.__doc__ or "")
     check_one_start(a.scenario, a.layout)
     if a.row is not None:
@@ -226,7 +225,7 @@ class BenchmarkArgs(StudyRowFlags):
     """torch device (auto: CUDA when torch sees one)"""
     progress: bool = True
     """show a progress bar"""
-    system: SystemConfig = LOOSE_SYSTEM
+    system: SystemConfig = SystemConfig()
     """the system: the target's own, with these fields changed"""
 
 
@@ -239,7 +238,6 @@ def benchmark_command(args: list[str]) -> None:
     zero action with its paired 95% CI, means over cells), benchmark.csv, benchmark.json and
     each cell's per-episode CSVs.
     """
-    check_hall_flags(args, SystemConfig(), "uavris benchmark")  # before the flags are read into the paper's system
     a = parse(BenchmarkArgs, args, "uavris benchmark", benchmark_command.__doc__ or "")
     if a.layout is not None and a.cells != "all":
         raise UsageError(f"--cells {a.cells} chooses among the protocol's cells and --layout is a cell of its own; "
@@ -287,7 +285,7 @@ class SweepArgs(StudyRowFlags):
     """local (process pool) or ray (pip install 'uavris[ray]')"""
     progress: bool = True
     """show a progress bar"""
-    system: SystemConfig = LOOSE_SYSTEM
+    system: SystemConfig = SystemConfig()
     """the system the grid varies"""
 
 
@@ -304,7 +302,6 @@ def sweep_command(args: list[str]) -> None:
     """
     from uavris.experiments.tools.sweep import parse_axis, sweep
 
-    check_hall_flags(args, SystemConfig(), "uavris sweep")  # a room given twice: one line, before the values are read
     a = parse(SweepArgs, args, "uavris sweep", sweep_command.__doc__ or "")
     system, hall = in_hall(a.layout, SystemConfig(), a.system, args)
     row_of = None

@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Any, TypeVar
 
 from uavris.agents.torch_device import Device, resolve_device
-from uavris.cli.parsing import Unset, UsageError, output_dir, read_first
+from uavris.cli.parsing import Unset, UsageError, output_dir
 from uavris.config import Scenario, SystemConfig
 from uavris.errors import ConfigError
 from uavris.layouts import resolve_layout
@@ -69,51 +69,16 @@ LAYOUT_HELP = ("the hall: paper (the paper's devices), layout-train-N / layout-u
                "devices of --system.users")
 
 
-class _DevicesLater(SystemConfig):
-    """A system whose hall (its room's height against the UAV's ceiling, its devices, the pairs they
-    make) is checked once a layout has given it: the parse default of a command with ``--layout``
-    (:data:`LOOSE_SYSTEM`) and the base a layout resolves in. The ``--system.*`` flags change the
-    base system before ``--layout`` resolves (a generated hall is drawn in the room of
-    ``--system.room``, the paper's devices fit a room the flag enlarges), and the base's own
-    devices need not fit the changed room. Every other field is checked as always;
-    :meth:`replace`, which is how a layout makes its system, gives a fully checked
-    :class:`SystemConfig`."""
-
-    def _check_hall(self) -> None:
-        pass
-
-    def replace(self, **changes: Any) -> SystemConfig:
-        return SystemConfig(**{**{f.name: getattr(self, f.name) for f in fields(SystemConfig)}, **changes})
-
-
-# The default of the `system` field of every command that takes a layout (a flag's room or pair count need
-# not fit the paper's devices): tyro keeps the default's class, so the parse checks every field but the
-# hall's, and in_hall (plan: its layout) builds the checked system in the hall the line names.
-LOOSE_SYSTEM = _DevicesLater()
-
-
-@dataclass(frozen=True)
-class _LayoutFlag:
-    layout: Unset[str] = None
-
-
 def given_flags(args: list[str]) -> set[str]:
     """The flags written on the command line (``--system.room``, also as ``--system.room=...``; a
     name's underscores as dashes): a flag given with its default value is still given."""
     return {a.split("=", 1)[0].replace("_", "-") for a in args if a.startswith("--")}
 
 
-def check_hall_flags(args: list[str], system: SystemConfig, prog: str = "uavris") -> str | None:
-    """The layout ``--layout`` names (None: none), refused in one line beside a flag that gives
-    what it gives: ``--system.users`` (the devices), ``--system.room`` where the layout sets its
-    room. Read before any other flag, whose values may only fit the layout's hall."""
-    named = read_first(_LayoutFlag, args, prog).layout
-    _check_given_beside_layout(named, given_flags(args), system)
-    return named
-
-
-def _check_given_beside_layout(named: str | None, given: set[str], system: SystemConfig) -> None:
-    """``check_hall_flags``' rule for a layout already read: one line where a flag gives what it gives."""
+def check_beside_layout(named: str | None, args: list[str], system: SystemConfig) -> None:
+    """The layout ``named`` (None: none) refused in one line beside a flag of ``args`` that gives what
+    it gives: ``--system.users`` (the devices), ``--system.room`` where the layout sets its room."""
+    given = given_flags(args)
     if named is None:
         return
     if "--system.users" in given:
@@ -151,13 +116,14 @@ _LOOSE: dict[type, type] = {}  # a config class -> its form that checks nothing
 _REAL: dict[type, type] = {}  # and back
 
 
-def unchecked(config: T) -> T:
+def unchecked(config: T, **changes: Any) -> T:
     """``config`` as the one parse's default of a command that builds its config afterwards: the same
     fields, nested configs included, in subclasses whose ``__post_init__`` judges nothing. tyro keeps
     the default's classes, so the parse takes the line's values without checking them against the
     parse's own defaults (another preset's budgets and hyperparameters, a placeholder scenario, the
     paper's hall); the command's build makes the real config, every check run there
-    (:func:`with_flags`, :func:`in_hall`)."""
+    (:func:`with_flags`, :func:`in_hall`). ``changes``: fields given other values (a nested config the
+    defaults have none of, whose flags the parse and the help still offer)."""
     cls = _REAL.get(type(config), type(config))  # a form that checks nothing already: its real class's
     if cls not in _LOOSE:
         public = next(c for c in cls.__mro__ if not c.__name__.startswith("_"))  # its help is the public class's
@@ -166,7 +132,7 @@ def unchecked(config: T) -> T:
         _LOOSE[cls], _REAL[loose] = loose, public
     out = object.__new__(_LOOSE[cls])
     for f in fields(config):
-        value = getattr(config, f.name)
+        value = changes.get(f.name, getattr(config, f.name))
         object.__setattr__(out, f.name, unchecked(value) if is_dataclass(value) else value)
     return out
 
@@ -199,14 +165,19 @@ def in_hall(layout: str | None, base: SystemConfig, parsed: SystemConfig,
     in the room of ``--system.room``). A layout gives the devices and, a layout file may, the
     room: ``--layout`` with ``--system.users``, or a file with a room with ``--system.room``,
     gives them twice, which is one error line whatever the values (the paper's room given
-    beside a file's room is no less a contradiction)."""
-    given = given_flags(args)
-    _check_given_beside_layout(layout, given, base)
-    changes = _given_fields(base, parsed, given, "--system")
+    beside a file's room is no less a contradiction). A lower room caps the UAV's ceiling
+    (:meth:`Layout.system`) unless ``--system.z-max`` is written: then the flag's ceiling is
+    judged in that room."""
+    check_beside_layout(layout, args, base)
+    written = _given_fields(base, parsed, given_flags(args), "--system")
+    flagged = replace(base, **written)  # judged once in its hall: its room or pairs may fit only the layout's devices
     if layout is None:
-        return base.replace(**changes), None
-    loose = _DevicesLater(**{**{f.name: getattr(base, f.name) for f in fields(SystemConfig)}, **changes})
-    return resolve_layout(layout, loose).resolve(loose)
+        return flagged.check(), None
+    system, start = resolve_layout(layout, flagged).resolve(flagged)
+    if "z_max" in written and system.z_max != written["z_max"]:  # the user's ceiling, not the room's cap
+        system = system.replace(z_max=written["z_max"])
+        start.validate_for(system)
+    return system, start
 
 
 def seed_note(row: Any, seeds: list[int]) -> str:

@@ -2,9 +2,8 @@
 
 Lives here: :func:`parse` (tyro over a command's dataclass, its defaults given; a rejected
 command line becomes one :class:`UsageError` line, built from tyro's parse-error event),
-:func:`parse_built` (a command line parsed once and built into its config), :func:`read_first`
-(a few flags read before the rest, for a check), the registry's rule for lists of points
-(``--system.users``) and the checks of paths every command shares. Not here: the commands
+:func:`parse_built` (a command line parsed once and built into its config), the registry's
+rule for lists of points (``--system.users``) and the checks of paths every command shares. Not here: the commands
 themselves (:mod:`.training`, :mod:`.evaluation`).
 
 Why :func:`parse_built`: tyro takes one default per field, fixed before it parses, while a few
@@ -124,12 +123,10 @@ def _one_line(event: Any) -> str:
     return f"the command line does not parse ({type(event).__name__})"
 
 
-def parse(cls: type[T], args: list[str], prog: str, description: str, default: T | None = None,
-          known_only: bool = False) -> T:
+def parse(cls: type[T], args: list[str], prog: str, description: str, default: T | None = None) -> T:
     """``tyro.cli(cls)`` on ``args``; a rejected command line raises one-line :class:`UsageError`.
 
-    ``--help`` prints tyro's help on stdout and exits 0 as usual. ``known_only``: the
-    arguments ``cls`` does not know are left alone (they belong to the rest of the command).
+    ``--help`` prints tyro's help on stdout and exits 0 as usual.
     """
     def reject(event: ParseErrorEvent) -> None:
         raise UsageError(f"{_one_line(event)} (see {prog} --help)")
@@ -139,20 +136,13 @@ def parse(cls: type[T], args: list[str], prog: str, description: str, default: T
     try:
         with hook, contextlib.redirect_stderr(captured):
             got = tyro.cli(cls, args=args, prog=prog, description=inspect.cleandoc(description), default=default,
-                           config=TYRO_CONFIG, return_unknown_args=known_only, registry=REGISTRY)
+                           config=TYRO_CONFIG, registry=REGISTRY)
     except SystemExit as e:
         sys.stderr.write(captured.getvalue())  # --help (exit 0), or another tyro's own message
         if e.code in (0, None):
             raise
         raise UsageError(f"the command line does not parse (see {prog} --help)") from None
-    return got[0] if known_only else got  # type: ignore[index,return-value]
-
-
-def read_first(cls: type[T], args: list[str], prog: str, default: T | None = None) -> T:
-    """The flags of ``cls`` (a small dataclass of a few flags) among ``args``, the rest of the line
-    left alone: what a check reads before the command parses (``--layout``, beside the flags it
-    contradicts). ``--help`` is the command's own, not answered here."""
-    return parse(cls, [a for a in args if a not in HELP], prog, "", default=default, known_only=True)
+    return got
 
 
 def parse_built(cls: type[T], args: list[str], prog: str, description: str, default: T,

@@ -14,7 +14,7 @@ from typing import Annotated, Literal
 
 import tyro
 
-from uavris.cli.options import LOOSE_SYSTEM, check_hall_flags, in_hall, seed_note
+from uavris.cli.options import in_hall, seed_note
 from uavris.cli.parsing import Unset, UsageError, parse, writing
 from uavris.config import ScenarioName, SystemConfig
 from uavris.experiments.display.tables import counted
@@ -50,7 +50,7 @@ class PlanArgs:
     row is told its place by"""
     progress: bool = True
     """show a progress bar"""
-    system: SystemConfig = LOOSE_SYSTEM
+    system: SystemConfig = SystemConfig()
     """the system (the layout sets its devices and, if it has one, its room)"""
 
 
@@ -87,15 +87,13 @@ def plan_command(args: list[str]) -> None:
     """
     from uavris.experiments.tools.plan import check_devices, check_grid, plan_hall, planning_seconds
 
-    a = parse(PlanArgs, args, "uavris plan", plan_command.__doc__ or "")  # the hall's fields judged in the layout's
+    a = parse(PlanArgs, args, "uavris plan", plan_command.__doc__ or "")
     a, named = _learned_value(a)
+    hall, _ = in_hall(a.layout, SystemConfig(), a.system, args)  # the flags written, in the layout's hall
     if a.layout is None:
-        layout = PAPER_LAYOUT if a.system.users == PAPER_LAYOUT.users else Layout(
-            "custom", a.system.users, default_start(a.system))
+        layout = PAPER_LAYOUT if hall.users == PAPER_LAYOUT.users else Layout("custom", hall.users, default_start(hall))
     else:
-        check_hall_flags(["--layout", a.layout, *args], a.system, "uavris plan")  # --system.users beside it: one line
         layout = resolve_layout(a.layout, a.system)
-    hall = layout.system(a.system)
     check_grid(hall, a.grid_step)  # before anything is written
     if a.learned is None or a.top_k or a.deployed:
         check_devices(hall)
@@ -113,7 +111,7 @@ def plan_command(args: list[str]) -> None:
         if value is None and hall.num_users > 8:
             seconds = planning_seconds(hall.num_users)
             print(f"planning a hall of {hall.num_users} devices: about {seconds:.0f} s on one core", flush=True)
-        plan, paths = plan_hall(layout, a.system, out, a.grid_step, progress=a.progress, value=value,
+        plan, paths = plan_hall(layout, hall, out, a.grid_step, progress=a.progress, value=value,
                                 top_k=a.top_k, controller=a.controller, deployed=a.deployed)
     t = plan["target"]
     if plan["expected_sum_rate"] is None:  # the learned planner's V: no R was computed
@@ -189,13 +187,12 @@ class DemoArgs:
     """the hall: paper, layout-train-N / layout-unseen-N (-kK: K devices), or a YAML layout file (devices,
     optionally start and room; --system.* flags apply first) (default: the devices of --system.users, the paper's
     unless given)"""
-    system: SystemConfig = LOOSE_SYSTEM
+    system: SystemConfig = SystemConfig()
     """the system (the paper's, with these fields changed)"""
 
 
 def demo_command(args: list[str]) -> None:
     """Roll out the zero action, random actions and a co-phasing hover, and print their average sum rate."""
-    check_hall_flags(args, SystemConfig(), "uavris demo")  # a room given twice: one line, before the values are read
     a = parse(DemoArgs, args, "uavris demo", demo_command.__doc__ or "")
     system, hall = in_hall(a.layout, SystemConfig(), a.system, args)
     run_demo(a.episodes, a.seed, a.scenario or hall or "fig2", system)

@@ -21,9 +21,7 @@ from uavris.agents.experts.imitation import ImitationConfig
 from uavris.agents.torch_device import Device, resolve_device
 from uavris.cli.options import (
     LAYOUT_HELP,
-    LOOSE_SYSTEM,
     RunOptions,
-    check_hall_flags,
     check_run_options,
     given_flags,
     in_hall,
@@ -109,10 +107,15 @@ def train_config(a: TrainArgs, args: list[str]) -> TrainConfig:
 
 def parse_train(args: list[str]) -> TrainArgs:
     """``uavris train``'s line, parsed once and built (:func:`train_config`)."""
-    default = unchecked(TrainConfig())
-    object.__setattr__(default, "imitation", unchecked(ImitationConfig()))  # its flags on the line; taken where written
-    return parse_built(TrainArgs, args, "uavris train", train_command.__doc__ or "", default=TrainArgs(default),
-                       build=lambda parsed: replace(parsed, run=train_config(parsed, args)))
+    def offering_imitation(a: TrainArgs) -> TrainArgs:
+        """``a`` whose run offers the imitation's flags (a run without imitation has none to show):
+        taken where written."""
+        return replace(a, run=unchecked(a.run, imitation=a.run.imitation or ImitationConfig()))
+
+    return parse_built(TrainArgs, args, "uavris train", train_command.__doc__ or "",
+                       default=offering_imitation(TrainArgs(TrainConfig())),
+                       build=lambda parsed: replace(parsed, run=train_config(parsed, args)),
+                       help_default=offering_imitation)
 
 
 def train_command(args: list[str]) -> None:
@@ -165,7 +168,7 @@ class CompareArgs:
     """torch device (auto: CUDA when torch sees one)"""
     progress: bool = True
     """show a progress bar"""
-    system: SystemConfig = LOOSE_SYSTEM
+    system: SystemConfig = SystemConfig()
     """the system trained and evaluated in"""
 
 
@@ -178,7 +181,6 @@ def compare_command(args: list[str]) -> None:
     """
     from uavris.experiments.training.compare import compare_algorithms, default_compare_dir
 
-    check_hall_flags(args, SystemConfig(), "uavris compare-algorithms")  # a room given twice: one line, first
     a = parse(CompareArgs, args, "uavris compare-algorithms", compare_command.__doc__ or "")
     system, hall = in_hall(a.layout, SystemConfig(), a.system, args)
     scenario = a.scenario or ("fig2" if hall is None else hall.name)

@@ -91,7 +91,7 @@ class BatchedSimulator:
     def __init__(self, config: SystemConfig, scenario: str | Scenario, num_envs: int) -> None:
         if not isinstance(num_envs, int) or num_envs < 1:
             raise ValueError(f"num_envs must be an integer >= 1, got {num_envs!r}")
-        self.config = config
+        self.config = config.check()  # a system made field by field is judged whole here, at the latest
         self.scenario = get_scenario(scenario)
         self.scenario.validate_for(config)
         self.num_envs = num_envs
