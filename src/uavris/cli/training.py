@@ -44,19 +44,16 @@ Flat = tyro.conf.arg(name="")  # the config's fields become the command's own fl
 
 
 def _required(config: Any, *names: str) -> Any:
-    """``config`` (a command's defaults) with the fields ``names`` required: the placeholder it
-    was made with is no default a user can rely on, so tyro asks for the flag (and --help says
-    "required")."""
-    for name in names:
-        object.__setattr__(config, name, tyro.MISSING)
-    return config
+    """``config`` (a command's defaults, in the form the parse takes: :func:`unchecked`) with the
+    fields ``names`` required: the placeholder it was made with is no default a user can rely on,
+    so tyro asks for the flag (and --help says "required")."""
+    return unchecked(config, **dict.fromkeys(names, tyro.MISSING))
 
 
 def _still_required(built: Any, args: list[str], *names: str) -> Any:
     """A command's built defaults shown by ``--help`` (``built.run``) with the fields ``names`` whose
     flags the line does not give still required."""
-    _required(built.run, *(n for n in names if f"--{n}" not in given_flags(args)))
-    return built
+    return replace(built, run=_required(built.run, *(n for n in names if f"--{n}" not in given_flags(args))))
 
 
 # ------------------------------------------------------------------------------------------ train
@@ -217,7 +214,7 @@ def parse_pretrain(args: list[str]) -> PretrainArgs:
         return replace(parsed, run=with_flags(run, parsed.run, args))
 
     return parse_built(PretrainArgs, args, "uavris pretrain-dt", pretrain_command.__doc__ or "",
-                       default=PretrainArgs(_required(unchecked(PretrainConfig(dataset="")), "dataset")), build=build,
+                       default=PretrainArgs(_required(PretrainConfig(dataset=""), "dataset")), build=build,
                        placeholder=PretrainArgs(unchecked(PretrainConfig(dataset=""))),
                        help_default=lambda built: _still_required(built, args, "dataset"))
 
