@@ -434,8 +434,8 @@ SYSTEM_COMMANDS = {  # each command that builds a system, as a line that stops b
 
 
 def _flags(command: list[str], capsys: pytest.CaptureFixture[str]) -> set[str]:
-    assert main([*command, "--help"]) == 0
-    return set(re.findall(r"--[a-z][a-z0-9.-]*", capsys.readouterr().out))
+    assert main([*command, "--help"]) == 0  # the flags a row of the help defines, not those its prose names
+    return set(re.findall(r"^[\s│]*(--[a-z][a-z0-9.-]*)", capsys.readouterr().out, re.MULTILINE))
 
 
 def _flag_names(cls: type, prefix: str) -> set[str]:
@@ -520,7 +520,7 @@ def test_a_ceiling_written_at_its_default_beside_a_lower_room_is_the_users(
     layout = [str(hall)] if command == "plan" else ["--layout", str(hall)]
     err = _one_line(capsys, main([*line, *layout, "--system.z-max", "8"]))
     assert "z_max <= room height 6.0, got (2.0, 8.0)" in err, err
-    assert not (tmp_path / "o").exists()
+    assert not (tmp_path / "o").exists() and not list(tmp_path.glob("runs*"))
 
 
 def test_a_flag_written_at_its_default_beside_a_file_or_a_model_is_the_users(
@@ -548,3 +548,24 @@ def test_a_flag_written_at_its_default_beside_a_file_or_a_model_is_the_users(
     with pytest.raises(_Built) as built:
         main(["evaluate", "zero-action", "--system.v-max", "5", "--out", str(tmp_path / "e")])
     assert (built.value.args[0].v_max, built.value.args[0].horizon) == (5.0, 30)
+
+
+def test_a_room_written_beside_a_file_with_a_room_is_one_line_whatever_its_devices(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A file's room is the file's whatever its devices (here one above the paper's floor of 2 m,
+    which only the file's own heights allow): --system.room beside it gives the room twice."""
+    hall = tmp_path / "hi.yaml"
+    hall.write_text(HALL_30.replace("[5, 5, 1]", "[5, 5, 2.5]"))
+    err = _one_line(capsys, main(["demo", "--layout", str(hall), "--system.z-min", "3", "--system.z-max", "6",
+                                  "--system.room", "40", "40", "8"]))
+    assert f"--layout {hall} sets the room" in err, err
+
+
+def test_a_named_scenario_flies_in_the_papers_hall_with_the_flags_written(hall_run: Path, tmp_path: Path) -> None:
+    """A run of a 30 x 20 x 6 hall at the paper's fig2: the paper's devices in the room the flags
+    give, judged once they apply (the paper's devices do not fit the run's own room)."""
+    out = tmp_path / "e"
+    assert main(["evaluate", str(hall_run), "--scenario", "fig2", "--system.room", "40", "40", "8",
+                 "--system.z-max", "8", "--episodes", "1", "--out", str(out), "--no-progress"]) == 0
+    got = _only_json(out)
+    assert got["system"]["room"] == [40.0, 40.0, 8.0] and got["system"]["users"] == [list(u) for u in PAPER_USERS]

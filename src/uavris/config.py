@@ -39,8 +39,8 @@ class DictConfig:
     is its inverse: a partial dict takes the defaults for what it leaves out, an unknown
     field is one :class:`~uavris.errors.ConfigError` line naming it, a nested config field
     is rebuilt from its dict (one the class names in ``partial_fields`` is left a mapping, of
-    the fields that differ from its preset's), and the class's own validation runs as on any
-    construction.
+    the fields that differ from its preset's), the class's own validation runs as on any
+    construction, and the whole config is checked (:meth:`check`).
     """
 
     def to_dict(self) -> dict[str, Any]:
@@ -70,8 +70,12 @@ class DictConfig:
         return built.check()
 
     def check(self: C) -> C:
-        """What no single field decides, judged once the config is whole (a system's hall); ``self``.
-        A field's own range is judged when the config is made; this is for a class to widen."""
+        """What no single field decides, judged once the config is whole (a system's hall), in every
+        nested config; ``self``. A field's own range is judged when the config is made."""
+        for f in dataclasses.fields(self):  # type: ignore[arg-type]
+            value = getattr(self, f.name)
+            if isinstance(value, DictConfig):
+                value.check()
         return self
 
 
@@ -274,6 +278,7 @@ class SystemConfig(DictConfig):
         devices can make; ``self``. Made on its own, a system judges only each field's range, so
         that its room and its devices can come from different places (a flag, a layout)."""
         o = "SystemConfig"
+        super().check()
         _check(_finite(self.z_min) and _finite(self.z_max) and 0 <= self.z_min < self.z_max <= self.room[2],
                o, "z_min/z_max", f"0 <= z_min < z_max <= room height {self.room[2]}", (self.z_min, self.z_max))
         for k, u in enumerate(self.users):

@@ -20,7 +20,8 @@ A layout file (YAML)::
 
     name: my-hall            # optional; default: the file's name without .yaml
     room: [40, 40, 8]        # optional; default: the system's (x, y, z in m; a lower
-                             # ceiling than the system's z_max caps the flight region)
+                             # ceiling than the system's z_max caps the flight region,
+                             # unless the command line writes --system.z-max)
     devices:                 # required: one [x, y, z] per D2D device, m
       - [15, 5, 1.0]
       - [20, 8, 1.5]
@@ -95,7 +96,7 @@ class Layout:
             object.__setattr__(self, "room", float_tuple(self.room, "Layout", "room", "three lengths [x, y, z] (m)"))
 
     def system(self, base: SystemConfig) -> SystemConfig:
-        """``base`` with this layout's devices (and room); validated like every system."""
+        """``base`` with this layout's devices (and room), checked whole (:meth:`SystemConfig.check`)."""
         changes: dict[str, Any] = {"users": self.users}
         if self.room is not None:  # a lower hall caps the flight region at its ceiling
             changes.update(room=self.room, z_max=min(base.z_max, self.room[2]))
@@ -304,6 +305,17 @@ def write_layout(path: str | Path, layout: Layout) -> Path:
     """Write ``layout`` as a layout file (atomically)."""
     write_yaml(Path(path), layout.to_dict())
     return Path(path)
+
+
+def sets_room(ref: str | Layout) -> bool:
+    """Whether the layout ``ref`` names gives a room of its own (a layout file with ``room``), read
+    without judging its devices in any room."""
+    if isinstance(ref, Layout):
+        return ref.room is not None
+    if ref == "paper" or _GENERATED.fullmatch(ref):
+        return False
+    data = read_yaml(Path(ref))
+    return isinstance(data, dict) and data.get("room") is not None
 
 
 def resolve_layout(ref: str | Layout, base: SystemConfig | None = None,

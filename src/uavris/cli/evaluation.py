@@ -24,7 +24,7 @@ from uavris.experiments.engine.jobs import Backend
 from uavris.experiments.tools.benchmark import Cells, benchmark, default_benchmark_dir
 from uavris.experiments.tools.evaluate import evaluate_target, results_dir
 from uavris.experiments.tools.rows import resolve_target, write_controller
-from uavris.layouts import Site, resolve_layout
+from uavris.layouts import PAPER_LAYOUT, Site
 from uavris.presets import EVAL_SEED, STUDY, Preset
 
 DEFAULT_EPISODES = STUDY["quick"]["eval_episodes"]  # uavris evaluate's: the quick report's
@@ -136,10 +136,10 @@ def check_one_start(scenario: str | None, layout: str | None) -> None:
 
 
 def paper_hall(system: SystemConfig) -> SystemConfig:
-    """``system`` in the paper's hall (its devices and room): where the named scenarios (fig2,
-    train1..8, unseen1..2) are, whatever hall a model was trained in (the --system.* flags still
-    apply on top)."""
-    return resolve_layout("paper", system).resolve(system)[0]
+    """``system`` with the paper's devices: where the named scenarios (fig2, train1..8,
+    unseen1..2) are, whatever hall a model was trained in; judged once the --system.* flags
+    apply on top (a model of a smaller room flies there with ``--system.room 40 40 8``)."""
+    return replace(system, users=PAPER_LAYOUT.users)
 
 
 def _evaluate_row(a: EvaluateArgs, args: list[str]) -> None:

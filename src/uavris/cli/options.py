@@ -18,8 +18,7 @@ from typing import Any, TypeVar
 from uavris.agents.torch_device import Device, resolve_device
 from uavris.cli.parsing import Unset, UsageError, output_dir
 from uavris.config import Scenario, SystemConfig
-from uavris.errors import ConfigError
-from uavris.layouts import resolve_layout
+from uavris.layouts import resolve_layout, sets_room
 from uavris.runs import CONFIG_FILE, config_path
 
 T = TypeVar("T")
@@ -75,7 +74,7 @@ def given_flags(args: list[str]) -> set[str]:
     return {a.split("=", 1)[0].replace("_", "-") for a in args if a.startswith("--")}
 
 
-def check_beside_layout(named: str | None, args: list[str], system: SystemConfig) -> None:
+def _check_beside_layout(named: str | None, args: list[str]) -> None:
     """The layout ``named`` (None: none) refused in one line beside a flag of ``args`` that gives what
     it gives: ``--system.users`` (the devices), ``--system.room`` where the layout sets its room."""
     given = given_flags(args)
@@ -83,13 +82,8 @@ def check_beside_layout(named: str | None, args: list[str], system: SystemConfig
         return
     if "--system.users" in given:
         raise UsageError("--layout and --system.users both give the device positions; pass one of them")
-    if "--system.room" in given:
-        try:
-            sets_room = resolve_layout(named, system).room is not None
-        except ConfigError:  # a hall that fits only the room the flag gives: it sets none of its own
-            sets_room = False
-        if sets_room:
-            raise UsageError(f"--layout {named} sets the room; drop --system.room or the file's room")
+    if "--system.room" in given and sets_room(named):
+        raise UsageError(f"--layout {named} sets the room; drop --system.room or the file's room")
 
 
 def _given_fields(base: Any, parsed: Any, given: set[str], prefix: str) -> dict[str, Any]:
@@ -168,7 +162,7 @@ def in_hall(layout: str | None, base: SystemConfig, parsed: SystemConfig,
     beside a file's room is no less a contradiction). A lower room caps the UAV's ceiling
     (:meth:`Layout.system`) unless ``--system.z-max`` is written: then the flag's ceiling is
     judged in that room."""
-    check_beside_layout(layout, args, base)
+    _check_beside_layout(layout, args)
     written = _given_fields(base, parsed, given_flags(args), "--system")
     flagged = replace(base, **written)  # judged once in its hall: its room or pairs may fit only the layout's devices
     if layout is None:

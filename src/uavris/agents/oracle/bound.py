@@ -91,6 +91,7 @@ def episode_bounds(config: SystemConfig, seeds: NDArray[np.integer]) -> NDArray[
     """``(n,)``: the largest average sum rate any controller can earn in each episode of ``seeds``
     (the largest mean of :func:`slot_bounds` over the first ``T'`` slots, ``T'`` from
     :func:`fewest_slots` to ``T``)."""
+    config.check()
     b = slot_bounds(config, seeds)
     lengths = np.arange(1, config.horizon + 1)
     means = np.cumsum(b, axis=1) / lengths

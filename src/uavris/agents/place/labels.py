@@ -61,6 +61,7 @@ def hall_labels(config: SystemConfig, count: int, seed: int, tilted: bool = Fals
     each that the surface can be turned at again with that attitude (module docstring): the
     positions, attitudes and ``R`` of every pose, the positions and the common random numbers
     both from ``seed``."""
+    config.check()
     rng = np.random.default_rng([seed, 1])
     q = label_poses(config, count, rng)
     att = np.zeros_like(q)

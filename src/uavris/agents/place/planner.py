@@ -123,6 +123,7 @@ def learned_plan(model: PoseValue, config: SystemConfig, start: tuple[float, flo
     """Where to go from ``start`` in ``config``'s hall (module docstring), level. With
     ``top_k`` 0 the plan's rate and value are ``V``'s (no ``R`` is computed: milliseconds);
     with ``top_k`` > 0 they are ``R``'s on fresh draws, as the exact planner's."""
+    config.check()  # a hall judged whole before any place is valued in it
     start_q = np.asarray(start, dtype=np.float64)
     places, values, v0 = ranked_places(model, config, start_q, settings)
     level = np.zeros(3)

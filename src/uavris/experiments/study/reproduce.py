@@ -78,6 +78,7 @@ def reproduce(rc: ReproduceConfig, out: str | Path, *, workers: int = 2, backend
     Raises :class:`UavrisError` at the end when any job or stage failed (after writing the
     report of everything that finished).
     """
+    rc.check()  # before anything is written
     if report_only:
         return _report_only(Path(out))
     warn_if_unpinned("reproduce")  # a result meant to be compared with another machine's

@@ -132,6 +132,7 @@ def rate_map(system: SystemConfig, altitude: float, step: float, progress: bool 
     """``(x, y, R)``: the expected sum rate (level RIS, optimised phases) on a grid of spacing
     ``step`` over the floor plan at ``altitude``, or the learned ``value``'s ``V`` there (one
     call: milliseconds); NaN where the UAV may not be (a safety ball)."""
+    system.check()
     check_grid(system, step)
     nx, ny = _grid_points(system, step)
     xs, ys = np.linspace(0.0, system.room[0], nx), np.linspace(0.0, system.room[1], ny)

@@ -137,7 +137,7 @@ def compare_algorithms(preset: str = "quick", seeds: int = 5, workers: int = 2, 
             raise UavrisError(f"{flag} must be >= 1, got {value}")
     for a in algos:
         check_algorithm(a)
-    system = system or SystemConfig()
+    system = (system or SystemConfig()).check()
     scenario_at(scenario, start).validate_for(system)
     out = Path(out or default_compare_dir(preset))
     if ray_address:  # a cluster's nodes write the runs where the driver has them: the same absolute paths

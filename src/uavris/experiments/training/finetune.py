@@ -282,6 +282,7 @@ def finetune(cfg: FinetuneConfig, run_dir: str | Path, *, resume: bool = False, 
     """Fine-tune a pre-trained DT in ``cfg.scenario`` (Algorithm 1, stage 2): the zero-shot
     model evaluated (round 0), then ``cfg.rounds`` of :func:`improvement_round`, each evaluated,
     logged and checkpointed (``resume`` goes on from the last); returns the model directory."""
+    cfg.check()  # before anything is written
     run_dir = Path(run_dir)
     pre = load_dt_policy(cfg.model, cfg.target_return, device=device)  # a run directory stands for its final model
     base, pre_meta, model_dir = pre.policy, pre.meta, pre.directory

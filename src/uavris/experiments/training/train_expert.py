@@ -307,6 +307,7 @@ def train(cfg: TrainConfig, run_dir: str | Path, *, resume: bool = False, force:
     unfinished run without ``resume``/``force``, a resume whose config differs, or a
     corrupt checkpoint. ``interrupt_at`` is a test hook that stops training at that step.
     """
+    cfg.check()  # before anything is written
     run_dir = Path(run_dir)
     resuming = runs.prepare(run_dir, cfg.to_dict(), resume=resume, force=force,
                             same=lambda stored: isinstance(stored, dict) and TrainConfig.from_dict(stored) == cfg)
