@@ -410,14 +410,14 @@ def test_every_kind_of_system_flag_written_on_the_line_changes_the_targets_syste
     propulsion parameters (the base's others kept), and a flag written at its default value; the
     fields not written stay the base's, whatever the parse's defaults say."""
     from uavris.cli.evaluation import EvaluateArgs
-    from uavris.cli.options import in_hall
+    from uavris.cli.options import in_hall, written
     from uavris.cli.parsing import parse
 
     base = SystemConfig(horizon=30, learn_amplitudes=True, observe_devices=True,
                         propulsion=PropulsionParams(induced_w=90.0))
     args = ["zero-action", "--system.no-angle-dependent-reflection", "--system.propulsion.tip-speed", "110",
             "--system.v-max=3", "--system.nx", str(SystemConfig().nx)]
-    got, hall = in_hall(None, base, parse(EvaluateArgs, args, "uavris evaluate", "").system, args)
+    got, hall = in_hall(None, base, written(parse(EvaluateArgs, args, "uavris evaluate", "").system))
     assert hall is None
     assert got == base.replace(angle_dependent_reflection=False, v_max=3.0,
                                propulsion=PropulsionParams(induced_w=90.0, tip_speed=110.0))
@@ -492,17 +492,19 @@ def test_a_field_added_to_a_config_is_taken_where_written_even_at_its_default() 
     at its default value too, and keeps the base's where it is not."""
     import dataclasses
 
-    from uavris.cli.options import with_flags
+    from uavris.cli.options import flags_of, layered, written
     from uavris.cli.parsing import parse
 
     @dataclasses.dataclass(frozen=True)
     class Added:
         kept: int = 1
-        added: float = 2.0
+        added: float = 2.0  # a field new to the config
+        maybe: int | None = None  # a field that takes None
 
-    base = Added(kept=5, added=7.0)
-    for line, want in ((["--added", "2.0"], Added(5, 2.0)), (["--kept", "1"], Added(1, 7.0)), ([], base)):
-        assert with_flags(base, parse(Added, line, "t", ""), line) == want, line
+    base = Added(kept=5, added=7.0, maybe=3)
+    for line, want in ((["--added", "2.0"], Added(5, 2.0, 3)), (["--kept", "1"], Added(1, 7.0, 3)), ([], base),
+                       (["--maybe", "None"], Added(5, 7.0, None))):
+        assert layered(base, written(parse(flags_of(Added), line, "t", ""))) == want, line
 
 
 LOW_HALL = HALL_30  # a 6 m room: the paper's ceiling of 8 m is above it

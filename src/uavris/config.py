@@ -57,7 +57,7 @@ class DictConfig:
         hints = typing.get_type_hints(cls, vars(sys.modules[cls.__module__]))
         values = {}
         for name, value in d.items():
-            nested = _nested_config(hints.get(name))
+            nested = nested_config(hints.get(name))
             if nested is not None and isinstance(value, Mapping) and name not in getattr(cls, "partial_fields", ()):
                 value = nested.from_dict(value)
             elif isinstance(value, list) and _holds_tuple(hints.get(name)):
@@ -107,7 +107,7 @@ def _options(hint: Any) -> tuple[Any, ...]:
     return get_args(hint) if union else (hint,)
 
 
-def _nested_config(hint: Any) -> type[DictConfig] | None:
+def nested_config(hint: Any) -> type[DictConfig] | None:
     """The config class a field's annotation holds (``X`` or ``X | None``), else None."""
     for opt in _options(hint):
         if isinstance(opt, type) and issubclass(opt, DictConfig):

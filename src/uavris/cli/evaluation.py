@@ -8,15 +8,15 @@ from __future__ import annotations
 
 import hashlib
 import sys
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Annotated, Literal
 
 import tyro
 
 from uavris.agents.torch_device import Device, resolve_device
-from uavris.cli.options import in_hall, seed_note
-from uavris.cli.parsing import Unset, UsageError, output_dir, parse, writing
+from uavris.cli.options import SystemFlags, in_hall, parse_in_hall, seed_note, written
+from uavris.cli.parsing import Unset, UsageError, output_dir, writing
 from uavris.config import ScenarioName, SystemConfig
 from uavris.env.wrappers import PhaseControl
 from uavris.experiments.display.tables import counted, interval, rate_interval, signed
@@ -60,7 +60,7 @@ class EvaluateArgs:
     """torch device (auto: CUDA when torch sees one)"""
     progress: bool = True
     """show a progress bar"""
-    system: SystemConfig = SystemConfig()
+    system: SystemFlags = field(default_factory=SystemFlags)
     """the system evaluated in: the target's own, with these fields changed"""
     row: Unset[str] = None
     """a row of a study's report, TARGET being the study's output directory (uavris reproduce --out): its key in
@@ -97,7 +97,7 @@ def evaluate_command(args: list[str]) -> None:
     A row of a study's report (--row, TARGET the study's OUT) is evaluated as the report
     evaluates it, here or in a hall of your own (default OUT runs/rows/ROW).
     """
-    a = parse(EvaluateArgs, args, "uavris evaluate", evaluate_command.__doc__ or "")
+    a = parse_in_hall(EvaluateArgs, args, "uavris evaluate", evaluate_command.__doc__ or "")
     check_one_start(a.scenario, a.layout)
     if a.row is not None:
         return _evaluate_row(a, args)
@@ -107,7 +107,7 @@ def evaluate_command(args: list[str]) -> None:
     own = target.own_system()  # the system the --system.* flags change
     if a.scenario is not None and a.layout is None:  # a named scenario is a start in the paper's hall
         own = paper_hall(own)
-    system, _ = in_hall(a.layout, own, a.system, args)
+    system, _ = in_hall(a.layout, own, written(a.system))
     episodes = DEFAULT_EPISODES if a.episodes is None else a.episodes
     with writing(a.out or results_dir(target)) as out:
         # the layout again (resolving it in its own hall changes nothing): the result records it
@@ -152,7 +152,7 @@ def _evaluate_row(a: EvaluateArgs, args: list[str]) -> None:
     ran = [t.name for t in rc.tracks]
     track = a.track or ("deployment" if "deployment" in ran else ran[-1])
     base = rc.system.replace(observe_devices=True) if TRACK_SPECS[track].layouts else rc.system
-    system, hall = in_hall(a.layout, base, a.system, args)
+    system, hall = in_hall(a.layout, base, written(a.system))
     if hall is None and a.scenario is None:
         raise UsageError("--row: name where to evaluate it: --layout HALL (its devices and start) or --scenario NAME")
     site = Site(a.scenario or hall.name, system, None if a.scenario else hall.start)
@@ -225,7 +225,7 @@ class BenchmarkArgs(StudyRowFlags):
     """torch device (auto: CUDA when torch sees one)"""
     progress: bool = True
     """show a progress bar"""
-    system: SystemConfig = SystemConfig()
+    system: SystemFlags = field(default_factory=SystemFlags)
     """the system: the target's own, with these fields changed"""
 
 
@@ -238,14 +238,14 @@ def benchmark_command(args: list[str]) -> None:
     zero action with its paired 95% CI, means over cells), benchmark.csv, benchmark.json and
     each cell's per-episode CSVs.
     """
-    a = parse(BenchmarkArgs, args, "uavris benchmark", benchmark_command.__doc__ or "")
+    a = parse_in_hall(BenchmarkArgs, args, "uavris benchmark", benchmark_command.__doc__ or "")
     if a.layout is not None and a.cells != "all":
         raise UsageError(f"--cells {a.cells} chooses among the protocol's cells and --layout is a cell of its own; "
                          "pass one of them")
     with writing(a.out or default_benchmark_dir(a.target if a.row is None else a.row)) as out:
         if a.row is not None:  # the study's row as a controller of its own, kept beside the results
             a = replace(a, target=str(_row_controller(a.target, a.row, a.track, out / "controller")))
-        system, _ = in_hall(a.layout, resolve_target(a.target).own_system(), a.system, args)  # --layout: one cell
+        system, _ = in_hall(a.layout, resolve_target(a.target).own_system(), written(a.system))  # --layout: one cell
         rows, md = benchmark(a.target, a.preset, a.cells, out, resolve_device(a.device), progress=a.progress,
                              system=system, phase_control=a.phase_control, layout=a.layout,
                              trust_pickle=a.trust_pickle)
@@ -285,7 +285,7 @@ class SweepArgs(StudyRowFlags):
     """local (process pool) or ray (pip install 'uavris[ray]')"""
     progress: bool = True
     """show a progress bar"""
-    system: SystemConfig = SystemConfig()
+    system: SystemFlags = field(default_factory=SystemFlags)
     """the system the grid varies"""
 
 
@@ -302,8 +302,8 @@ def sweep_command(args: list[str]) -> None:
     """
     from uavris.experiments.tools.sweep import parse_axis, sweep
 
-    a = parse(SweepArgs, args, "uavris sweep", sweep_command.__doc__ or "")
-    system, hall = in_hall(a.layout, SystemConfig(), a.system, args)
+    a = parse_in_hall(SweepArgs, args, "uavris sweep", sweep_command.__doc__ or "")
+    system, hall = in_hall(a.layout, SystemConfig(), written(a.system))
     row_of = None
     if a.row is not None:
         if len(a.targets) != 1:

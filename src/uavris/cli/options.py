@@ -1,27 +1,120 @@
-"""The flags commands share, beside the config dataclasses tyro reads.
+"""How a command line becomes a command's config: what the line wrote, layered on the defaults.
 
-Lives here: :class:`RunOptions` (where a training run goes and whether it resumes) and
-:func:`check_run_options`, the one place that says what ``--resume`` and ``--force`` mean
-on the command line; :data:`LAYOUT_HELP` and :func:`in_hall`, the one place that says what
-``--layout`` and the ``--system.*`` flags do to a command's system and start; :func:`with_flags`,
-the one place that says which fields a command line gives (a command parses its line once, then
-builds its config: the defaults its choices make, the flags written on top). Not here: the run
-directory itself (:mod:`uavris.runs`), layouts (:mod:`uavris.layouts`).
+Lives here: :func:`flags_of`, the flags of a config class (its fields, each None where the
+line does not write it), :func:`written` (what a parsed line wrote) and :func:`layered` (a
+config with it on top), the one rule by which every command builds its config: the library's
+defaults, then the preset, then a file or a model's config, then the hall (:func:`in_hall`:
+``--layout`` and the ``--system.*`` flags), then the flags written, then one check;
+:class:`RunOptions` and :func:`check_run_options`, what ``--resume`` and ``--force`` mean on
+the command line. Not here: parsing itself (:mod:`.parsing`), the run directory
+(:mod:`uavris.runs`), layouts (:mod:`uavris.layouts`).
+
+Why flags of their own: tyro builds what it parses, and a config checks itself when it is
+made, against defaults the line's choices have not made yet (another preset's budgets, the
+paper's hall). The flags are plain data that check nothing, so a flag given at its default
+value is still known to be given, and the config is made once, from its layers.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields, is_dataclass, replace
+import types
+import typing
+from dataclasses import MISSING, dataclass, field, fields, is_dataclass, make_dataclass, replace
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import Annotated, Any, Literal, Optional, Union
+
+import tyro
+from tyro._docstrings import get_field_docstring  # the help of a field, as tyro reads it from its class
 
 from uavris.agents.torch_device import Device, resolve_device
-from uavris.cli.parsing import Unset, UsageError, output_dir
-from uavris.config import Scenario, SystemConfig
+from uavris.cli.parsing import HELP, POINTS, Unset, UsageError, output_dir, parse
+from uavris.config import Scenario, SystemConfig, nested_config
 from uavris.layouts import resolve_layout, sets_room
 from uavris.runs import CONFIG_FILE, config_path
 
-T = TypeVar("T")
+NONE_WRITTEN = "None"  # how a line writes None to a field that takes it (--system.max-active-pairs None)
+_FLAGS: dict[type, type] = {}
+
+
+def flags_of(config: type) -> type:
+    """The flags of the config class ``config``: a frozen dataclass of the same name, a field per
+    field of ``config`` (its type, its help), None where the line does not write it; a nested
+    config's are its own flags (``--system.room``). A field tyro suppresses is none."""
+    if config in _FLAGS:
+        return _FLAGS[config]
+    hints = typing.get_type_hints(config, include_extras=True)
+    specs: list[tuple[str, Any, Any]] = []
+    for f in fields(config):
+        hint = hints[f.name]
+        if tyro.conf.Suppress in getattr(hint, "__metadata__", ()):
+            continue
+        nested = nested_config(hint)
+        if nested is not None:
+            specs.append((f.name, flags_of(nested), field(default_factory=flags_of(nested))))
+            continue
+        if typing.get_origin(hint) is Annotated:
+            hint = typing.get_args(hint)[0]
+        kinds = typing.get_args(hint) if typing.get_origin(hint) in (Union, types.UnionType) else ()
+        if type(None) in kinds:  # None is a value of it: written as "None"
+            hint = Union[(Literal["None"], *(k for k in kinds if k is not type(None)))]
+        arg = tyro.conf.arg(help=get_field_docstring(config, f.name, ()), metavar=_metavar(hint))
+        specs.append((f.name, Annotated[Optional[hint], tyro.conf.DisallowNone, arg], None))
+    flags = make_dataclass(config.__name__, specs, frozen=True, namespace={"__doc__": config.__doc__})
+    flags.__module__ = config.__module__
+    _FLAGS[config] = flags
+    return flags
+
+
+def _metavar(hint: Any) -> str | None:
+    """A sequence's metavar as tyro writes it for the field itself (not as an optional value, in braces)."""
+    if hint == POINTS:
+        return "X Y Z [X Y Z ...]"
+    kinds = typing.get_args(hint) if typing.get_origin(hint) is tuple else ()
+    names = [k.__name__.upper() for k in kinds if k in (int, float, str)]
+    if len(kinds) == 2 and kinds[1] is Ellipsis and names:
+        return f"[{names[0]} [{names[0]} ...]]"
+    return " ".join(names) if kinds and len(names) == len(kinds) else None
+
+
+def written(flags: Any) -> dict[str, Any]:
+    """What the parsed ``flags`` (:func:`flags_of`) hold: the fields the line wrote, by name, a
+    nested config's as a dict of its own."""
+    out: dict[str, Any] = {}
+    for f in fields(flags):
+        value = getattr(flags, f.name)
+        if is_dataclass(value):
+            inner = written(value)
+            if inner:
+                out[f.name] = inner
+        elif value is not None:
+            out[f.name] = None if value == NONE_WRITTEN and isinstance(value, str) else value
+    return out
+
+
+def layered(base: Any, changes: dict[str, Any]) -> Any:
+    """The config ``base`` with ``changes`` (:func:`written`) on top, a nested config's into the
+    base's (a config the base has none of, such as an expert's imitation, from its defaults)."""
+    hints = typing.get_type_hints(type(base))
+    out = {}
+    for name, value in changes.items():
+        if isinstance(value, dict):
+            under = getattr(base, name)
+            value = layered(nested_config(hints[name])() if under is None else under, value)
+        out[name] = value
+    return replace(base, **out)
+
+
+def shown(flags: type, config: Any, required: tuple[str, ...] = ()) -> Any:
+    """The flags ``flags`` holding ``config``'s values: what ``--help`` shows as their defaults
+    (the fields ``required`` as required; a nested config the config has none of, its defaults)."""
+    hints = typing.get_type_hints(type(config))
+    values = {}
+    for f in fields(flags):
+        value = getattr(config, f.name)
+        if f.default_factory is not MISSING:  # a nested config's flags
+            value = shown(f.default_factory, nested_config(hints[f.name])() if value is None else value)
+        values[f.name] = tyro.MISSING if f.name in required else value
+    return flags(**values)
 
 
 @dataclass(frozen=True)
@@ -66,94 +159,15 @@ LAYOUT_HELP = ("the hall: paper (the paper's devices), layout-train-N / layout-u
                "devices, docs/study.md section 2) or a YAML layout file (devices, optionally start and room); it "
                "sets --system.users (and --system.room) and the start (unless --scenario is given); default: the "
                "devices of --system.users")
+SystemFlags = flags_of(SystemConfig)  # every command's --system.* flags
 
 
-def given_flags(args: list[str]) -> set[str]:
-    """The flags written on the command line (``--system.room``, also as ``--system.room=...``; a
-    name's underscores as dashes): a flag given with its default value is still given."""
-    return {a.split("=", 1)[0].replace("_", "-") for a in args if a.startswith("--")}
-
-
-def _check_beside_layout(named: str | None, args: list[str]) -> None:
-    """The layout ``named`` (None: none) refused in one line beside a flag of ``args`` that gives what
-    it gives: ``--system.users`` (the devices), ``--system.room`` where the layout sets its room."""
-    given = given_flags(args)
-    if named is None:
-        return
-    if "--system.users" in given:
-        raise UsageError("--layout and --system.users both give the device positions; pass one of them")
-    if "--system.room" in given and sets_room(named):
-        raise UsageError(f"--layout {named} sets the room; drop --system.room or the file's room")
-
-
-def _given_fields(base: Any, parsed: Any, given: set[str], prefix: str) -> dict[str, Any]:
-    """The fields of the dataclass ``parsed`` whose flag (``PREFIX.NAME``, a boolean's ``PREFIX.no-NAME``; ``--NAME``
-    without a prefix) was written, by name; a nested dataclass (the propulsion parameters) as ``base``'s with its own
-    written ones."""
-    out: dict[str, Any] = {}
-    for f in fields(parsed):
-        name = f.name.replace("_", "-")
-        flag, negated = (f"{prefix}.{name}", f"{prefix}.no-{name}") if prefix else (f"--{name}", f"--no-{name}")
-        value, under = getattr(parsed, f.name), getattr(base, f.name)
-        if is_dataclass(value) and is_dataclass(under):
-            inner = _given_fields(under, value, given, flag)
-            if inner:
-                out[f.name] = replace(under, **inner)
-        elif is_dataclass(value) and any(g.startswith(f"{flag}.") for g in given):
-            out[f.name] = _checked(value)  # a nested config the base has none of (an expert's imitation), asked for
-        elif flag in given or negated in given:
-            out[f.name] = _checked(value)
-    return out
-
-
-_LOOSE: dict[type, type] = {}  # a config class -> its form that checks nothing
-_REAL: dict[type, type] = {}  # and back
-
-
-def unchecked(config: T, **changes: Any) -> T:
-    """``config`` as the one parse's default of a command that builds its config afterwards: the same
-    fields, nested configs included, in subclasses whose ``__post_init__`` judges nothing. tyro keeps
-    the default's classes, so the parse takes the line's values without checking them against the
-    parse's own defaults (another preset's budgets and hyperparameters, a placeholder scenario, the
-    paper's hall); the command's build makes the real config, every check run there
-    (:func:`with_flags`, :func:`in_hall`). ``changes``: fields given other values (a nested config the
-    defaults have none of, whose flags the parse and the help still offer)."""
-    cls = _REAL.get(type(config), type(config))  # a form that checks nothing already: its real class's
-    if cls not in _LOOSE:
-        public = next(c for c in cls.__mro__ if not c.__name__.startswith("_"))  # its help is the public class's
-        loose = type(public.__name__, (cls,), {"__post_init__": lambda self: None, "__doc__": public.__doc__,
-                                               "__module__": public.__module__})
-        _LOOSE[cls], _REAL[loose] = loose, public
-    out = object.__new__(_LOOSE[cls])
-    for f in fields(config):
-        value = changes.get(f.name, getattr(config, f.name))
-        object.__setattr__(out, f.name, unchecked(value) if is_dataclass(value) else value)
-    return out
-
-
-def _checked(value: Any) -> Any:
-    """The real, checked config of a parsed one (:func:`unchecked`); any other value as it is."""
-    real = _REAL.get(type(value))
-    if real is None:
-        return value
-    return real(**{f.name: _checked(getattr(value, f.name)) for f in fields(value) if f.init})
-
-
-def with_flags(base: Any, parsed: Any, args: list[str], skip: tuple[str, ...] = ()) -> Any:
-    """The config ``base`` (the defaults a command's choices make: its preset, a file, a model, a
-    hall) with every field whose flag is written in ``args`` taken from ``parsed``, the command's one
-    parse of its flattened config (a flag given at its default value still counts; a nested
-    config's flags change that config's fields); the fields in ``skip`` stay ``base``'s."""
-    changes = _given_fields(base, parsed, given_flags(args), "")
-    return replace(base, **{k: v for k, v in changes.items() if k not in skip})
-
-
-def in_hall(layout: str | None, base: SystemConfig, parsed: SystemConfig,
-            args: list[str]) -> tuple[SystemConfig, Scenario | None]:
-    """The system of a command parsed once: ``base`` (the target's, the study's, the paper's) with
-    the ``--system.*`` flags written in ``args`` (their values read from ``parsed``, the command's
-    parsed system, so a flag given at its default value still counts), in the hall ``layout``
-    names, and that layout's start; without a layout, ``base`` with the flags and None.
+def in_hall(layout: str | None, base: SystemConfig,
+            flags: dict[str, Any]) -> tuple[SystemConfig, Scenario | None]:
+    """The system of a command: ``base`` (the target's, the study's, the paper's) with the
+    ``--system.*`` flags the line wrote (``flags``, :func:`written`), in the hall ``layout``
+    names, and that layout's start; without a layout, ``base`` with the flags and None;
+    checked once, whole.
 
     The flags apply to the base system before the layout resolves (a generated hall is drawn
     in the room of ``--system.room``). A layout gives the devices and, a layout file may, the
@@ -162,16 +176,28 @@ def in_hall(layout: str | None, base: SystemConfig, parsed: SystemConfig,
     beside a file's room is no less a contradiction). A lower room caps the UAV's ceiling
     (:meth:`Layout.system`) unless ``--system.z-max`` is written: then the flag's ceiling is
     judged in that room."""
-    _check_beside_layout(layout, args)
-    written = _given_fields(base, parsed, given_flags(args), "--system")
-    flagged = replace(base, **written)  # judged once in its hall: its room or pairs may fit only the layout's devices
+    if layout is not None and "users" in flags:
+        raise UsageError("--layout and --system.users both give the device positions; pass one of them")
+    if layout is not None and "room" in flags and sets_room(layout):
+        raise UsageError(f"--layout {layout} sets the room; drop --system.room or the file's room")
+    flagged = layered(base, flags)  # judged once in its hall: its room or pairs may fit only the layout's devices
     if layout is None:
         return flagged.check(), None
     system, start = resolve_layout(layout, flagged).resolve(flagged)
-    if "z_max" in written and system.z_max != written["z_max"]:  # the user's ceiling, not the room's cap
-        system = system.replace(z_max=written["z_max"])
+    if "z_max" in flags and system.z_max != flags["z_max"]:  # the user's ceiling, not the room's cap
+        system = system.replace(z_max=flags["z_max"])
         start.validate_for(system)
     return system, start
+
+
+def parse_in_hall(cls: type, args: list[str], prog: str, description: str) -> Any:
+    """:func:`~uavris.cli.parsing.parse` of a command with ``--system.*`` flags (``cls.system``:
+    :data:`SystemFlags`): its ``--help`` shows the paper's system as their defaults."""
+    default = None
+    if any(a in HELP for a in args):
+        required = {f.name: tyro.MISSING for f in fields(cls) if f.default is MISSING and f.default_factory is MISSING}
+        default = cls(**required, system=shown(SystemFlags, SystemConfig()))
+    return parse(cls, args, prog, description, default=default)
 
 
 def seed_note(row: Any, seeds: list[int]) -> str:

@@ -6,17 +6,12 @@ command line becomes one :class:`UsageError` line, built from tyro's parse-error
 rule for lists of points (``--system.users``) and the checks of paths every command shares. Not here: the commands
 themselves (:mod:`.training`, :mod:`.evaluation`).
 
-Why :func:`parse_built`: tyro takes one default per field, fixed before it parses, while a few
-flags choose the defaults of many others: a preset (``--preset``) every budget, a config file
-(``--config``) every field, a model (``--model``) its system, a layout (``--layout``) the hall.
-A command parses its line once, with its own defaults in a form of its config that checks
-nothing (:func:`uavris.cli.options.unchecked`: tyro builds the config while it parses, and the
-parse's defaults are not the line's), and then builds its config: the defaults its choices
-make, with every field whose flag is written on the line taken from the parse
-(:func:`uavris.cli.options.with_flags`, :func:`uavris.cli.options.in_hall`), so that a flag
-given at its default value is known to be given; every check runs on the built config. Only
-``--help`` looks twice: it shows the defaults the line's choices make (``uavris train --preset
-paper --help`` the paper preset's), so the line without it is parsed and built first.
+Why :func:`parse_built`: a few flags choose the defaults of many others (a preset every
+budget, a config file every field, a model its system, a layout the hall), so a command parses
+what its line wrote (:func:`uavris.cli.options.flags_of`: every flag None where not written)
+and builds its config from layers (:func:`uavris.cli.options.layered`). Only ``--help`` looks
+twice: it shows the defaults the line's choices make (``uavris train --preset paper --help`` the
+paper preset's), so the line without it is parsed and built first.
 """
 
 from __future__ import annotations
@@ -71,7 +66,7 @@ class UsageError(UavrisError):
 @REGISTRY.primitive_rule
 def _points(info: PrimitiveTypeInfo) -> PrimitiveConstructorSpec | None:
     """A list of points is typed as its numbers, x y z per point (``--system.users 15 5 1 20 8 1.5``)."""
-    if info.type != POINTS:
+    if info.type not in (POINTS, Optional[POINTS]):  # the field, or its flag (None: not written)
         return None
 
     def points(values: list[str]) -> POINTS:
@@ -145,22 +140,20 @@ def parse(cls: type[T], args: list[str], prog: str, description: str, default: T
     return got
 
 
-def parse_built(cls: type[T], args: list[str], prog: str, description: str, default: T,
-                build: Callable[[T], T], placeholder: T | None = None,
-                help_default: Callable[[T], T] = lambda built: built) -> T:
-    """``args`` parsed once into ``cls`` (its defaults ``default``) and built (``build``: the
-    config its choices make, the flags written on top; the module docstring says why). With
-    ``--help``, the line without it is parsed (``placeholder``: ``default`` with its required
-    flags filled, so that a help needs none) and built first, and the help shows what that
-    build gives (``help_default`` marks the flags still required), the command's own defaults
-    where the line does not parse or build."""
+def parse_built(cls: type[T], args: list[str], prog: str, description: str, build: Callable[[T, bool], T],
+                show: Callable[[T | None, T | None], T]) -> T:
+    """``args`` parsed once into ``cls`` and built (``build(parsed, False)``: the config its
+    choices make, the flags written on top). With ``--help``, the line without it is parsed and
+    built first (``build(parsed, True)``: required flags may be missing), and the help shows
+    ``show(built, parsed)`` (either None where the line does not parse or build): the defaults
+    the line's choices make, the flags it still requires."""
     if any(a in HELP for a in args):
-        shown = default
+        parsed = built = None
         with contextlib.suppress(UavrisError):
-            shown = build(parse(cls, [a for a in args if a not in HELP], prog, description,
-                                default=default if placeholder is None else placeholder))
-        parse(cls, args, prog, description, default=help_default(shown))  # prints the help and exits
-    return build(parse(cls, args, prog, description, default=default))
+            parsed = parse(cls, [a for a in args if a not in HELP], prog, description)
+            built = build(parsed, True)
+        parse(cls, args, prog, description, default=show(built, parsed))  # prints the help and exits
+    return build(parse(cls, args, prog, description), False)
 
 
 NAME_MAX = 255  # bytes in one file or folder name (Linux, macOS); results add their own names inside

@@ -8,13 +8,13 @@ the commands that score policies (:mod:`.evaluation`).
 from __future__ import annotations
 
 import sys
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Annotated, Literal
 
 import tyro
 
-from uavris.cli.options import in_hall, seed_note
+from uavris.cli.options import SystemFlags, in_hall, layered, parse_in_hall, seed_note, written
 from uavris.cli.parsing import Unset, UsageError, parse, writing
 from uavris.config import ScenarioName, SystemConfig
 from uavris.experiments.display.tables import counted
@@ -50,7 +50,7 @@ class PlanArgs:
     row is told its place by"""
     progress: bool = True
     """show a progress bar"""
-    system: SystemConfig = SystemConfig()
+    system: SystemFlags = field(default_factory=SystemFlags)
     """the system (the layout sets its devices and, if it has one, its room)"""
 
 
@@ -87,13 +87,14 @@ def plan_command(args: list[str]) -> None:
     """
     from uavris.experiments.tools.plan import check_devices, check_grid, plan_hall, planning_seconds
 
-    a = parse(PlanArgs, args, "uavris plan", plan_command.__doc__ or "")
+    a = parse_in_hall(PlanArgs, args, "uavris plan", plan_command.__doc__ or "")
     a, named = _learned_value(a)
-    hall, _ = in_hall(a.layout, SystemConfig(), a.system, args)  # the flags written, in the layout's hall
+    flags = written(a.system)
+    hall, _ = in_hall(a.layout, SystemConfig(), flags)  # the flags written, in the layout's hall
     if a.layout is None:
         layout = PAPER_LAYOUT if hall.users == PAPER_LAYOUT.users else Layout("custom", hall.users, default_start(hall))
     else:
-        layout = resolve_layout(a.layout, a.system)
+        layout = resolve_layout(a.layout, layered(SystemConfig(), flags))  # drawn in the flags' room
     check_grid(hall, a.grid_step)  # before anything is written
     if a.learned is None or a.top_k or a.deployed:
         check_devices(hall)
@@ -187,14 +188,14 @@ class DemoArgs:
     """the hall: paper, layout-train-N / layout-unseen-N (-kK: K devices), or a YAML layout file (devices,
     optionally start and room; --system.* flags apply first) (default: the devices of --system.users, the paper's
     unless given)"""
-    system: SystemConfig = SystemConfig()
+    system: SystemFlags = field(default_factory=SystemFlags)
     """the system (the paper's, with these fields changed)"""
 
 
 def demo_command(args: list[str]) -> None:
     """Roll out the zero action, random actions and a co-phasing hover, and print their average sum rate."""
-    a = parse(DemoArgs, args, "uavris demo", demo_command.__doc__ or "")
-    system, hall = in_hall(a.layout, SystemConfig(), a.system, args)
+    a = parse_in_hall(DemoArgs, args, "uavris demo", demo_command.__doc__ or "")
+    system, hall = in_hall(a.layout, SystemConfig(), written(a.system))
     run_demo(a.episodes, a.seed, a.scenario or hall or "fig2", system)
 
 

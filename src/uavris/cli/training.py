@@ -1,15 +1,16 @@
 """The commands that train: ``train``, ``compare-algorithms``, ``pretrain-dt``, ``finetune-dt``, ``reproduce``.
 
-Lives here: for each command, the dataclass tyro reads (the library's config dataclass,
-flattened, plus :class:`~uavris.cli.options.RunOptions`) and the function that runs it.
-The flags *are* the config's fields: a preset (``--preset``) or a YAML file (``train
---config``) supplies the defaults, and any field given on the command line overrides them.
+Lives here: for each command, the dataclass tyro reads (the flags of the library's config,
+:func:`~uavris.cli.options.flags_of`, flattened, plus :class:`~uavris.cli.options.RunOptions`),
+the build of its config and the function that runs it. The flags *are* the config's fields: a
+preset (``--preset``), a YAML file (``train --config``) or a model (``finetune-dt --model``)
+supplies the defaults, and every field written on the command line is taken over them.
 Not here: what the commands do (:mod:`uavris.experiments`).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Annotated, Any, Callable
 
@@ -17,18 +18,20 @@ import tyro
 
 from uavris.agents.dt.checkpoint import dt_system
 from uavris.agents.experts import Algorithm
-from uavris.agents.experts.imitation import ImitationConfig
 from uavris.agents.torch_device import Device, resolve_device
 from uavris.cli.options import (
     LAYOUT_HELP,
     RunOptions,
+    SystemFlags,
     check_run_options,
-    given_flags,
+    flags_of,
     in_hall,
-    unchecked,
-    with_flags,
+    layered,
+    parse_in_hall,
+    shown,
+    written,
 )
-from uavris.cli.parsing import Unset, UsageError, load_overrides, output_dir, parse, parse_built, writing
+from uavris.cli.parsing import Unset, UsageError, load_overrides, output_dir, parse_built, writing
 from uavris.config import ScenarioName, SystemConfig
 from uavris.experiments.display.tables import counted, rate_interval
 from uavris.experiments.engine.jobs import Backend
@@ -43,23 +46,17 @@ from uavris.runs import read_done
 Flat = tyro.conf.arg(name="")  # the config's fields become the command's own flags
 
 
-def _required(config: Any, *names: str) -> Any:
-    """``config`` (a command's defaults, in the form the parse takes: :func:`unchecked`) with the
-    fields ``names`` required: the placeholder it was made with is no default a user can rely on,
-    so tyro asks for the flag (and --help says "required")."""
-    return unchecked(config, **dict.fromkeys(names, tyro.MISSING))
-
-
-def _still_required(built: Any, args: list[str], *names: str) -> Any:
-    """A command's built defaults shown by ``--help`` (``built.run``) with the fields ``names`` whose
-    flags the line does not give still required."""
-    return replace(built, run=_required(built.run, *(n for n in names if f"--{n}" not in given_flags(args))))
+def _missing(name: str, prog: str, alternative: str = "") -> UsageError:
+    return UsageError(f"missing required argument --{name}{alternative} (see {prog} --help)")
 
 
 # ------------------------------------------------------------------------------------------ train
+TrainFlags = flags_of(TrainConfig)
+
+
 @dataclass(frozen=True)
 class TrainArgs:
-    run: Annotated[TrainConfig, Flat]
+    run: Annotated[TrainFlags, Flat] = field(default_factory=TrainFlags)  # once built: the TrainConfig
     options: Annotated[RunOptions, Flat] = RunOptions()
     config: Unset[Path] = None
     """YAML file of TrainConfig fields (e.g. RUN/config.yaml); the preset fills what it leaves out, flags override it
@@ -82,37 +79,32 @@ def _nested_update(base: dict[str, Any], changes: dict[str, Any], where: str) ->
     return out
 
 
-def train_config(a: TrainArgs, args: list[str]) -> TrainConfig:
+def train_config(a: TrainArgs) -> TrainConfig:
     """The run ``uavris train``'s line asks for: the algorithm, preset and scenario it chooses (or
     ``--config`` does), the file's fields on top, in the hall of ``--layout``, and every flag
     written on the line over them. ``--resume`` without ``--config`` continues with the run's
     own ``OUT/config.yaml``."""
-    given = given_flags(args)
+    line = written(a.run)
     file, out = a.config, a.options.out
     if file is None and a.options.resume and out is not None and (out / "config.yaml").is_file():
         file = out / "config.yaml"  # the resumed run's configuration, not the preset's defaults
     data = load_overrides(file, "TrainConfig") if file else {}
-    chosen = {k: getattr(a.run, k) for k in ("algo", "preset", "scenario") if f"--{k}" in given}
+    chosen = {k: line[k] for k in ("algo", "preset", "scenario") if k in line}
     base = TrainConfig(**{**{k: data[k] for k in ("algo", "preset", "scenario") if k in data}, **chosen})
     if data:
         base = TrainConfig.from_dict({**_nested_update(base.to_dict(), data, f"--config {file}"), **chosen})
-    system, hall = in_hall(a.layout, base.system, a.run.system, args)
+    system, hall = in_hall(a.layout, base.system, line.pop("system", {}))
     # a layout's own start, unless a named scenario starts in its hall
-    where = {} if hall is None or "--scenario" in given else {"scenario": hall.name, "start": hall.start}
-    return with_flags(replace(base, system=system, **where), a.run, args, skip=("system",))
+    where = {} if hall is None or "scenario" in line else {"scenario": hall.name, "start": hall.start}
+    return layered(replace(base, system=system, **where), line).check()
 
 
 def parse_train(args: list[str]) -> TrainArgs:
     """``uavris train``'s line, parsed once and built (:func:`train_config`)."""
-    def offering_imitation(a: TrainArgs) -> TrainArgs:
-        """``a`` whose run offers the imitation's flags (a run without imitation has none to show):
-        taken where written."""
-        return replace(a, run=unchecked(a.run, imitation=a.run.imitation or ImitationConfig()))
-
     return parse_built(TrainArgs, args, "uavris train", train_command.__doc__ or "",
-                       default=offering_imitation(TrainArgs(TrainConfig())),
-                       build=lambda parsed: replace(parsed, run=train_config(parsed, args)),
-                       help_default=offering_imitation)
+                       build=lambda parsed, _: replace(parsed, run=train_config(parsed)),
+                       show=lambda built, _: replace(built or TrainArgs(), run=shown(
+                           TrainFlags, built.run if built else TrainConfig())))
 
 
 def train_command(args: list[str]) -> None:
@@ -165,7 +157,7 @@ class CompareArgs:
     """torch device (auto: CUDA when torch sees one)"""
     progress: bool = True
     """show a progress bar"""
-    system: SystemConfig = SystemConfig()
+    system: SystemFlags = field(default_factory=SystemFlags)
     """the system trained and evaluated in"""
 
 
@@ -178,8 +170,8 @@ def compare_command(args: list[str]) -> None:
     """
     from uavris.experiments.training.compare import compare_algorithms, default_compare_dir
 
-    a = parse(CompareArgs, args, "uavris compare-algorithms", compare_command.__doc__ or "")
-    system, hall = in_hall(a.layout, SystemConfig(), a.system, args)
+    a = parse_in_hall(CompareArgs, args, "uavris compare-algorithms", compare_command.__doc__ or "")
+    system, hall = in_hall(a.layout, SystemConfig(), written(a.system))
     scenario = a.scenario or ("fig2" if hall is None else hall.name)
     start = hall.start if hall is not None and scenario == hall.name else None
     seeds = STUDY[a.preset]["compare_seeds"] if a.seeds is None else a.seeds
@@ -201,22 +193,32 @@ def _run_dt(fn: Callable[..., Path], cfg: Any, opts: RunOptions, default_dir: Ca
 
 
 # ------------------------------------------------------------------------------------- pretrain-dt
+PretrainFlags = flags_of(PretrainConfig)
+
+
 @dataclass(frozen=True)
 class PretrainArgs:
-    run: Annotated[PretrainConfig, Flat]
+    run: Annotated[PretrainFlags, Flat] = field(default_factory=PretrainFlags)  # once built: the PretrainConfig
     options: Annotated[RunOptions, Flat] = RunOptions()
 
 
 def parse_pretrain(args: list[str]) -> PretrainArgs:
     """``uavris pretrain-dt``'s line, parsed once and built: the preset's run, the flags written on top."""
-    def build(parsed: PretrainArgs) -> PretrainArgs:
-        run = PretrainConfig(dataset=parsed.run.dataset, preset=parsed.run.preset)
-        return replace(parsed, run=with_flags(run, parsed.run, args))
+    prog = "uavris pretrain-dt"
 
-    return parse_built(PretrainArgs, args, "uavris pretrain-dt", pretrain_command.__doc__ or "",
-                       default=PretrainArgs(_required(PretrainConfig(dataset=""), "dataset")), build=build,
-                       placeholder=PretrainArgs(unchecked(PretrainConfig(dataset=""))),
-                       help_default=lambda built: _still_required(built, args, "dataset"))
+    def build(parsed: PretrainArgs, for_help: bool) -> PretrainArgs:
+        line = written(parsed.run)
+        if "dataset" not in line and not for_help:
+            raise _missing("dataset", prog)
+        run = PretrainConfig(dataset=line.pop("dataset", ""), preset=line.pop("preset", "quick"))
+        return replace(parsed, run=layered(run, line).check())
+
+    def show(built: PretrainArgs | None, parsed: PretrainArgs | None) -> PretrainArgs:
+        given = parsed is not None and parsed.run.dataset is not None
+        run = built.run if built is not None else PretrainConfig(dataset="")
+        return replace(built or PretrainArgs(), run=shown(PretrainFlags, run, required=() if given else ("dataset",)))
+
+    return parse_built(PretrainArgs, args, prog, pretrain_command.__doc__ or "", build=build, show=show)
 
 
 def pretrain_command(args: list[str]) -> None:
@@ -235,37 +237,43 @@ def pretrain_command(args: list[str]) -> None:
 
 
 # ------------------------------------------------------------------------------------- finetune-dt
+FinetuneFlags = flags_of(FinetuneConfig)
+
+
 @dataclass(frozen=True)
 class FinetuneArgs:
-    run: Annotated[FinetuneConfig, Flat]
+    run: Annotated[FinetuneFlags, Flat] = field(default_factory=FinetuneFlags)  # once built: the FinetuneConfig
     options: Annotated[RunOptions, Flat] = RunOptions()
     layout: Annotated[Unset[str], tyro.conf.arg(help=LAYOUT_HELP)] = None
 
 
 def parse_finetune(args: list[str]) -> FinetuneArgs:
-    """``uavris finetune-dt``'s line, parsed once and built."""
-    def build(parsed: FinetuneArgs) -> FinetuneArgs:
-        """The preset's fine-tuning of the model in its own system (in the hall of --layout, with its
-        start unless a scenario is named there), the flags written on top."""
-        given, run = given_flags(args), parsed.run
-        system, hall = in_hall(parsed.layout, dt_system(run.model) if run.model else SystemConfig(), run.system, args)
-        if hall is None and "--scenario" not in given:
-            raise UsageError("missing required argument --scenario (or a --layout to adapt to) "
-                             "(see uavris finetune-dt --help)")
-        where = {} if hall is None or "--scenario" in given else {"scenario": hall.name, "start": hall.start}
-        cfg = FinetuneConfig(**{"model": run.model, "scenario": run.scenario, "preset": run.preset, **where},
-                             system=system)
-        return replace(parsed, run=with_flags(cfg, run, args, skip=("system",)))
+    """``uavris finetune-dt``'s line, parsed once and built: the preset's fine-tuning of the model in
+    its own system (in the hall of --layout, with its start unless a scenario is named there), the
+    flags written on top."""
+    prog = "uavris finetune-dt"
 
-    # the placeholders (no model, the paper's unseen1) make the parse's other defaults; tyro asks for --model
-    def placeholders() -> FinetuneConfig:
-        return unchecked(FinetuneConfig(model="", scenario="unseen1", system=SystemConfig()))
+    def build(parsed: FinetuneArgs, for_help: bool) -> FinetuneArgs:
+        line = written(parsed.run)
+        model = line.pop("model", None)
+        if model is None and not for_help:
+            raise _missing("model", prog)
+        system, hall = in_hall(parsed.layout, dt_system(model) if model else SystemConfig(), line.pop("system", {}))
+        if hall is None and "scenario" not in line and not for_help:
+            raise _missing("scenario", prog, " (or a --layout to adapt to)")
+        where = ({"scenario": line.pop("scenario")} if "scenario" in line else
+                 {"scenario": hall.name, "start": hall.start} if hall is not None else {"scenario": "unseen1"})
+        run = FinetuneConfig(model=model or "", preset=line.pop("preset", "quick"), system=system, **where)
+        return replace(parsed, run=layered(run, line).check())
 
-    return parse_built(FinetuneArgs, args, "uavris finetune-dt", finetune_command.__doc__ or "",
-                       default=FinetuneArgs(_required(placeholders(), "model")),
-                       placeholder=FinetuneArgs(placeholders()), build=build,
-                       help_default=lambda built: _still_required(
-                           built, args, "model", *(() if "--layout" in given_flags(args) else ("scenario",))))
+    def show(built: FinetuneArgs | None, parsed: FinetuneArgs | None) -> FinetuneArgs:
+        given = written(parsed.run) if parsed is not None else {}
+        required = tuple(n for n in ("model", "scenario") if n not in given
+                         and not (n == "scenario" and parsed is not None and parsed.layout is not None))
+        run = built.run if built is not None else FinetuneConfig(model="", scenario="unseen1", system=SystemConfig())
+        return replace(built or FinetuneArgs(), run=shown(FinetuneFlags, run, required=required))
+
+    return parse_built(FinetuneArgs, args, prog, finetune_command.__doc__ or "", build=build, show=show)
 
 
 def finetune_command(args: list[str]) -> None:
@@ -288,9 +296,12 @@ def finetune_command(args: list[str]) -> None:
 
 
 # --------------------------------------------------------------------------------------- reproduce
+ReproduceFlags = flags_of(ReproduceConfig)
+
+
 @dataclass(frozen=True)
 class ReproduceArgs:
-    study: Annotated[ReproduceConfig, Flat]
+    study: Annotated[ReproduceFlags, Flat] = field(default_factory=ReproduceFlags)  # once built: the ReproduceConfig
     layout: Annotated[Unset[str], tyro.conf.arg(help="the hall of the paper and strong tracks (their scenarios "
                                                 "start in it): paper, layout-train-N / layout-unseen-N "
                                                 "(-kK: K devices), or a YAML layout file; it sets --system.users "
@@ -320,14 +331,15 @@ class ReproduceArgs:
 
 def parse_reproduce(args: list[str]) -> ReproduceArgs:
     """``uavris reproduce``'s line, parsed once and built: the preset's study in the hall, the flags written on top."""
-    def build(parsed: ReproduceArgs) -> ReproduceArgs:
-        system, _ = in_hall(parsed.layout, SystemConfig(), parsed.study.system, args)
-        study = with_flags(ReproduceConfig(system=system, preset=parsed.study.preset), parsed.study, args,
-                           skip=("system",))
-        return replace(parsed, study=study)
+    def build(parsed: ReproduceArgs, _: bool) -> ReproduceArgs:
+        line = written(parsed.study)
+        system, _ = in_hall(parsed.layout, SystemConfig(), line.pop("system", {}))
+        study = ReproduceConfig(system=system, preset=line.pop("preset", "quick"))
+        return replace(parsed, study=layered(study, line).check())
 
-    return parse_built(ReproduceArgs, args, "uavris reproduce", reproduce_command.__doc__ or "",
-                       default=ReproduceArgs(unchecked(ReproduceConfig())), build=build)
+    return parse_built(ReproduceArgs, args, "uavris reproduce", reproduce_command.__doc__ or "", build=build,
+                       show=lambda built, _: replace(built or ReproduceArgs(), study=shown(
+                           ReproduceFlags, built.study if built else ReproduceConfig())))
 
 
 def reproduce_command(args: list[str]) -> None:
