@@ -78,12 +78,12 @@ from uavris.agents.references import reference_policy  # noqa: E402
 from uavris.config import SCENARIOS, SystemConfig  # noqa: E402
 from uavris.env.simulator import BatchedSimulator  # noqa: E402
 from uavris.layouts import LayoutGenerator  # noqa: E402
+from uavris.physics.co_phasing import co_phasing_phases  # noqa: E402
 from uavris.physics.phase_opt import (  # noqa: E402
     DEFAULT_ITERATIONS,
     DEFAULT_NOISE_LEVELS,
     DEFAULT_RESTARTS,
     active_links,
-    co_phasing_phases,
     optimize_slot_phases,
     random_starts,
     sum_rate_and_gradient,

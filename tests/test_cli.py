@@ -516,3 +516,37 @@ def test_the_first_use_of_the_optimiser_says_it_compiles(monkeypatch, tmp_path, 
     fresh = subprocess.run([sys.executable, "-c", "from uavris.physics.phase_opt import kernel_ready; "
                             "print(kernel_ready())"], capture_output=True, text=True, check=True, timeout=120)
     assert fresh.stdout.strip() == "True"
+
+
+def test_the_compile_notice_is_one_line_in_a_command_and_a_warning_in_the_library(monkeypatch, capsys):
+    """A command shows uavris's own notice as one plain line on stderr (no file, no source line) and
+    hands any other warning on as it was; outside a command the notice is an ordinary warning of its
+    own category, which a library user may filter. Nothing is compiled: the kernel is said to be
+    missing and the command only announces it."""
+    import warnings
+
+    from uavris import cli
+    from uavris.physics import phase_opt
+
+    monkeypatch.setattr(phase_opt, "kernel_ready", lambda: False)
+
+    def announcing(args: list[str]) -> None:
+        phase_opt.announce_compile()
+        warnings.warn("not uavris's", UserWarning, stacklevel=1)
+
+    monkeypatch.setattr(cli, "command", lambda name: announcing)
+    others: list[type[Warning]] = []
+    monkeypatch.setattr(warnings, "showwarning", lambda message, category, *rest: others.append(category))
+    hook = warnings.showwarning
+    with warnings.catch_warnings():
+        warnings.simplefilter("always")
+        assert main(["demo"]) == 0
+    assert capsys.readouterr().err == (f"uavris: compiling the phase optimiser, once: {phase_opt.COMPILE_S} s "
+                                       "(later runs load it from numba's cache)\n")
+    assert others == [UserWarning] and warnings.showwarning is hook  # the other warning as it was; the hook undone
+    with pytest.warns(phase_opt.CompileNotice, match="compiling the phase optimiser, once"):
+        phase_opt.announce_compile()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        warnings.filterwarnings("ignore", category=phase_opt.CompileNotice)
+        phase_opt.announce_compile()  # filtered like any warning

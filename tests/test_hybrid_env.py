@@ -14,7 +14,8 @@ from uavris import physics as ph
 from uavris.config import SystemConfig
 from uavris.errors import ActionError
 from uavris.layouts import Layout, LayoutGenerator
-from uavris.physics.phase_opt import co_phasing_phases, optimize_slot_phases
+from uavris.physics.co_phasing import co_phasing_phases
+from uavris.physics.phase_opt import optimize_slot_phases
 
 ID = "uavris/UavRisD2D-v1"
 

@@ -5,6 +5,9 @@ Lives here: the package's public names. Not here: anything else; the layers are
 ``physics`` -> ``env`` -> ``agents`` -> ``experiments`` -> ``cli`` (README, Layout).
 """
 
+import os as _os
+import sys as _sys
+
 from uavris.float_paths import pin_float_paths
 
 pin_float_paths()  # before numpy and torch load: the references' numbers the same on every CPU (float_paths)
@@ -13,9 +16,6 @@ try:
     from uavris.config import SCENARIOS, ConfigError, Scenario, SystemConfig, get_scenario
     from uavris.env import ENV_ID, UavRisD2DEnv, UavRisD2DVectorEnv
 except KeyboardInterrupt:
-    import os as _os
-    import sys as _sys
-
     if _os.path.basename(_sys.argv[0]) in ("uavris", "-m"):  # Ctrl-C while `uavris` starts: one line, as later
         print("uavris: interrupted", file=_sys.stderr)
         raise SystemExit(130) from None

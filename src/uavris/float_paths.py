@@ -34,6 +34,8 @@ import sys
 import warnings
 from importlib import metadata
 
+from threadpoolctl import threadpool_info  # loads no library: it lists the ones loaded when called
+
 # numpy 2.4 dispatches by x86-64 levels (X86_V3 is AVX2, X86_V4 AVX-512), earlier releases by features
 _NUMPY_AVX512 = {"levels": "X86_V4 AVX512_ICL AVX512_SPR",
                  "features": "AVX512F AVX512CD AVX512_KNL AVX512_KNM AVX512_SKX AVX512_CLX AVX512_CNL AVX512_ICL "
@@ -72,14 +74,12 @@ def _has_flag(flag: str) -> bool:
 
 
 def numpy_cpu_tables() -> tuple[list[str], dict[str, bool]]:
-    """numpy's dispatch targets and the CPU features it found (its private tables; ``numpy.core``
-    before numpy 2): the kernels numpy may choose from are the targets whose feature is on."""
-    try:
-        from numpy._core._multiarray_umath import __cpu_dispatch__ as targets
-        from numpy._core._multiarray_umath import __cpu_features__ as features
-    except ImportError:
-        from numpy.core._multiarray_umath import __cpu_dispatch__ as targets
-        from numpy.core._multiarray_umath import __cpu_features__ as features
+    """numpy's dispatch targets and the CPU features it found (its private tables): the kernels numpy
+    may choose from are the targets whose feature is on. Imported here, not at the top: this module
+    runs before numpy loads its kernels (:func:`pin_float_paths`)."""
+    from numpy._core._multiarray_umath import __cpu_dispatch__ as targets
+    from numpy._core._multiarray_umath import __cpu_features__ as features
+
     return list(targets), dict(features)
 
 
@@ -92,12 +92,7 @@ def float_path() -> str:
         return "the libraries' own kernels"
     targets, features = numpy_cpu_tables()
     numpy_avx512 = any(features.get(k) for k in targets if "AVX512" in k or k == "X86_V4")
-    try:
-        from threadpoolctl import threadpool_info
-
-        blas = sorted({str(i.get("architecture")) for i in threadpool_info() if i.get("internal_api") == "openblas"})
-    except ImportError:
-        blas = []
+    blas = sorted({str(i.get("architecture")) for i in threadpool_info() if i.get("internal_api") == "openblas"})
     torch = sys.modules.get("torch")
     capability = torch.backends.cpu.get_cpu_capability() if torch is not None else None
     if not numpy_avx512 and blas in ([], [PINNED["OPENBLAS_CORETYPE"]]) and capability in (None, "AVX2", "DEFAULT"):

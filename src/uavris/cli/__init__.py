@@ -42,6 +42,7 @@ from typing import Any, Callable, Iterator
 
 from uavris.errors import UavrisError
 from uavris.experiments.engine.process import configure_threads
+from uavris.physics.phase_opt import CompileNotice  # loaded by `import uavris` already (env.wrappers)
 
 EXIT_BAD_INPUT = 2
 EXIT_INTERRUPTED = 128 + signal.SIGINT  # 130, what a shell reports for a process Ctrl-C ended
@@ -49,6 +50,7 @@ EXIT_TERMINATED = 128 + signal.SIGTERM  # 143, likewise for SIGTERM
 # What `pip install 'uavris[train]'` adds (pyproject.toml): the experts, the DT and the study need it
 TRAINING_STACK = ("torch", "stable_baselines3", "tensorboard", "minari", "h5py", "safetensors")
 PROG = "uavris"
+NOTICES = (CompileNotice,)  # the warnings a command shows as one line `uavris: ...` (_notices)
 
 
 # Each command's module is imported only when it runs, so `uavris evaluate` does not load
@@ -185,12 +187,14 @@ def main(argv: list[str] | None = None) -> int:
 @contextlib.contextmanager
 def _notices() -> Iterator[None]:
     """What the library says while a command runs (the optimiser being compiled, once), as one line
-    ``uavris: ...`` on stderr rather than Python's warning with its file and line."""
+    ``uavris: ...`` on stderr rather than Python's warning with its file and line. Scoped to
+    uavris's own notices (:data:`NOTICES`), and to the command: any other warning keeps its form,
+    and a library user gets the notice as a warning (filtered like any other)."""
     show = warnings.showwarning
 
     def one_line(message: Warning | str, category: type[Warning], filename: str, lineno: int, file: Any = None,
                  line: str | None = None) -> None:
-        if category.__name__ == "CompileNotice":
+        if issubclass(category, NOTICES):
             print(f"{PROG}: {message}", file=sys.stderr, flush=True)
         else:
             show(message, category, filename, lineno, file, line)

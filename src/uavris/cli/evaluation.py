@@ -10,6 +10,7 @@ import hashlib
 import sys
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+from types import ModuleType
 from typing import Annotated, Literal
 
 import tyro
@@ -120,11 +121,17 @@ def evaluate_command(args: list[str]) -> None:
 
 def _row_controller(study: str | Path, key: str, track: str, dest: Path) -> Path:
     """Row ``key`` of ``track`` of the study in ``study`` as a controller directory at ``dest``."""
-    from uavris.experiments.study.finished import Study
-
-    opened = Study.open(study)
+    opened = _finished().Study.open(study)
     _, unseen = opened.sites(track)
     return write_controller(opened.row(key, track, unseen[0]), dest)
+
+
+def _finished() -> ModuleType:
+    """:mod:`uavris.experiments.study.finished`, where a study's row is scored or exported: it loads
+    the study's code (torch, the train extra), which scoring a policy never needs."""
+    import uavris.experiments.study.finished
+
+    return uavris.experiments.study.finished
 
 
 def check_one_start(scenario: str | None, layout: str | None) -> None:
@@ -144,14 +151,13 @@ def paper_hall(system: SystemConfig) -> SystemConfig:
 
 def _evaluate_row(a: EvaluateArgs, args: list[str]) -> None:
     """``uavris evaluate OUT --row KEY``: a row of the study in OUT, in the site the flags name."""
-    from uavris.experiments.study.finished import Study
-    from uavris.experiments.study.tracks import TRACK_SPECS
-
-    study = Study.open(a.target)
+    study = _finished().Study.open(a.target)
     rc = study.config
-    ran = [t.name for t in rc.tracks]
-    track = a.track or ("deployment" if "deployment" in ran else ran[-1])
-    base = rc.system.replace(observe_devices=True) if TRACK_SPECS[track].layouts else rc.system
+    ran = {t.name: t for t in rc.tracks}
+    track = a.track or ("deployment" if "deployment" in ran else list(ran)[-1])
+    if track not in ran:
+        raise UsageError(f"--track {track}: the study in {a.target} ran {', '.join(ran)}")
+    base = rc.system.replace(observe_devices=True) if ran[track].layouts else rc.system
     system, hall = in_hall(a.layout, base, written(a.system))
     if hall is None and a.scenario is None:
         raise UsageError("--row: name where to evaluate it: --layout HALL (its devices and start) or --scenario NAME")

@@ -10,6 +10,7 @@ from __future__ import annotations
 import sys
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+from types import ModuleType
 from typing import Annotated, Literal
 
 import tyro
@@ -65,10 +66,9 @@ def _learned_value(a: PlanArgs) -> tuple[PlanArgs, Path | str | None]:
         if given is not None and (shipped := shipped_controller(given)) is not None:
             a, named = replace(a, learned=None, controller=shipped), str(given)
     if a.learned is not None:  # a learned value needs the train extra (torch), as the study's pipeline does
-        from uavris.experiments.study.finished import STUDY_FILE, Study
-
-        if (a.learned / STUDY_FILE).is_file():  # a study: its pre-training seed 0's V
-            a = replace(a, learned=Study.open(a.learned).learned_value())
+        finished = _finished()
+        if (a.learned / finished.STUDY_FILE).is_file():  # a study: its pre-training seed 0's V
+            a = replace(a, learned=finished.Study.open(a.learned).learned_value())
     if a.controller is not None:
         told = read_controller(a.controller).goal_from
         if not isinstance(told, LearnedValue):
@@ -103,10 +103,7 @@ def plan_command(args: list[str]) -> None:
     if not 0 <= a.top_k <= 5 or (a.top_k and a.learned is None):
         raise UsageError(f"--top-k must be in 0-5 and needs --learned, got {a.top_k}"
                           + ("" if a.learned is not None else " without --learned"))
-    value = None
-    if a.learned is not None:
-        from uavris.agents.place.checkpoint import load_value
-        value, _ = load_value(a.learned)
+    value = LearnedValue.at(a.learned).planner_model() if a.learned is not None else None
     out = a.out or Path("runs/plans") / (layout.name + ("-learned" if value is not None else ""))
     with writing(out.parent, "--out's folder", files_only=True):
         if value is None and hall.num_users > 8:
@@ -247,10 +244,8 @@ def export_command(args: list[str]) -> None:
     `uavris evaluate OUT --row ROW` in the same hall. A row that flies another hall's plan (transfer-...) is that
     hall's and cannot be exported. Writes --out/controller.json and its models' files.
     """
-    from uavris.experiments.study.finished import Study
-
     a = parse(ExportArgs, args, "uavris export", export_command.__doc__ or "")
-    study = Study.open(a.study)
+    study = _finished().Study.open(a.study)
     _, unseen = study.sites(a.track)
     row = study.row(a.row, a.track, unseen[0])  # a controller's models are the study's, whatever the hall
     out = a.out or Path("runs/controllers") / file_part(row.key)
@@ -258,3 +253,11 @@ def export_command(args: list[str]) -> None:
         write_controller(row, out)
     print(f"exported {row.key} ({row.label_for()}) of {a.study} -> {out}")
     print(seed_note(row, study.seeds(row, a.track, unseen[0])), end="")
+
+
+def _finished() -> ModuleType:
+    """:mod:`uavris.experiments.study.finished`, where a study is opened: it loads the study's code
+    (torch, the train extra), which ``plan`` without a study and every ``--help`` never need."""
+    import uavris.experiments.study.finished
+
+    return uavris.experiments.study.finished

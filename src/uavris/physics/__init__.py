@@ -3,11 +3,11 @@
 Modules: :mod:`.geometry` (attitude, RIS axes, incidence), :mod:`.channel` (UPA channels,
 cascaded gains), :mod:`.reflection` (angle-dependent reflection), :mod:`.rates` (SINR, sum
 rate), :mod:`.pairing` (link activation), :mod:`.motion` (kinematics, propulsion energy),
-:mod:`.streams` (counter-based random numbers), :mod:`.phase_opt` and :mod:`.phase_kernel`
-(the per-slot phase optimiser).
+:mod:`.streams` (counter-based random numbers), :mod:`.co_phasing`, :mod:`.phase_opt` and
+:mod:`.phase_kernel` (the per-slot phase optimiser: one pair's closed form, the method, its compiled core).
 
 Lives here: the re-exports of the first six modules' functions (``__all__``). Not here:
-:mod:`.streams` and :mod:`.phase_opt`, imported from their modules, and the per-slot
+:mod:`.streams`, :mod:`.co_phasing` and :mod:`.phase_opt`, imported from their modules, and the per-slot
 composition of these functions into a simulator (:mod:`uavris.env.simulator`).
 
 Every function works on arrays with arbitrary leading (batch) dimensions. Example: the

@@ -1,7 +1,8 @@
 """Expert datasets on disk: Minari (HDF5 backend), read back with validation.
 
 Lives here: :func:`write_dataset`, :func:`load_dataset`, :class:`ExpertDataset`. Not here:
-what a trajectory is and how the model trains on it (:mod:`.trajectories`).
+what a trajectory is and how the model trains on it (:mod:`.trajectories`), Minari's own calls
+(:mod:`.minari_files`, imported only where a dataset's files are written or read).
 
 Dataset layout (a directory ``DIR``)::
 
@@ -38,12 +39,12 @@ import re
 import shutil
 from dataclasses import dataclass
 from pathlib import Path
+from types import ModuleType
 from typing import Any, Sequence
 
 import gymnasium as gym
 import numpy as np
 from gymnasium.envs.registration import EnvSpec
-from numpy.typing import NDArray
 
 from uavris.agents.dt.trajectories import Trajectory
 from uavris.config import SCENARIOS, Scenario, SystemConfig, float_tuple, get_scenario, scenario_at
@@ -139,10 +140,6 @@ def write_dataset(path: str | Path, trajectories: Sequence[Trajectory], system: 
     interrupted write never leaves a half dataset. An existing dataset is replaced only
     with ``force``; a non-empty directory that is not a dataset is never touched.
     """
-    import minari
-    from minari.data_collector import EpisodeBuffer
-    from minari.dataset.minari_storage import MinariStorage
-
     given = Path(path)
     path = given.absolute()  # Minari mis-joins relative paths when it sizes the dataset
     if not trajectories:
@@ -158,28 +155,19 @@ def write_dataset(path: str | Path, trajectories: Sequence[Trajectory], system: 
     shutil.rmtree(tmp, ignore_errors=True)
     tmp.mkdir(parents=True)
     try:
-        low, high = observation_bounds(system)
-        storage = MinariStorage.new(tmp / "data", observation_space=gym.spaces.Box(low, high, dtype=np.float32),
-                                    action_space=gym.spaces.Box(-1.0, 1.0, (act_dim,), dtype=np.float32),
-                                    env_spec=env_spec, data_format="hdf5", jpeg_encoding=False)
+        files = _minari_files()
         algos = sorted({tr.expert_algo for tr in trajectories if tr.expert_algo})
-        storage.update_metadata({
+        files.write_data(tmp / "data", *_spaces(system, act_dim), env_spec, {
             "dataset_id": dataset_id_for(path, namespace),
             # Minari falls back to env_spec without it; recorded so the intent is explicit.
             "eval_env_spec": env_spec.to_json(),
-            "minari_version": minari.__version__,
+            "minari_version": files.MINARI_VERSION,
             "algorithm_name": "+".join(algos) or "unknown",
             "description": description or "uavris expert trajectories",
             "uavris": {"format_version": DATASET_FORMAT_VERSION, "system": system.to_dict(),
                        "observation_layout": layout_as_lists(system), "observation_dim": system.observation_dim,
                        "action_dim": act_dim, "phase_control": phase_control},
-        })
-        storage.update_episodes(
-            EpisodeBuffer(id=i, seed=tr.seed, observations=tr.observations, actions=tr.actions, rewards=tr.rewards,
-                          terminations=_flag_last(tr.length, tr.terminated),
-                          truncations=_flag_last(tr.length, tr.truncated))
-            for i, tr in enumerate(trajectories))
-        storage.update_episode_metadata([_episode_metadata(tr) for tr in trajectories])
+        }, trajectories, [_episode_metadata(tr) for tr in trajectories])
         # the data folder swapped, not the directory: the directory keeps its writer's lock (uavris.io.contents)
         path.mkdir(parents=True, exist_ok=True)
         replace_folder(tmp / "data", path / "data", path.parent / f".{path.name}.old")
@@ -205,11 +193,18 @@ def _episode_metadata(tr: Trajectory) -> dict[str, Any]:
     return meta
 
 
-def _flag_last(length: int, flag: bool) -> NDArray[np.bool_]:
-    """Per-slot flags of an episode: ``flag`` at its last slot, False before."""
-    out = np.zeros(length, dtype=bool)
-    out[-1] = flag
-    return out
+def _minari_files() -> ModuleType:
+    """:mod:`.minari_files`, the one home of Minari (the train extra), imported where a dataset's
+    files are written or read: the rest of this module serves the light install."""
+    import uavris.agents.dt.minari_files
+
+    return uavris.agents.dt.minari_files
+
+
+def _spaces(system: SystemConfig, act_dim: int) -> tuple[gym.spaces.Box, gym.spaces.Box]:
+    """The environment's observation and action spaces for ``system``, as a dataset records them."""
+    low, high = observation_bounds(system)
+    return gym.spaces.Box(low, high, dtype=np.float32), gym.spaces.Box(-1.0, 1.0, (act_dim,), dtype=np.float32)
 
 
 def _data_dir(path: Path) -> Path:
@@ -233,13 +228,11 @@ def load_dataset(path: str | Path) -> ExpertDataset:
     environment's, or a recorded environment spec that would recover another environment or
     system.
     """
-    import minari
-
     path = Path(path)
     data_dir = _data_dir(path).absolute()
     meta, system, phase_control = _checked_metadata(data_dir, str(path))
     try:
-        ds = minari.MinariDataset(data_dir)
+        ds = _minari_files().open_data(data_dir)
     except (ValueError, KeyError, OSError, AssertionError, TypeError, json.JSONDecodeError) as e:
         raise DatasetError(f"{path} is not a readable Minari dataset ({_one_line(e)})") from None
     obs_dim, act_dim = system.observation_dim, action_dim_for(system, phase_control)
@@ -341,14 +334,10 @@ def _checked_metadata(data_dir: Path, where: str) -> tuple[dict[str, Any], Syste
 
 def _check_spaces(meta: dict[str, Any], system: SystemConfig, act_dim: int, where: str) -> None:
     """The recorded spaces, exactly as Minari serialises the environment's for ``system``."""
-    from minari.serialization import serialize_space
-
-    low, high = observation_bounds(system)
-    spaces = {"observation_space": gym.spaces.Box(low, high, dtype=np.float32),
-              "action_space": gym.spaces.Box(-1.0, 1.0, (act_dim,), dtype=np.float32)}
-    for key, space in spaces.items():
+    serialized = _minari_files().serialized_space
+    for key, space in zip(("observation_space", "action_space"), _spaces(system, act_dim)):
         try:
-            same = isinstance(meta.get(key), str) and json.loads(meta[key]) == serialize_space(space, to_string=False)
+            same = isinstance(meta.get(key), str) and json.loads(meta[key]) == serialized(space)
         except ValueError:
             same = False
         if not same:

@@ -11,8 +11,10 @@ from __future__ import annotations
 import os
 import platform
 import sys
+from types import ModuleType
 
 import numpy
+from threadpoolctl import threadpool_limits  # loads no library: it limits the ones loaded when called
 
 from uavris.float_paths import cpu_info, float_path
 
@@ -35,17 +37,21 @@ def configure_threads(torch_now: bool = True) -> None:
     """
     for var in THREAD_VARIABLES:
         os.environ.setdefault(var, "1")
-    import scipy.linalg  # noqa: F401  (likewise scipy's own BLAS)
-    from threadpoolctl import threadpool_limits
+    import scipy.linalg  # noqa: F401  (after the variables: scipy's own BLAS reads them as it loads)
 
-    if torch_now or "torch" in sys.modules:
-        try:
-            import torch
-        except ModuleNotFoundError:  # `pip install uavris` without its training extra: nothing to set
-            pass
-        else:
-            torch.set_num_threads(1)
+    torch = _torch() if torch_now or "torch" in sys.modules else None
+    if torch is not None:  # None: `pip install uavris` without its training extra, nothing to set
+        torch.set_num_threads(1)
     threadpool_limits(limits=1)
+
+
+def _torch() -> ModuleType | None:
+    """torch, where the train extra installed it; None in a light install."""
+    try:
+        import torch
+    except ModuleNotFoundError:
+        return None
+    return torch
 
 
 def machine() -> str:
@@ -59,10 +65,6 @@ def machine() -> str:
     if "cpu family" in found and "model" in found:
         cpu += f" (family {found['cpu family']}, model {found['model']})"
 
-    try:
-        import torch
-    except ModuleNotFoundError:  # a light install (no [train] extra): a report or the claims of studies made elsewhere
-        libraries = f"numpy {numpy.__version__}, no torch"
-    else:
-        libraries = f"numpy {numpy.__version__}, torch {torch.__version__}"
+    torch = _torch()  # None: a light install (no [train] extra), a report or the claims of studies made elsewhere
+    libraries = f"numpy {numpy.__version__}, " + ("no torch" if torch is None else f"torch {torch.__version__}")
     return f"{cpu}, {os.cpu_count()} CPUs, {float_path()}, Python {platform.python_version()}, {libraries}"

@@ -43,6 +43,7 @@ import dataclasses
 from dataclasses import dataclass
 from functools import partial
 from pathlib import Path
+from types import ModuleType
 from typing import Any, Callable, Sequence
 
 from uavris import runs
@@ -157,23 +158,28 @@ def track_stages(rc: ReproduceConfig, ctx: StudyContext) -> list[TrackStages]:
     return [TrackStages(rc, track, ctx) for track in rc.tracks]
 
 
-def _compare_stage(rc: ReproduceConfig, ctx: StudyContext) -> Stage:
-    from uavris.experiments.training.compare import comparison_configs
+def _compare() -> ModuleType:
+    """:mod:`uavris.experiments.training.compare`, imported where the comparison's stage is built:
+    its figures load matplotlib, which a pipeline without that stage never needs."""
+    import uavris.experiments.training.compare
 
-    costs = tuple(train_cost(c) for c in comparison_configs(rc.preset, rc.compare_seeds, ALGORITHMS, "fig2",
-                                                            rc.eval_episodes, rc.system,
-                                                            steps=rc.compare_steps).values())
+    return uavris.experiments.training.compare
+
+
+def _compare_stage(rc: ReproduceConfig, ctx: StudyContext) -> Stage:
+    configs = _compare().comparison_configs(rc.preset, rc.compare_seeds, ALGORITHMS, "fig2", rc.eval_episodes,
+                                            rc.system, steps=rc.compare_steps)
+    costs = tuple(train_cost(c) for c in configs.values())
     return Stage(COMPARE, {"preset": rc.preset, "seeds": rc.compare_seeds, "steps": rc.compare_steps,
                              "eval_episodes": rc.eval_episodes, "system": rc.system.to_dict()},
                  partial(_run_compare, rc, ctx), costs=costs)
 
 
 def _run_compare(rc: ReproduceConfig, ctx: StudyContext, d: Path, deps: dict[str, Path]) -> dict[str, Any]:
-    from uavris.experiments.training.compare import compare_algorithms
-
-    compare_algorithms(preset=rc.preset, seeds=rc.compare_seeds, workers=ctx.workers, out=d,
-                       eval_episodes=rc.eval_episodes, progress=False, device=ctx.device, system=rc.system,
-                       submit=lambda jobs: ctx.submit(COMPARE, jobs), steps=rc.compare_steps)
+    _compare().compare_algorithms(preset=rc.preset, seeds=rc.compare_seeds, workers=ctx.workers, out=d,
+                                  eval_episodes=rc.eval_episodes, progress=False, device=ctx.device,
+                                  system=rc.system, submit=lambda jobs: ctx.submit(COMPARE, jobs),
+                                  steps=rc.compare_steps)
     return compare_record(read_json(d / "summary.json"))
 
 

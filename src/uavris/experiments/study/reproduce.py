@@ -9,6 +9,7 @@ Lives here: :func:`reproduce` (run or resume the study, then write the report) a
 
 from __future__ import annotations
 
+import math
 import os
 import time
 from pathlib import Path
@@ -115,8 +116,6 @@ def reproduce(rc: ReproduceConfig, out: str | Path, *, workers: int = 2, backend
 def _report_only(out: Path) -> Path:
     """The report of the stages ``out`` holds, of the study its ``study.yaml`` says (the last
     invocation's parameters), nothing run (:func:`reproduce`'s ``report_only``)."""
-    from uavris.experiments.study.report import write_report
-
     if not (out / STUDY_FILE).is_file():
         raise UavrisError(f"--report-only: {out} holds no study (no {STUDY_FILE}); run uavris reproduce first")
     study = Study.open(out)
@@ -124,7 +123,7 @@ def _report_only(out: Path) -> Path:
         records = study.pipeline.finished()
         if not records:
             raise UavrisError(f"--report-only: no stage of the study in {out} has finished")
-        return write_report(study, records, 0.0, ran=False)
+        return _write_report(study, records, 0.0, ran=False)
 
 
 def _run(rc: ReproduceConfig, out: Path, pipeline: Any, ctx: StudyContext, force: Sequence[str], bar: Any,
@@ -136,14 +135,12 @@ def _run(rc: ReproduceConfig, out: Path, pipeline: Any, ctx: StudyContext, force
         records = pipeline.run(tuple(f for f in force if f != "report"), ctx.stage_done)
     finally:
         ctx.close()
-    from uavris.experiments.study.report import write_report
-
     if progress and records and all(r.status == "skipped" for r in records):
         bar.write("every stage was done earlier: only the report and its figures are drawn again")
 
     write_json(out / "schedule.json", {"workers": workers, "origin": origin, "jobs": ctx.schedule(origin),
                                        "eta": ctx.etas(origin)})
-    report = write_report(Study(out, rc, pipeline), records, time.perf_counter() - t0, origin)
+    report = _write_report(Study(out, rc, pipeline), records, time.perf_counter() - t0, origin)
     bar.close()
     failed = [r for r in records if r.status == "failed"]
     if failed or ctx.failures:
@@ -151,6 +148,15 @@ def _run(rc: ReproduceConfig, out: Path, pipeline: Any, ctx: StudyContext, force
         raise UavrisError(f"{len(failed)} stage(s) failed ({', '.join(r.name for r in failed)}); "
                           f"report of the rest: {report}" + (f"; failed job logs: {logs}" if logs else ""))
     return report
+
+
+def _write_report(study: Study, records: Sequence[Any], wall_s: float, origin: float = math.nan,
+                  ran: bool = True) -> Path:
+    """:func:`uavris.experiments.study.report.write_report`, imported when the report is written: its
+    figures load matplotlib, which ``--estimate`` and a study's stages never need."""
+    from uavris.experiments.study.report import write_report
+
+    return write_report(study, records, wall_s, origin, ran)
 
 
 __all__ = ["ReproduceConfig", "estimate", "reproduce"]

@@ -32,6 +32,7 @@ from uavris.experiments.tools.evaluate import write_results
 from uavris.experiments.tools.rows import Row
 from uavris.experiments.tools.targets import LearnedValue
 from uavris.experiments.tools.trajectory import SlotLog, write_slots
+from uavris.experiments.training import finetune, pretrain
 from uavris.experiments.training.collect import collect, dataset_summary
 from uavris.experiments.training.demonstrations import DemonstrationConfig, collect_demonstrations, demonstrate
 from uavris.experiments.training.values import ValueFitConfig, ValueLabelsConfig, fit, make_labels, write_label_part
@@ -96,10 +97,9 @@ def best_demonstrations_job(cfg_dict: dict[str, Any], source: str, fraction: flo
 
 def pretrain_job(cfg_dict: dict[str, Any], out: str, device: str = "cpu") -> dict[str, Any]:
     """Pre-train (or resume) a DT; returns its done.json."""
-    from uavris.experiments.training.pretrain import PretrainConfig, pretrain
-
-    model_dir = Path(out)
-    pretrain(PretrainConfig.from_dict(cfg_dict), model_dir, resume=model_dir.exists(), progress=False, device=device)
+    model_dir = Path(out)  # pretrain.pretrain read when the job runs: tests/test_reproduce.py replaces it
+    pretrain.pretrain(pretrain.PretrainConfig.from_dict(cfg_dict), model_dir, resume=model_dir.exists(),
+                      progress=False, device=device)
     return read_done(model_dir)
 
 
@@ -118,10 +118,9 @@ def value_fit_job(cfg_dict: dict[str, Any], parts: Sequence[str], out: str) -> d
 
 def finetune_job(cfg_dict: dict[str, Any], out: str, device: str = "cpu") -> dict[str, Any]:
     """Fine-tune (or resume) a DT; returns its done.json."""
-    from uavris.experiments.training.finetune import FinetuneConfig, finetune
-
     model_dir = Path(out)
-    finetune(FinetuneConfig.from_dict(cfg_dict), model_dir, resume=model_dir.exists(), progress=False, device=device)
+    finetune.finetune(finetune.FinetuneConfig.from_dict(cfg_dict), model_dir, resume=model_dir.exists(),
+                      progress=False, device=device)
     return read_done(model_dir)
 
 

@@ -20,9 +20,9 @@ The kinds, in the order :func:`uavris.experiments.tools.rows.resolve_target` tri
   (``uavris train``);
 - :class:`UserPolicy`: ``MODULE:NAME`` or ``FILE.py:NAME`` (README, "Your own controller").
 
-The DT, the learned value and an expert's run are read with torch (and SB3): their modules are
-imported where a target of that kind is loaded, so that a light install (no ``[train]``
-extra) evaluates references and a user's policy.
+The DT, the learned value and an expert's run are read with torch (and SB3): what reads them
+(:mod:`.trained_loaders`) is imported where a target of that kind is read or loaded, so that a
+light install (no ``[train]`` extra) evaluates references and a user's policy.
 """
 
 from __future__ import annotations
@@ -32,6 +32,7 @@ import re
 import shutil
 from dataclasses import dataclass
 from pathlib import Path
+from types import ModuleType
 from typing import Any, ClassVar
 
 from uavris.agents.dt.goals import PlannedGoals
@@ -250,14 +251,11 @@ class LearnedValue(ModelDir):
     files: ClassVar[tuple[str, ...]] = ("value.safetensors", "value.json")
 
     def planner_model(self) -> Any:
-        from uavris.agents.place.checkpoint import load_value
-
-        return load_value(self.path)[0]
+        return _trained().load_value(self.path)[0]
 
     def _planner(self) -> Any:
-        from uavris.agents.place.planner import LearnedPlanner, PlaceSettings
-
-        return LearnedPlanner(self.planner_model(), PlaceSettings(top_k=self.top_k), self.deployed)
+        trained = _trained()
+        return trained.LearnedPlanner(self.planner_model(), trained.PlaceSettings(top_k=self.top_k), self.deployed)
 
     def load(self, system: SystemConfig | None = None, device: str = "cpu") -> Loaded:
         return Loaded(self._planner(), system or SystemConfig(), None, self.path)
@@ -290,24 +288,16 @@ class DTModel(ModelDir):
     def recognise(cls, name: str, trust_pickle: bool = False) -> Target | None:
         if not Path(name).is_dir():
             return None
-        from uavris.agents.dt.checkpoint import dt_model_dir
-
-        return cls.at(name) if dt_model_dir(name) is not None else None
+        return cls.at(name) if _trained().dt_model_dir(name) is not None else None
 
     def model_dir(self) -> Path:
-        from uavris.agents.dt.checkpoint import dt_model_dir
-
-        return dt_model_dir(self.path) or self.path
+        return _trained().dt_model_dir(self.path) or self.path
 
     def own_system(self) -> SystemConfig:
-        from uavris.agents.dt.checkpoint import dt_system
-
-        return dt_system(self.path)
+        return _trained().dt_system(self.path)
 
     def load(self, system: SystemConfig | None = None, device: str = "cpu") -> Loaded:
-        from uavris.agents.dt.policy import load_dt_policy
-
-        dt = load_dt_policy(self.path, device=device)
+        dt = _trained().load_dt_policy(self.path, device=device)
         return Loaded(dt.policy, dt.system, dt.scenario, self.path)
 
 
@@ -329,15 +319,20 @@ class ExpertRun(ModelDir):
         return dataclasses.replace(found, trust_pickle=trust_pickle) if found is not None else None
 
     def own_system(self) -> SystemConfig:
-        from uavris.experiments.training.train_expert import load_run_config
-
-        return load_run_config(self.path).system
+        return _trained().load_run_config(self.path).system
 
     def load(self, system: SystemConfig | None = None, device: str = "cpu") -> Loaded:
-        from uavris.experiments.training.train_expert import load_run_policy
-
-        cfg, policy = load_run_policy(self.path, device, self.trust_pickle)
+        cfg, policy = _trained().load_run_policy(self.path, device, self.trust_pickle)
         return Loaded(policy, cfg.system, cfg.resolved_scenario, self.path, cfg.expert_kind)
+
+
+def _trained() -> ModuleType:
+    """:mod:`.trained_loaders`: what the trained kinds are read and loaded with (torch, the train
+    extra), imported where a target of one of them is read or loaded, so that a light install
+    resolves and scores references and a user's policy."""
+    import uavris.experiments.tools.trained_loaders
+
+    return uavris.experiments.tools.trained_loaders
 
 
 EXPORTED_KINDS: dict[str, type[ModelDir]] = {k.kind: k for k in (DTModel, LearnedValue, ExpertRun)}
