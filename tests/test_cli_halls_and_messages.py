@@ -450,8 +450,8 @@ def _flag_names(cls: type, prefix: str) -> set[str]:
     extras = typing.get_type_hints(cls, include_extras=True)
     out: set[str] = set()
     for f in dataclasses.fields(cls):
-        if tyro.conf.Suppress in getattr(extras[f.name], "__metadata__", ()):
-            continue  # not a flag by design (a model's data sizes: the dataset gives them)
+        if tyro.conf.Suppress in getattr(extras[f.name], "__metadata__", ()) or f.metadata.get("internal"):
+            continue  # not a flag by design (a model's data sizes: the dataset gives them; what a config keeps)
         name = f"{prefix}{f.name.replace('_', '-')}"
         nested = [t for t in (hints[f.name], *typing.get_args(hints[f.name])) if dataclasses.is_dataclass(t)]
         out |= _flag_names(nested[0], f"{name}.") if nested else {name}

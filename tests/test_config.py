@@ -86,3 +86,26 @@ def test_config_is_frozen_and_round_trips():
 def test_scenario_custom():
     s = get_scenario([20, 20, 5])
     assert isinstance(s, Scenario) and s.start == (20.0, 20.0, 5.0)
+
+
+def test_a_preset_changed_by_replace_gives_its_values():
+    """dataclasses.replace(cfg, preset=...) gives every field the old preset gave the new preset's
+    value and keeps the fields given otherwise (at construction or in the same replace); an
+    algorithm changed by replace takes its own hyperparameters; the stored form (what stage keys
+    hash) knows nothing of it."""
+    from uavris.agents.experts import default_hyperparams
+    from uavris.experiments.training.pretrain import PretrainConfig
+    from uavris.experiments.training.train_expert import TrainConfig
+    from uavris.presets import PRETRAIN, TRAIN
+
+    paper = dataclasses.replace(PretrainConfig("d"), preset="paper")
+    assert (paper.steps, paper.warmup_steps) == (PRETRAIN["paper"]["steps"], PRETRAIN["paper"]["warmup_steps"])
+    made = PretrainConfig("d", preset="paper")
+    assert paper == made and paper.to_dict() == made.to_dict()
+    kept = dataclasses.replace(PretrainConfig("d", steps=7), preset="paper")
+    assert kept.steps == 7 and kept.learning_rate == PRETRAIN["paper"]["learning_rate"]
+    both = dataclasses.replace(PretrainConfig("d"), preset="smoke", steps=9)
+    assert both.steps == 9 and both.batch_size == PRETRAIN["smoke"]["batch_size"]
+    sac = dataclasses.replace(TrainConfig(preset="smoke"), algo="sac")
+    assert sac.hyperparams == default_hyperparams("sac", "smoke") and sac.total_steps == TRAIN["smoke"]["total_steps"]
+    assert "_from_preset" not in sac.to_dict() and sac.to_dict() == TrainConfig(algo="sac", preset="smoke").to_dict()

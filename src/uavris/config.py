@@ -26,7 +26,7 @@ from dataclasses import dataclass, field
 from typing import Any, Literal, Mapping, Sequence, TypeVar, get_args
 
 from uavris.errors import ConfigError
-from uavris.io import OMIT_DEFAULT, to_plain
+from uavris.io import INTERNAL, OMIT_DEFAULT, to_plain
 
 C = TypeVar("C", bound="DictConfig")
 
@@ -89,16 +89,32 @@ class _PresetValue:
 PRESET: Any = _PresetValue()
 
 
-def fill_from_preset(cfg: Any, table: Mapping[str, Any]) -> None:
-    """Give every field of the frozen dataclass ``cfg`` still at :data:`PRESET` the preset
-    table's value (a :mod:`uavris.presets` table's row): the one way a preset acts, so that
+def fill_from_preset(cfg: PresetConfig, table: Mapping[str, Any]) -> None:
+    """Give every field of the frozen config ``cfg`` still at :data:`PRESET` the preset table's
+    value (a :mod:`uavris.presets` table's row): the one way a preset acts, so that
     ``PretrainConfig(dataset, preset="paper")`` is the paper preset's run, in Python as on the
-    command line. Call it first in ``__post_init__``, before validation."""
+    command line. A field still at the value an earlier preset gave it (``dataclasses.replace(cfg,
+    preset="paper")``, or ``algo=`` where the algorithm's hyperparameters are the preset's) takes
+    this table's too. Call it first in ``__post_init__``, before validation."""
+    earlier = dict(cfg._from_preset)  # what the preset gave the config a dataclasses.replace copied
+    given = {}
     for f in dataclasses.fields(cfg):
-        if getattr(cfg, f.name) is PRESET:
+        value = getattr(cfg, f.name)
+        if value is PRESET or (f.name in earlier and value == earlier[f.name]):
             if f.name not in table:
                 raise ConfigError(f"{type(cfg).__name__}.{f.name} has no value in the preset's table")
             object.__setattr__(cfg, f.name, table[f.name])
+            given[f.name] = table[f.name]
+    object.__setattr__(cfg, "_from_preset", tuple(given.items()))
+
+
+@dataclass(frozen=True)
+class PresetConfig(DictConfig):
+    """A config with a preset (:func:`fill_from_preset`): it keeps the values its preset gave, for
+    a replace that changes the preset to give the new one's."""
+
+    _from_preset: tuple[tuple[str, Any], ...] = field(default=(), kw_only=True, repr=False, compare=False,
+                                                      metadata={INTERNAL: True})
 
 
 def _options(hint: Any) -> tuple[Any, ...]:

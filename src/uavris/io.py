@@ -83,6 +83,7 @@ def atomic_save(path: str | Path, save: Callable[[Path], Any]) -> None:
 
 
 OMIT_DEFAULT = "omit_default"  # dataclass field metadata: left out of to_plain at its default
+INTERNAL = "internal"  # dataclass field metadata: what a config keeps for itself, never written nor a flag
 
 
 def to_plain(obj: Any) -> Any:
@@ -91,7 +92,7 @@ def to_plain(obj: Any) -> Any:
         # A field added after a release is written only when set (metadata OMIT_DEFAULT), so the
         # stage keys hashed from a config (uavris.experiments.engine.stages) stay those of earlier runs.
         return {f.name: to_plain(getattr(obj, f.name)) for f in dataclasses.fields(obj)
-                if not (f.metadata.get(OMIT_DEFAULT) and getattr(obj, f.name) == f.default)}
+                if not (f.metadata.get(INTERNAL) or f.metadata.get(OMIT_DEFAULT) and getattr(obj, f.name) == f.default)}
     if isinstance(obj, dict):
         return {str(k): to_plain(v) for k, v in obj.items()}
     if isinstance(obj, (list, tuple)):

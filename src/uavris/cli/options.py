@@ -29,6 +29,7 @@ from tyro._docstrings import get_field_docstring  # the help of a field, as tyro
 from uavris.agents.torch_device import Device, resolve_device
 from uavris.cli.parsing import HELP, POINTS, Unset, UsageError, output_dir, parse
 from uavris.config import Scenario, SystemConfig, nested_config
+from uavris.io import INTERNAL
 from uavris.layouts import resolve_layout, sets_room
 from uavris.runs import CONFIG_FILE, config_path
 
@@ -46,7 +47,7 @@ def flags_of(config: type) -> type:
     specs: list[tuple[str, Any, Any]] = []
     for f in fields(config):
         hint = hints[f.name]
-        if tyro.conf.Suppress in getattr(hint, "__metadata__", ()):
+        if tyro.conf.Suppress in getattr(hint, "__metadata__", ()) or f.metadata.get(INTERNAL):
             continue
         nested = nested_config(hint)
         if nested is not None:

@@ -12,7 +12,7 @@ import dataclasses
 from typing import Literal, get_args
 
 from uavris.agents.experts import ALGORITHMS
-from uavris.config import PRESET, DictConfig, SystemConfig, fill_from_preset
+from uavris.config import PRESET, PresetConfig, SystemConfig, fill_from_preset
 from uavris.errors import UavrisError
 from uavris.experiments.study.tracks import TRACK_SPECS, TRACKS, Track, sites
 from uavris.layouts import Site
@@ -33,7 +33,7 @@ assert set(TRACK_CHOICES) == set(TRACK_SETS) | set(TRACKS) and set(get_args(Expe
 
 
 @dataclasses.dataclass(frozen=True)
-class ReproduceConfig(DictConfig):
+class ReproduceConfig(PresetConfig):
     """Everything that determines the study (dumped into the report). Fields left at
     ``PRESET`` take the preset's values (:data:`uavris.presets.STUDY`)."""
 

@@ -55,7 +55,7 @@ from uavris.agents.place.planner import learned_plan, places_to_try
 from uavris.agents.policy import LevelAttitude, check_policy_fits
 from uavris.config import (
     PRESET,
-    DictConfig,
+    PresetConfig,
     Scenario,
     ScenarioName,
     SystemConfig,
@@ -85,7 +85,7 @@ ROUND_HEADER = ("round", "env_interactions", "gradient_steps", "candidate_mean_r
 
 
 @dataclass(frozen=True)
-class FinetuneConfig(DictConfig):
+class FinetuneConfig(PresetConfig):
     """Everything that determines a fine-tuning run (dumped as config.yaml). Fields left at
     ``PRESET`` take the preset's values (:data:`uavris.presets.FINETUNE`)."""
 

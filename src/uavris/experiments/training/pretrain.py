@@ -38,7 +38,7 @@ from uavris.agents.dt.training import (
     train_steps,
 )
 from uavris.agents.dt.trajectories import default_target_return
-from uavris.config import PRESET, DictConfig, check_non_negative, check_positive, fill_from_preset
+from uavris.config import PRESET, PresetConfig, check_non_negative, check_positive, fill_from_preset
 from uavris.env.simulator import layout_as_lists
 from uavris.env.wrappers import action_dim_for
 from uavris.errors import ConfigError
@@ -60,7 +60,7 @@ LOG_HEADER = ("step", "loss", "learning_rate")  # throughput: TensorBoard (perf/
 
 
 @dataclass(frozen=True)
-class PretrainConfig(DictConfig):
+class PretrainConfig(PresetConfig):
     """Everything that determines a pre-training run (dumped as config.yaml). Fields left at
     ``PRESET`` take the preset's values (:data:`uavris.presets.PRETRAIN`); ``model`` may be
     given as a mapping of the :class:`~uavris.agents.dt.config.DTConfig` fields that differ

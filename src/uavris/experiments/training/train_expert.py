@@ -54,7 +54,7 @@ from uavris.agents.experts.sb3 import SB3Policy, build_model, has_policy, load_m
 from uavris.agents.experts.vec_env import UavRisVecEnv
 from uavris.config import (
     PRESET,
-    DictConfig,
+    PresetConfig,
     Scenario,
     ScenarioName,
     SystemConfig,
@@ -74,7 +74,7 @@ EVAL_HEADER = ("env_steps", "episodes", "mean", "ci_low", "ci_high", "iqm")
 
 
 @dataclass(frozen=True)
-class TrainConfig(DictConfig):
+class TrainConfig(PresetConfig):
     """Everything that determines a training run (dumped as config.yaml). Fields left at
     ``PRESET`` take the preset's values (:data:`uavris.presets.TRAIN`; the hyperparameters:
     :func:`uavris.agents.experts.default_hyperparams` of the algorithm and preset)."""

@@ -22,7 +22,7 @@ import numpy as np
 from uavris.agents.place.checkpoint import save_value
 from uavris.agents.place.labels import hall_labels
 from uavris.agents.place.value import ValueConfig, ValueLabels, fit_value
-from uavris.config import PRESET, DictConfig, SystemConfig, fill_from_preset
+from uavris.config import PRESET, DictConfig, PresetConfig, SystemConfig, fill_from_preset
 from uavris.errors import ConfigError
 from uavris.io import atomic_write_bytes, write_csv, write_json
 from uavris.layouts import LayoutGenerator
@@ -105,7 +105,7 @@ def read_labels(parts: Sequence[str | Path]) -> ValueLabels:
 
 
 @dataclass(frozen=True)
-class ValueFitConfig(DictConfig):
+class ValueFitConfig(PresetConfig):
     """A fit of the learned value. Fields left at ``PRESET`` take the preset's values
     (:data:`uavris.presets.VALUE`)."""
 
