@@ -322,9 +322,9 @@ def test_a_flag_written_at_the_parses_default_value_is_still_given(tmp_path: Pat
 
 
 def test_the_one_parse_checks_nothing_against_its_own_defaults(tmp_path: Path, monkeypatch) -> None:
-    """The parse takes the line's values as they are (the parse's defaults are another preset's budgets,
-    a placeholder scenario, the paper's hall); the config built from the line's choices is what is
-    checked: lines valid for their preset, hall or file build, and an invalid one is still refused."""
+    """The parse takes the line's values as they are (a config's flags, which check nothing); the config
+    built from the line's choices (another preset's budgets, a hall, a file) is what is checked: lines
+    valid for their preset, hall or file build, and an invalid one is still refused."""
     import yaml
 
     from uavris.agents.experts.imitation import ImitationConfig

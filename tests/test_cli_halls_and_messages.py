@@ -571,3 +571,25 @@ def test_a_named_scenario_flies_in_the_papers_hall_with_the_flags_written(hall_r
                  "--system.z-max", "8", "--episodes", "1", "--out", str(out), "--no-progress"]) == 0
     got = _only_json(out)
     assert got["system"]["room"] == [40.0, 40.0, 8.0] and got["system"]["users"] == [list(u) for u in PAPER_USERS]
+
+
+def test_none_written_is_none_only_where_the_field_takes_it(capsys: pytest.CaptureFixture[str]) -> None:
+    """``None`` on the line is None for a field that takes it, and a value like any other (judged as
+    one) for a field that does not: one line, never a traceback."""
+    from uavris.cli.training import parse_train
+
+    assert parse_train(["--system.max-active-pairs", "None"]).run.system.max_active_pairs is None
+    err = _one_line(capsys, main(["train", "--algo", "sac", "--hyperparams.ent-coef", "None"]))
+    assert "Hyperparams.ent_coef must be 'auto' or a number, got 'None'" in err, err
+
+
+@pytest.mark.parametrize("line, message", [
+    (["train", "--total-steps", "abc"], "--total-steps expects INT, got abc"),
+    (["train", "--system.v-max", "fast"], "--system.v-max expects FLOAT, got fast"),
+    (["train", "--algo", "None"], "--algo expects one of ddpg, ppo, sac, td3, got None"),
+    (["reproduce", "--device-counts", "a"], "--device-counts expects [INT [INT ...]], got a"),
+])
+def test_a_value_of_the_wrong_type_names_the_flag_and_what_it_takes(line: list[str], message: str,
+                                                                     capsys: pytest.CaptureFixture[str]) -> None:
+    err = _one_line(capsys, main(line))
+    assert message in err, err

@@ -106,6 +106,28 @@ def test_a_preset_changed_by_replace_gives_its_values():
     assert kept.steps == 7 and kept.learning_rate == PRETRAIN["paper"]["learning_rate"]
     both = dataclasses.replace(PretrainConfig("d"), preset="smoke", steps=9)
     assert both.steps == 9 and both.batch_size == PRETRAIN["smoke"]["batch_size"]
+    again = dataclasses.replace(PretrainConfig("d"), preset="smoke", steps=1500)  # the quick preset's value, given
+    assert PRETRAIN["quick"]["steps"] == 1500 and again.steps == 1500
+    from uavris.cli.training import parse_train
+
+    line = parse_train(["--preset", "smoke", "--total-steps", str(TRAIN["smoke"]["total_steps"])]).run
+    assert dataclasses.replace(line, preset="paper").total_steps == TRAIN["smoke"]["total_steps"]  # written
+    assert dataclasses.replace(line, preset="paper").eval_every == TRAIN["paper"]["eval_every"]  # the preset's
     sac = dataclasses.replace(TrainConfig(preset="smoke"), algo="sac")
     assert sac.hyperparams == default_hyperparams("sac", "smoke") and sac.total_steps == TRAIN["smoke"]["total_steps"]
     assert "_from_preset" not in sac.to_dict() and sac.to_dict() == TrainConfig(algo="sac", preset="smoke").to_dict()
+
+
+def test_every_config_with_a_preset_reads_back_its_stored_form():
+    """What a run directory or a job stores (to_dict) reads back (from_dict) to an equal config, for
+    every config class with a preset, each in its own module."""
+    from uavris.experiments.study.config import ReproduceConfig
+    from uavris.experiments.training.finetune import FinetuneConfig
+    from uavris.experiments.training.pretrain import PretrainConfig
+    from uavris.experiments.training.train_expert import TrainConfig
+    from uavris.experiments.training.values import ValueFitConfig
+
+    for cfg in (TrainConfig(preset="smoke"), PretrainConfig("d", preset="paper"), ReproduceConfig(preset="smoke"),
+                FinetuneConfig(model="m", scenario="unseen1", preset="smoke"), ValueFitConfig(preset="smoke")):
+        stored = cfg.to_dict()
+        assert "_from_preset" not in stored and type(cfg).from_dict(stored) == cfg, type(cfg).__name__

@@ -50,7 +50,7 @@ class DictConfig:
     def from_dict(cls: type[C], d: Mapping[str, Any]) -> C:
         if not isinstance(d, Mapping):
             raise ConfigError(f"{cls.__name__} must be given as a mapping of its fields, got {type(d).__name__}")
-        known = {f.name for f in dataclasses.fields(cls)}  # type: ignore[arg-type]
+        known = {f.name for f in dataclasses.fields(cls) if not f.metadata.get(INTERNAL)}  # type: ignore[arg-type]
         unknown = sorted(set(d) - known)
         if unknown:
             raise ConfigError(f"{cls.__name__} has no field(s) {unknown}; known fields: {sorted(known)}")
@@ -100,7 +100,8 @@ def fill_from_preset(cfg: PresetConfig, table: Mapping[str, Any]) -> None:
     given = {}
     for f in dataclasses.fields(cfg):
         value = getattr(cfg, f.name)
-        if value is PRESET or (f.name in earlier and value == earlier[f.name]):
+        # the very object the preset gave (dataclasses.replace copies it), not a value given equal to it
+        if value is PRESET or (f.name in earlier and value is earlier[f.name]):
             if f.name not in table:
                 raise ConfigError(f"{type(cfg).__name__}.{f.name} has no value in the preset's table")
             object.__setattr__(cfg, f.name, table[f.name])
@@ -111,10 +112,13 @@ def fill_from_preset(cfg: PresetConfig, table: Mapping[str, Any]) -> None:
 @dataclass(frozen=True)
 class PresetConfig(DictConfig):
     """A config with a preset (:func:`fill_from_preset`): it keeps the values its preset gave, for
-    a replace that changes the preset to give the new one's."""
+    a replace that changes the preset to give the new one's. Kept in memory only: a config read
+    back from its dict (a run's config.yaml) holds none, and a replace keeps its values. A value
+    given that is the very object the preset gave (a small integer, say 64 where the preset's is
+    64) is read as the preset's."""
 
-    _from_preset: tuple[tuple[str, Any], ...] = field(default=(), kw_only=True, repr=False, compare=False,
-                                                      metadata={INTERNAL: True})
+    # (name, value) pairs; a plain tuple, so that its type reads in every subclass's module
+    _from_preset: tuple = field(default=(), kw_only=True, repr=False, compare=False, metadata={INTERNAL: True})
 
 
 def _options(hint: Any) -> tuple[Any, ...]:

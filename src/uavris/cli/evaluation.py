@@ -16,7 +16,7 @@ from typing import Annotated, Literal
 import tyro
 
 from uavris.agents.torch_device import Device, resolve_device
-from uavris.cli.options import SystemFlags, in_hall, parse_in_hall, seed_note, written
+from uavris.cli.options import SystemFlags, in_hall, layered, parse_in_hall, seed_note, written
 from uavris.cli.parsing import Unset, UsageError, output_dir, writing
 from uavris.config import ScenarioName, SystemConfig
 from uavris.env.wrappers import PhaseControl
@@ -248,10 +248,12 @@ def benchmark_command(args: list[str]) -> None:
     if a.layout is not None and a.cells != "all":
         raise UsageError(f"--cells {a.cells} chooses among the protocol's cells and --layout is a cell of its own; "
                          "pass one of them")
+    flags = written(a.system)
+    layered(SystemConfig(), flags)  # each flag's own range judged before anything is written
     with writing(a.out or default_benchmark_dir(a.target if a.row is None else a.row)) as out:
         if a.row is not None:  # the study's row as a controller of its own, kept beside the results
             a = replace(a, target=str(_row_controller(a.target, a.row, a.track, out / "controller")))
-        system, _ = in_hall(a.layout, resolve_target(a.target).own_system(), written(a.system))  # --layout: one cell
+        system, _ = in_hall(a.layout, resolve_target(a.target).own_system(), flags)  # --layout: one cell
         rows, md = benchmark(a.target, a.preset, a.cells, out, resolve_device(a.device), progress=a.progress,
                              system=system, phase_control=a.phase_control, layout=a.layout,
                              trust_pickle=a.trust_pickle)

@@ -24,16 +24,22 @@ from pathlib import Path
 from typing import Annotated, Any, Literal, Optional, Union
 
 import tyro
-from tyro._docstrings import get_field_docstring  # the help of a field, as tyro reads it from its class
 
 from uavris.agents.torch_device import Device, resolve_device
 from uavris.cli.parsing import HELP, POINTS, Unset, UsageError, output_dir, parse
-from uavris.config import Scenario, SystemConfig, nested_config
+from uavris.config import PresetConfig, Scenario, SystemConfig, nested_config
 from uavris.io import INTERNAL
 from uavris.layouts import resolve_layout, sets_room
 from uavris.runs import CONFIG_FILE, config_path
 
+try:  # the help of a field, as tyro reads it from its class: private in tyro 1.0, whose version the project pins
+    from tyro._docstrings import get_field_docstring
+except ImportError:  # another tyro: the flags without their help, every command still works
+    def get_field_docstring(cls: type, name: str, markers: tuple) -> str | None:
+        return None
+
 NONE_WRITTEN = "None"  # how a line writes None to a field that takes it (--system.max-active-pairs None)
+_TAKES_NONE = "takes_none"  # a flag's metadata: its field takes None, so "None" written is None
 _FLAGS: dict[type, type] = {}
 
 
@@ -56,10 +62,12 @@ def flags_of(config: type) -> type:
         if typing.get_origin(hint) is Annotated:
             hint = typing.get_args(hint)[0]
         kinds = typing.get_args(hint) if typing.get_origin(hint) in (Union, types.UnionType) else ()
-        if type(None) in kinds:  # None is a value of it: written as "None"
+        nullable = type(None) in kinds
+        if nullable:  # None is a value of it: written as "None"
             hint = Union[(Literal["None"], *(k for k in kinds if k is not type(None)))]
         arg = tyro.conf.arg(help=get_field_docstring(config, f.name, ()), metavar=_metavar(hint))
-        specs.append((f.name, Annotated[Optional[hint], tyro.conf.DisallowNone, arg], None))
+        specs.append((f.name, Annotated[Optional[hint], tyro.conf.DisallowNone, arg],
+                      field(default=None, metadata={_TAKES_NONE: nullable})))
     flags = make_dataclass(config.__name__, specs, frozen=True, namespace={"__doc__": config.__doc__})
     flags.__module__ = config.__module__
     _FLAGS[config] = flags
@@ -88,7 +96,7 @@ def written(flags: Any) -> dict[str, Any]:
             if inner:
                 out[f.name] = inner
         elif value is not None:
-            out[f.name] = None if value == NONE_WRITTEN and isinstance(value, str) else value
+            out[f.name] = None if f.metadata.get(_TAKES_NONE) and value == NONE_WRITTEN else value
     return out
 
 
@@ -102,6 +110,8 @@ def layered(base: Any, changes: dict[str, Any]) -> Any:
             under = getattr(base, name)
             value = layered(nested_config(hints[name])() if under is None else under, value)
         out[name] = value
+    if isinstance(base, PresetConfig):  # a field written is the user's, even at the preset's value
+        out["_from_preset"] = tuple((k, v) for k, v in base._from_preset if k not in out)
     return replace(base, **out)
 
 

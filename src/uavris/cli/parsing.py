@@ -1,4 +1,4 @@
-"""Turning argv into config dataclasses with tyro, and a rejected command line into one line.
+"""Turning argv into dataclasses with tyro (a config's flags), and a rejected command line into one line.
 
 Lives here: :func:`parse` (tyro over a command's dataclass, its defaults given; a rejected
 command line becomes one :class:`UsageError` line, built from tyro's parse-error event),
@@ -19,6 +19,7 @@ from __future__ import annotations
 import contextlib
 import inspect
 import io
+import re
 import sys
 import tempfile
 from pathlib import Path
@@ -114,6 +115,13 @@ def _one_line(event: Any) -> str:
         if event.argument is None:
             return message
         name = event.argument.display_name()
+        unread = re.fullmatch(r"no type matching (.*) could be instantiated from \[(.*)\]\.?", message)
+        if unread:  # a flag's value of the wrong type (its flag is optional: not written is None)
+            expected, got = unread.group(1), unread.group(2).replace("'", "")
+            choices = re.fullmatch(r"\{([^{}\[\] ]+)\}", expected)  # {ddpg,ppo,sac,td3}
+            expected = (f"one of {', '.join(choices.group(1).split(','))}" if choices
+                        else expected.removeprefix("{").removesuffix("}"))
+            return f"{name} expects {expected}, got {got}"
         return f"{name} {message}" if name.endswith("users") else f"{name}: {message}"
     return f"the command line does not parse ({type(event).__name__})"
 
