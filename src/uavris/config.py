@@ -79,48 +79,6 @@ class DictConfig:
         return self
 
 
-class _PresetValue:
-    """The default of a field whose value comes from the config's preset (:data:`PRESET`)."""
-
-    def __repr__(self) -> str:
-        return "<the preset's>"
-
-
-PRESET: Any = _PresetValue()
-
-
-def fill_from_preset(cfg: PresetConfig, table: Mapping[str, Any]) -> None:
-    """Give every field of the frozen config ``cfg`` still at :data:`PRESET` the preset table's
-    value (a :mod:`uavris.presets` table's row): the one way a preset acts, so that
-    ``PretrainConfig(dataset, preset="paper")`` is the paper preset's run, in Python as on the
-    command line. A field still at the value an earlier preset gave it (``dataclasses.replace(cfg,
-    preset="paper")``, or ``algo=`` where the algorithm's hyperparameters are the preset's) takes
-    this table's too. Call it first in ``__post_init__``, before validation."""
-    earlier = dict(cfg._from_preset)  # what the preset gave the config a dataclasses.replace copied
-    given = {}
-    for f in dataclasses.fields(cfg):
-        value = getattr(cfg, f.name)
-        # the very object the preset gave (dataclasses.replace copies it), not a value given equal to it
-        if value is PRESET or (f.name in earlier and value is earlier[f.name]):
-            if f.name not in table:
-                raise ConfigError(f"{type(cfg).__name__}.{f.name} has no value in the preset's table")
-            object.__setattr__(cfg, f.name, table[f.name])
-            given[f.name] = table[f.name]
-    object.__setattr__(cfg, "_from_preset", tuple(given.items()))
-
-
-@dataclass(frozen=True)
-class PresetConfig(DictConfig):
-    """A config with a preset (:func:`fill_from_preset`): it keeps the values its preset gave, for
-    a replace that changes the preset to give the new one's. Kept in memory only: a config read
-    back from its dict (a run's config.yaml) holds none, and a replace keeps its values. A value
-    given that is the very object the preset gave (a small integer, say 64 where the preset's is
-    64) is read as the preset's."""
-
-    # (name, value) pairs; a plain tuple, so that its type reads in every subclass's module
-    _from_preset: tuple = field(default=(), kw_only=True, repr=False, compare=False, metadata={INTERNAL: True})
-
-
 def _options(hint: Any) -> tuple[Any, ...]:
     """The types a field's annotation allows (``X | Y`` -> X, Y)."""
     union = isinstance(hint, types.UnionType) or typing.get_origin(hint) is typing.Union

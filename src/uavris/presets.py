@@ -5,16 +5,21 @@ Lives here: :data:`PRESETS`, :func:`check_preset` and the budgets of the ``smoke
 presets, one table per config class: expert training (:data:`TRAIN`), the DT's pre-training
 and fine-tuning (:data:`PRETRAIN`, :data:`FINETUNE`), the study (:data:`STUDY`), and the
 strong track's experts; and the seed bases (:data:`EVAL_SEED`, ...) that keep evaluation,
-collection, fine-tuning and imitation episodes apart. Not here: what the numbers mean and why (the module that uses a
-table explains its values) and the experts' hyperparameters, kept with their reasons in
-:mod:`uavris.agents.experts.hyperparams`.
+collection, fine-tuning and imitation episodes apart; how a preset acts on a config
+(:data:`PRESET`, :func:`fill_from_preset`, :class:`PresetConfig`). Not here: what the numbers
+mean and why (the module that uses a table explains its values) and the experts'
+hyperparameters, kept with their reasons in :mod:`uavris.agents.experts.hyperparams`.
 """
 
 from __future__ import annotations
 
-from typing import Any, Literal, get_args
+import dataclasses
+from dataclasses import dataclass, field
+from typing import Any, Literal, Mapping, get_args
 
+from uavris.config import DictConfig
 from uavris.errors import ConfigError
+from uavris.io import INTERNAL
 
 Preset = Literal["smoke", "quick", "paper"]  # what --preset accepts
 PRESETS: tuple[str, ...] = get_args(Preset)
@@ -27,7 +32,7 @@ IMITATION_SEED = 4_000_000  # the strong experts' imitation rollouts
 VALUE_SEED = 5_000_000  # the learned value's labelled poses and their draws
 
 # A table per config class, each complete: a config built with ``preset=NAME`` takes every
-# field of ``TABLE[NAME]`` that it is not given (uavris.config.PRESET marks those fields), in
+# field of ``TABLE[NAME]`` that it is not given (PRESET, below, marks those fields), in
 # Python as on the command line.
 
 # Expert training (uavris.experiments.training.train_expert.TrainConfig): env steps, the
@@ -153,3 +158,46 @@ TRACK_FINETUNE: dict[str, dict[str, dict[str, Any]]] = {
 def check_preset(preset: str) -> None:
     if preset not in PRESETS:
         raise ConfigError(f"unknown preset {preset!r}; choose one of {', '.join(PRESETS)}")
+
+
+# ------------------------------------------------------------------ how a preset acts on a config
+class _PresetValue:
+    """The default of a field whose value comes from the config's preset (:data:`PRESET`)."""
+
+    def __repr__(self) -> str:
+        return "<the preset's>"
+
+
+PRESET: Any = _PresetValue()
+
+
+def fill_from_preset(cfg: PresetConfig, table: Mapping[str, Any]) -> None:
+    """Give every field of the frozen config ``cfg`` still at :data:`PRESET` the preset table's
+    value (a :mod:`uavris.presets` table's row): the one way a preset acts, so that
+    ``PretrainConfig(dataset, preset="paper")`` is the paper preset's run, in Python as on the
+    command line. A field still at the value an earlier preset gave it (``dataclasses.replace(cfg,
+    preset="paper")``, or ``algo=`` where the algorithm's hyperparameters are the preset's) takes
+    this table's too. Call it first in ``__post_init__``, before validation."""
+    earlier = dict(cfg._from_preset)  # what the preset gave the config a dataclasses.replace copied
+    given = {}
+    for f in dataclasses.fields(cfg):
+        value = getattr(cfg, f.name)
+        # the very object the preset gave (dataclasses.replace copies it), not a value given equal to it
+        if value is PRESET or (f.name in earlier and value is earlier[f.name]):
+            if f.name not in table:
+                raise ConfigError(f"{type(cfg).__name__}.{f.name} has no value in the preset's table")
+            object.__setattr__(cfg, f.name, table[f.name])
+            given[f.name] = table[f.name]
+    object.__setattr__(cfg, "_from_preset", tuple(given.items()))
+
+
+@dataclass(frozen=True)
+class PresetConfig(DictConfig):
+    """A config with a preset (:func:`fill_from_preset`): it keeps the values its preset gave, for
+    a replace that changes the preset to give the new one's. Kept in memory only: a config read
+    back from its dict (a run's config.yaml) holds none, and a replace keeps its values. A value
+    given that is the very object the preset gave (a small integer, say 64 where the preset's is
+    64) is read as the preset's."""
+
+    # (name, value) pairs; a plain tuple, so that its type reads in every subclass's module
+    _from_preset: tuple = field(default=(), kw_only=True, repr=False, compare=False, metadata={INTERNAL: True})

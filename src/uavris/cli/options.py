@@ -27,9 +27,10 @@ import tyro
 
 from uavris.agents.torch_device import Device, resolve_device
 from uavris.cli.parsing import HELP, POINTS, Unset, UsageError, output_dir, parse
-from uavris.config import PresetConfig, Scenario, SystemConfig, nested_config
+from uavris.config import Scenario, SystemConfig, nested_config
 from uavris.io import INTERNAL
 from uavris.layouts import resolve_layout, sets_room
+from uavris.presets import PresetConfig
 from uavris.runs import CONFIG_FILE, config_path
 
 try:  # the help of a field, as tyro reads it from its class: private in tyro 1.0, whose version the project pins

@@ -12,11 +12,11 @@ import dataclasses
 from typing import Literal, get_args
 
 from uavris.agents.experts import ALGORITHMS
-from uavris.config import PRESET, PresetConfig, SystemConfig, fill_from_preset
+from uavris.config import SystemConfig
 from uavris.errors import UavrisError
 from uavris.experiments.study.tracks import TRACK_SPECS, TRACKS, Track, sites
 from uavris.layouts import Site
-from uavris.presets import STUDY, Preset, check_preset
+from uavris.presets import PRESET, STUDY, Preset, PresetConfig, check_preset, fill_from_preset
 
 # "all": the three tracks; "both": the paper and the strong track (the study before layouts).
 TrackChoice = Literal["all", "both", "paper", "strong", "deployment"]

@@ -54,14 +54,11 @@ from uavris.agents.place.checkpoint import load_value
 from uavris.agents.place.planner import learned_plan, places_to_try
 from uavris.agents.policy import LevelAttitude, check_policy_fits
 from uavris.config import (
-    PRESET,
-    PresetConfig,
     Scenario,
     ScenarioName,
     SystemConfig,
     check_non_negative,
     check_positive,
-    fill_from_preset,
     float_tuple,
     scenario_at,
 )
@@ -77,7 +74,16 @@ from uavris.experiments.training.dt_runs import (
     write_checkpoint,
 )
 from uavris.io import read_rows, write_csv
-from uavris.presets import EVAL_SEED, FINETUNE, FINETUNE_SEED, Preset, check_preset
+from uavris.presets import (
+    EVAL_SEED,
+    FINETUNE,
+    FINETUNE_SEED,
+    PRESET,
+    Preset,
+    PresetConfig,
+    check_preset,
+    fill_from_preset,
+)
 from uavris.runs import RunClock, write_done
 
 ROUND_HEADER = ("round", "env_interactions", "gradient_steps", "candidate_mean_return", "candidate_avg_sum_rate",

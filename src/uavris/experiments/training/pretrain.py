@@ -38,7 +38,7 @@ from uavris.agents.dt.training import (
     train_steps,
 )
 from uavris.agents.dt.trajectories import default_target_return
-from uavris.config import PRESET, PresetConfig, check_non_negative, check_positive, fill_from_preset
+from uavris.config import check_non_negative, check_positive
 from uavris.env.simulator import layout_as_lists
 from uavris.env.wrappers import action_dim_for
 from uavris.errors import ConfigError
@@ -52,7 +52,7 @@ from uavris.experiments.training.dt_runs import (
     write_checkpoint,
 )
 from uavris.io import read_rows, write_csv
-from uavris.presets import PRETRAIN, Preset, check_preset
+from uavris.presets import PRESET, PRETRAIN, Preset, PresetConfig, check_preset, fill_from_preset
 from uavris.runs import RunClock, write_done
 
 TARGET_QUANTILE = 0.9

@@ -52,21 +52,12 @@ from uavris.agents.experts import (
 from uavris.agents.experts.imitation import ImitationConfig, imitate
 from uavris.agents.experts.sb3 import SB3Policy, build_model, has_policy, load_model, load_policy, save_policy
 from uavris.agents.experts.vec_env import UavRisVecEnv
-from uavris.config import (
-    PRESET,
-    PresetConfig,
-    Scenario,
-    ScenarioName,
-    SystemConfig,
-    fill_from_preset,
-    float_tuple,
-    scenario_at,
-)
+from uavris.config import Scenario, ScenarioName, SystemConfig, float_tuple, scenario_at
 from uavris.env.wrappers import PhaseControl, check_phase_control
 from uavris.errors import CheckpointError, ConfigError, UavrisError
 from uavris.experiments.display.progress import progress_bar
 from uavris.io import atomic_save, atomic_write_bytes, read_csv, read_rows, refuse_links_out, write_csv
-from uavris.presets import EVAL_SEED, TRAIN, Preset, check_preset
+from uavris.presets import EVAL_SEED, PRESET, TRAIN, Preset, PresetConfig, check_preset, fill_from_preset
 from uavris.runs.seal import TRUST_FLAG, check_sealed, seal
 
 EPISODE_HEADER = ("episode", "env_steps", "avg_sum_rate", "return", "length")

@@ -22,11 +22,11 @@ import numpy as np
 from uavris.agents.place.checkpoint import save_value
 from uavris.agents.place.labels import hall_labels
 from uavris.agents.place.value import ValueConfig, ValueLabels, fit_value
-from uavris.config import PRESET, DictConfig, PresetConfig, SystemConfig, fill_from_preset
+from uavris.config import DictConfig, SystemConfig
 from uavris.errors import ConfigError
 from uavris.io import atomic_write_bytes, write_csv, write_json
 from uavris.layouts import LayoutGenerator
-from uavris.presets import VALUE, VALUE_SEED, Preset, check_preset
+from uavris.presets import PRESET, VALUE, VALUE_SEED, Preset, PresetConfig, check_preset, fill_from_preset
 from uavris.runs import TIMING_FILE
 
 
