@@ -56,6 +56,7 @@ bench: $(STAMP)
 	$(PY) benchmarks/sb3_share.py
 	$(PY) benchmarks/dt_throughput.py
 	$(PY) benchmarks/oracle_throughput.py
+	$(PY) benchmarks/slot_memo.py
 	$(PY) benchmarks/paper_wallclock.py
 	$(PY) benchmarks/reproduce_scaling.py
 

@@ -128,6 +128,7 @@ from uavris.config import SystemConfig
 from uavris.physics import streams
 from uavris.physics.co_phasing import co_phasing_phases, single_pair_snr, target_phases_to_presets  # noqa: F401
 from uavris.physics.phase_kernel import solve_slots
+from uavris.physics.slot_memo import SlotMemo
 
 # The first compile of the kernel on one core (measured, docs/timings.md: 13 s on the AMD EPYC of family 26,
 # 24 s on one of family 25 with the other core busy); numba caches it beside the module (or in
@@ -288,7 +289,8 @@ def optimize_phases(channels: ArrayLike, cos_theta: ArrayLike, pairing: ArrayLik
                     memory: int = DEFAULT_MEMORY, polish_steps: int = DEFAULT_POLISH_STEPS,
                     seed: int = 0, warm: ArrayLike | None = None,
                     warm_iterations: int = DEFAULT_WARM_ITERATIONS,
-                    warm_levels: tuple[float, ...] = DEFAULT_WARM_LEVELS) -> PhaseSolution:
+                    warm_levels: tuple[float, ...] = DEFAULT_WARM_LEVELS,
+                    memo: SlotMemo | None = None) -> PhaseSolution:
     """Sum-rate-maximising unit-modulus phases for every slot of a batch (method: module docstring).
 
     Args:
@@ -363,9 +365,10 @@ def optimize_phases(channels: ArrayLike, cos_theta: ArrayLike, pairing: ArrayLik
             else:  # the warm start optimised, the co-phasing starts valued beside it
                 phi0, n_opt = np.concatenate([w[sel][:, None], starts[multi[sel]]], axis=1), 1
             sub_phi, sub_rate = np.empty((sel.size, n)), np.empty(sel.size)
-            solve_slots(*(x[sel] for x in part), cos_tx[sel], np.ascontiguousarray(phi0), n_opt, float(tx_power_w),
-                        float(noise_w), np.asarray(levels, dtype=np.float64), its, memory, polish_steps,
-                        bool(angle_dependent), INITIAL_STEP, MAX_STEP, MIN_STEP, sub_phi, sub_rate)
+            solve = solve_slots if memo is None else memo.solve
+            solve(*(x[sel] for x in part), cos_tx[sel], np.ascontiguousarray(phi0), n_opt, float(tx_power_w),
+                  float(noise_w), np.asarray(levels, dtype=np.float64), its, memory, polish_steps,
+                  bool(angle_dependent), INITIAL_STEP, MAX_STEP, MIN_STEP, sub_phi, sub_rate)
             out_phi[sel], out_rate[sel] = sub_phi, sub_rate
         phases[multi] = out_phi
         rate[multi] = out_rate

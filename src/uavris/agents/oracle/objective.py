@@ -40,12 +40,17 @@ from uavris import physics as ph
 from uavris.config import SystemConfig
 from uavris.physics import streams
 from uavris.physics.phase_opt import optimize_slot_phases
+from uavris.physics.slot_memo import SlotMemo
 
 # Above this many pairings (K = 4 has 24) the expectation samples this many (stratified by the
 # number of active pairs, common random numbers) instead of enumerating them: the cost of a
 # pose then grows with K only through the optimiser's cost per slot (measured in
 # benchmarks/oracle_throughput.py, with the sampled value's error against 256 samples).
 MAX_ENUMERATED_PAIRINGS = 24
+# Every R of this process solves its slots through this memo: a pose valued again (a pattern
+# search stepping back, a finalist checked, a place every row is told) costs nothing, with the
+# same bits (uavris.physics.slot_memo).
+SLOT_MEMO = SlotMemo()
 ARRIVAL_TOLERANCE = 0.05  # m: the trip is over within this distance of the target, at rest
 
 
@@ -95,8 +100,10 @@ def expected_optimised_rate(config: SystemConfig, position: NDArray, attitude: N
     """``R`` of poses ``(P, 3)``, ``(P, 3)``: expected sum rate with per-slot optimised phases, ``(P,)``.
 
     Exact over the pairing, ``draws`` NLoS draws (the same for every pose), see the module
-    docstring; ``optimiser`` settings go to :func:`uavris.physics.phase_opt.optimize_phases`.
+    docstring; ``optimiser`` settings go to :func:`uavris.physics.phase_opt.optimize_phases`
+    (its slots through :data:`SLOT_MEMO` unless ``memo`` is given; ``memo=None``: none).
     """
+    optimiser.setdefault("memo", SLOT_MEMO)
     c = config
     pos = np.atleast_2d(np.asarray(position, dtype=np.float64))
     att = np.broadcast_to(np.asarray(attitude, dtype=np.float64), pos.shape)
