@@ -417,8 +417,8 @@ def test_every_kind_of_system_flag_written_on_the_line_changes_the_targets_syste
                         propulsion=PropulsionParams(induced_w=90.0))
     args = ["zero-action", "--system.no-angle-dependent-reflection", "--system.propulsion.tip-speed", "110",
             "--system.v-max=3", "--system.nx", str(SystemConfig().nx)]
-    got, hall = in_hall(None, base, written(parse(EvaluateArgs, args, "uavris evaluate", "").system))
-    assert hall is None
+    got, hall, layout = in_hall(None, base, written(parse(EvaluateArgs, args, "uavris evaluate", "").system))
+    assert hall is None and layout is None
     assert got == base.replace(angle_dependent_reflection=False, v_max=3.0,
                                propulsion=PropulsionParams(induced_w=90.0, tip_speed=110.0))
     assert got.horizon == 30 and got.learn_amplitudes and got.observe_devices and got.propulsion.induced_w == 90.0

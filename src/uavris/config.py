@@ -79,7 +79,7 @@ class DictConfig:
         return self
 
 
-def _options(hint: Any) -> tuple[Any, ...]:
+def union_members(hint: Any) -> tuple[Any, ...]:
     """The types a field's annotation allows (``X | Y`` -> X, Y)."""
     union = isinstance(hint, types.UnionType) or typing.get_origin(hint) is typing.Union
     return get_args(hint) if union else (hint,)
@@ -87,14 +87,14 @@ def _options(hint: Any) -> tuple[Any, ...]:
 
 def nested_config(hint: Any) -> type[DictConfig] | None:
     """The config class a field's annotation holds (``X`` or ``X | None``), else None."""
-    for opt in _options(hint):
+    for opt in union_members(hint):
         if isinstance(opt, type) and issubclass(opt, DictConfig):
             return opt
     return None
 
 
 def _holds_tuple(hint: Any) -> bool:
-    return any(opt is tuple or typing.get_origin(opt) is tuple for opt in _options(hint))
+    return any(opt is tuple or typing.get_origin(opt) is tuple for opt in union_members(hint))
 
 Vec3 = tuple[float, float, float]
 

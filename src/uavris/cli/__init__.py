@@ -103,7 +103,7 @@ def _run(argv: list[str]) -> None:
     command(name)(rest)
 
 
-RESUMABLE = ("train", "pretrain-dt", "finetune-dt")  # the commands with --resume (cli.options.RunOptions)
+RESUMABLE = ("train", "pretrain-dt", "finetune-dt")  # the commands with --resume (cli.outputs.RunOptions)
 RERUN_REUSES = ("reproduce", "sweep")  # the commands whose rerun reuses what finished (stages, cells)
 
 

@@ -16,7 +16,8 @@ from typing import Annotated
 
 import tyro
 
-from uavris.cli.parsing import Unset, UsageError, output_dir, parse, writing
+from uavris.cli.outputs import output_dir, writing
+from uavris.cli.parsing import Unset, UsageError, parse
 from uavris.experiments.display.tables import markdown_table
 from uavris.experiments.study.claims import write_claims
 from uavris.experiments.study.from_scratch import FromScratchConfig, from_scratch

@@ -11,13 +11,14 @@ import sys
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from types import ModuleType
-from typing import Annotated, Literal
+from typing import Annotated, Any, Literal
 
 import tyro
 
 from uavris.agents.torch_device import Device, resolve_device
-from uavris.cli.options import SystemFlags, in_hall, layered, parse_in_hall, seed_note, written
-from uavris.cli.parsing import Unset, UsageError, output_dir, writing
+from uavris.cli.options import SystemFlags, in_hall, layered, parse_in_hall, written
+from uavris.cli.outputs import output_dir, writing
+from uavris.cli.parsing import Unset, UsageError
 from uavris.config import ScenarioName, SystemConfig
 from uavris.env.wrappers import PhaseControl
 from uavris.experiments.display.tables import counted, interval, rate_interval, signed
@@ -108,7 +109,7 @@ def evaluate_command(args: list[str]) -> None:
     own = target.own_system()  # the system the --system.* flags change
     if a.scenario is not None and a.layout is None:  # a named scenario is a start in the paper's hall
         own = paper_hall(own)
-    system, _ = in_hall(a.layout, own, written(a.system))
+    system, _, _ = in_hall(a.layout, own, written(a.system))
     episodes = DEFAULT_EPISODES if a.episodes is None else a.episodes
     with writing(a.out or results_dir(target)) as out:
         # the layout again (resolving it in its own hall changes nothing): the result records it
@@ -158,7 +159,7 @@ def _evaluate_row(a: EvaluateArgs, args: list[str]) -> None:
     if track not in ran:
         raise UsageError(f"--track {track}: the study in {a.target} ran {', '.join(ran)}")
     base = rc.system.replace(observe_devices=True) if ran[track].layouts else rc.system
-    system, hall = in_hall(a.layout, base, written(a.system))
+    system, hall, _ = in_hall(a.layout, base, written(a.system))
     if hall is None and a.scenario is None:
         raise UsageError("--row: name where to evaluate it: --layout HALL (its devices and start) or --scenario NAME")
     site = Site(a.scenario or hall.name, system, None if a.scenario else hall.start)
@@ -253,7 +254,7 @@ def benchmark_command(args: list[str]) -> None:
     with writing(a.out or default_benchmark_dir(a.target if a.row is None else a.row)) as out:
         if a.row is not None:  # the study's row as a controller of its own, kept beside the results
             a = replace(a, target=str(_row_controller(a.target, a.row, a.track, out / "controller")))
-        system, _ = in_hall(a.layout, resolve_target(a.target).own_system(), flags)  # --layout: one cell
+        system, _, _ = in_hall(a.layout, resolve_target(a.target).own_system(), flags)  # --layout: one cell
         rows, md = benchmark(a.target, a.preset, a.cells, out, resolve_device(a.device), progress=a.progress,
                              system=system, phase_control=a.phase_control, layout=a.layout,
                              trust_pickle=a.trust_pickle)
@@ -311,7 +312,7 @@ def sweep_command(args: list[str]) -> None:
     from uavris.experiments.tools.sweep import parse_axis, sweep
 
     a = parse_in_hall(SweepArgs, args, "uavris sweep", sweep_command.__doc__ or "")
-    system, hall = in_hall(a.layout, SystemConfig(), written(a.system))
+    system, hall, _ = in_hall(a.layout, SystemConfig(), written(a.system))
     row_of = None
     if a.row is not None:
         if len(a.targets) != 1:
@@ -345,3 +346,13 @@ def sweep_command(args: list[str]) -> None:
 
 
 # -------------------------------------------------------------------------------------------- plan
+
+
+def seed_note(row: Any, seeds: list[int]) -> str:
+    """A line saying which of its seeds a row of several is (the report's row of that name is their
+    mean), and how to name the others; nothing for a row of one seed."""
+    if len(seeds) < 2:
+        return ""
+    others = ", ".join(f"{row.variant}@s{s}" for s in seeds if s != (row.seed or 0))
+    return (f"note: this is seed {row.seed or 0} of the row's {len(seeds)} seeds ({', '.join(map(str, seeds))}); the "
+            f"report's {row.variant} is their mean; the others are {others}\n")

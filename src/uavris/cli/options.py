@@ -4,10 +4,9 @@ Lives here: :func:`flags_of`, the flags of a config class (its fields, each None
 line does not write it), :func:`written` (what a parsed line wrote) and :func:`layered` (a
 config with it on top), the one rule by which every command builds its config: the library's
 defaults, then the preset, then a file or a model's config, then the hall (:func:`in_hall`:
-``--layout`` and the ``--system.*`` flags), then the flags written, then one check;
-:class:`RunOptions` and :func:`check_run_options`, what ``--resume`` and ``--force`` mean on
-the command line. Not here: parsing itself (:mod:`.parsing`), the run directory
-(:mod:`uavris.runs`), layouts (:mod:`uavris.layouts`).
+``--layout`` and the ``--system.*`` flags), then the flags written, then one check. Not here:
+parsing itself (:mod:`.parsing`), where a command writes (:mod:`.outputs`), layouts
+(:mod:`uavris.layouts`).
 
 Why flags of their own: tyro builds what it parses, and a config checks itself when it is
 made, against defaults the line's choices have not made yet (another preset's budgets, the
@@ -17,21 +16,17 @@ value is still known to be given, and the config is made once, from its layers.
 
 from __future__ import annotations
 
-import types
 import typing
-from dataclasses import MISSING, dataclass, field, fields, is_dataclass, make_dataclass, replace
-from pathlib import Path
-from typing import Annotated, Any, Literal, Optional, Union
+from dataclasses import MISSING, field, fields, is_dataclass, make_dataclass, replace
+from typing import Annotated, Any, Literal, NamedTuple, Optional, Union
 
 import tyro
 
-from uavris.agents.torch_device import Device, resolve_device
-from uavris.cli.parsing import HELP, POINTS, Unset, UsageError, output_dir, parse
-from uavris.config import Scenario, SystemConfig, nested_config
+from uavris.cli.parsing import HELP, POINTS, UsageError, parse
+from uavris.config import Scenario, SystemConfig, nested_config, union_members
 from uavris.io import INTERNAL
-from uavris.layouts import resolve_layout, sets_room
+from uavris.layouts import Layout, resolve_layout, sets_room
 from uavris.presets import PresetConfig
-from uavris.runs import CONFIG_FILE, config_path
 
 try:  # the help of a field, as tyro reads it from its class: private in tyro 1.0, whose version the project pins
     from tyro._docstrings import get_field_docstring
@@ -58,11 +53,12 @@ def flags_of(config: type) -> type:
             continue
         nested = nested_config(hint)
         if nested is not None:
-            specs.append((f.name, flags_of(nested), field(default_factory=flags_of(nested))))
+            inner = flags_of(nested)
+            specs.append((f.name, inner, field(default_factory=inner)))
             continue
         if typing.get_origin(hint) is Annotated:
             hint = typing.get_args(hint)[0]
-        kinds = typing.get_args(hint) if typing.get_origin(hint) in (Union, types.UnionType) else ()
+        kinds = union_members(hint)
         nullable = type(None) in kinds
         if nullable:  # None is a value of it: written as "None"
             hint = Union[(Literal["None"], *(k for k in kinds if k is not type(None)))]
@@ -129,44 +125,6 @@ def shown(flags: type, config: Any, required: tuple[str, ...] = ()) -> Any:
     return flags(**values)
 
 
-@dataclass(frozen=True)
-class RunOptions:
-    """Where a training run is written and how it starts."""
-
-    out: Unset[Path] = None
-    """run directory (default: under runs/, named after the configuration)"""
-    resume: bool = False
-    """continue the interrupted run in OUT from its last checkpoint, with its stored configuration (train: OUT/
-    config.yaml; flags given beside must agree with it); an error if OUT holds no run"""
-    force: bool = False
-    """delete the run in OUT and start from scratch"""
-    device: Device = "cpu"
-    """torch device (auto: CUDA when torch sees one)"""
-    progress: bool = True
-    """show a progress bar"""
-
-
-def check_run_options(opts: RunOptions, run_dir: Path) -> str:
-    """Reject contradictory or empty resumes; returns the resolved torch device.
-
-    The library's ``resume=True`` means "continue if there is something to continue" (the
-    study relies on it); a user who types ``--resume`` means "continue this run", so here a
-    resume with nothing to continue is an error rather than a silent fresh start.
-    """
-    output_dir(run_dir)
-    if opts.resume and opts.force:
-        raise UsageError("--resume (continue the run) and --force (delete it and start over) contradict each "
-                         "other; pass one of them")
-    if opts.resume:
-        if not run_dir.exists():
-            raise UsageError(f"--resume: {run_dir} does not exist, so there is no run to resume; drop --resume to "
-                             "start a new run")
-        if config_path(run_dir) is None:
-            raise UsageError(f"--resume: {run_dir} holds no run ({CONFIG_FILE} is missing); drop --resume to start "
-                             "a new run")
-    return resolve_device(opts.device)
-
-
 LAYOUT_HELP = ("the hall: paper (the paper's devices), layout-train-N / layout-unseen-N (generated; -kK: K "
                "devices, docs/study.md section 2) or a YAML layout file (devices, optionally start and room); it "
                "sets --system.users (and --system.room) and the start (unless --scenario is given); default: the "
@@ -174,11 +132,19 @@ LAYOUT_HELP = ("the hall: paper (the paper's devices), layout-train-N / layout-u
 SystemFlags = flags_of(SystemConfig)  # every command's --system.* flags
 
 
-def in_hall(layout: str | None, base: SystemConfig,
-            flags: dict[str, Any]) -> tuple[SystemConfig, Scenario | None]:
+class Hall(NamedTuple):
+    """Where a command flies: its system (checked), the layout's start and the layout itself
+    (None, None without ``--layout``)."""
+
+    system: SystemConfig
+    start: Scenario | None
+    layout: Layout | None
+
+
+def in_hall(layout: str | None, base: SystemConfig, flags: dict[str, Any]) -> Hall:
     """The system of a command: ``base`` (the target's, the study's, the paper's) with the
     ``--system.*`` flags the line wrote (``flags``, :func:`written`), in the hall ``layout``
-    names, and that layout's start; without a layout, ``base`` with the flags and None;
+    names, with that layout's start and the layout; without a layout, ``base`` with the flags;
     checked once, whole.
 
     The flags apply to the base system before the layout resolves (a generated hall is drawn
@@ -194,12 +160,13 @@ def in_hall(layout: str | None, base: SystemConfig,
         raise UsageError(f"--layout {layout} sets the room; drop --system.room or the file's room")
     flagged = layered(base, flags)  # judged once in its hall: its room or pairs may fit only the layout's devices
     if layout is None:
-        return flagged.check(), None
-    system, start = resolve_layout(layout, flagged).resolve(flagged)
+        return Hall(flagged.check(), None, None)
+    named = resolve_layout(layout, flagged)
+    system, start = named.resolve(flagged)
     if "z_max" in flags and system.z_max != flags["z_max"]:  # the user's ceiling, not the room's cap
         system = system.replace(z_max=flags["z_max"])
         start.validate_for(system)
-    return system, start
+    return Hall(system, start, named)
 
 
 def parse_in_hall(cls: type, args: list[str], prog: str, description: str) -> Any:
@@ -210,13 +177,3 @@ def parse_in_hall(cls: type, args: list[str], prog: str, description: str) -> An
         required = {f.name: tyro.MISSING for f in fields(cls) if f.default is MISSING and f.default_factory is MISSING}
         default = cls(**required, system=shown(SystemFlags, SystemConfig()))
     return parse(cls, args, prog, description, default=default)
-
-
-def seed_note(row: Any, seeds: list[int]) -> str:
-    """A line saying which of its seeds a row of several is (the report's row of that name is their
-    mean), and how to name the others; nothing for a row of one seed."""
-    if len(seeds) < 2:
-        return ""
-    others = ", ".join(f"{row.variant}@s{s}" for s in seeds if s != (row.seed or 0))
-    return (f"note: this is seed {row.seed or 0} of the row's {len(seeds)} seeds ({', '.join(map(str, seeds))}); the "
-            f"report's {row.variant} is their mean; the others are {others}\n")

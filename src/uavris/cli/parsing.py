@@ -3,8 +3,8 @@
 Lives here: :func:`parse` (tyro over a command's dataclass, its defaults given; a rejected
 command line becomes one :class:`UsageError` line, built from tyro's parse-error event),
 :func:`parse_built` (a command line parsed once and built into its config), the registry's
-rule for lists of points (``--system.users``) and the checks of paths every command shares. Not here: the commands
-themselves (:mod:`.training`, :mod:`.evaluation`).
+rule for lists of points (``--system.users``) and a ``--config`` file's overrides. Not here: the commands
+themselves (:mod:`.training`, :mod:`.evaluation`), where they write (:mod:`.outputs`).
 
 Why :func:`parse_built`: a few flags choose the defaults of many others (a preset every
 budget, a config file every field, a model its system, a layout the hall), so a command parses
@@ -21,16 +21,14 @@ import inspect
 import io
 import re
 import sys
-import tempfile
 from pathlib import Path
-from typing import Annotated, Any, Callable, Iterator, Literal, Optional, TypeVar, get_args, get_origin
+from typing import Annotated, Any, Callable, Literal, Optional, TypeVar, get_args, get_origin
 
 import tyro
 from tyro.constructors import ConstructorRegistry, PrimitiveConstructorSpec, PrimitiveTypeInfo
 
 from uavris.errors import UavrisError
 from uavris.io import read_yaml
-from uavris.runs.lock import locked
 
 try:  # tyro's parse-error events: private and experimental in tyro 1.0, whose version the project pins
     from tyro._errors import (
@@ -162,48 +160,6 @@ def parse_built(cls: type[T], args: list[str], prog: str, description: str, buil
             built = build(parsed, True)
         parse(cls, args, prog, description, default=show(built, parsed))  # prints the help and exits
     return build(parse(cls, args, prog, description), False)
-
-
-NAME_MAX = 255  # bytes in one file or folder name (Linux, macOS); results add their own names inside
-
-
-def output_dir(path: Path | None, flag: str = "--out") -> None:
-    """An output directory may exist (as a directory) or not yet; a file in its place is an
-    error, and so is one that cannot be written (read-only, immutable, another user's): found
-    before any work, by writing a file into its nearest existing folder (None: ``runs/``, where
-    the commands write by default)."""
-    target = Path("runs") if path is None else Path(path)
-    long = [part for part in target.parts if len(part.encode()) > NAME_MAX]
-    if long:  # found before any work, not when the first result is written
-        raise UsageError(f"{flag}: a folder name of {len(long[0].encode())} bytes ({long[0][:40]}...); a file system "
-                         f"takes at most {NAME_MAX}")
-    if target.exists() and not target.is_dir():
-        raise UsageError(f"{flag} {path}: exists and is not a directory")
-    folder = target.absolute()
-    while not folder.exists():
-        folder = folder.parent
-    if not folder.is_dir():
-        raise UsageError(f"{flag} {target}: {folder} is not a directory")
-
-    try:
-        with tempfile.TemporaryFile(dir=folder, prefix=".uavris-probe-"):
-            pass
-    except OSError as e:
-        what = f"--out (default {target})" if path is None else f"{flag} {target}"
-        raise UsageError(f"{what}: {folder} cannot be written ({e.strerror or e})") from None
-
-
-@contextlib.contextmanager
-def writing(path: Path, flag: str = "--out", files_only: bool = False) -> Iterator[Path]:
-    """The command's output ``path`` checked (:func:`output_dir`) and held for the block: one
-    writer at a time (:func:`uavris.runs.lock.locked`), so a second command into the same
-    output is one line instead of a silent replacement of the first's results. Every command
-    that writes takes it around all of its writing (``reproduce`` and ``sweep`` inside the
-    library, which their workers share). ``files_only``: the command writes files into ``path``
-    itself (a plot's folder), never into its subfolders, which may then be links."""
-    output_dir(path, flag)
-    with locked(path, links=files_only):
-        yield Path(path)
 
 
 def load_overrides(path: Path, kind: str) -> dict[str, Any]:

@@ -15,15 +15,17 @@ from typing import Annotated, Literal
 
 import tyro
 
-from uavris.cli.options import SystemFlags, in_hall, layered, parse_in_hall, seed_note, written
-from uavris.cli.parsing import Unset, UsageError, parse, writing
+from uavris.cli.evaluation import seed_note
+from uavris.cli.options import SystemFlags, in_hall, parse_in_hall, written
+from uavris.cli.outputs import writing
+from uavris.cli.parsing import Unset, UsageError, parse
 from uavris.config import ScenarioName, SystemConfig
 from uavris.experiments.display.tables import counted
 from uavris.experiments.tools.demo import run_demo
 from uavris.experiments.tools.rows import read_controller, shipped_controller, write_controller
 from uavris.experiments.tools.targets import LearnedValue
 from uavris.io import file_part
-from uavris.layouts import PAPER_LAYOUT, Layout, default_start, resolve_layout
+from uavris.layouts import PAPER_LAYOUT, Layout, default_start
 from uavris.presets import COLLECT_SEED
 
 
@@ -90,11 +92,9 @@ def plan_command(args: list[str]) -> None:
     a = parse_in_hall(PlanArgs, args, "uavris plan", plan_command.__doc__ or "")
     a, named = _learned_value(a)
     flags = written(a.system)
-    hall, _ = in_hall(a.layout, SystemConfig(), flags)  # the flags written, in the layout's hall
-    if a.layout is None:
+    hall, _, layout = in_hall(a.layout, SystemConfig(), flags)  # the flags written, in the layout's hall
+    if layout is None:
         layout = PAPER_LAYOUT if hall.users == PAPER_LAYOUT.users else Layout("custom", hall.users, default_start(hall))
-    else:
-        layout = resolve_layout(a.layout, layered(SystemConfig(), flags))  # drawn in the flags' room
     check_grid(hall, a.grid_step)  # before anything is written
     if a.learned is None or a.top_k or a.deployed:
         check_devices(hall)
@@ -192,7 +192,7 @@ class DemoArgs:
 def demo_command(args: list[str]) -> None:
     """Roll out the zero action, random actions and a co-phasing hover, and print their average sum rate."""
     a = parse_in_hall(DemoArgs, args, "uavris demo", demo_command.__doc__ or "")
-    system, hall = in_hall(a.layout, SystemConfig(), written(a.system))
+    system, hall, _ = in_hall(a.layout, SystemConfig(), written(a.system))
     run_demo(a.episodes, a.seed, a.scenario or hall or "fig2", system)
 
 

@@ -1,7 +1,7 @@
 """The commands that train: ``train``, ``compare-algorithms``, ``pretrain-dt``, ``finetune-dt``, ``reproduce``.
 
 Lives here: for each command, the dataclass tyro reads (the flags of the library's config,
-:func:`~uavris.cli.options.flags_of`, flattened, plus :class:`~uavris.cli.options.RunOptions`),
+:func:`~uavris.cli.options.flags_of`, flattened, plus :class:`~uavris.cli.outputs.RunOptions`),
 the build of its config and the function that runs it. The flags *are* the config's fields: a
 preset (``--preset``), a YAML file (``train --config``) or a model (``finetune-dt --model``)
 supplies the defaults, and every field written on the command line is taken over them.
@@ -21,9 +21,7 @@ from uavris.agents.experts import Algorithm
 from uavris.agents.torch_device import Device, resolve_device
 from uavris.cli.options import (
     LAYOUT_HELP,
-    RunOptions,
     SystemFlags,
-    check_run_options,
     flags_of,
     in_hall,
     layered,
@@ -31,7 +29,8 @@ from uavris.cli.options import (
     shown,
     written,
 )
-from uavris.cli.parsing import Unset, UsageError, load_overrides, output_dir, parse_built, writing
+from uavris.cli.outputs import RunOptions, check_run_options, output_dir, writing
+from uavris.cli.parsing import Unset, UsageError, load_overrides, parse_built
 from uavris.config import ScenarioName, SystemConfig
 from uavris.experiments.display.tables import counted, rate_interval
 from uavris.experiments.engine.jobs import Backend
@@ -93,7 +92,7 @@ def train_config(a: TrainArgs) -> TrainConfig:
     base = TrainConfig(**{**{k: data[k] for k in ("algo", "preset", "scenario") if k in data}, **chosen})
     if data:
         base = TrainConfig.from_dict({**_nested_update(base.to_dict(), data, f"--config {file}"), **chosen})
-    system, hall = in_hall(a.layout, base.system, line.pop("system", {}))
+    system, hall, _ = in_hall(a.layout, base.system, line.pop("system", {}))
     # a layout's own start, unless a named scenario starts in its hall
     where = {} if hall is None or "scenario" in line else {"scenario": hall.name, "start": hall.start}
     return layered(replace(base, system=system, **where), line).check()
@@ -171,7 +170,7 @@ def compare_command(args: list[str]) -> None:
     from uavris.experiments.training.compare import compare_algorithms, default_compare_dir
 
     a = parse_in_hall(CompareArgs, args, "uavris compare-algorithms", compare_command.__doc__ or "")
-    system, hall = in_hall(a.layout, SystemConfig(), written(a.system))
+    system, hall, _ = in_hall(a.layout, SystemConfig(), written(a.system))
     scenario = a.scenario or ("fig2" if hall is None else hall.name)
     start = hall.start if hall is not None and scenario == hall.name else None
     seeds = STUDY[a.preset]["compare_seeds"] if a.seeds is None else a.seeds
@@ -258,7 +257,7 @@ def parse_finetune(args: list[str]) -> FinetuneArgs:
         model = line.pop("model", None)
         if model is None and not for_help:
             raise _missing("model", prog)
-        system, hall = in_hall(parsed.layout, dt_system(model) if model else SystemConfig(), line.pop("system", {}))
+        system, hall, _ = in_hall(parsed.layout, dt_system(model) if model else SystemConfig(), line.pop("system", {}))
         if hall is None and "scenario" not in line and not for_help:
             raise _missing("scenario", prog, " (or a --layout to adapt to)")
         where = ({"scenario": line.pop("scenario")} if "scenario" in line else
@@ -333,7 +332,7 @@ def parse_reproduce(args: list[str]) -> ReproduceArgs:
     """``uavris reproduce``'s line, parsed once and built: the preset's study in the hall, the flags written on top."""
     def build(parsed: ReproduceArgs, _: bool) -> ReproduceArgs:
         line = written(parsed.study)
-        system, _ = in_hall(parsed.layout, SystemConfig(), line.pop("system", {}))
+        system, _, _ = in_hall(parsed.layout, SystemConfig(), line.pop("system", {}))
         study = ReproduceConfig(system=system, preset=line.pop("preset", "quick"))
         return replace(parsed, study=layered(study, line).check())
 

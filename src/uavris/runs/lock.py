@@ -4,7 +4,7 @@ Lives here: :func:`locked` (a context manager around the work of one invocation)
 invocations writing one output (two ``uavris train --out X``, two ``benchmark --out X`` of
 different targets) would replace each other's checkpoints and results; the second gets one
 line naming the first's process instead. Every command that writes takes it
-(:func:`uavris.cli.parsing.writing`). Not here: the run directory's other files
+(:func:`uavris.cli.outputs.writing`). Not here: the run directory's other files
 (:mod:`uavris.runs`).
 
 The lock is ``flock`` on ``OUT/.uavris.lock``: the kernel grants it to one open file at a time
