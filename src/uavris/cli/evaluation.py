@@ -345,7 +345,7 @@ def sweep_command(args: list[str]) -> None:
     print("wrote " + ", ".join(str(p) for p in paths))
 
 
-# -------------------------------------------------------------------------------------------- plan
+# -------------------------------------------------------------------------- a row of several seeds
 
 
 def seed_note(row: Any, seeds: list[int]) -> str:

@@ -47,9 +47,6 @@ class SlotMemo:
     def __len__(self) -> int:
         return len(self._phases)
 
-    def clear(self) -> None:
-        self._phases.clear()
-
     def solve(self, *args: Any) -> None:
         """:func:`~uavris.physics.phase_kernel.solve_slots` with the same arguments: the slots whose
         inputs it has seen are copied from the memo, the others solved (each once) and kept."""
