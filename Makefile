@@ -57,6 +57,7 @@ bench: $(STAMP)
 	$(PY) benchmarks/dt_throughput.py
 	$(PY) benchmarks/oracle_throughput.py
 	$(PY) benchmarks/slot_memo.py
+	$(PY) benchmarks/cli_parse.py
 	$(PY) benchmarks/paper_wallclock.py
 	$(PY) benchmarks/reproduce_scaling.py
 

@@ -226,6 +226,36 @@ def test_help_reads_cleanly(capsys: pytest.CaptureFixture[str]) -> None:
     assert "--system.tx-power-w FLOAT" in capsys.readouterr().out
 
 
+def test_every_flag_says_what_it_is_beyond_its_default(capsys: pytest.CaptureFixture[str]) -> None:
+    """No flag's help is its default alone (tyro prints "(default: X)" under a flag whose field
+    has neither a docstring nor a comment)."""
+    bare = []
+    for name in COMMANDS:
+        assert main([name, "--help"]) == 0
+        rows = [r.strip("\u2502 ") for r in capsys.readouterr().out.splitlines()]
+        bare += [(name, flag) for flag, text in zip(rows, rows[1:])  # a row of a flag and its metavar alone
+                 if re.fullmatch(r"(-[\w.-]+,? ?)+( ?[A-Z_|.]+)*", re.sub(r"\{[^{}]*\}|\[[^\[\]]*\]", "", flag))
+                 and re.fullmatch(r"\((default|required)[^()]*\)", text)]
+    assert not bare, bare
+
+
+def test_a_command_line_reads_no_source_after_the_first(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                                       capsys: pytest.CaptureFixture[str]) -> None:
+    """Each field's help is read from its class's source once per process (cli.parsing.with_help),
+    not at every parse (tyro empties its caches after each): a second parse reads no source."""
+    import inspect
+
+    lines = (["train", "--preset", "smoke", "--out", str(tmp_path / "run"), "--system.v-max", "-1"],
+             ["plan", "paper", "--grid-step", "-1"])
+    assert [main(line) for line in lines] == [2, 2]
+    read: list[object] = []
+    real = inspect.getsource
+    monkeypatch.setattr(inspect, "getsource", lambda obj: read.append(obj) or real(obj))
+    assert [main(line) for line in lines] == [2, 2]
+    assert "v_max" in capsys.readouterr().err
+    assert not read, read
+
+
 _SCENARIOS = ("fig2", "train1", "train2", "train3", "train4", "train5", "train6", "train7", "train8", "unseen1",
               "unseen2")
 _PRESETS, _DEVICES, _PHASES = ("smoke", "quick", "paper"), ("cpu", "cuda", "auto"), ("agent", "optimizer")

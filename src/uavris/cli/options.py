@@ -22,17 +22,11 @@ from typing import Annotated, Any, Literal, NamedTuple, Optional, Union
 
 import tyro
 
-from uavris.cli.parsing import HELP, POINTS, UsageError, parse
+from uavris.cli.parsing import HELP, POINTS, UsageError, get_field_docstring, parse
 from uavris.config import Scenario, SystemConfig, nested_config, union_members
 from uavris.io import INTERNAL
 from uavris.layouts import Layout, resolve_layout, sets_room
 from uavris.presets import PresetConfig
-
-try:  # the help of a field, as tyro reads it from its class: private in tyro 1.0, whose version the project pins
-    from tyro._docstrings import get_field_docstring
-except ImportError:  # another tyro: the flags without their help, every command still works
-    def get_field_docstring(cls: type, name: str, markers: tuple) -> str | None:
-        return None
 
 NONE_WRITTEN = "None"  # how a line writes None to a field that takes it (--system.max-active-pairs None)
 _TAKES_NONE = "takes_none"  # a flag's metadata: its field takes None, so "None" written is None

@@ -47,12 +47,12 @@ TEACHERS: tuple[str, ...] = ("oracle",)
 class ImitationConfig(DictConfig):
     """Behaviour cloning with DAgger from a teacher (see the module docstring)."""
 
-    teacher: str = "oracle"
+    teacher: str = "oracle"  # whose actions the student imitates (the oracle, the one teacher there is)
     rounds: int = 6  # round 0: the teacher's own episodes; rounds 1..: DAgger
     episodes: int = 32  # episodes per round
     epochs: int = 30  # passes over all data after each round
-    batch_size: int = 256
-    learning_rate: float = 1e-3
+    batch_size: int = 256  # transitions per gradient step of behaviour cloning
+    learning_rate: float = 1e-3  # Adam's step size in behaviour cloning
     action_std: float = 0.2  # PPO's exploration standard deviation afterwards
     # evaluate the student after every round (its learning curve, not one point); keyed only when set
     evaluate_rounds: bool = unkeyed(False)
