@@ -3,7 +3,7 @@
 The alternative is the parse as tyro does it on its own: tyro empties its caches after every
 ``tyro.cli`` call, so each parse reads the source of every class it parses again, to find
 the fields' help. uavris gives every field its help once per process
-(:func:`uavris.cli.parsing.with_help`); the alternative is that function made a no-op, timed
+(:func:`uavris.cli.field_help.with_help`); the alternative is that function made a no-op, timed
 first (the other order would find the help already given). Each side parses, in this one
 process pinned to a single CPU, each command line below ``--repeat`` times after one warm-up
 parse: lines with a wrong number last, which parse and are refused in one line, as the CLI's

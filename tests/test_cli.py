@@ -241,7 +241,7 @@ def test_every_flag_says_what_it_is_beyond_its_default(capsys: pytest.CaptureFix
 
 def test_a_command_line_reads_no_source_after_the_first(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
                                                        capsys: pytest.CaptureFixture[str]) -> None:
-    """Each field's help is read from its class's source once per process (cli.parsing.with_help),
+    """Each field's help is read from its class's source once per process (cli.field_help.with_help),
     not at every parse (tyro empties its caches after each): a second parse reads no source."""
     import inspect
 

@@ -22,7 +22,8 @@ from typing import Annotated, Any, Literal, NamedTuple, Optional, Union
 
 import tyro
 
-from uavris.cli.parsing import HELP, POINTS, UsageError, get_field_docstring, parse
+from uavris.cli.field_help import get_field_docstring
+from uavris.cli.parsing import HELP, POINTS, UsageError, parse
 from uavris.config import Scenario, SystemConfig, nested_config, union_members
 from uavris.io import INTERNAL
 from uavris.layouts import Layout, resolve_layout, sets_room

@@ -21,15 +21,13 @@ import inspect
 import io
 import re
 import sys
-import types
-import typing
-from dataclasses import fields, is_dataclass
 from pathlib import Path
 from typing import Annotated, Any, Callable, Literal, Optional, TypeVar, get_args, get_origin
 
 import tyro
 from tyro.constructors import ConstructorRegistry, PrimitiveConstructorSpec, PrimitiveTypeInfo
 
+from uavris.cli.field_help import with_help
 from uavris.errors import UavrisError
 from uavris.io import read_yaml
 
@@ -46,14 +44,6 @@ try:  # tyro's parse-error events: private and experimental in tyro 1.0, whose v
 except ImportError:  # another tyro: its own boxed message, then exit 2 (still one failure, not a traceback)
     on_parse_error = None
 
-try:  # the help of a field and of a class, as tyro reads them: private in tyro 1.0, whose version the project pins
-    from tyro._docstrings import get_callable_description, get_field_docstring
-except ImportError:  # another tyro: it reads each field's help itself, every command still works
-    def get_field_docstring(cls: type, name: str, markers: tuple) -> str | None:
-        return None
-
-    def get_callable_description(f: Any) -> str | None:
-        return None
 
 T = TypeVar("T")
 
@@ -134,40 +124,6 @@ def _one_line(event: Any) -> str:
             return f"{name} expects {expected}, got {got}"
         return f"{name} {message}" if name.endswith("users") else f"{name}: {message}"
     return f"the command line does not parse ({type(event).__name__})"
-
-
-_HELPED: set[type] = set()
-
-
-def with_help(cls: type) -> type:
-    """``cls``, each of its fields (and its nested configs' fields) carrying its help in the
-    field's metadata (``help``), read from the class's source once per process.
-
-    Why: tyro reads a field's help from ``metadata["help"]`` before it looks in the source, and
-    it empties its caches after every parse, so without this every parse tokenises the source
-    of every class it parses again: half a command line's parse (``benchmarks/cli_parse.py``)."""
-    if cls in _HELPED or not is_dataclass(cls):
-        return cls
-    _HELPED.add(cls)
-    hints = typing.get_type_hints(cls, include_extras=True)
-    for f in fields(cls):
-        nested = _classes_in(hints[f.name])
-        if "help" not in f.metadata:
-            doc = get_field_docstring(cls, f.name, ())
-            if doc is None and len(nested) == 1:  # a group's help: its class's, as tyro falls back to
-                doc = get_callable_description(nested[0])
-            if doc is not None:
-                f.metadata = types.MappingProxyType({**f.metadata, "help": doc})
-        for inner in nested:
-            with_help(inner)
-    return cls
-
-
-def _classes_in(hint: Any) -> list[type]:
-    """The dataclasses a field's type names (itself, or inside Annotated, Optional, a union)."""
-    if is_dataclass(hint) and isinstance(hint, type):
-        return [hint]
-    return [c for arg in get_args(hint) for c in _classes_in(arg)]
 
 
 def parse(cls: type[T], args: list[str], prog: str, description: str, default: T | None = None) -> T:
