@@ -63,3 +63,25 @@ def test_a_full_memo_starts_afresh_and_still_gives_the_same_bits():
         assert np.array_equal(got.phases, optimize_phases(h[part], cos[part], pairing[part], P, NOISE).phases)
     with pytest.raises(ValueError, match="max_slots"):
         SlotMemo(max_slots=0)
+
+
+def _at_offset(a: np.ndarray, offset: int) -> np.ndarray:
+    """A copy of ``a`` whose data starts ``offset`` bytes past a 64-byte boundary."""
+    buf = np.empty(a.nbytes + 128, dtype=np.uint8)
+    start = (-buf.ctypes.data) % 64 + offset
+    out = buf[start:start + a.nbytes].view(a.dtype).reshape(a.shape)
+    out[...] = a
+    return out
+
+
+@pytest.mark.parametrize("offset", [8, 24, 40])
+def test_a_slots_bits_do_not_depend_on_where_its_inputs_lie_in_memory(offset):
+    """What the memo rests on, and the study's same numbers in any process: a slot's solution is
+    a function of its inputs' values alone, not of their alignment (which differs between
+    processes with their allocation history: an alignment-dependent SIMD or BLAS path would give
+    other bits there)."""
+    h, cos, pairing = _slots(8, 4)
+    pairing[::2, 0, 1] = 0.0  # slots of one link and of two
+    plain = optimize_phases(h, cos, pairing, P, NOISE, memo=None)
+    moved = optimize_phases(*(_at_offset(x, offset) for x in (h, cos, pairing)), P, NOISE, memo=None)
+    assert np.array_equal(moved.phases, plain.phases) and np.array_equal(moved.sum_rate, plain.sum_rate)
