@@ -226,17 +226,62 @@ def test_help_reads_cleanly(capsys: pytest.CaptureFixture[str]) -> None:
     assert "--system.tx-power-w FLOAT" in capsys.readouterr().out
 
 
-def test_every_flag_says_what_it_is_beyond_its_default(capsys: pytest.CaptureFixture[str]) -> None:
+def _bare_flags(help_text: str) -> list[str]:
+    """The flags of a command's ``--help`` (rendered 80 columns wide) whose help is nothing but
+    their default. Below the description, a flag's row starts with the flag (its metavar may
+    wrap onto rows as little indented); its help follows two spaces or more after it on that row
+    and on the rows below that are indented further, up to the next flag or section."""
+    lines = help_text.splitlines()
+    first = next(i for i, r in enumerate(lines) if re.match(r"\s*(\u256d|-{10,})", r))  # the first section
+    rows = [r.replace("\u2502", " ").rstrip() for r in lines[first:]]
+    flags = [i for i, r in enumerate(rows) if re.match(r"--?[A-Za-z]", r.lstrip())]
+    indent = min(len(rows[i]) - len(rows[i].lstrip()) for i in flags)  # a help's own rows are indented further
+    bare = []
+    for i in flags:
+        if len(rows[i]) - len(rows[i].lstrip()) != indent:
+            continue
+        flag, _, text = rows[i].strip().partition("  ")
+        words = [text]
+        for below in rows[i + 1:]:
+            if not below.strip() or re.match(r"--?[A-Za-z]|\u2570|-{10,}", below.lstrip()):
+                break
+            if len(below) - len(below.lstrip()) > indent:
+                words.append(below.strip())
+        if not re.sub(r"\((default|required|fixed to)[^()]*\)", "", " ".join(words)).strip():
+            bare.append(flag)
+    return bare
+
+
+def test_every_flag_says_what_it_is_beyond_its_default(monkeypatch: pytest.MonkeyPatch,
+                                                        capsys: pytest.CaptureFixture[str]) -> None:
     """No flag's help is its default alone (tyro prints "(default: X)" under a flag whose field
     has neither a docstring nor a comment)."""
+    monkeypatch.setenv("COLUMNS", "80")  # one column of flags (tyro lays a wide terminal out in several)
     bare = []
     for name in COMMANDS:
         assert main([name, "--help"]) == 0
-        rows = [r.strip("\u2502 ") for r in capsys.readouterr().out.splitlines()]
-        bare += [(name, flag) for flag, text in zip(rows, rows[1:])  # a row of a flag and its metavar alone
-                 if re.fullmatch(r"(-[\w.-]+,? ?)+( ?[A-Z_|.]+)*", re.sub(r"\{[^{}]*\}|\[[^\[\]]*\]", "", flag))
-                 and re.fullmatch(r"\((default|required)[^()]*\)", text)]
+        bare += [(name, flag) for flag in _bare_flags(capsys.readouterr().out)]
     assert not bare, bare
+    assert _bare_flags(" options\n ----------\n  --jobs INT  (default: 1)\n  --seed INT\n      (default: 0)\n"
+                       "  --out {a,\n  b}\n      where it writes (default: a)\n  --no-help\n") == [
+        "--jobs INT", "--seed INT", "--no-help"]
+
+
+def test_every_commands_help_is_tyros_own_to_the_byte() -> None:
+    """Reading each field's help once (cli.field_help.with_help) changes no command's ``--help``:
+    every command's, printed by a process where tyro reads the help itself at each parse and by
+    one where it is read once."""
+    import subprocess
+    import sys
+
+    script = ("import sys; from uavris.cli import COMMANDS, main, parsing\n"
+              "if sys.argv[1] == 'tyro': parsing.with_help = lambda cls: None\n"
+              "for name in COMMANDS: main([name, '--help']); print('=' * 20, name)\n")
+    env = {**__import__("os").environ, "COLUMNS": "100"}
+    tyro_alone, read_once = (subprocess.run([sys.executable, "-c", script, side], capture_output=True, text=True,
+                                            env=env, timeout=120, check=True).stdout for side in ("tyro", "once"))
+    assert tyro_alone.count("usage: uavris ") == len(COMMANDS)
+    assert read_once == tyro_alone
 
 
 def test_a_command_line_reads_no_source_after_the_first(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,

@@ -44,7 +44,6 @@ try:  # tyro's parse-error events: private and experimental in tyro 1.0, whose v
 except ImportError:  # another tyro: its own boxed message, then exit 2 (still one failure, not a traceback)
     on_parse_error = None
 
-
 T = TypeVar("T")
 
 # An optional flag whose help says what leaving it out means (--out, --layout, --scenario, ...):
@@ -132,6 +131,7 @@ def parse(cls: type[T], args: list[str], prog: str, description: str, default: T
     ``--help`` prints tyro's help on stdout and exits 0 as usual.
     """
     with_help(cls)
+
     def reject(event: ParseErrorEvent) -> None:
         raise UsageError(f"{_one_line(event)} (see {prog} --help)")
 
