@@ -271,13 +271,14 @@ def test_every_commands_help_is_tyros_own_to_the_byte() -> None:
     """Reading each field's help once (cli.field_help.with_help) changes no command's ``--help``:
     every command's, printed by a process where tyro reads the help itself at each parse and by
     one where it is read once."""
+    import os
     import subprocess
     import sys
 
     script = ("import sys; from uavris.cli import COMMANDS, main, parsing\n"
               "if sys.argv[1] == 'tyro': parsing.with_help = lambda cls: None\n"
               "for name in COMMANDS: main([name, '--help']); print('=' * 20, name)\n")
-    env = {**__import__("os").environ, "COLUMNS": "100"}
+    env = {**os.environ, "COLUMNS": "100"}
     tyro_alone, read_once = (subprocess.run([sys.executable, "-c", script, side], capture_output=True, text=True,
                                             env=env, timeout=120, check=True).stdout for side in ("tyro", "once"))
     assert tyro_alone.count("usage: uavris ") == len(COMMANDS)

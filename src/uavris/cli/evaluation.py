@@ -109,7 +109,7 @@ def evaluate_command(args: list[str]) -> None:
     own = target.own_system()  # the system the --system.* flags change
     if a.scenario is not None and a.layout is None:  # a named scenario is a start in the paper's hall
         own = paper_hall(own)
-    system, _, _ = in_hall(a.layout, own, written(a.system))
+    system = in_hall(a.layout, own, written(a.system)).system
     episodes = DEFAULT_EPISODES if a.episodes is None else a.episodes
     with writing(a.out or results_dir(target)) as out:
         # the layout again (resolving it in its own hall changes nothing): the result records it
@@ -254,7 +254,7 @@ def benchmark_command(args: list[str]) -> None:
     with writing(a.out or default_benchmark_dir(a.target if a.row is None else a.row)) as out:
         if a.row is not None:  # the study's row as a controller of its own, kept beside the results
             a = replace(a, target=str(_row_controller(a.target, a.row, a.track, out / "controller")))
-        system, _, _ = in_hall(a.layout, resolve_target(a.target).own_system(), flags)  # --layout: one cell
+        system = in_hall(a.layout, resolve_target(a.target).own_system(), flags).system  # --layout: one cell
         rows, md = benchmark(a.target, a.preset, a.cells, out, resolve_device(a.device), progress=a.progress,
                              system=system, phase_control=a.phase_control, layout=a.layout,
                              trust_pickle=a.trust_pickle)

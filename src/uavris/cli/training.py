@@ -332,7 +332,7 @@ def parse_reproduce(args: list[str]) -> ReproduceArgs:
     """``uavris reproduce``'s line, parsed once and built: the preset's study in the hall, the flags written on top."""
     def build(parsed: ReproduceArgs, _: bool) -> ReproduceArgs:
         line = written(parsed.study)
-        system, _, _ = in_hall(parsed.layout, SystemConfig(), line.pop("system", {}))
+        system = in_hall(parsed.layout, SystemConfig(), line.pop("system", {})).system
         study = ReproduceConfig(system=system, preset=line.pop("preset", "quick"))
         return replace(parsed, study=layered(study, line).check())
 
